@@ -1,0 +1,222 @@
+//! Geometry data as the Rust side keeps it: validated before Embree sees it, and shared with
+//! Embree (no copy) for as long as the scene lives.
+
+use glam::{Vec2, Vec3};
+
+use super::device::{EmbreeError, Result};
+
+/// A triangle mesh. Positions and indices are handed to Embree as shared buffers; normals and
+/// UVs stay on the Rust side for shading.
+#[derive(Debug, Clone)]
+pub struct TriangleMesh {
+    /// One extra, zero vertex at the end: Embree reads vertices with 16-byte loads.
+    positions: Vec<[f32; 3]>,
+    /// One extra triangle at the end, for the same reason.
+    indices: Vec<[u32; 3]>,
+    normals: Option<Vec<[f32; 3]>>,
+    uvs: Option<Vec<[f32; 2]>>,
+}
+
+fn check_finite(values: &[f32], what: &str, width: usize) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(EmbreeError::InvalidGeometry(format!(
+            "{what} {} has a non-finite coordinate ({})",
+            i / width,
+            values[i]
+        ))),
+        None => Ok(()),
+    }
+}
+
+impl TriangleMesh {
+    /// Validates and takes ownership of the mesh: every coordinate must be finite and every
+    /// index must name an existing vertex.
+    pub fn new(mut positions: Vec<[f32; 3]>, mut indices: Vec<[u32; 3]>) -> Result<Self> {
+        if positions.is_empty() || indices.is_empty() {
+            return Err(EmbreeError::InvalidGeometry(format!(
+                "a triangle mesh needs vertices and triangles (got {} vertices, {} triangles)",
+                positions.len(),
+                indices.len()
+            )));
+        }
+        if positions.len() >= u32::MAX as usize || indices.len() >= u32::MAX as usize {
+            return Err(EmbreeError::InvalidGeometry(
+                "a triangle mesh may have at most 2^32 - 2 vertices and triangles".into(),
+            ));
+        }
+        check_finite(positions.as_flattened(), "vertex", 3)?;
+        let n = positions.len() as u32;
+        if let Some((t, tri)) = indices
+            .iter()
+            .enumerate()
+            .find(|(_, tri)| tri.iter().any(|&i| i >= n))
+        {
+            return Err(EmbreeError::InvalidGeometry(format!(
+                "triangle {t} has index {:?} out of range for {n} vertices",
+                tri
+            )));
+        }
+        positions.push([0.0; 3]);
+        indices.push([0; 3]);
+        Ok(Self {
+            positions,
+            indices,
+            normals: None,
+            uvs: None,
+        })
+    }
+
+    /// Per-vertex shading normals (one per vertex, finite; normalised here).
+    pub fn with_normals(mut self, normals: Vec<[f32; 3]>) -> Result<Self> {
+        if normals.len() != self.vertex_count() {
+            return Err(EmbreeError::InvalidGeometry(format!(
+                "{} normals for {} vertices",
+                normals.len(),
+                self.vertex_count()
+            )));
+        }
+        check_finite(normals.as_flattened(), "normal", 3)?;
+        let normals = normals
+            .into_iter()
+            .map(|n| Vec3::from(n).normalize_or_zero().to_array())
+            .collect();
+        self.normals = Some(normals);
+        Ok(self)
+    }
+
+    /// Per-vertex texture coordinates (one per vertex, finite).
+    pub fn with_uvs(mut self, uvs: Vec<[f32; 2]>) -> Result<Self> {
+        if uvs.len() != self.vertex_count() {
+            return Err(EmbreeError::InvalidGeometry(format!(
+                "{} UVs for {} vertices",
+                uvs.len(),
+                self.vertex_count()
+            )));
+        }
+        check_finite(uvs.as_flattened(), "UV", 2)?;
+        self.uvs = Some(uvs);
+        Ok(self)
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len() - 1
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() - 1
+    }
+
+    pub fn positions(&self) -> &[[f32; 3]] {
+        &self.positions[..self.vertex_count()]
+    }
+
+    pub fn indices(&self) -> &[[u32; 3]] {
+        &self.indices[..self.triangle_count()]
+    }
+
+    /// Bytes held by the mesh's buffers (what a 1M-triangle mesh costs in memory).
+    pub fn heap_bytes(&self) -> usize {
+        self.positions.capacity() * 12
+            + self.indices.capacity() * 12
+            + self.normals.as_ref().map_or(0, |n| n.capacity() * 12)
+            + self.uvs.as_ref().map_or(0, |u| u.capacity() * 8)
+    }
+
+    /// The buffers Embree shares: (vertex pointer, vertex count, index pointer, triangle count).
+    pub(super) fn raw_buffers(&self) -> (*const [f32; 3], usize, *const [u32; 3], usize) {
+        (
+            self.positions.as_ptr(),
+            self.vertex_count(),
+            self.indices.as_ptr(),
+            self.triangle_count(),
+        )
+    }
+
+    fn corners<T: Copy>(&self, data: &[T], prim: u32) -> [T; 3] {
+        let [a, b, c] = self.indices[prim as usize];
+        [data[a as usize], data[b as usize], data[c as usize]]
+    }
+
+    /// Interpolated, normalised shading normal at barycentrics (u, v) of triangle `prim`,
+    /// or `None` when the mesh has no normals.
+    pub fn shading_normal(&self, prim: u32, u: f32, v: f32) -> Option<Vec3> {
+        let normals = self.normals.as_ref()?;
+        let [a, b, c] = self.corners(normals, prim).map(Vec3::from);
+        Some((a * (1.0 - u - v) + b * u + c * v).normalize_or_zero())
+    }
+
+    /// Interpolated texture coordinate, or `None` when the mesh has no UVs.
+    pub fn uv(&self, prim: u32, u: f32, v: f32) -> Option<Vec2> {
+        let uvs = self.uvs.as_ref()?;
+        let [a, b, c] = self.corners(uvs, prim).map(Vec2::from);
+        Some(a * (1.0 - u - v) + b * u + c * v)
+    }
+
+    /// The geometric normal of triangle `prim` (unnormalised winding order a, b, c).
+    pub fn face_normal(&self, prim: u32) -> Vec3 {
+        let [a, b, c] = self.corners(&self.positions, prim).map(Vec3::from);
+        (b - a).cross(c - a)
+    }
+}
+
+/// A set of analytic spheres in one Embree geometry; the primitive id is the sphere's index.
+#[derive(Debug, Clone)]
+pub struct Spheres {
+    /// x, y, z, radius: the layout of Embree's `RTC_FORMAT_FLOAT4` sphere buffer.
+    data: Vec<[f32; 4]>,
+}
+
+impl Spheres {
+    /// Validates centres (finite) and radii (finite, > 0).
+    pub fn new(spheres: impl IntoIterator<Item = (Vec3, f32)>) -> Result<Self> {
+        let data: Vec<[f32; 4]> = spheres
+            .into_iter()
+            .map(|(c, r)| [c.x, c.y, c.z, r])
+            .collect();
+        if data.is_empty() {
+            return Err(EmbreeError::InvalidGeometry(
+                "a sphere set needs at least one sphere".into(),
+            ));
+        }
+        check_finite(data.as_flattened(), "sphere", 4)?;
+        if let Some((i, s)) = data.iter().enumerate().find(|(_, s)| s[3] <= 0.0) {
+            return Err(EmbreeError::InvalidGeometry(format!(
+                "sphere {i} has radius {} (must be > 0)",
+                s[3]
+            )));
+        }
+        Ok(Self { data })
+    }
+
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    pub fn center(&self, prim: u32) -> Vec3 {
+        let [x, y, z, _] = self.data[prim as usize];
+        Vec3::new(x, y, z)
+    }
+
+    pub fn radius(&self, prim: u32) -> f32 {
+        self.data[prim as usize][3]
+    }
+
+    pub(super) fn raw_buffer(&self) -> (*const [f32; 4], usize) {
+        (self.data.as_ptr(), self.data.len())
+    }
+}
+
+/// A geometry attached to a scene, as the Rust side keeps it for shading.
+#[derive(Debug, Clone)]
+pub enum Geometry {
+    Mesh(TriangleMesh),
+    Spheres(Spheres),
+}
+
+/// The id Embree gave a geometry (`geomID` in a hit); indexes `Scene::geometry`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct GeometryId(pub u32);

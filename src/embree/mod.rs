@@ -1,0 +1,19 @@
+//! Safe Rust over Intel Embree: the only module of dofray with `unsafe` code and raw FFI.
+//!
+//! [`Device`] -> [`SceneBuilder`] (add [`TriangleMesh`]es and [`Spheres`]) -> [`Scene`], which is
+//! immutable, `Send + Sync`, and traces single rays or 16-wide packets ([`RayPacket16`],
+//! [`ShadowPacket16`]). Geometry data is validated before Embree sees it; Embree's errors come
+//! back as [`EmbreeError`].
+
+mod device;
+mod geometry;
+mod packet;
+mod scene;
+mod sys;
+mod version;
+
+pub use device::{Device, EmbreeError, ErrorCode, Result};
+pub use geometry::{Geometry, GeometryId, Spheres, TriangleMesh};
+pub use packet::{Hit, LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
+pub use scene::{BuildQuality, Scene, SceneBuilder};
+pub use version::EMBREE_MAJOR;

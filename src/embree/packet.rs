@@ -1,0 +1,219 @@
+//! Rays, hits and 16-wide structure-of-arrays ray packets in Embree's own layout.
+
+use glam::Vec3;
+
+use super::geometry::GeometryId;
+use super::sys;
+
+/// Number of rays in a packet.
+pub const LANES: usize = 16;
+
+/// A ray segment `origin + t * dir` for `t` in `[tnear, tfar]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub tnear: f32,
+    pub tfar: f32,
+}
+
+impl Ray {
+    /// A ray from `origin` along `dir` with no far limit.
+    pub fn new(origin: Vec3, dir: Vec3) -> Self {
+        Self {
+            origin,
+            dir,
+            tnear: 0.0,
+            tfar: f32::INFINITY,
+        }
+    }
+
+    /// A ray limited to `t` in `[tnear, tfar]`.
+    pub fn segment(origin: Vec3, dir: Vec3, tnear: f32, tfar: f32) -> Self {
+        Self {
+            origin,
+            dir,
+            tnear,
+            tfar,
+        }
+    }
+
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// The nearest hit of a ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Ray parameter of the hit (a distance when `dir` is unit length).
+    pub t: f32,
+    pub geometry: GeometryId,
+    /// Triangle index in a mesh, sphere index in a sphere set.
+    pub prim: u32,
+    /// Barycentric coordinates for triangles (Embree's u, v); unspecified for spheres.
+    pub u: f32,
+    pub v: f32,
+    /// Unnormalised geometric normal as Embree reports it.
+    pub ng: Vec3,
+}
+
+/// Whether a packet's rays are coherent (primary rays, lens samples of one pixel) or not.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RayHint {
+    Coherent,
+    Incoherent,
+}
+
+/// Embree's lane mask: -1 is active, 0 inactive. 64-byte aligned as rtcIntersect16 requires.
+#[repr(C, align(64))]
+#[derive(Clone, Copy)]
+pub(super) struct Mask16(pub(super) [i32; LANES]);
+
+fn init_ray(raw: &mut sys::RTCRay16, lane: usize, ray: &Ray) {
+    raw.org_x[lane] = ray.origin.x;
+    raw.org_y[lane] = ray.origin.y;
+    raw.org_z[lane] = ray.origin.z;
+    raw.dir_x[lane] = ray.dir.x;
+    raw.dir_y[lane] = ray.dir.y;
+    raw.dir_z[lane] = ray.dir.z;
+    raw.tnear[lane] = ray.tnear;
+    raw.tfar[lane] = ray.tfar;
+    raw.time[lane] = 0.0;
+    raw.mask[lane] = u32::MAX;
+    raw.id[lane] = lane as u32;
+    raw.flags[lane] = 0;
+}
+
+fn read_ray(raw: &sys::RTCRay16, lane: usize) -> Ray {
+    Ray {
+        origin: Vec3::new(raw.org_x[lane], raw.org_y[lane], raw.org_z[lane]),
+        dir: Vec3::new(raw.dir_x[lane], raw.dir_y[lane], raw.dir_z[lane]),
+        tnear: raw.tnear[lane],
+        tfar: raw.tfar[lane],
+    }
+}
+
+/// 16 rays and their hits, structure-of-arrays, 64-byte aligned, with a valid mask.
+/// Build one per thread and reuse it: `set` overwrites a lane, `clear` deactivates all lanes.
+#[derive(Clone)]
+pub struct RayPacket16 {
+    pub(super) rayhit: sys::RTCRayHit16,
+    pub(super) valid: Mask16,
+}
+
+impl Default for RayPacket16 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl RayPacket16 {
+    /// A packet with every lane inactive.
+    pub fn new() -> Self {
+        Self {
+            rayhit: sys::RTCRayHit16::default(),
+            valid: Mask16([0; LANES]),
+        }
+    }
+
+    /// Deactivates every lane (their data is left as it was).
+    pub fn clear(&mut self) {
+        self.valid.0 = [0; LANES];
+    }
+
+    /// Activates `lane` with `ray` and no hit.
+    pub fn set(&mut self, lane: usize, ray: &Ray) {
+        init_ray(&mut self.rayhit.ray, lane, ray);
+        let hit = &mut self.rayhit.hit;
+        hit.geomID[lane] = sys::RTC_INVALID_GEOMETRY_ID;
+        hit.primID[lane] = sys::RTC_INVALID_GEOMETRY_ID;
+        for level in hit.instID.iter_mut() {
+            level[lane] = sys::RTC_INVALID_GEOMETRY_ID;
+        }
+        self.valid.0[lane] = -1;
+    }
+
+    /// Deactivates one lane; Embree will neither read nor write it.
+    pub fn set_inactive(&mut self, lane: usize) {
+        self.valid.0[lane] = 0;
+    }
+
+    pub fn is_active(&self, lane: usize) -> bool {
+        self.valid.0[lane] != 0
+    }
+
+    /// Number of active lanes.
+    pub fn active_count(&self) -> usize {
+        self.valid.0.iter().filter(|&&v| v != 0).count()
+    }
+
+    /// The ray in `lane` (after tracing, `tfar` is the hit distance when it hit).
+    pub fn ray(&self, lane: usize) -> Ray {
+        read_ray(&self.rayhit.ray, lane)
+    }
+
+    /// The hit in `lane`, or `None` when the lane is inactive or its ray missed.
+    pub fn hit(&self, lane: usize) -> Option<Hit> {
+        let h = &self.rayhit.hit;
+        if !self.is_active(lane) || h.geomID[lane] == sys::RTC_INVALID_GEOMETRY_ID {
+            return None;
+        }
+        Some(Hit {
+            t: self.rayhit.ray.tfar[lane],
+            geometry: GeometryId(h.geomID[lane]),
+            prim: h.primID[lane],
+            u: h.u[lane],
+            v: h.v[lane],
+            ng: Vec3::new(h.Ng_x[lane], h.Ng_y[lane], h.Ng_z[lane]),
+        })
+    }
+}
+
+/// 16 shadow (occlusion) rays, structure-of-arrays, 64-byte aligned, with a valid mask.
+#[derive(Clone)]
+pub struct ShadowPacket16 {
+    pub(super) rays: sys::RTCRay16,
+    pub(super) valid: Mask16,
+}
+
+impl Default for ShadowPacket16 {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ShadowPacket16 {
+    pub fn new() -> Self {
+        Self {
+            rays: sys::RTCRay16::default(),
+            valid: Mask16([0; LANES]),
+        }
+    }
+
+    pub fn clear(&mut self) {
+        self.valid.0 = [0; LANES];
+    }
+
+    pub fn set(&mut self, lane: usize, ray: &Ray) {
+        init_ray(&mut self.rays, lane, ray);
+        self.valid.0[lane] = -1;
+    }
+
+    pub fn is_active(&self, lane: usize) -> bool {
+        self.valid.0[lane] != 0
+    }
+
+    pub fn active_count(&self) -> usize {
+        self.valid.0.iter().filter(|&&v| v != 0).count()
+    }
+
+    pub fn ray(&self, lane: usize) -> Ray {
+        read_ray(&self.rays, lane)
+    }
+
+    /// True when the active ray in `lane` is blocked (Embree sets its `tfar` to -inf).
+    pub fn occluded(&self, lane: usize) -> bool {
+        self.is_active(lane) && self.rays.tfar[lane] == f32::NEG_INFINITY
+    }
+}
