@@ -3,5 +3,15 @@
 //! The renderer traces 16-wide packets of thin-lens rays only at adaptive sample sites, dense
 //! where the image is in focus and sparse where it is blurred, and interpolates between them
 //! (Kumamoto, "A Faster Technique for Rendering Depth of Field Images").
+//!
+//! Data flows one way: [`scene::SceneDesc`] -> [`scene::World`] (Embree geometry, materials)
+//! -> [`camera::Camera`] -> [`render::render`] -> [`render::Film`] -> [`output`].
 
+pub mod camera;
 pub mod embree;
+pub mod metrics;
+pub mod output;
+pub mod render;
+pub mod sampler;
+pub mod scene;
+pub mod shade;

@@ -10,7 +10,8 @@ use rayon::prelude::*;
 fn sphere_scene(center: Vec3, radius: f32) -> Scene {
     let device = Device::new().unwrap();
     let mut b = SceneBuilder::new(&device).unwrap();
-    b.add_spheres(Spheres::new([(center, radius)]).unwrap()).unwrap();
+    b.add_spheres(Spheres::new([(center, radius)]).unwrap())
+        .unwrap();
     b.commit().unwrap()
 }
 
@@ -19,7 +20,12 @@ fn quad_scene() -> Scene {
     let device = Device::new().unwrap();
     let mut b = SceneBuilder::new(&device).unwrap();
     let mesh = TriangleMesh::new(
-        vec![[0.0, 0.0, 2.0], [1.0, 0.0, 2.0], [1.0, 1.0, 2.0], [0.0, 1.0, 2.0]],
+        vec![
+            [0.0, 0.0, 2.0],
+            [1.0, 0.0, 2.0],
+            [1.0, 1.0, 2.0],
+            [0.0, 1.0, 2.0],
+        ],
         vec![[0, 1, 2], [0, 2, 3]],
     )
     .unwrap();
@@ -37,7 +43,12 @@ fn mixed_scene() -> Scene {
     });
     b.add_spheres(Spheres::new(spheres).unwrap()).unwrap();
     let ground = TriangleMesh::new(
-        vec![[-30.0, 0.0, -26.0], [30.0, 0.0, -26.0], [30.0, 0.0, 34.0], [-30.0, 0.0, 34.0]],
+        vec![
+            [-30.0, 0.0, -26.0],
+            [30.0, 0.0, -26.0],
+            [30.0, 0.0, 34.0],
+            [-30.0, 0.0, 34.0],
+        ],
         vec![[0, 2, 1], [0, 3, 2]],
     )
     .unwrap();
@@ -75,7 +86,9 @@ fn ray_hits_sphere_at_analytic_distance_with_right_normal() {
     let c = oc.length_squared() - (radius as f64).powi(2);
     let t_expected = -b - (b * b - c).sqrt();
 
-    let hit = scene.intersect1(&Ray::new(origin, dir)).expect("ray must hit");
+    let hit = scene
+        .intersect1(&Ray::new(origin, dir))
+        .expect("ray must hit");
     assert!(
         (hit.t as f64 - t_expected).abs() < 1e-4,
         "t = {}, expected {t_expected}",
@@ -85,7 +98,11 @@ fn ray_hits_sphere_at_analytic_distance_with_right_normal() {
     assert_eq!(hit.prim, 0);
     let p = origin + dir * hit.t;
     let expected_normal = (p - center).normalize();
-    assert!(hit.ng.normalize().dot(expected_normal) > 0.9999, "normal {:?}", hit.ng);
+    assert!(
+        hit.ng.normalize().dot(expected_normal) > 0.9999,
+        "normal {:?}",
+        hit.ng
+    );
     assert!(matches!(scene.geometry(hit.geometry), Geometry::Spheres(_)));
 
     // A ray passing beside the sphere (closest approach 1.0 > radius) misses.
@@ -103,13 +120,19 @@ fn triangle_hits_report_primitive_and_barycentrics() {
         .expect("hit");
     assert_eq!(hit.prim, 0);
     assert!((hit.t - 2.0).abs() < 1e-5);
-    assert!((hit.u - 0.5).abs() < 1e-5 && (hit.v - 0.2).abs() < 1e-5, "{hit:?}");
+    assert!(
+        (hit.u - 0.5).abs() < 1e-5 && (hit.v - 0.2).abs() < 1e-5,
+        "{hit:?}"
+    );
     // Point (0.2, 0.7) is in triangle 1 (0,2,3): u = 0.2, v = 0.5.
     let hit = scene
         .intersect1(&Ray::new(Vec3::new(0.2, 0.7, 0.0), Vec3::Z))
         .expect("hit");
     assert_eq!(hit.prim, 1);
-    assert!((hit.u - 0.2).abs() < 1e-5 && (hit.v - 0.5).abs() < 1e-5, "{hit:?}");
+    assert!(
+        (hit.u - 0.2).abs() < 1e-5 && (hit.v - 0.5).abs() < 1e-5,
+        "{hit:?}"
+    );
     // Outside the quad.
     assert!(
         scene
@@ -218,17 +241,20 @@ fn threads_see_the_same_hits() {
         }
         scene.intersect16(&mut packet, RayHint::Incoherent);
         for lane in 0..chunk.len() {
-            out.push(packet.hit(lane).map(|h| (h.geometry, h.prim, h.t.to_bits())));
+            out.push(
+                packet
+                    .hit(lane)
+                    .map(|h| (h.geometry, h.prim, h.t.to_bits())),
+            );
         }
         out
     };
     let serial: Vec<_> = rays.chunks(LANES).flat_map(trace).collect();
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
-    let parallel: Vec<_> = pool.install(|| {
-        rays.par_chunks(LANES)
-            .flat_map_iter(trace)
-            .collect()
-    });
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(4)
+        .build()
+        .unwrap();
+    let parallel: Vec<_> = pool.install(|| rays.par_chunks(LANES).flat_map_iter(trace).collect());
     assert_eq!(serial, parallel);
 }
 
@@ -251,10 +277,16 @@ fn invalid_device_config_is_an_error() {
 
 #[test]
 fn out_of_range_index_is_an_error() {
-    let err = TriangleMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 3]])
-        .unwrap_err();
+    let err = TriangleMesh::new(
+        vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        vec![[0, 1, 3]],
+    )
+    .unwrap_err();
     let text = err.to_string();
-    assert!(text.contains("triangle 0") && text.contains("3 vertices"), "{text}");
+    assert!(
+        text.contains("triangle 0") && text.contains("3 vertices"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -270,8 +302,11 @@ fn non_finite_geometry_is_an_error() {
     assert!(Spheres::new([(Vec3::ZERO, -1.0)]).is_err());
     assert!(Spheres::new([(Vec3::ZERO, f32::NAN)]).is_err());
     assert!(TriangleMesh::new(vec![[0.0; 3]], vec![]).is_err());
-    let mesh = TriangleMesh::new(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]])
-        .unwrap();
+    let mesh = TriangleMesh::new(
+        vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        vec![[0, 1, 2]],
+    )
+    .unwrap();
     assert!(mesh.clone().with_normals(vec![[0.0, 0.0, 1.0]]).is_err());
     assert!(mesh.with_uvs(vec![[0.0, f32::NAN]; 3]).is_err());
 }

@@ -1,0 +1,521 @@
+//! The thin-lens camera: rays through a lens aperture focused on a plane, the circle of
+//! confusion (CoC) that results, and the three ways of specifying the lens.
+
+use glam::{Vec2, Vec3};
+
+use crate::embree::Ray;
+
+/// Why a camera specification was rejected.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CameraError {
+    #[error("{name} must be {expected}, got {value}")]
+    Invalid {
+        name: &'static str,
+        expected: &'static str,
+        value: String,
+    },
+    #[error("autofocus pixel ({x}, {y}) is outside the {width}x{height} image")]
+    FocusPixelOutside {
+        x: u32,
+        y: u32,
+        width: u32,
+        height: u32,
+    },
+    #[error("autofocus pixel ({x}, {y}) sees no surface to focus on")]
+    FocusPixelMisses { x: u32, y: u32 },
+}
+
+fn check(
+    ok: bool,
+    name: &'static str,
+    expected: &'static str,
+    value: impl ToString,
+) -> Result<(), CameraError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(CameraError::Invalid {
+            name,
+            expected,
+            value: value.to_string(),
+        })
+    }
+}
+
+fn positive(name: &'static str, v: f32) -> Result<(), CameraError> {
+    check(v.is_finite() && v > 0.0, name, "a finite number > 0", v)
+}
+
+/// How the lens aperture is specified. All three map to one thin lens of some aperture radius.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LensSpec {
+    /// No depth of field: every ray leaves the lens centre.
+    Pinhole,
+    /// Aperture radius in scene units (as pbrt and Mitsuba specify it).
+    Aperture { radius: f32 },
+    /// A photographic lens: focal length and sensor width in millimetres, scene units metres.
+    /// The aperture radius is `focal_length / (2 f_number)`, and the field of view follows from
+    /// the focal length and sensor width (replacing the camera's `vfov_deg`).
+    Photographic {
+        focal_length_mm: f32,
+        f_number: f32,
+        sensor_width_mm: f32,
+    },
+    /// The seed's intuitive control: depths within `sharp_range` in front of and behind the
+    /// focus distance stay sharp, and blur grows by `spread` pixels of CoC per `sharp_range`
+    /// beyond. Using the seed's symmetric approximation of the CoC around the focus distance P,
+    /// `coc_px(D) ~= 2 R k |D - P| / P^2` (k = pixels per unit at unit distance), the aperture
+    /// radius is chosen so that `coc_px(P +- sharp_range) = spread`:
+    /// `R = spread * P^2 / (2 k sharp_range)`.
+    Seed { sharp_range: f32, spread: f32 },
+}
+
+/// Where the lens is focused.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Focus {
+    /// Distance along the view axis to the plane in focus.
+    Distance(f32),
+    /// A world-space point that must be in focus.
+    Point(Vec3),
+    /// Autofocus: the surface seen through this pixel (x right, y down) is in focus.
+    Pixel { x: u32, y: u32 },
+}
+
+/// The outline of the aperture, which is also the shape of out-of-focus highlights (bokeh).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ApertureShape {
+    /// 0 for a circular aperture, else the number of diaphragm blades (>= 3).
+    pub blades: u32,
+    /// Rotation of a polygonal aperture, degrees.
+    pub rotation_deg: f32,
+    /// Anamorphic squeeze: the aperture's height over its width (1 = round bokeh).
+    pub anamorphic: f32,
+}
+
+impl Default for ApertureShape {
+    fn default() -> Self {
+        Self {
+            blades: 0,
+            rotation_deg: 0.0,
+            anamorphic: 1.0,
+        }
+    }
+}
+
+/// Everything needed to build a [`Camera`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraSpec {
+    pub eye: Vec3,
+    pub look_at: Vec3,
+    pub up: Vec3,
+    pub vfov_deg: f32,
+    pub width: u32,
+    pub height: u32,
+    pub lens: LensSpec,
+    pub focus: Focus,
+    pub aperture: ApertureShape,
+}
+
+/// A thin-lens camera, ready to generate rays.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    /// Unit view axis.
+    pub forward: Vec3,
+    pub right: Vec3,
+    pub up: Vec3,
+    pub width: u32,
+    pub height: u32,
+    /// tan(vfov / 2).
+    pub tan_half_vfov: f32,
+    /// Aperture radius in scene units (0 = pinhole).
+    pub aperture_radius: f32,
+    /// Distance of the plane in focus along the view axis.
+    pub focus_distance: f32,
+    pub aperture: ApertureShape,
+}
+
+impl CameraSpec {
+    /// Validates the spec and builds the camera. `depth_of` answers autofocus queries: given a
+    /// pinhole ray it returns the view-axis depth of the surface it hits (None for a miss).
+    pub fn build(&self, depth_of: impl FnOnce(&Ray) -> Option<f32>) -> Result<Camera, CameraError> {
+        check(self.width > 0, "width", "at least 1 pixel", self.width)?;
+        check(self.height > 0, "height", "at least 1 pixel", self.height)?;
+        for (name, v) in [
+            ("eye", self.eye),
+            ("look_at", self.look_at),
+            ("up", self.up),
+        ] {
+            check(v.is_finite(), name, "finite coordinates", format!("{v:?}"))?;
+        }
+        let forward = (self.look_at - self.eye).normalize_or_zero();
+        check(
+            forward != Vec3::ZERO,
+            "look_at",
+            "a point different from eye",
+            format!("{:?}", self.look_at),
+        )?;
+        let right = forward.cross(self.up).normalize_or_zero();
+        check(
+            right != Vec3::ZERO,
+            "up",
+            "a direction not parallel to the view direction",
+            format!("{:?}", self.up),
+        )?;
+        let up = right.cross(forward);
+        let a = &self.aperture;
+        check(
+            a.blades == 0 || a.blades >= 3,
+            "aperture blades",
+            "0 (circular) or at least 3",
+            a.blades,
+        )?;
+        check(
+            a.rotation_deg.is_finite(),
+            "aperture rotation",
+            "a finite angle",
+            a.rotation_deg,
+        )?;
+        positive("anamorphic ratio", a.anamorphic)?;
+
+        let mut vfov_deg = self.vfov_deg;
+        if let LensSpec::Photographic {
+            focal_length_mm,
+            sensor_width_mm,
+            ..
+        } = self.lens
+        {
+            positive("focal_length_mm", focal_length_mm)?;
+            positive("sensor_width_mm", sensor_width_mm)?;
+            let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
+            let tan_half_v = tan_half_h * self.height as f32 / self.width as f32;
+            vfov_deg = 2.0 * tan_half_v.atan().to_degrees();
+        }
+        check(
+            vfov_deg.is_finite() && vfov_deg > 0.0 && vfov_deg < 180.0,
+            "vfov_deg",
+            "an angle between 0 and 180 degrees",
+            vfov_deg,
+        )?;
+
+        let mut camera = Camera {
+            eye: self.eye,
+            forward,
+            right,
+            up,
+            width: self.width,
+            height: self.height,
+            tan_half_vfov: (vfov_deg.to_radians() * 0.5).tan(),
+            aperture_radius: 0.0,
+            focus_distance: 1.0,
+            aperture: self.aperture,
+        };
+        camera.focus_distance = match self.focus {
+            Focus::Distance(d) => d,
+            Focus::Point(p) => {
+                check(
+                    p.is_finite(),
+                    "focus point",
+                    "finite coordinates",
+                    format!("{p:?}"),
+                )?;
+                (p - self.eye).dot(forward)
+            }
+            Focus::Pixel { x, y } => {
+                if x >= self.width || y >= self.height {
+                    return Err(CameraError::FocusPixelOutside {
+                        x,
+                        y,
+                        width: self.width,
+                        height: self.height,
+                    });
+                }
+                let ray = camera.pinhole_ray(x as f32 + 0.5, y as f32 + 0.5);
+                depth_of(&ray).ok_or(CameraError::FocusPixelMisses { x, y })?
+            }
+        };
+        positive("focus distance", camera.focus_distance)?;
+        camera.aperture_radius = match self.lens {
+            LensSpec::Pinhole => 0.0,
+            LensSpec::Aperture { radius } => {
+                check(
+                    radius.is_finite() && radius >= 0.0,
+                    "aperture radius",
+                    "a finite number >= 0",
+                    radius,
+                )?;
+                radius
+            }
+            LensSpec::Photographic {
+                focal_length_mm,
+                f_number,
+                ..
+            } => {
+                positive("f_number", f_number)?;
+                focal_length_mm / 1000.0 / (2.0 * f_number)
+            }
+            LensSpec::Seed {
+                sharp_range,
+                spread,
+            } => {
+                positive("sharp_range", sharp_range)?;
+                check(
+                    spread.is_finite() && spread >= 0.0,
+                    "spread",
+                    "a finite number >= 0",
+                    spread,
+                )?;
+                let p = camera.focus_distance;
+                spread * p * p / (2.0 * camera.pixels_per_unit() * sharp_range)
+            }
+        };
+        Ok(camera)
+    }
+}
+
+impl Camera {
+    /// Pixels spanned by one scene unit at unit distance along the view axis.
+    pub fn pixels_per_unit(&self) -> f32 {
+        self.height as f32 / (2.0 * self.tan_half_vfov)
+    }
+
+    /// The largest extent of the aperture (the CoC's largest diameter scales with it).
+    fn aperture_extent(&self) -> f32 {
+        self.aperture_radius * self.aperture.anamorphic.max(1.0)
+    }
+
+    /// Diameter in pixels of the circle of confusion of a point at `depth` along the view axis
+    /// (infinite depth gives the limit for points at infinity).
+    ///
+    /// For a thin lens of aperture diameter A focused at P, a point at depth D blurs to a disc
+    /// of diameter `A |D - P| / D` on the plane in focus, which the image scales by `k / P`:
+    /// `coc = A k |D - P| / (D P)`. This equals the seed's `C = |Vp - Vd| F / (n Vd)` on the
+    /// sensor converted to pixels (see the tests).
+    pub fn coc_px(&self, depth: f32) -> f32 {
+        let a = 2.0 * self.aperture_extent();
+        let p = self.focus_distance;
+        let k = self.pixels_per_unit();
+        if depth.is_infinite() {
+            return a * k / p;
+        }
+        let d = depth.max(1e-6);
+        a * k * (d - p).abs() / (d * p)
+    }
+
+    /// Unnormalised direction from the eye through film position (px, py) in pixels
+    /// (x right, y down; pixel centres at +0.5). Its component along the view axis is 1.
+    fn film_dir(&self, px: f32, py: f32) -> Vec3 {
+        let aspect = self.width as f32 / self.height as f32;
+        let sx = (2.0 * px / self.width as f32 - 1.0) * self.tan_half_vfov * aspect;
+        let sy = (1.0 - 2.0 * py / self.height as f32) * self.tan_half_vfov;
+        self.forward + self.right * sx + self.up * sy
+    }
+
+    /// The ray through the lens centre (no depth of field).
+    pub fn pinhole_ray(&self, px: f32, py: f32) -> Ray {
+        Ray::new(self.eye, self.film_dir(px, py).normalize())
+    }
+
+    /// The ray from lens position `lens` (in the aperture's unit shape, see
+    /// [`crate::sampler::aperture_point`]) through the point on the plane in focus that film
+    /// position (px, py) images.
+    pub fn lens_ray(&self, px: f32, py: f32, lens: Vec2) -> Ray {
+        let focus_point = self.eye + self.film_dir(px, py) * self.focus_distance;
+        let origin = self.eye + (self.right * lens.x + self.up * lens.y) * self.aperture_radius;
+        Ray::new(origin, (focus_point - origin).normalize())
+    }
+
+    /// Depth along the view axis of the point at parameter `t` of `ray` (unit direction).
+    pub fn depth_along_axis(&self, ray: &Ray, t: f32) -> f32 {
+        (ray.at(t) - self.eye).dot(self.forward)
+    }
+
+    /// Film position (px, py) of a world point seen through the lens centre, if in front.
+    pub fn project(&self, p: Vec3) -> Option<Vec2> {
+        let v = p - self.eye;
+        let z = v.dot(self.forward);
+        if z <= 0.0 {
+            return None;
+        }
+        let aspect = self.width as f32 / self.height as f32;
+        let sx = v.dot(self.right) / z / (self.tan_half_vfov * aspect);
+        let sy = v.dot(self.up) / z / self.tan_half_vfov;
+        Some(Vec2::new(
+            (sx + 1.0) * 0.5 * self.width as f32,
+            (1.0 - sy) * 0.5 * self.height as f32,
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(lens: LensSpec) -> CameraSpec {
+        CameraSpec {
+            eye: Vec3::new(0.0, 1.2, -6.0),
+            look_at: Vec3::new(0.0, 0.5, 4.0),
+            up: Vec3::Y,
+            vfov_deg: 40.0,
+            width: 640,
+            height: 480,
+            lens,
+            focus: Focus::Distance(12.5),
+            aperture: ApertureShape::default(),
+        }
+    }
+
+    fn no_autofocus(_: &Ray) -> Option<f32> {
+        None
+    }
+
+    /// The seed's formula, evaluated literally with image-side distances, then converted to
+    /// pixels through the sensor size.
+    #[test]
+    fn coc_matches_the_seeds_formula() {
+        let (focal_mm, n, sensor_w_mm) = (50.0f32, 2.8f32, 36.0f32);
+        let cam = spec(LensSpec::Photographic {
+            focal_length_mm: focal_mm,
+            f_number: n,
+            sensor_width_mm: sensor_w_mm,
+        })
+        .build(no_autofocus)
+        .unwrap();
+        let f = focal_mm as f64 / 1000.0;
+        let p = cam.focus_distance as f64;
+        // Image distance for an object at distance x: 1/F = 1/x + 1/V.
+        let image_dist = |x: f64| f * x / (x - f);
+        let vp = image_dist(p);
+        // The camera's field of view is set by F and the sensor, so the sensor that covers the
+        // image at image distance Vp is sensor_w * Vp / F wide, and pixels per metre follow.
+        let sensor_h = (sensor_w_mm as f64 / 1000.0) * 480.0 / 640.0 * vp / f;
+        let px_per_m = 480.0 / sensor_h;
+        for depth in [2.0f64, 5.0, 9.0, 12.5, 14.0, 20.0, 40.0] {
+            let vd = image_dist(depth);
+            let c = (vp - vd).abs() * f / (n as f64 * vd);
+            let expected = c * px_per_m;
+            let got = cam.coc_px(depth as f32) as f64;
+            assert!(
+                (got - expected).abs() <= 1e-3 * expected.max(1.0),
+                "depth {depth}: coc_px {got} vs seed {expected}"
+            );
+        }
+        assert_eq!(cam.coc_px(12.5), 0.0);
+    }
+
+    #[test]
+    fn paper_lens_gives_the_designed_blur() {
+        let cam = spec(LensSpec::Aperture { radius: 0.2 })
+            .build(no_autofocus)
+            .unwrap();
+        // Front sphere centre is about 5 units from the eye along the axis: CoC near 30 px.
+        let front = cam.coc_px(5.05);
+        assert!((25.0..35.0).contains(&front), "{front}");
+        let horizon = cam.coc_px(f32::INFINITY);
+        assert!((15.0..25.0).contains(&horizon), "{horizon}");
+    }
+
+    #[test]
+    fn seed_lens_gives_spread_pixels_at_the_range_limits() {
+        let cam = spec(LensSpec::Seed {
+            sharp_range: 2.0,
+            spread: 3.0,
+        })
+        .build(no_autofocus)
+        .unwrap();
+        let near = cam.coc_px(10.5);
+        let far = cam.coc_px(14.5);
+        // Symmetric approximation: the true CoC is larger in front than behind, around spread.
+        assert!(near > far && near < 3.6 && far > 2.5, "{near} {far}");
+    }
+
+    #[test]
+    fn focus_point_and_autofocus_set_the_focus_distance() {
+        let mut s = spec(LensSpec::Aperture { radius: 0.1 });
+        s.focus = Focus::Point(s.eye + (s.look_at - s.eye).normalize() * 7.0 + Vec3::X);
+        let cam = s.build(no_autofocus).unwrap();
+        assert!((cam.focus_distance - 7.0).abs() < 1e-4);
+        s.focus = Focus::Pixel { x: 320, y: 240 };
+        let cam = s.build(|ray| Some(ray.dir.length() * 9.0)).unwrap();
+        assert!((cam.focus_distance - 9.0).abs() < 1e-4);
+        assert!(matches!(
+            s.build(no_autofocus),
+            Err(CameraError::FocusPixelMisses { .. })
+        ));
+        s.focus = Focus::Pixel { x: 640, y: 0 };
+        assert!(matches!(
+            s.build(no_autofocus),
+            Err(CameraError::FocusPixelOutside { .. })
+        ));
+    }
+
+    #[test]
+    fn lens_rays_converge_on_the_plane_in_focus() {
+        let cam = spec(LensSpec::Aperture { radius: 0.3 })
+            .build(no_autofocus)
+            .unwrap();
+        let centre = cam.pinhole_ray(100.5, 50.5);
+        let t = cam.focus_distance / centre.dir.dot(cam.forward);
+        let target = centre.at(t);
+        for lens in [
+            Vec2::new(1.0, 0.0),
+            Vec2::new(-0.3, 0.7),
+            Vec2::new(0.0, -1.0),
+        ] {
+            let r = cam.lens_ray(100.5, 50.5, lens);
+            let t = (cam.focus_distance - cam.depth_along_axis(&r, 0.0)) / r.dir.dot(cam.forward);
+            assert!((r.at(t) - target).length() < 1e-4);
+        }
+        let p = cam.project(target).unwrap();
+        assert!((p - Vec2::new(100.5, 50.5)).length() < 1e-2, "{p}");
+    }
+
+    #[test]
+    fn bad_parameters_are_rejected_by_name() {
+        let mut s = spec(LensSpec::Aperture { radius: -0.1 });
+        assert!(
+            s.build(no_autofocus)
+                .unwrap_err()
+                .to_string()
+                .contains("aperture radius")
+        );
+        s.lens = LensSpec::Aperture { radius: 0.1 };
+        s.focus = Focus::Distance(0.0);
+        assert!(
+            s.build(no_autofocus)
+                .unwrap_err()
+                .to_string()
+                .contains("focus distance")
+        );
+        s.focus = Focus::Distance(f32::NAN);
+        assert!(s.build(no_autofocus).is_err());
+        s.focus = Focus::Distance(5.0);
+        s.width = 0;
+        assert!(
+            s.build(no_autofocus)
+                .unwrap_err()
+                .to_string()
+                .contains("width")
+        );
+        s.width = 10;
+        s.aperture.blades = 2;
+        assert!(
+            s.build(no_autofocus)
+                .unwrap_err()
+                .to_string()
+                .contains("blades")
+        );
+        s.aperture.blades = 6;
+        s.lens = LensSpec::Photographic {
+            focal_length_mm: 50.0,
+            f_number: 0.0,
+            sensor_width_mm: 36.0,
+        };
+        assert!(
+            s.build(no_autofocus)
+                .unwrap_err()
+                .to_string()
+                .contains("f_number")
+        );
+    }
+}

@@ -1,0 +1,719 @@
+//! Writing rendered films and diagnostic pictures to disk.
+//!
+//! Two formats, chosen by the file extension (case-insensitive):
+//!
+//! - `.png`: 8-bit sRGB of the linear colour, clamped to `[0, 1]`.
+//! - `.exr`: one unnamed layer of 32-bit float channels `R`, `G`, `B` (linear), `Z` (view-axis
+//!   depth, `+inf` for misses), `coc` (circle of confusion in pixels), `interval` (sample
+//!   interval) and `samples` (lens samples traced), which compositors read as the beauty pass
+//!   plus auxiliary channels.
+//!
+//! Every writer is atomic: it writes a hidden temporary file next to the target and renames it
+//! over the target only once everything has been written, removing the temporary file on any
+//! error, so a failed or interrupted write never leaves a partial image behind.
+//!
+//! The picture helpers ([`depth_picture`], [`interval_picture`], [`heat_picture`]) return
+//! *linear* RGB buffers for [`write_png_rgb`]; their colours are chosen in display (sRGB)
+//! space and linearised, so the PNG shows exactly the intended grey ramps and palettes.
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use glam::Vec3;
+
+use crate::render::film::Film;
+
+/// Why an image could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// The path's extension names no format we write.
+    #[error("{}: unknown image extension (expected .png or .exr)", path.display())]
+    UnknownExtension { path: PathBuf },
+    /// Creating, writing or renaming a file failed.
+    #[error("cannot write {}", path.display())]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The encoder rejected the image, or the buffers do not match the image size.
+    #[error("cannot encode {}: {message}", path.display())]
+    Encode { path: PathBuf, message: String },
+    /// The image has no pixels (zero width or height).
+    #[error("cannot write an image with no pixels")]
+    EmptyImage,
+}
+
+/// The file formats [`write_film`] writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// 8-bit sRGB colour.
+    Png,
+    /// 32-bit float linear colour plus depth, CoC, interval and sample-count channels.
+    Exr,
+}
+
+impl ImageFormat {
+    /// The format named by `path`'s extension (case-insensitive).
+    pub fn from_path(path: &Path) -> Result<Self, OutputError> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("png") => Ok(Self::Png),
+            Some("exr") => Ok(Self::Exr),
+            _ => Err(OutputError::UnknownExtension {
+                path: path.to_path_buf(),
+            }),
+        }
+    }
+}
+
+/// Checks up front that `path` has a known extension and that its directory exists and is
+/// writable (by creating and removing a temporary file there), so the CLI can fail before a
+/// long render rather than after it.
+pub fn check_writable(path: &Path) -> Result<ImageFormat, OutputError> {
+    let format = ImageFormat::from_path(path)?;
+    let io_err = |source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    if path.is_dir() {
+        return Err(io_err(std::io::Error::new(
+            std::io::ErrorKind::IsADirectory,
+            "the output path is a directory",
+        )));
+    }
+    let dir = parent_dir(path);
+    if !dir.is_dir() {
+        return Err(io_err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!("directory {} does not exist", dir.display()),
+        )));
+    }
+    let (tmp, file) = create_temp(path).map_err(io_err)?;
+    drop(file);
+    std::fs::remove_file(&tmp).map_err(io_err)?;
+    Ok(format)
+}
+
+/// Writes `film` to `path` in the format its extension names (see the module documentation).
+pub fn write_film(path: &Path, film: &Film) -> Result<(), OutputError> {
+    let format = ImageFormat::from_path(path)?;
+    check_film(path, film)?;
+    match format {
+        ImageFormat::Png => write_png_rgb(path, film.width, film.height, &film.color),
+        ImageFormat::Exr => write_exr(path, film),
+    }
+}
+
+/// Writes an 8-bit sRGB PNG of any linear RGB buffer (row-major, top row first), clamping
+/// each channel to `[0, 1]`. Used for the film itself, comparison pictures and heat maps.
+pub fn write_png_rgb(
+    path: &Path,
+    width: usize,
+    height: usize,
+    rgb: &[Vec3],
+) -> Result<(), OutputError> {
+    use image::ImageEncoder;
+
+    check_len(path, width, height, rgb.len(), "colour")?;
+    let (w, h) = match (u32::try_from(width), u32::try_from(height)) {
+        (Ok(w), Ok(h)) => (w, h),
+        _ => {
+            return Err(OutputError::Encode {
+                path: path.to_path_buf(),
+                message: format!("{width}x{height} is too large for PNG"),
+            });
+        }
+    };
+    let bytes: Vec<u8> = rgb
+        .iter()
+        .flat_map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
+        .collect();
+    write_atomic(path, |file| {
+        let mut out = BufWriter::new(file);
+        image::codecs::png::PngEncoder::new(&mut out)
+            .write_image(&bytes, w, h, image::ExtendedColorType::Rgb8)
+            .map_err(|e| encode_or_io(path, e))?;
+        out.flush().map_err(|source| OutputError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    })
+}
+
+/// The seed's figure 2: depth as a grey picture, near = white, far = dark grey, misses black.
+/// Depth is normalised by the film's finite depth range; the grey ramp is linear in display
+/// (sRGB) space, from 1 at the nearest surface down to 0.15 at the farthest.
+pub fn depth_picture(film: &Film) -> Vec<Vec3> {
+    const FAR_GREY: f32 = 0.15;
+    let (near, far) = film
+        .depth
+        .iter()
+        .filter(|d| d.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &d| {
+            (lo.min(d), hi.max(d))
+        });
+    let range = far - near;
+    film.depth
+        .iter()
+        .map(|&d| {
+            if !d.is_finite() {
+                return Vec3::ZERO;
+            }
+            let t = if range > 0.0 {
+                ((d - near) / range).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            Vec3::splat(srgb_to_linear(1.0 - (1.0 - FAR_GREY) * t))
+        })
+        .collect()
+}
+
+/// Display-space (sRGB) colours of the interval layers, interval 1, 2, 4, ... 128 and larger:
+/// samples of the "inferno" colour map, so larger intervals are brighter and warmer.
+const INTERVAL_PALETTE: [[f32; 3]; 8] = [
+    [0.000, 0.000, 0.016],
+    [0.160, 0.040, 0.350],
+    [0.400, 0.080, 0.430],
+    [0.630, 0.170, 0.360],
+    [0.830, 0.290, 0.220],
+    [0.960, 0.490, 0.050],
+    [0.980, 0.750, 0.160],
+    [0.990, 1.000, 0.640],
+];
+
+/// The seed's figure 3: the sample-interval map, one distinct colour per power-of-two layer
+/// (interval 1 = black, then purple, red, orange, yellow, up to pale yellow for 128 and more).
+/// An interval that is not a power of two takes its largest power-of-two layer below.
+pub fn interval_picture(film: &Film) -> Vec<Vec3> {
+    let palette = INTERVAL_PALETTE.map(|c| Vec3::from_array(c.map(srgb_to_linear)));
+    film.interval
+        .iter()
+        .map(|&i| {
+            let level = i.max(1).ilog2() as usize;
+            palette[level.min(palette.len() - 1)]
+        })
+        .collect()
+}
+
+/// Heat map of a per-pixel error in `[0, max]`: black -> red -> yellow -> white, linear in
+/// display (sRGB) space. Values are clamped to the range; NaN shows as the maximum (white),
+/// so broken pixels stand out. If `max` is not positive, any positive value is white.
+pub fn heat_picture(values: &[f32], max: f32) -> Vec<Vec3> {
+    values
+        .iter()
+        .map(|&v| {
+            let t = if v.is_nan() {
+                1.0
+            } else if max > 0.0 {
+                (v / max).clamp(0.0, 1.0)
+            } else if v > 0.0 {
+                1.0
+            } else {
+                0.0
+            };
+            // Three equal segments: red rises, then green, then blue.
+            let s = t * 3.0;
+            let display = Vec3::new(
+                s.clamp(0.0, 1.0),
+                (s - 1.0).clamp(0.0, 1.0),
+                (s - 2.0).clamp(0.0, 1.0),
+            );
+            Vec3::new(
+                srgb_to_linear(display.x),
+                srgb_to_linear(display.y),
+                srgb_to_linear(display.z),
+            )
+        })
+        .collect()
+}
+
+/// sRGB-encodes one linear channel, clamped to `[0, 1]` (NaN counts as 0), to 8 bits.
+pub fn srgb8(v: f32) -> u8 {
+    let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+    let e = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (e * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+/// The inverse of the sRGB transfer function: display value in `[0, 1]` to linear.
+fn srgb_to_linear(e: f32) -> f32 {
+    let e = e.clamp(0.0, 1.0);
+    if e <= 0.040_45 {
+        e / 12.92
+    } else {
+        ((e + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn write_exr(path: &Path, film: &Film) -> Result<(), OutputError> {
+    use exr::prelude::*;
+
+    let channel = |name: &str, data: Vec<f32>| AnyChannel::new(name, FlatSamples::F32(data));
+    let channels = SmallVec::from_vec(vec![
+        channel("R", film.color.iter().map(|c| c.x).collect()),
+        channel("G", film.color.iter().map(|c| c.y).collect()),
+        channel("B", film.color.iter().map(|c| c.z).collect()),
+        channel("Z", film.depth.clone()),
+        channel("coc", film.coc.clone()),
+        channel(
+            "interval",
+            film.interval.iter().map(|&i| i as f32).collect(),
+        ),
+        channel("samples", film.samples.iter().map(|&s| s as f32).collect()),
+    ]);
+    let layer = Layer::new(
+        (film.width, film.height),
+        LayerAttributes {
+            software_name: Some(Text::from("dofray")),
+            ..LayerAttributes::default()
+        },
+        Encoding::SMALL_LOSSLESS,
+        // EXR requires channels sorted by name; `sort` does that (bytewise: B G R Z coc ...).
+        AnyChannels::sort(channels),
+    );
+    let image = Image::from_layer(layer);
+    write_atomic(path, |file| {
+        image
+            .write()
+            .to_unbuffered(&mut *file)
+            .map_err(|e| match e {
+                Error::Io(source) => OutputError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                },
+                other => OutputError::Encode {
+                    path: path.to_path_buf(),
+                    message: other.to_string(),
+                },
+            })
+    })
+}
+
+/// Checks that every buffer of `film` has `width * height` entries.
+fn check_film(path: &Path, film: &Film) -> Result<(), OutputError> {
+    let (w, h) = (film.width, film.height);
+    check_len(path, w, h, film.color.len(), "colour")?;
+    check_len(path, w, h, film.depth.len(), "depth")?;
+    check_len(path, w, h, film.coc.len(), "coc")?;
+    check_len(path, w, h, film.interval.len(), "interval")?;
+    check_len(path, w, h, film.samples.len(), "samples")
+}
+
+fn check_len(
+    path: &Path,
+    width: usize,
+    height: usize,
+    len: usize,
+    what: &str,
+) -> Result<(), OutputError> {
+    if width == 0 || height == 0 {
+        return Err(OutputError::EmptyImage);
+    }
+    match width.checked_mul(height) {
+        Some(n) if n == len => Ok(()),
+        _ => Err(OutputError::Encode {
+            path: path.to_path_buf(),
+            message: format!("{what} buffer has {len} pixels, expected {width}x{height}"),
+        }),
+    }
+}
+
+fn encode_or_io(path: &Path, e: image::ImageError) -> OutputError {
+    match e {
+        image::ImageError::IoError(source) => OutputError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        other => OutputError::Encode {
+            path: path.to_path_buf(),
+            message: other.to_string(),
+        },
+    }
+}
+
+/// The directory `path` would be written into ("." for a bare file name).
+fn parent_dir(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
+/// Creates a fresh hidden temporary file next to `path`: `.{name}.tmp-{pid}-{n}`.
+fn create_temp(path: &Path) -> std::io::Result<(PathBuf, File)> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".to_owned());
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let tmp = parent_dir(path).join(format!(".{name}.tmp-{}-{n}", std::process::id()));
+    let file = OpenOptions::new().write(true).create_new(true).open(&tmp)?;
+    Ok((tmp, file))
+}
+
+/// Runs `write` on a temporary file next to `path`, then syncs it and renames it over `path`.
+/// On any error the temporary file is removed and `path` is left untouched.
+fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut File) -> Result<(), OutputError>,
+) -> Result<(), OutputError> {
+    let io_err = |source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let (tmp, mut file) = create_temp(path).map_err(io_err)?;
+    let result = write(&mut file)
+        .and_then(|()| file.sync_all().map_err(io_err))
+        .and_then(|()| {
+            drop(file);
+            std::fs::rename(&tmp, path).map_err(io_err)
+        });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A unique scratch directory under the system temp dir, removed on drop.
+    struct Scratch(PathBuf);
+
+    impl Scratch {
+        fn new(tag: &str) -> Self {
+            static N: AtomicU64 = AtomicU64::new(0);
+            let dir = std::env::temp_dir().join(format!(
+                "dofray-output-{tag}-{}-{}",
+                std::process::id(),
+                N.fetch_add(1, Ordering::Relaxed)
+            ));
+            std::fs::create_dir_all(&dir).unwrap();
+            Self(dir)
+        }
+
+        fn entries(&self) -> Vec<String> {
+            let mut names: Vec<String> = std::fs::read_dir(&self.0)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            names.sort();
+            names
+        }
+    }
+
+    impl Drop for Scratch {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn test_film() -> Film {
+        let mut film = Film::new(4, 3);
+        for y in 0..3 {
+            for x in 0..4 {
+                let i = film.index(x, y);
+                film.color[i] = Vec3::new(x as f32 / 3.0, y as f32 / 2.0, 0.25);
+                film.depth[i] = if x == 3 {
+                    f32::INFINITY
+                } else {
+                    1.0 + i as f32
+                };
+                film.coc[i] = 0.5 * i as f32;
+                film.interval[i] = 1 << (i % 4);
+                film.samples[i] = (i * 3) as u32;
+            }
+        }
+        film.color[0] = Vec3::new(2.0, -1.0, 0.5); // out of range: clamped
+        film
+    }
+
+    #[test]
+    fn srgb8_known_values() {
+        assert_eq!(srgb8(0.0), 0);
+        assert_eq!(srgb8(1.0), 255);
+        assert_eq!(srgb8(0.5), 188);
+        assert_eq!(srgb8(-3.0), 0);
+        assert_eq!(srgb8(7.0), 255);
+        assert_eq!(srgb8(f32::NAN), 0);
+        // The linear segment near black.
+        assert_eq!(srgb8(0.001), (0.001f32 * 12.92 * 255.0).round() as u8);
+        // Inverse transfer round-trips every 8-bit level.
+        for b in 0..=255u8 {
+            assert_eq!(srgb8(srgb_to_linear(b as f32 / 255.0)), b);
+        }
+    }
+
+    #[test]
+    fn format_from_extension() {
+        assert_eq!(
+            ImageFormat::from_path(Path::new("a/b.png")).unwrap(),
+            ImageFormat::Png
+        );
+        assert_eq!(
+            ImageFormat::from_path(Path::new("B.PNG")).unwrap(),
+            ImageFormat::Png
+        );
+        assert_eq!(
+            ImageFormat::from_path(Path::new("x.ExR")).unwrap(),
+            ImageFormat::Exr
+        );
+        for bad in ["x.jpg", "x.txt", "x", "png", ".png.bak"] {
+            let err = ImageFormat::from_path(Path::new(bad)).unwrap_err();
+            assert!(
+                matches!(&err, OutputError::UnknownExtension { path } if path == Path::new(bad)),
+                "{bad}: {err:?}"
+            );
+            assert!(err.to_string().contains(".png or .exr"), "{err}");
+        }
+    }
+
+    #[test]
+    fn png_round_trip() {
+        let dir = Scratch::new("png");
+        let path = dir.0.join("film.png");
+        let film = test_film();
+        write_film(&path, &film).unwrap();
+        assert_eq!(dir.entries(), vec!["film.png".to_owned()]);
+
+        let img = image::open(&path).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (4, 3));
+        for y in 0..3 {
+            for x in 0..4 {
+                let c = film.color[film.index(x, y)];
+                let expected = [srgb8(c.x), srgb8(c.y), srgb8(c.z)];
+                assert_eq!(img.get_pixel(x as u32, y as u32).0, expected, "({x}, {y})");
+            }
+        }
+        assert_eq!(img.get_pixel(0, 0).0, [255, 0, 188]);
+        assert_eq!(img.get_pixel(3, 2).0, [255, 255, srgb8(0.25)]);
+    }
+
+    #[test]
+    fn exr_round_trip() {
+        use exr::prelude::*;
+
+        let dir = Scratch::new("exr");
+        let path = dir.0.join("film.EXR");
+        let film = test_film();
+        write_film(&path, &film).unwrap();
+        assert_eq!(dir.entries(), vec!["film.EXR".to_owned()]);
+
+        let image = read_all_flat_layers_from_file(&path).unwrap();
+        assert_eq!(image.layer_data.len(), 1);
+        let layer = &image.layer_data[0];
+        assert_eq!(layer.size, Vec2(4, 3));
+        let names: Vec<String> = layer
+            .channel_data
+            .list
+            .iter()
+            .map(|c| c.name.to_string())
+            .collect();
+        assert_eq!(
+            names,
+            ["B", "G", "R", "Z", "coc", "interval", "samples"].map(String::from)
+        );
+        let get = |name: &str| -> Vec<f32> {
+            let ch = layer
+                .channel_data
+                .list
+                .iter()
+                .find(|c| c.name == *name)
+                .unwrap();
+            match &ch.sample_data {
+                FlatSamples::F32(v) => v.clone(),
+                other => panic!("{name}: expected f32 samples, got {other:?}"),
+            }
+        };
+        let r = get("R");
+        let z = get("Z");
+        let interval = get("interval");
+        let samples = get("samples");
+        let coc = get("coc");
+        assert_eq!(r.len(), 12);
+        for i in 0..12 {
+            assert_eq!(r[i], film.color[i].x, "R[{i}]");
+            assert_eq!(get("G")[i], film.color[i].y, "G[{i}]");
+            assert_eq!(coc[i], film.coc[i], "coc[{i}]");
+            assert_eq!(interval[i], film.interval[i] as f32, "interval[{i}]");
+            assert_eq!(samples[i], film.samples[i] as f32, "samples[{i}]");
+            if film.depth[i].is_finite() {
+                assert_eq!(z[i], film.depth[i], "Z[{i}]");
+            } else {
+                assert_eq!(z[i], f32::INFINITY, "Z[{i}]");
+            }
+        }
+        // Linear values are stored unclamped.
+        assert_eq!(r[0], 2.0);
+        assert_eq!(get("G")[0], -1.0);
+    }
+
+    #[test]
+    fn missing_directory_is_an_io_error_and_creates_nothing() {
+        let dir = Scratch::new("missing");
+        let missing = dir.0.join("no-such-dir");
+        for name in ["out.png", "out.exr"] {
+            let path = missing.join(name);
+            let err = write_film(&path, &test_film()).unwrap_err();
+            assert!(
+                matches!(&err, OutputError::Io { path: p, .. } if *p == path),
+                "{err:?}"
+            );
+            assert!(err.to_string().contains(name), "{err}");
+            let err = check_writable(&path).unwrap_err();
+            assert!(matches!(err, OutputError::Io { .. }), "{err:?}");
+            let err = write_png_rgb(&path, 1, 1, &[Vec3::ONE]).unwrap_err();
+            assert!(matches!(err, OutputError::Io { .. }), "{err:?}");
+        }
+        assert!(!missing.exists());
+        assert!(dir.entries().is_empty());
+    }
+
+    #[test]
+    fn check_writable_accepts_a_writable_directory_and_leaves_it_clean() {
+        let dir = Scratch::new("check");
+        assert_eq!(
+            check_writable(&dir.0.join("a.png")).unwrap(),
+            ImageFormat::Png
+        );
+        assert_eq!(
+            check_writable(&dir.0.join("a.exr")).unwrap(),
+            ImageFormat::Exr
+        );
+        assert!(matches!(
+            check_writable(&dir.0.join("a.jpg")),
+            Err(OutputError::UnknownExtension { .. })
+        ));
+        // A directory named like an image is not a writable output path.
+        std::fs::create_dir(dir.0.join("d.png")).unwrap();
+        assert!(matches!(
+            check_writable(&dir.0.join("d.png")),
+            Err(OutputError::Io { .. })
+        ));
+        assert_eq!(dir.entries(), vec!["d.png".to_owned()]);
+    }
+
+    #[test]
+    fn failed_writes_leave_no_files_and_keep_the_old_target() {
+        let dir = Scratch::new("fail");
+        // Unknown extension: nothing is created.
+        assert!(matches!(
+            write_film(&dir.0.join("x.jpg"), &test_film()),
+            Err(OutputError::UnknownExtension { .. })
+        ));
+        // Empty images.
+        assert!(matches!(
+            write_film(&dir.0.join("e.png"), &Film::new(0, 3)),
+            Err(OutputError::EmptyImage)
+        ));
+        assert!(matches!(
+            write_png_rgb(&dir.0.join("e.png"), 3, 0, &[]),
+            Err(OutputError::EmptyImage)
+        ));
+        // Mismatched buffers.
+        let mut bad = test_film();
+        bad.depth.pop();
+        assert!(matches!(
+            write_film(&dir.0.join("b.exr"), &bad),
+            Err(OutputError::Encode { .. })
+        ));
+        assert!(matches!(
+            write_png_rgb(&dir.0.join("b.png"), 2, 2, &[Vec3::ONE; 3]),
+            Err(OutputError::Encode { .. })
+        ));
+        assert!(dir.entries().is_empty(), "{:?}", dir.entries());
+
+        // A failure inside the writer removes the temp file and keeps the previous target.
+        let target = dir.0.join("keep.png");
+        std::fs::write(&target, b"old").unwrap();
+        let err = write_atomic(&target, |file| {
+            file.write_all(b"partial").unwrap();
+            Err(OutputError::Encode {
+                path: target.clone(),
+                message: "boom".into(),
+            })
+        })
+        .unwrap_err();
+        assert!(matches!(err, OutputError::Encode { .. }));
+        assert_eq!(std::fs::read(&target).unwrap(), b"old");
+        assert_eq!(dir.entries(), vec!["keep.png".to_owned()]);
+
+        // A successful write replaces it, again without leftovers.
+        write_film(&target, &test_film()).unwrap();
+        assert_eq!(image::open(&target).unwrap().to_rgb8().dimensions(), (4, 3));
+        assert_eq!(dir.entries(), vec!["keep.png".to_owned()]);
+    }
+
+    #[test]
+    fn depth_picture_near_white_far_dark_miss_black() {
+        let mut film = Film::new(4, 1);
+        film.depth = vec![2.0, 4.0, 6.0, f32::INFINITY];
+        let pic = depth_picture(&film);
+        let bytes: Vec<u8> = pic.iter().map(|c| srgb8(c.x)).collect();
+        assert_eq!(bytes[0], 255);
+        assert_eq!(bytes[3], 0);
+        assert!(
+            bytes[0] > bytes[1] && bytes[1] > bytes[2] && bytes[2] > 0,
+            "{bytes:?}"
+        );
+        assert_eq!(bytes[1], ((1.0 - 0.85 * 0.5) * 255.0f32).round() as u8);
+        assert!(pic.iter().all(|c| c.x == c.y && c.y == c.z));
+        // A single finite depth is white; no finite depth at all is black.
+        film.depth = vec![3.0, 3.0, f32::INFINITY, f32::INFINITY];
+        let pic = depth_picture(&film);
+        assert_eq!(pic[0], Vec3::ONE);
+        assert_eq!(pic[2], Vec3::ZERO);
+        film.depth = vec![f32::INFINITY; 4];
+        assert!(depth_picture(&film).iter().all(|&c| c == Vec3::ZERO));
+    }
+
+    #[test]
+    fn interval_picture_distinct_and_brightening() {
+        let mut film = Film::new(9, 1);
+        film.interval = (0..9).map(|k| 1u32 << k).collect();
+        let pic = interval_picture(&film);
+        let luma = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
+        assert!(luma(pic[0]) < 0.01, "interval 1 is dark");
+        for k in 1..8 {
+            assert_ne!(pic[k], pic[k - 1]);
+            assert!(luma(pic[k]) > luma(pic[k - 1]), "layer {k} brighter");
+        }
+        assert_eq!(pic[8], pic[7], "256 shares the last colour");
+        // Non-powers of two take the layer below; 0 counts as 1.
+        film.interval = vec![3, 2, 0, 1, 5, 4, 1, 1, 1];
+        let pic2 = interval_picture(&film);
+        assert_eq!(pic2[0], pic2[1]);
+        assert_eq!(pic2[2], pic2[3]);
+        assert_eq!(pic2[4], pic2[5]);
+    }
+
+    #[test]
+    fn heat_picture_ramp() {
+        let pic = heat_picture(&[0.0, 1.0, 2.0, 3.0, 10.0, -1.0, f32::NAN], 3.0);
+        let bytes: Vec<[u8; 3]> = pic
+            .iter()
+            .map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
+            .collect();
+        assert_eq!(bytes[0], [0, 0, 0]);
+        assert_eq!(bytes[1], [255, 0, 0]);
+        assert_eq!(bytes[2], [255, 255, 0]);
+        assert_eq!(bytes[3], [255, 255, 255]);
+        assert_eq!(bytes[4], [255, 255, 255]);
+        assert_eq!(bytes[5], [0, 0, 0]);
+        assert_eq!(bytes[6], [255, 255, 255]);
+        assert_eq!(heat_picture(&[0.5], 3.0)[0].y, 0.0);
+        assert_eq!(heat_picture(&[0.0, 1.0], 0.0), vec![Vec3::ZERO, Vec3::ONE]);
+    }
+}

@@ -1,0 +1,45 @@
+//! The rendered image and its per-pixel arbitrary output variables (AOVs).
+
+use glam::Vec3;
+
+/// A rendered frame: linear RGB radiance plus the maps the seed's method works from.
+#[derive(Debug, Clone)]
+pub struct Film {
+    pub width: usize,
+    pub height: usize,
+    /// Linear RGB radiance, row-major, top row first.
+    pub color: Vec<Vec3>,
+    /// Distance along the camera's view axis of the surface the pinhole ray hit (inf for misses).
+    pub depth: Vec<f32>,
+    /// Circle-of-confusion diameter in pixels at `depth`.
+    pub coc: Vec<f32>,
+    /// Sample interval (power of two; 1 = every pixel is a site).
+    pub interval: Vec<u32>,
+    /// Lens samples traced for this pixel: 0 where it was interpolated, 1 where the pinhole
+    /// sample was used, `spp` at defocused sample sites.
+    pub samples: Vec<u32>,
+}
+
+impl Film {
+    pub fn new(width: usize, height: usize) -> Self {
+        let n = width * height;
+        Self {
+            width,
+            height,
+            color: vec![Vec3::ZERO; n],
+            depth: vec![f32::INFINITY; n],
+            coc: vec![0.0; n],
+            interval: vec![1; n],
+            samples: vec![0; n],
+        }
+    }
+
+    pub fn index(&self, x: usize, y: usize) -> usize {
+        y * self.width + x
+    }
+
+    /// The colour as `[f32; 3]` pixels (for metrics and writers).
+    pub fn rgb(&self) -> Vec<[f32; 3]> {
+        self.color.iter().map(|c| c.to_array()).collect()
+    }
+}

@@ -1,0 +1,362 @@
+//! Render modes. All three share the same two primitives, "trace and shade a packet"
+//! ([`trace::trace_and_shade`]) and "shade one sample site" ([`shade_site`]); they differ only in
+//! where the sample sites are:
+//!
+//! - `pinhole`: one ray per pixel through the lens centre. It yields the depth and CoC maps
+//!   and is the first pass of the other two modes.
+//! - `dense` (Cook's distributed ray tracing): every pixel is a site.
+//! - `adaptive` (the seed's method): sites on power-of-two lattices whose spacing follows the
+//!   CoC; the pixels between them are interpolated.
+//!
+//! A site whose pixel is reached by blur (see [`maps::blurred`]) traces `spp` lens samples
+//! as 16-wide packets; other sites reuse their pinhole sample.
+
+pub mod film;
+pub mod interpolate;
+pub mod maps;
+pub mod trace;
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::camera::Camera;
+use crate::embree::{LANES, RayHint, RayPacket16};
+use crate::sampler::{LensFilter, PixelSampler, aperture_point};
+use crate::scene::World;
+pub use film::Film;
+pub use trace::RayCounts;
+
+/// Where sample sites are placed.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    Pinhole,
+    Dense,
+    Adaptive,
+}
+
+impl Mode {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Pinhole => "pinhole",
+            Self::Dense => "dense",
+            Self::Adaptive => "adaptive",
+        }
+    }
+}
+
+/// How to render.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderSettings {
+    pub mode: Mode,
+    /// Lens samples per defocused sample site (16 fill one packet).
+    pub spp: u32,
+    /// The seed's k: sample interval = k x CoC in defocused regions.
+    pub interval_factor: f32,
+    /// Use the seed's plain per-pixel interval rule instead of the conservative one.
+    pub paper_exact: bool,
+    /// Largest interval (power of two).
+    pub max_interval: u32,
+    pub seed: u64,
+    pub filter: LensFilter,
+    /// Mirror bounces after the first hit.
+    pub bounces: u32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            mode: Mode::Adaptive,
+            spp: 16,
+            interval_factor: 0.4,
+            paper_exact: false,
+            max_interval: 64,
+            seed: 0,
+            filter: LensFilter::Box,
+            bounces: 1,
+        }
+    }
+}
+
+/// Why a render could not start.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RenderError {
+    #[error("spp must be at least 1")]
+    ZeroSpp,
+    #[error("interval factor must be a finite number > 0, got {0}")]
+    BadIntervalFactor(f32),
+    #[error("max interval must be a power of two >= 1, got {0}")]
+    BadMaxInterval(u32),
+}
+
+impl RenderSettings {
+    pub fn validate(&self) -> Result<(), RenderError> {
+        if self.spp == 0 {
+            return Err(RenderError::ZeroSpp);
+        }
+        if !(self.interval_factor.is_finite() && self.interval_factor > 0.0) {
+            return Err(RenderError::BadIntervalFactor(self.interval_factor));
+        }
+        if !self.max_interval.is_power_of_two() {
+            return Err(RenderError::BadMaxInterval(self.max_interval));
+        }
+        Ok(())
+    }
+}
+
+/// What a render did and how long it took.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct RenderStats {
+    pub seconds: f64,
+    /// Time of the pinhole pass alone (included in `seconds`).
+    pub pinhole_seconds: f64,
+    pub rays: RayCounts,
+    /// Pixels shaded directly (the rest were interpolated).
+    pub sample_sites: u64,
+    /// Sites that traced `spp` lens samples (the rest reused the pinhole sample).
+    pub defocused_sites: u64,
+}
+
+impl RenderStats {
+    pub fn mrays_per_s(&self) -> f64 {
+        if self.seconds > 0.0 {
+            self.rays.total() as f64 / self.seconds / 1e6
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Receives progress; all methods may be called from several threads.
+pub trait Progress: Sync {
+    /// A new phase with `total` units of work begins.
+    fn start(&self, _phase: &str, _total: u64) {}
+    fn advance(&self, _units: u64) {}
+    fn finish(&self) {}
+}
+
+/// Progress that goes nowhere.
+pub struct NoProgress;
+impl Progress for NoProgress {}
+
+/// Thread-safe ray counters, added to once per row.
+#[derive(Default)]
+struct SharedCounts {
+    primary: AtomicU64,
+    shadow: AtomicU64,
+    secondary: AtomicU64,
+}
+
+impl SharedCounts {
+    fn add(&self, c: &RayCounts) {
+        self.primary.fetch_add(c.primary, Ordering::Relaxed);
+        self.shadow.fetch_add(c.shadow, Ordering::Relaxed);
+        self.secondary.fetch_add(c.secondary, Ordering::Relaxed);
+    }
+
+    fn get(&self) -> RayCounts {
+        RayCounts {
+            primary: self.primary.load(Ordering::Relaxed),
+            shadow: self.shadow.load(Ordering::Relaxed),
+            secondary: self.secondary.load(Ordering::Relaxed),
+        }
+    }
+}
+
+/// Pinhole pass: one ray per pixel through the lens centre, 16 pixels (a 4 x 4 block) per
+/// packet. Fills the film's colour, depth and CoC.
+fn pinhole_pass(
+    world: &World,
+    camera: &Camera,
+    settings: &RenderSettings,
+    film: &mut Film,
+    counts: &SharedCounts,
+    progress: &dyn Progress,
+) {
+    let (w, h) = (film.width, film.height);
+    let band_rows = 4;
+    progress.start("pinhole", h.div_ceil(band_rows) as u64);
+    let bands: Vec<(usize, Vec<Vec3>, Vec<f32>)> = (0..h.div_ceil(band_rows))
+        .into_par_iter()
+        .map(|band| {
+            let y_start = band * band_rows;
+            let rows = band_rows.min(h - y_start);
+            let mut color = vec![Vec3::ZERO; rows * w];
+            let mut depth = vec![f32::INFINITY; rows * w];
+            let mut packet = RayPacket16::new();
+            let mut radiance = [Vec3::ZERO; LANES];
+            let mut t_hit = [0.0f32; LANES];
+            let mut local = RayCounts::default();
+            for x_start in (0..w).step_by(4) {
+                packet.clear();
+                let mut lanes = [(0usize, 0usize); LANES];
+                for (lane, slot) in lanes.iter_mut().enumerate() {
+                    let (dx, dy) = (lane % 4, lane / 4);
+                    let (x, y) = (x_start + dx, dy);
+                    if x < w && y < rows {
+                        let ray = camera.pinhole_ray(x as f32 + 0.5, (y_start + y) as f32 + 0.5);
+                        packet.set(lane, &ray);
+                        *slot = (x, y);
+                    }
+                }
+                local.primary += packet.active_count() as u64;
+                trace::trace_and_shade(
+                    world,
+                    &mut packet,
+                    RayHint::Coherent,
+                    &mut radiance,
+                    &mut t_hit,
+                    settings.bounces,
+                    &mut local,
+                );
+                for (lane, &(x, y)) in lanes.iter().enumerate() {
+                    if packet.is_active(lane) {
+                        color[y * w + x] = radiance[lane];
+                        let ray = packet.ray(lane);
+                        depth[y * w + x] = if t_hit[lane].is_finite() {
+                            camera.depth_along_axis(&ray, t_hit[lane])
+                        } else {
+                            f32::INFINITY
+                        };
+                    }
+                }
+            }
+            counts.add(&local);
+            progress.advance(1);
+            (y_start, color, depth)
+        })
+        .collect();
+    for (y_start, color, depth) in bands {
+        let at = y_start * w;
+        film.color[at..at + color.len()].copy_from_slice(&color);
+        film.depth[at..at + depth.len()].copy_from_slice(&depth);
+    }
+    for (coc, &depth) in film.coc.iter_mut().zip(&film.depth) {
+        *coc = camera.coc_px(depth);
+    }
+}
+
+/// Shades one sample site with `spp` lens samples traced as 16-wide packets, weighted by the
+/// lens filter. Deterministic in (seed, pixel, sample index).
+pub fn shade_site(
+    world: &World,
+    camera: &Camera,
+    settings: &RenderSettings,
+    x: usize,
+    y: usize,
+    counts: &mut RayCounts,
+) -> Vec3 {
+    let sampler = PixelSampler::new(settings.seed, (y * camera.width as usize + x) as u64);
+    let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+    let mut packet = RayPacket16::new();
+    let mut radiance = [Vec3::ZERO; LANES];
+    let mut t_hit = [0.0f32; LANES];
+    let mut weights = [0.0f32; LANES];
+    let mut sum = Vec3::ZERO;
+    let mut weight_sum = 0.0f32;
+    let mut index = 0;
+    while index < settings.spp {
+        packet.clear();
+        let n = (settings.spp - index).min(LANES as u32) as usize;
+        for (lane, weight) in weights.iter_mut().enumerate().take(n) {
+            let lens: Vec2 = aperture_point(sampler.get(index + lane as u32), &camera.aperture);
+            *weight = settings.filter.weight(lens, camera.aperture.anamorphic);
+            packet.set(lane, &camera.lens_ray(px, py, lens));
+        }
+        counts.primary += n as u64;
+        trace::trace_and_shade(
+            world,
+            &mut packet,
+            RayHint::Coherent,
+            &mut radiance,
+            &mut t_hit,
+            settings.bounces,
+            counts,
+        );
+        for (c, w) in radiance.iter().zip(&weights).take(n) {
+            sum += *c * *w;
+            weight_sum += w;
+        }
+        index += n as u32;
+    }
+    sum / weight_sum
+}
+
+/// Renders `world` through `camera`. The result is bit-identical for any thread count.
+pub fn render(
+    world: &World,
+    camera: &Camera,
+    settings: &RenderSettings,
+    progress: &dyn Progress,
+) -> Result<(Film, RenderStats), RenderError> {
+    settings.validate()?;
+    let start = Instant::now();
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let mut film = Film::new(w, h);
+    let counts = SharedCounts::default();
+    pinhole_pass(world, camera, settings, &mut film, &counts, progress);
+    let pinhole_seconds = start.elapsed().as_secs_f64();
+    let mut stats = RenderStats {
+        pinhole_seconds,
+        ..Default::default()
+    };
+
+    if settings.mode == Mode::Pinhole {
+        film.samples.fill(1);
+        stats.sample_sites = (w * h) as u64;
+    } else {
+        let blurred = maps::blurred(&film.coc, w, h);
+        film.interval = match settings.mode {
+            Mode::Adaptive => maps::interval_map(
+                &film.coc,
+                w,
+                h,
+                settings.interval_factor,
+                settings.paper_exact,
+                settings.max_interval,
+            ),
+            _ => vec![1; w * h],
+        };
+        let sites = maps::site_mask(&film.interval, w, h);
+        progress.start(settings.mode.name(), h as u64);
+        let rows: Vec<(Vec<Vec3>, Vec<u32>)> = (0..h)
+            .into_par_iter()
+            .map(|y| {
+                let mut local = RayCounts::default();
+                let mut color = film.color[y * w..(y + 1) * w].to_vec();
+                let mut samples = vec![0u32; w];
+                for x in 0..w {
+                    let p = y * w + x;
+                    if !sites[p] {
+                        continue;
+                    }
+                    if blurred[p] {
+                        color[x] = shade_site(world, camera, settings, x, y, &mut local);
+                        samples[x] = settings.spp;
+                    } else {
+                        samples[x] = 1;
+                    }
+                }
+                counts.add(&local);
+                progress.advance(1);
+                (color, samples)
+            })
+            .collect();
+        for (y, (color, samples)) in rows.into_iter().enumerate() {
+            film.color[y * w..(y + 1) * w].copy_from_slice(&color);
+            film.samples[y * w..(y + 1) * w].copy_from_slice(&samples);
+        }
+        interpolate::interpolate(&mut film.color, &film.interval, &sites, w, h);
+        stats.sample_sites = sites.iter().filter(|&&s| s).count() as u64;
+        stats.defocused_sites = film.samples.iter().filter(|&&s| s > 1).count() as u64;
+    }
+    progress.finish();
+    stats.rays = counts.get();
+    stats.seconds = start.elapsed().as_secs_f64();
+    Ok((film, stats))
+}

@@ -1,0 +1,154 @@
+//! The one primitive every render mode shares: trace a 16-wide packet and shade its hits
+//! (direct light with `occluded16` shadow packets, ambient, one optional mirror bounce).
+
+use glam::Vec3;
+
+use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
+use crate::scene::World;
+use crate::shade::{self, SurfacePoint};
+
+/// Rays traced, by kind.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+pub struct RayCounts {
+    /// Camera rays (pinhole and lens rays).
+    pub primary: u64,
+    /// Occlusion rays towards lights.
+    pub shadow: u64,
+    /// Mirror reflection rays.
+    pub secondary: u64,
+}
+
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.primary + self.shadow + self.secondary
+    }
+
+    pub fn add(&mut self, other: &RayCounts) {
+        self.primary += other.primary;
+        self.shadow += other.shadow;
+        self.secondary += other.secondary;
+    }
+}
+
+/// Offset for rays leaving a surface, scaled to the magnitude of the position so it survives
+/// f32 rounding far from the origin.
+fn surface_epsilon(p: Vec3) -> f32 {
+    1e-4 * (1.0 + p.abs().max_element())
+}
+
+/// Traces the active lanes of `packet` and writes each lane's radiance to `radiance`
+/// (inactive lanes are left as they were). Writes the hit distance to `t_hit` (infinite for
+/// misses). `bounces` is how many mirror reflections may still follow.
+pub fn trace_and_shade(
+    world: &World,
+    packet: &mut RayPacket16,
+    hint: RayHint,
+    radiance: &mut [Vec3; LANES],
+    t_hit: &mut [f32; LANES],
+    bounces: u32,
+    counts: &mut RayCounts,
+) {
+    world.scene.intersect16(packet, hint);
+    let mut points = [None::<(SurfacePoint, usize)>; LANES];
+    let mut albedo = [Vec3::ZERO; LANES];
+    let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); LANES];
+    for lane in 0..LANES {
+        if !packet.is_active(lane) {
+            continue;
+        }
+        let ray = packet.ray(lane);
+        rays[lane] = ray;
+        match packet.hit(lane) {
+            None => {
+                radiance[lane] = world.background.radiance(ray.dir);
+                t_hit[lane] = f32::INFINITY;
+            }
+            Some(hit) => {
+                let sp = world.surface_point(&ray, &hit);
+                let material = world.material(&hit);
+                albedo[lane] = material.diffuse.sample(sp.uv);
+                radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror);
+                t_hit[lane] = hit.t;
+                points[lane] = Some((sp, world.material_index(&hit)));
+            }
+        }
+    }
+
+    let mut shadow = ShadowPacket16::new();
+    for light in &world.lights {
+        shadow.clear();
+        let mut samples = [None; LANES];
+        for lane in 0..LANES {
+            let Some((sp, _)) = &points[lane] else {
+                continue;
+            };
+            let ls = light.sample(sp.position);
+            if sp.normal.dot(ls.dir) <= 0.0 {
+                continue;
+            }
+            let eps = surface_epsilon(sp.position);
+            let tfar = if ls.distance.is_finite() {
+                ls.distance * (1.0 - 1e-4) - eps
+            } else {
+                f32::INFINITY
+            };
+            shadow.set(
+                lane,
+                &Ray::segment(sp.position + sp.normal * eps, ls.dir, 0.0, tfar),
+            );
+            samples[lane] = Some(ls);
+        }
+        let active = shadow.active_count();
+        if active == 0 {
+            continue;
+        }
+        counts.shadow += active as u64;
+        world.scene.occluded16(&mut shadow, RayHint::Coherent);
+        for lane in 0..LANES {
+            if let (Some(ls), Some((sp, m))) = (&samples[lane], &points[lane]) {
+                if !shadow.occluded(lane) {
+                    let material = &world.materials[*m];
+                    radiance[lane] += shade::direct(material, albedo[lane], sp, rays[lane].dir, ls);
+                }
+            }
+        }
+    }
+
+    if bounces == 0 {
+        return;
+    }
+    let mut mirror = RayPacket16::new();
+    for lane in 0..LANES {
+        if let Some((sp, m)) = &points[lane] {
+            if world.materials[*m].mirror > 0.0 {
+                let d = rays[lane].dir;
+                let r = d - 2.0 * d.dot(sp.normal) * sp.normal;
+                let eps = surface_epsilon(sp.position);
+                mirror.set(lane, &Ray::new(sp.position + sp.normal * eps, r));
+            }
+        }
+    }
+    let active = mirror.active_count();
+    if active == 0 {
+        return;
+    }
+    counts.secondary += active as u64;
+    let mut reflected = [Vec3::ZERO; LANES];
+    let mut t_unused = [0.0; LANES];
+    trace_and_shade(
+        world,
+        &mut mirror,
+        RayHint::Incoherent,
+        &mut reflected,
+        &mut t_unused,
+        bounces - 1,
+        counts,
+    );
+    for lane in 0..LANES {
+        if mirror.is_active(lane) {
+            if let Some((_, m)) = &points[lane] {
+                radiance[lane] += reflected[lane] * world.materials[*m].mirror;
+            }
+        }
+    }
+}

@@ -1,0 +1,254 @@
+//! Lens (aperture) samples: Owen-scrambled Sobol points, deterministic from
+//! (seed, pixel, sample index), mapped area-preservingly onto the aperture shape.
+//!
+//! The first two Sobol dimensions form a (0,2)-sequence: any power-of-two prefix of 16 points
+//! is stratified in every 2^a x 2^b elementary interval of area 1/16, so one 16-sample packet
+//! covers the aperture evenly. Each pixel scrambles the sequence with its own hash-derived seed
+//! (Burley 2020, "Practical Hash-based Owen Scrambling"), so neighbouring pixels' patterns are
+//! uncorrelated and no image depends on thread count or tile order.
+
+use std::f32::consts::{FRAC_PI_2, FRAC_PI_4, TAU};
+
+use glam::Vec2;
+
+use crate::camera::ApertureShape;
+
+/// A 64-bit mix (SplitMix64's finaliser): a good hash for small structured inputs.
+pub fn hash64(mut x: u64) -> u64 {
+    x = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    x ^ (x >> 31)
+}
+
+/// First Sobol dimension: the van der Corput sequence in base 2.
+fn sobol0(i: u32) -> u32 {
+    i.reverse_bits()
+}
+
+/// Second Sobol dimension (its generator matrix is Pascal's triangle mod 2).
+fn sobol1(mut i: u32) -> u32 {
+    let mut v = 1u32 << 31;
+    let mut r = 0;
+    while i != 0 {
+        if i & 1 != 0 {
+            r ^= v;
+        }
+        i >>= 1;
+        v ^= v >> 1;
+    }
+    r
+}
+
+fn laine_karras(mut x: u32, seed: u32) -> u32 {
+    x = x.wrapping_add(seed);
+    x ^= x.wrapping_mul(0x6c50_b47c);
+    x ^= x.wrapping_mul(0xb82f_1e52);
+    x ^= x.wrapping_mul(0xc7af_e638);
+    x ^= x.wrapping_mul(0x8d22_f6e6);
+    x
+}
+
+/// Nested uniform (Owen) scrambling of a 32-bit fixed-point coordinate.
+fn owen_scramble(x: u32, seed: u32) -> u32 {
+    laine_karras(x.reverse_bits(), seed).reverse_bits()
+}
+
+fn to_unit(x: u32) -> f32 {
+    // 24 bits keep the result strictly below 1.0 in f32.
+    (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+}
+
+/// The sample stream of one pixel: point `i` of an Owen-scrambled 2D Sobol sequence.
+#[derive(Debug, Clone, Copy)]
+pub struct PixelSampler {
+    seed_x: u32,
+    seed_y: u32,
+}
+
+impl PixelSampler {
+    /// The stream for pixel `pixel` (any unique index, e.g. `y * width + x`) of image seed `seed`.
+    pub fn new(seed: u64, pixel: u64) -> Self {
+        let h = hash64(hash64(seed) ^ pixel);
+        Self {
+            seed_x: h as u32,
+            seed_y: (h >> 32) as u32,
+        }
+    }
+
+    /// Sample `i` in [0, 1)^2.
+    pub fn get(&self, i: u32) -> Vec2 {
+        Vec2::new(
+            to_unit(owen_scramble(sobol0(i), self.seed_x)),
+            to_unit(owen_scramble(sobol1(i), self.seed_y)),
+        )
+    }
+}
+
+/// Shirley & Chiu's concentric map from the unit square to the unit disc (area-preserving,
+/// low distortion, so stratification survives).
+pub fn concentric_disc(u: Vec2) -> Vec2 {
+    let a = 2.0 * u.x - 1.0;
+    let b = 2.0 * u.y - 1.0;
+    if a == 0.0 && b == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, phi) = if a.abs() > b.abs() {
+        (a, FRAC_PI_4 * (b / a))
+    } else {
+        (b, FRAC_PI_2 - FRAC_PI_4 * (a / b))
+    };
+    Vec2::new(r * phi.cos(), r * phi.sin())
+}
+
+/// Uniform map from the unit square to a regular polygon with `blades` corners on the unit
+/// circle: `u.x` picks a triangle of the fan (and is reused within it), `u.y` the radius.
+pub fn polygon(u: Vec2, blades: u32, rotation_rad: f32) -> Vec2 {
+    let n = blades as f32;
+    let scaled = u.x * n;
+    let k = scaled.floor().min(n - 1.0);
+    let t = scaled - k;
+    let a0 = rotation_rad + TAU * k / n;
+    let a1 = rotation_rad + TAU * (k + 1.0) / n;
+    let edge = Vec2::new(a0.cos(), a0.sin()) * (1.0 - t) + Vec2::new(a1.cos(), a1.sin()) * t;
+    edge * u.y.sqrt()
+}
+
+/// A point on the aperture in lens units (the unit disc or polygon, stretched vertically by
+/// the anamorphic ratio); the camera scales it by the aperture radius.
+pub fn aperture_point(u: Vec2, shape: &ApertureShape) -> Vec2 {
+    let p = if shape.blades >= 3 {
+        polygon(u, shape.blades, shape.rotation_deg.to_radians())
+    } else {
+        concentric_disc(u)
+    };
+    Vec2::new(p.x, p.y * shape.anamorphic)
+}
+
+/// How lens samples are weighted when averaged: the filter over the CoC that the seed leaves
+/// open. The weight depends on the sample's radius on the (unstretched) aperture.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum LensFilter {
+    /// Every sample counts equally: a uniformly bright aperture (a real lens's bokeh).
+    #[default]
+    Box,
+    /// Weight 1 - r: softer bokeh edges.
+    Tent,
+    /// Weight exp(-r^2 / (2 * 0.5^2)): a smooth, Gaussian-like blur.
+    Gaussian,
+}
+
+impl LensFilter {
+    pub fn weight(self, aperture_point: Vec2, anamorphic: f32) -> f32 {
+        let r = Vec2::new(aperture_point.x, aperture_point.y / anamorphic).length();
+        match self {
+            Self::Box => 1.0,
+            Self::Tent => (1.0 - r).max(0.0) + 1e-3,
+            Self::Gaussian => (-r * r / (2.0 * 0.25)).exp(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sixteen_samples_are_stratified_in_every_elementary_interval() {
+        for pixel in 0..50u64 {
+            let s = PixelSampler::new(7, pixel);
+            let pts: Vec<Vec2> = (0..16).map(|i| s.get(i)).collect();
+            for (cols, rows) in [(16u32, 1u32), (8, 2), (4, 4), (2, 8), (1, 16)] {
+                let mut seen = vec![0; 16];
+                for p in &pts {
+                    let cx = (p.x * cols as f32) as u32;
+                    let cy = (p.y * rows as f32) as u32;
+                    seen[(cy * cols + cx) as usize] += 1;
+                }
+                assert!(
+                    seen.iter().all(|&c| c == 1),
+                    "pixel {pixel}, {cols}x{rows}: {seen:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn samples_are_deterministic_and_differ_between_pixels() {
+        let a = PixelSampler::new(1, 42);
+        let b = PixelSampler::new(1, 42);
+        let c = PixelSampler::new(1, 43);
+        let d = PixelSampler::new(2, 42);
+        assert_eq!(a.get(5), b.get(5));
+        assert_ne!(a.get(5), c.get(5));
+        assert_ne!(a.get(5), d.get(5));
+    }
+
+    #[test]
+    fn disc_map_stays_inside_and_preserves_area() {
+        // Count mapped points of a fine grid inside the disc of radius 0.5: a quarter of all.
+        let n = 200;
+        let mut inside_half = 0;
+        for i in 0..n {
+            for j in 0..n {
+                let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                let p = concentric_disc(u);
+                assert!(p.length() <= 1.0 + 1e-6);
+                if p.length() < 0.5 {
+                    inside_half += 1;
+                }
+            }
+        }
+        let frac = inside_half as f32 / (n * n) as f32;
+        assert!((frac - 0.25).abs() < 0.01, "{frac}");
+    }
+
+    #[test]
+    fn polygon_map_is_uniform_and_inside() {
+        let n = 200;
+        let blades = 6;
+        let apothem = (std::f32::consts::PI / blades as f32).cos();
+        let mut inner = 0;
+        for i in 0..n {
+            for j in 0..n {
+                let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
+                let p = polygon(u, blades, 0.3);
+                // Inside the hexagon: within the apothem of every edge normal.
+                for k in 0..blades {
+                    let mid = 0.3 + TAU * (k as f32 + 0.5) / blades as f32;
+                    assert!(p.dot(Vec2::new(mid.cos(), mid.sin())) <= apothem + 1e-5);
+                }
+                if p.length() < 0.5 * apothem {
+                    inner += 1;
+                }
+            }
+        }
+        // The disc of radius apothem/2 covers pi a^2 / 4 of the hexagon's area 6 a^2 tan(pi/6).
+        let expected = std::f32::consts::PI * 0.25 / (6.0 * (std::f32::consts::PI / 6.0).tan());
+        let frac = inner as f32 / (n * n) as f32;
+        assert!((frac - expected).abs() < 0.01, "{frac} vs {expected}");
+    }
+
+    #[test]
+    fn filters_weight_the_centre_most() {
+        for f in [LensFilter::Box, LensFilter::Tent, LensFilter::Gaussian] {
+            assert!(f.weight(Vec2::ZERO, 1.0) >= f.weight(Vec2::new(0.9, 0.0), 1.0));
+            assert!(f.weight(Vec2::new(0.9, 0.0), 1.0) > 0.0);
+        }
+        assert!(
+            LensFilter::Gaussian.weight(Vec2::ZERO, 1.0)
+                > LensFilter::Gaussian.weight(Vec2::X, 1.0) * 2.0
+        );
+    }
+}

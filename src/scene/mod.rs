@@ -1,0 +1,252 @@
+//! Scene descriptions (what to render) and the world built from them (Embree geometry plus
+//! the materials and lights that shade its hits).
+
+pub mod builtin;
+
+use std::f32::consts::{PI, TAU};
+
+use glam::{Vec2, Vec3};
+
+use crate::camera::CameraSpec;
+use crate::embree::{
+    self, Device, EmbreeError, Geometry, Hit, Ray, SceneBuilder, Spheres, TriangleMesh,
+};
+use crate::shade::{Light, Material, SurfacePoint};
+
+/// Why a scene could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("the scene has no objects")]
+    Empty,
+    #[error("object {object} uses material {material}, but the scene has {count} materials")]
+    MissingMaterial {
+        object: usize,
+        material: usize,
+        count: usize,
+    },
+    #[error("{what} must be {expected}")]
+    Invalid {
+        what: String,
+        expected: &'static str,
+    },
+    #[error(transparent)]
+    Embree(#[from] EmbreeError),
+}
+
+/// Which material each triangle of a mesh uses.
+#[derive(Debug, Clone)]
+pub enum MeshMaterials {
+    One(usize),
+    PerTriangle(Vec<u32>),
+}
+
+/// One thing in the scene.
+#[derive(Debug, Clone)]
+pub enum Object {
+    Sphere {
+        center: Vec3,
+        radius: f32,
+        material: usize,
+    },
+    Mesh {
+        mesh: TriangleMesh,
+        materials: MeshMaterials,
+    },
+}
+
+/// Sky colour by ray direction: `horizon` at the horizon blending to `zenith` straight up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Background {
+    pub horizon: Vec3,
+    pub zenith: Vec3,
+}
+
+impl Background {
+    pub fn uniform(c: Vec3) -> Self {
+        Self {
+            horizon: c,
+            zenith: c,
+        }
+    }
+
+    pub fn radiance(&self, dir: Vec3) -> Vec3 {
+        self.horizon.lerp(self.zenith, dir.y.clamp(0.0, 1.0).sqrt())
+    }
+}
+
+/// A complete description of what to render, independent of Embree.
+#[derive(Debug, Clone)]
+pub struct SceneDesc {
+    pub name: String,
+    pub camera: CameraSpec,
+    pub materials: Vec<Material>,
+    pub objects: Vec<Object>,
+    pub lights: Vec<Light>,
+    pub ambient: Vec3,
+    pub background: Background,
+}
+
+/// Material lookup for one Embree geometry.
+#[derive(Debug, Clone)]
+enum GeometryMaterials {
+    One(usize),
+    PerPrimitive(Vec<u32>),
+}
+
+/// A scene ready to trace: the committed Embree scene and everything needed to shade hits.
+pub struct World {
+    pub scene: embree::Scene,
+    pub materials: Vec<Material>,
+    geometry_materials: Vec<GeometryMaterials>,
+    pub lights: Vec<Light>,
+    pub ambient: Vec3,
+    pub background: Background,
+}
+
+fn finite_vec(what: impl Fn() -> String, v: Vec3) -> Result<(), SceneError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(SceneError::Invalid {
+            what: what(),
+            expected: "finite",
+        })
+    }
+}
+
+impl World {
+    /// Validates the description and builds the Embree scene (the BVH) from it.
+    pub fn build(desc: &SceneDesc, device: &Device) -> Result<World, SceneError> {
+        if desc.objects.is_empty() {
+            return Err(SceneError::Empty);
+        }
+        let count = desc.materials.len();
+        let check_material = |object: usize, material: usize| {
+            if material < count {
+                Ok(())
+            } else {
+                Err(SceneError::MissingMaterial {
+                    object,
+                    material,
+                    count,
+                })
+            }
+        };
+        for (i, light) in desc.lights.iter().enumerate() {
+            let (a, b) = match *light {
+                Light::Point {
+                    position,
+                    intensity,
+                } => (position, intensity),
+                Light::Directional {
+                    direction,
+                    irradiance,
+                } => (direction, irradiance),
+            };
+            finite_vec(|| format!("light {i}"), a)?;
+            finite_vec(|| format!("light {i}"), b)?;
+        }
+        finite_vec(|| "ambient".into(), desc.ambient)?;
+
+        let mut builder = SceneBuilder::new(device)?;
+        let mut geometry_materials = Vec::new();
+        let mut spheres = Vec::new();
+        let mut sphere_materials = Vec::new();
+        for (i, object) in desc.objects.iter().enumerate() {
+            match object {
+                Object::Sphere {
+                    center,
+                    radius,
+                    material,
+                } => {
+                    check_material(i, *material)?;
+                    spheres.push((*center, *radius));
+                    sphere_materials.push(*material as u32);
+                }
+                Object::Mesh { mesh, materials } => {
+                    let lookup = match materials {
+                        MeshMaterials::One(m) => {
+                            check_material(i, *m)?;
+                            GeometryMaterials::One(*m)
+                        }
+                        MeshMaterials::PerTriangle(ids) => {
+                            if ids.len() != mesh.triangle_count() {
+                                return Err(SceneError::Invalid {
+                                    what: format!("object {i}'s per-triangle material list"),
+                                    expected: "one entry per triangle",
+                                });
+                            }
+                            if let Some(&bad) = ids.iter().find(|&&m| m as usize >= count) {
+                                check_material(i, bad as usize)?;
+                            }
+                            GeometryMaterials::PerPrimitive(ids.clone())
+                        }
+                    };
+                    builder.add_mesh(mesh.clone())?;
+                    geometry_materials.push(lookup);
+                }
+            }
+        }
+        if !spheres.is_empty() {
+            builder.add_spheres(Spheres::new(spheres)?)?;
+            geometry_materials.push(GeometryMaterials::PerPrimitive(sphere_materials));
+        }
+        Ok(World {
+            scene: builder.commit()?,
+            materials: desc.materials.clone(),
+            geometry_materials,
+            lights: desc.lights.clone(),
+            ambient: desc.ambient,
+            background: desc.background,
+        })
+    }
+
+    /// Index into `materials` of the surface a hit found.
+    pub fn material_index(&self, hit: &Hit) -> usize {
+        match &self.geometry_materials[hit.geometry.0 as usize] {
+            GeometryMaterials::One(m) => *m,
+            GeometryMaterials::PerPrimitive(ids) => ids[hit.prim as usize] as usize,
+        }
+    }
+
+    /// The material of the surface a hit found.
+    pub fn material(&self, hit: &Hit) -> &Material {
+        &self.materials[self.material_index(hit)]
+    }
+
+    /// Position, shading normal (facing the ray) and texture coordinates of a hit.
+    pub fn surface_point(&self, ray: &Ray, hit: &Hit) -> SurfacePoint {
+        let position = ray.at(hit.t);
+        let (normal, uv) = match self.scene.geometry(hit.geometry) {
+            Geometry::Spheres(s) => {
+                let d = ((position - s.center(hit.prim)) / s.radius(hit.prim)).normalize_or_zero();
+                let uv = Vec2::new(
+                    0.5 + d.z.atan2(d.x) / TAU,
+                    0.5 + d.y.clamp(-1.0, 1.0).asin() / PI,
+                );
+                (d, uv)
+            }
+            Geometry::Mesh(m) => {
+                let n = m
+                    .shading_normal(hit.prim, hit.u, hit.v)
+                    .filter(|n| *n != Vec3::ZERO)
+                    .unwrap_or_else(|| hit.ng.normalize_or_zero());
+                // Without UVs, project the world position onto the ground plane (x, z).
+                let uv = m
+                    .uv(hit.prim, hit.u, hit.v)
+                    .unwrap_or(Vec2::new(position.x, position.z));
+                (n, uv)
+            }
+        };
+        let normal = if normal.dot(ray.dir) > 0.0 {
+            -normal
+        } else {
+            normal
+        };
+        SurfacePoint {
+            position,
+            normal,
+            uv,
+        }
+    }
+}

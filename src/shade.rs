@@ -1,0 +1,312 @@
+//! Materials, textures and lights: what a surface looks like once a ray has found it.
+//! All colours are linear radiance; sRGB appears only when 8-bit images are written.
+
+use std::sync::Arc;
+
+use glam::{Vec2, Vec3};
+
+/// Procedural patterns over texture coordinates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Pattern {
+    Checker,
+    Stripes,
+    Grid,
+    Dots,
+    /// Fractal value noise.
+    Noise,
+    /// Veined marble: a sine wave perturbed by noise.
+    Marble,
+}
+
+/// How image textures treat coordinates outside [0, 1].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Wrap {
+    #[default]
+    Repeat,
+    Clamp,
+}
+
+/// A decoded image in linear RGB, sampled bilinearly.
+#[derive(Debug, Clone)]
+pub struct ImageTexture {
+    pub width: usize,
+    pub height: usize,
+    /// Row-major, top row first (v = 1 is the top, as in OBJ and glTF after its flip).
+    pub texels: Vec<Vec3>,
+    pub wrap: Wrap,
+}
+
+impl ImageTexture {
+    fn texel(&self, x: i64, y: i64) -> Vec3 {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let (x, y) = match self.wrap {
+            Wrap::Repeat => (x.rem_euclid(w), y.rem_euclid(h)),
+            Wrap::Clamp => (x.clamp(0, w - 1), y.clamp(0, h - 1)),
+        };
+        self.texels[(y * w + x) as usize]
+    }
+
+    /// Bilinear lookup; v points up, so v = 0 is the bottom row.
+    pub fn sample(&self, uv: Vec2) -> Vec3 {
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = (1.0 - uv.y) * self.height as f32 - 0.5;
+        if !(x.is_finite() && y.is_finite()) {
+            return Vec3::ZERO;
+        }
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let top = self.texel(x0, y0).lerp(self.texel(x0 + 1, y0), fx);
+        let bottom = self.texel(x0, y0 + 1).lerp(self.texel(x0 + 1, y0 + 1), fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+/// Where a material's colour comes from.
+#[derive(Debug, Clone)]
+pub enum Texture {
+    Constant(Vec3),
+    /// Alternates colours `a` and `b`; `scale` is the number of pattern periods per UV unit.
+    Procedural {
+        pattern: Pattern,
+        a: Vec3,
+        b: Vec3,
+        scale: f32,
+    },
+    /// An image, multiplied by `tint`.
+    Image {
+        image: Arc<ImageTexture>,
+        tint: Vec3,
+    },
+}
+
+/// 2D value noise in [0, 1] from a hashed integer lattice, smoothly interpolated.
+fn value_noise(p: Vec2) -> f32 {
+    let cell = p.floor();
+    let f = p - cell;
+    let s = f * f * (Vec2::splat(3.0) - 2.0 * f);
+    let corner = |dx: f32, dy: f32| {
+        let x = (cell.x + dx) as i64 as u64;
+        let y = (cell.y + dy) as i64 as u64;
+        let h = crate::sampler::hash64(x.wrapping_mul(0x9e37_79b9) ^ y.rotate_left(32));
+        (h >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let top = corner(0.0, 0.0) + (corner(1.0, 0.0) - corner(0.0, 0.0)) * s.x;
+    let bottom = corner(0.0, 1.0) + (corner(1.0, 1.0) - corner(0.0, 1.0)) * s.x;
+    top + (bottom - top) * s.y
+}
+
+/// Four octaves of value noise, in [0, 1].
+fn fbm(p: Vec2) -> f32 {
+    let mut sum = 0.0;
+    let mut amp = 0.5;
+    let mut q = p;
+    for _ in 0..4 {
+        sum += amp * value_noise(q);
+        q = q * 2.03 + Vec2::splat(17.1);
+        amp *= 0.5;
+    }
+    sum / 0.9375
+}
+
+impl Pattern {
+    /// The mix between colour a (0) and b (1) at `p` (UV times scale).
+    pub fn mix(self, p: Vec2) -> f32 {
+        let fract = p - p.floor();
+        match self {
+            Self::Checker => ((p.x.floor() + p.y.floor()) as i64 & 1) as f32,
+            Self::Stripes => (fract.x < 0.5) as u8 as f32,
+            Self::Grid => (fract.x < 0.1 || fract.y < 0.1) as u8 as f32,
+            Self::Dots => ((fract - Vec2::splat(0.5)).length() < 0.3) as u8 as f32,
+            Self::Noise => fbm(p * 2.0),
+            Self::Marble => 0.5 + 0.5 * (p.x * 3.0 + 6.0 * fbm(p)).sin(),
+        }
+    }
+}
+
+impl Texture {
+    pub fn sample(&self, uv: Vec2) -> Vec3 {
+        match self {
+            Self::Constant(c) => *c,
+            Self::Procedural {
+                pattern,
+                a,
+                b,
+                scale,
+            } => a.lerp(*b, pattern.mix(uv * *scale)),
+            Self::Image { image, tint } => image.sample(uv) * *tint,
+        }
+    }
+}
+
+/// A surface: Lambertian diffuse, optional Blinn-Phong highlight, optional perfect mirror.
+#[derive(Debug, Clone)]
+pub struct Material {
+    pub diffuse: Texture,
+    /// Specular colour (zero for none).
+    pub specular: Vec3,
+    /// Blinn-Phong exponent.
+    pub shininess: f32,
+    /// Fraction of light reflected as a perfect mirror (one bounce).
+    pub mirror: f32,
+}
+
+impl Material {
+    pub fn diffuse(color: Vec3) -> Self {
+        Self {
+            diffuse: Texture::Constant(color),
+            specular: Vec3::ZERO,
+            shininess: 32.0,
+            mirror: 0.0,
+        }
+    }
+}
+
+/// A light that casts hard shadows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Light {
+    /// Radiant intensity `intensity` at `position`, falling off as 1 / distance^2.
+    Point { position: Vec3, intensity: Vec3 },
+    /// Parallel light arriving along `direction` (pointing from the light into the scene).
+    Directional { direction: Vec3, irradiance: Vec3 },
+}
+
+/// What a shadow ray needs to know about a light as seen from a point.
+#[derive(Debug, Clone, Copy)]
+pub struct LightSample {
+    /// Unit direction from the point towards the light.
+    pub dir: Vec3,
+    /// Distance to the light (infinite for directional lights).
+    pub distance: f32,
+    /// Irradiance arriving at the point (before the cosine term).
+    pub irradiance: Vec3,
+}
+
+impl Light {
+    pub fn sample(&self, p: Vec3) -> LightSample {
+        match *self {
+            Self::Point {
+                position,
+                intensity,
+            } => {
+                let d = position - p;
+                let dist2 = d.length_squared().max(1e-12);
+                let distance = dist2.sqrt();
+                LightSample {
+                    dir: d / distance,
+                    distance,
+                    irradiance: intensity / dist2,
+                }
+            }
+            Self::Directional {
+                direction,
+                irradiance,
+            } => LightSample {
+                dir: -direction.normalize(),
+                distance: f32::INFINITY,
+                irradiance,
+            },
+        }
+    }
+}
+
+/// Local shading frame of a hit: everything shading needs, independent of geometry type.
+#[derive(Debug, Clone, Copy)]
+pub struct SurfacePoint {
+    pub position: Vec3,
+    /// Unit shading normal facing the incoming ray.
+    pub normal: Vec3,
+    pub uv: Vec2,
+}
+
+/// Direct lighting from one light through an unoccluded shadow ray: diffuse + highlight.
+pub fn direct(
+    material: &Material,
+    albedo: Vec3,
+    sp: &SurfacePoint,
+    view: Vec3,
+    light: &LightSample,
+) -> Vec3 {
+    let cos = sp.normal.dot(light.dir);
+    if cos <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let mut c = albedo * (1.0 - material.mirror) * cos;
+    if material.specular != Vec3::ZERO {
+        let h = (light.dir - view).normalize_or_zero();
+        c += material.specular * sp.normal.dot(h).max(0.0).powf(material.shininess);
+    }
+    c * light.irradiance
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn checker_alternates_per_cell() {
+        let t = Texture::Procedural {
+            pattern: Pattern::Checker,
+            a: Vec3::ZERO,
+            b: Vec3::ONE,
+            scale: 1.0,
+        };
+        assert_eq!(t.sample(Vec2::new(0.5, 0.5)), Vec3::ZERO);
+        assert_eq!(t.sample(Vec2::new(1.5, 0.5)), Vec3::ONE);
+        assert_eq!(t.sample(Vec2::new(1.5, 1.5)), Vec3::ZERO);
+        assert_eq!(t.sample(Vec2::new(-0.5, 0.5)), Vec3::ONE);
+    }
+
+    #[test]
+    fn noise_is_bounded_and_varies() {
+        let vals: Vec<f32> = (0..200)
+            .map(|i| Pattern::Noise.mix(Vec2::new(i as f32 * 0.37, 1.3)))
+            .collect();
+        assert!(vals.iter().all(|v| (0.0..=1.0).contains(v)));
+        let mean = vals.iter().sum::<f32>() / vals.len() as f32;
+        assert!(vals.iter().any(|v| (v - mean).abs() > 0.1));
+    }
+
+    #[test]
+    fn image_texture_is_bilinear_and_wraps() {
+        let img = ImageTexture {
+            width: 2,
+            height: 1,
+            texels: vec![Vec3::ZERO, Vec3::ONE],
+            wrap: Wrap::Clamp,
+        };
+        assert_eq!(img.sample(Vec2::new(0.25, 0.5)), Vec3::ZERO);
+        assert_eq!(img.sample(Vec2::new(0.75, 0.5)), Vec3::ONE);
+        assert!((img.sample(Vec2::new(0.5, 0.5)).x - 0.5).abs() < 1e-6);
+        let repeat = ImageTexture {
+            wrap: Wrap::Repeat,
+            ..img
+        };
+        // Halfway between the last texel (1) and the first (0), wrapped.
+        assert!((repeat.sample(Vec2::new(1.0, 0.5)).x - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn lambert_follows_the_cosine_and_inverse_square() {
+        let m = Material::diffuse(Vec3::ONE);
+        let sp = SurfacePoint {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            uv: Vec2::ZERO,
+        };
+        let light = Light::Point {
+            position: Vec3::new(0.0, 2.0, 0.0),
+            intensity: Vec3::splat(4.0),
+        };
+        let c = direct(&m, Vec3::ONE, &sp, -Vec3::Y, &light.sample(sp.position));
+        assert!((c.x - 1.0).abs() < 1e-6);
+        let slanted = Light::Directional {
+            direction: Vec3::new(1.0, -1.0, 0.0),
+            irradiance: Vec3::ONE,
+        };
+        let c = direct(&m, Vec3::ONE, &sp, -Vec3::Y, &slanted.sample(sp.position));
+        assert!((c.x - std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-6);
+    }
+}

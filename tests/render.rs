@@ -1,0 +1,238 @@
+//! The renderer end to end: the seed's method against dense distributed ray tracing.
+
+use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
+use dofray::embree::Device;
+use dofray::metrics::{Space, psnr};
+use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, render};
+use dofray::scene::{Background, Object, SceneDesc, World, builtin};
+use dofray::shade::Material;
+use glam::Vec3;
+
+fn setup(desc: &SceneDesc) -> (World, Camera) {
+    let device = Device::new().unwrap();
+    let world = World::build(desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    (world, camera)
+}
+
+fn paper(width: u32, height: u32) -> (World, Camera) {
+    let mut desc = builtin::paper();
+    desc.camera.width = width;
+    desc.camera.height = height;
+    setup(&desc)
+}
+
+fn run(
+    world: &World,
+    camera: &Camera,
+    mode: Mode,
+    k: f32,
+    spp: u32,
+    threads: usize,
+) -> (Film, RenderStats) {
+    let settings = RenderSettings {
+        mode,
+        interval_factor: k,
+        spp,
+        seed: 3,
+        ..Default::default()
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| render(world, camera, &settings, &NoProgress))
+        .unwrap()
+}
+
+/// Compares adaptive with dense at 64 lens samples per site: with the default 16, dense's own
+/// Monte Carlo noise (about 34 dB from a converged reference on this scene) would swamp the
+/// interpolation error this test is about.
+#[test]
+fn adaptive_matches_dense_where_in_focus_and_costs_a_fraction() {
+    let (world, camera) = paper(320, 240);
+    let (dense, dense_stats) = run(&world, &camera, Mode::Dense, 0.4, 64, 2);
+    let (fast, fast_stats) = run(&world, &camera, Mode::Adaptive, 0.4, 64, 2);
+    let (fine, fine_stats) = run(&world, &camera, Mode::Adaptive, 0.2, 64, 2);
+
+    // Interval-1 pixels are shaded by the same code from the same samples: identical.
+    let mut in_focus = 0;
+    for p in 0..dense.color.len() {
+        if fast.interval[p] == 1 {
+            assert_eq!(fast.color[p], dense.color[p], "pixel {p}");
+            in_focus += 1;
+        }
+    }
+    assert!(in_focus > 1000, "{in_focus} interval-1 pixels");
+
+    let (w, h) = (320, 240);
+    let q_fast = psnr(&fast.rgb(), &dense.rgb(), w, h, Space::Srgb).unwrap();
+    let q_fine = psnr(&fine.rgb(), &dense.rgb(), w, h, Space::Srgb).unwrap();
+    let ratio = fast_stats.rays.primary as f64 / dense_stats.rays.primary as f64;
+    eprintln!(
+        "k=0.4: {q_fast:.2} dB, {:.1}% of dense primary rays; k=0.2: {q_fine:.2} dB, {:.1}%",
+        100.0 * ratio,
+        100.0 * fine_stats.rays.primary as f64 / dense_stats.rays.primary as f64
+    );
+    assert!(q_fast >= 35.0, "PSNR at k = 0.4: {q_fast}");
+    assert!(
+        q_fine > q_fast,
+        "k = 0.2 ({q_fine}) must beat k = 0.4 ({q_fast})"
+    );
+    assert!(
+        ratio <= 0.35,
+        "adaptive traced {:.1}% of dense's primary rays",
+        ratio * 100.0
+    );
+    assert!(fast_stats.sample_sites < fine_stats.sample_sites);
+    assert!(fine_stats.sample_sites < dense_stats.sample_sites);
+}
+
+#[test]
+fn images_are_identical_for_any_thread_count() {
+    let (world, camera) = paper(96, 72);
+    for mode in [Mode::Dense, Mode::Adaptive] {
+        let (one, s1) = run(&world, &camera, mode, 0.4, 16, 1);
+        let (two, s2) = run(&world, &camera, mode, 0.4, 16, 2);
+        let bits = |f: &Film| {
+            f.color
+                .iter()
+                .flat_map(|c| c.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&one), bits(&two), "{mode:?}");
+        assert_eq!(s1.rays, s2.rays);
+    }
+}
+
+#[test]
+fn conservative_intervals_never_reach_an_in_focus_pixel() {
+    let (world, camera) = paper(200, 150);
+    let (film, _) = run(&world, &camera, Mode::Adaptive, 0.4, 16, 2);
+    let (w, h) = (film.width as i64, film.height as i64);
+    let mut checked = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let i = film.interval[(y * w + x) as usize] as i64;
+            if i == 1 {
+                continue;
+            }
+            checked += 1;
+            for yy in (y - i).max(0)..(y + i + 1).min(h) {
+                for xx in (x - i).max(0)..(x + i + 1).min(w) {
+                    let c = film.coc[(yy * w + xx) as usize];
+                    assert!(
+                        c > 1.0,
+                        "pixel ({x},{y}) interval {i} reaches in-focus ({xx},{yy})"
+                    );
+                }
+            }
+        }
+    }
+    assert!(checked > 1000);
+    // The paper-exact rule does interpolate next to in-focus pixels somewhere in this scene.
+    let settings = RenderSettings {
+        mode: Mode::Adaptive,
+        paper_exact: true,
+        ..Default::default()
+    };
+    let (exact, _) = render(&world, &camera, &settings, &NoProgress).unwrap();
+    let differs = exact
+        .interval
+        .iter()
+        .zip(&film.interval)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(differs > 0);
+}
+
+/// A small bright sphere far in front of the focus plane blurs into a disc whose diameter is
+/// the CoC. The blurred image is the sphere's own disc convolved with the CoC disc, so their
+/// per-axis variances add: var = s^2/16 + c^2/16 for uniform discs of diameters s and c.
+#[test]
+fn rendered_blur_disc_matches_coc_px() {
+    let (size, depth, radius) = (128u32, 5.0f32, 0.08f32);
+    let desc = SceneDesc {
+        name: "bokeh".into(),
+        camera: CameraSpec {
+            eye: Vec3::ZERO,
+            look_at: Vec3::Z,
+            up: Vec3::Y,
+            vfov_deg: 30.0,
+            width: size,
+            height: size,
+            lens: LensSpec::Aperture { radius: 0.8 },
+            focus: Focus::Distance(10.0),
+            aperture: ApertureShape::default(),
+        },
+        materials: vec![Material::diffuse(Vec3::ONE)],
+        objects: vec![Object::Sphere {
+            center: Vec3::new(0.0, 0.0, depth),
+            radius,
+            material: 0,
+        }],
+        lights: vec![],
+        ambient: Vec3::ONE,
+        background: Background::uniform(Vec3::ZERO),
+    };
+    let (world, camera) = setup(&desc);
+    let settings = RenderSettings {
+        mode: Mode::Dense,
+        spp: 256,
+        ..Default::default()
+    };
+    let (film, _) = render(&world, &camera, &settings, &NoProgress).unwrap();
+    let n = size as usize;
+    let (mut sum, mut mx, mut my) = (0.0f64, 0.0f64, 0.0f64);
+    for (p, c) in film.color.iter().enumerate() {
+        let v = c.x as f64;
+        sum += v;
+        mx += v * ((p % n) as f64 + 0.5);
+        my += v * ((p / n) as f64 + 0.5);
+    }
+    let (cx, cy) = (mx / sum, my / sum);
+    let mut var = 0.0;
+    for (p, c) in film.color.iter().enumerate() {
+        let dx = (p % n) as f64 + 0.5 - cx;
+        let dy = (p / n) as f64 + 0.5 - cy;
+        var += c.x as f64 * (dx * dx + dy * dy) / 2.0;
+    }
+    var /= sum;
+    let s = 2.0 * radius as f64 * camera.pixels_per_unit() as f64 / depth as f64;
+    let measured = (16.0 * var - s * s).sqrt();
+    let expected = camera.coc_px(depth) as f64;
+    eprintln!("blur disc {measured:.2} px, coc_px {expected:.2} px, sphere {s:.2} px");
+    assert!(expected > 30.0);
+    assert!(
+        (measured - expected).abs() <= 0.1 * expected,
+        "{measured} vs {expected}"
+    );
+}
+
+#[test]
+fn bad_settings_are_rejected() {
+    let (world, camera) = paper(16, 12);
+    for settings in [
+        RenderSettings {
+            spp: 0,
+            ..Default::default()
+        },
+        RenderSettings {
+            interval_factor: 0.0,
+            ..Default::default()
+        },
+        RenderSettings {
+            interval_factor: f32::NAN,
+            ..Default::default()
+        },
+        RenderSettings {
+            max_interval: 3,
+            ..Default::default()
+        },
+    ] {
+        assert!(
+            render(&world, &camera, &settings, &NoProgress).is_err(),
+            "{settings:?}"
+        );
+    }
+}
