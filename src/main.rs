@@ -47,12 +47,14 @@ struct RenderArgs {
     #[arg(long, value_enum, default_value_t = Mode::Adaptive)]
     mode: Mode,
     /// Lens samples per defocused sample site (16 fill one ray packet).
-    #[arg(long, default_value_t = 16)]
-    spp: u32,
+    /// [default: the scene's, else 16]
+    #[arg(long)]
+    spp: Option<u32>,
     /// Sample interval as a fraction of the CoC diameter in defocused regions (the seed's k;
     /// 0.4 is fast, 0.2 is near-identical to dense).
-    #[arg(long, short = 'k', default_value_t = 0.4)]
-    interval_factor: f32,
+    /// [default: the scene's, else 0.4]
+    #[arg(long, short = 'k')]
+    interval_factor: Option<f32>,
     /// Use the seed's plain per-pixel interval rule instead of the conservative one that never
     /// interpolates across an in-focus edge.
     #[arg(long)]
@@ -221,10 +223,11 @@ fn apply_overrides(desc: &mut SceneDesc, a: &RenderArgs) -> Result<()> {
 }
 
 fn run_render(a: &RenderArgs) -> Result<()> {
+    let mut desc = load_scene(&a.scene)?;
     let settings = RenderSettings {
         mode: a.mode,
-        spp: a.spp,
-        interval_factor: a.interval_factor,
+        spp: a.spp.or(desc.spp).unwrap_or(16),
+        interval_factor: a.interval_factor.or(desc.interval_factor).unwrap_or(0.4),
         paper_exact: a.paper_exact,
         seed: a.seed,
         filter: a.filter,
@@ -240,7 +243,6 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             bail!("--aov-dir {} is not a directory", dir.display());
         }
     }
-    let mut desc = load_scene(&a.scene)?;
     apply_overrides(&mut desc, a)?;
 
     let pool = rayon::ThreadPoolBuilder::new()
@@ -281,8 +283,8 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "mode": a.mode.name(),
             "width": film.width,
             "height": film.height,
-            "spp": a.spp,
-            "interval_factor": a.interval_factor,
+            "spp": settings.spp,
+            "interval_factor": settings.interval_factor,
             "paper_exact": a.paper_exact,
             "seed": a.seed,
             "seconds": stats.seconds,

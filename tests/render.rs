@@ -174,6 +174,8 @@ fn rendered_blur_disc_matches_coc_px() {
         lights: vec![],
         ambient: Vec3::ONE,
         background: Background::uniform(Vec3::ZERO),
+        spp: None,
+        interval_factor: None,
     };
     let (world, camera) = setup(&desc);
     let settings = RenderSettings {

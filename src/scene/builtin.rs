@@ -116,5 +116,7 @@ pub fn paper() -> SceneDesc {
             horizon: Vec3::new(0.75, 0.82, 0.95),
             zenith: Vec3::new(0.3, 0.45, 0.8),
         },
+        spp: None,
+        interval_factor: None,
     }
 }

@@ -84,6 +84,10 @@ pub struct SceneDesc {
     pub lights: Vec<Light>,
     pub ambient: Vec3,
     pub background: Background,
+    /// Lens samples per defocused site the scene asks for (the command line may override it).
+    pub spp: Option<u32>,
+    /// The seed's interval factor k the scene asks for (the command line may override it).
+    pub interval_factor: Option<f32>,
 }
 
 /// Material lookup for one Embree geometry.
