@@ -284,7 +284,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "width": film.width,
             "height": film.height,
             "spp": settings.spp,
-            "interval_factor": settings.interval_factor,
+            "interval_factor": json_f32(settings.interval_factor),
             "paper_exact": a.paper_exact,
             "seed": a.seed,
             "seconds": stats.seconds,
@@ -296,8 +296,8 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "sample_sites": stats.sample_sites,
             "defocused_sites": stats.defocused_sites,
             "mrays_per_s": stats.mrays_per_s(),
-            "aperture_radius": camera.aperture_radius,
-            "focus_distance": camera.focus_distance,
+            "aperture_radius": json_f32(camera.aperture_radius),
+            "focus_distance": json_f32(camera.focus_distance),
         });
         println!("{summary}");
     } else if !a.quiet {
@@ -314,6 +314,11 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// An f32 as the f64 with the same shortest decimal form (0.4, not 0.4000000059604645).
+fn json_f32(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::NAN)
 }
 
 /// Render-setting errors worded for the command line (flag names, not field names).

@@ -16,7 +16,6 @@ pub mod interpolate;
 pub mod maps;
 pub mod trace;
 
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 use glam::{Vec2, Vec3};
@@ -27,7 +26,7 @@ use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::sampler::{LensFilter, PixelSampler, aperture_point};
 use crate::scene::World;
 pub use film::Film;
-pub use trace::RayCounts;
+pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 
 /// Where sample sites are placed.
 #[derive(
@@ -66,6 +65,8 @@ pub struct RenderSettings {
     pub filter: LensFilter,
     /// Mirror bounces after the first hit.
     pub bounces: u32,
+    /// Keep every traced packet in [`RenderStats::ray_log`] (for intersect-only benchmarks).
+    pub record_rays: bool,
 }
 
 impl Default for RenderSettings {
@@ -79,6 +80,7 @@ impl Default for RenderSettings {
             seed: 0,
             filter: LensFilter::Box,
             bounces: 1,
+            record_rays: false,
         }
     }
 }
@@ -120,6 +122,9 @@ pub struct RenderStats {
     pub sample_sites: u64,
     /// Sites that traced `spp` lens samples (the rest reused the pinhole sample).
     pub defocused_sites: u64,
+    /// Every packet traced, in a deterministic order, when `record_rays` was set.
+    #[serde(skip)]
+    pub ray_log: Option<Vec<RecordedPacket>>,
 }
 
 impl RenderStats {
@@ -144,30 +149,6 @@ pub trait Progress: Sync {
 pub struct NoProgress;
 impl Progress for NoProgress {}
 
-/// Thread-safe ray counters, added to once per row.
-#[derive(Default)]
-struct SharedCounts {
-    primary: AtomicU64,
-    shadow: AtomicU64,
-    secondary: AtomicU64,
-}
-
-impl SharedCounts {
-    fn add(&self, c: &RayCounts) {
-        self.primary.fetch_add(c.primary, Ordering::Relaxed);
-        self.shadow.fetch_add(c.shadow, Ordering::Relaxed);
-        self.secondary.fetch_add(c.secondary, Ordering::Relaxed);
-    }
-
-    fn get(&self) -> RayCounts {
-        RayCounts {
-            primary: self.primary.load(Ordering::Relaxed),
-            shadow: self.shadow.load(Ordering::Relaxed),
-            secondary: self.secondary.load(Ordering::Relaxed),
-        }
-    }
-}
-
 /// Pinhole pass: one ray per pixel through the lens centre, 16 pixels (a 4 x 4 block) per
 /// packet. Fills the film's colour, depth and CoC.
 fn pinhole_pass(
@@ -175,13 +156,13 @@ fn pinhole_pass(
     camera: &Camera,
     settings: &RenderSettings,
     film: &mut Film,
-    counts: &SharedCounts,
+    tally: &mut Tally,
     progress: &dyn Progress,
 ) {
     let (w, h) = (film.width, film.height);
     let band_rows = 4;
     progress.start("pinhole", h.div_ceil(band_rows) as u64);
-    let bands: Vec<(usize, Vec<Vec3>, Vec<f32>)> = (0..h.div_ceil(band_rows))
+    let bands: Vec<(usize, Vec<Vec3>, Vec<f32>, Tally)> = (0..h.div_ceil(band_rows))
         .into_par_iter()
         .map(|band| {
             let y_start = band * band_rows;
@@ -191,7 +172,7 @@ fn pinhole_pass(
             let mut packet = RayPacket16::new();
             let mut radiance = [Vec3::ZERO; LANES];
             let mut t_hit = [0.0f32; LANES];
-            let mut local = RayCounts::default();
+            let mut local = Tally::new(settings.record_rays);
             for x_start in (0..w).step_by(4) {
                 packet.clear();
                 let mut lanes = [(0usize, 0usize); LANES];
@@ -204,10 +185,10 @@ fn pinhole_pass(
                         *slot = (x, y);
                     }
                 }
-                local.primary += packet.active_count() as u64;
                 trace::trace_and_shade(
                     world,
                     &mut packet,
+                    RayKind::Primary,
                     RayHint::Coherent,
                     &mut radiance,
                     &mut t_hit,
@@ -226,12 +207,12 @@ fn pinhole_pass(
                     }
                 }
             }
-            counts.add(&local);
             progress.advance(1);
-            (y_start, color, depth)
+            (y_start, color, depth, local)
         })
         .collect();
-    for (y_start, color, depth) in bands {
+    for (y_start, color, depth, local) in bands {
+        tally.merge(local);
         let at = y_start * w;
         film.color[at..at + color.len()].copy_from_slice(&color);
         film.depth[at..at + depth.len()].copy_from_slice(&depth);
@@ -249,7 +230,7 @@ pub fn shade_site(
     settings: &RenderSettings,
     x: usize,
     y: usize,
-    counts: &mut RayCounts,
+    tally: &mut Tally,
 ) -> Vec3 {
     let sampler = PixelSampler::new(settings.seed, (y * camera.width as usize + x) as u64);
     let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
@@ -268,15 +249,15 @@ pub fn shade_site(
             *weight = settings.filter.weight(lens, camera.aperture.anamorphic);
             packet.set(lane, &camera.lens_ray(px, py, lens));
         }
-        counts.primary += n as u64;
         trace::trace_and_shade(
             world,
             &mut packet,
+            RayKind::Primary,
             RayHint::Coherent,
             &mut radiance,
             &mut t_hit,
             settings.bounces,
-            counts,
+            tally,
         );
         for (c, w) in radiance.iter().zip(&weights).take(n) {
             sum += *c * *w;
@@ -298,8 +279,8 @@ pub fn render(
     let start = Instant::now();
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut film = Film::new(w, h);
-    let counts = SharedCounts::default();
-    pinhole_pass(world, camera, settings, &mut film, &counts, progress);
+    let mut tally = Tally::new(settings.record_rays);
+    pinhole_pass(world, camera, settings, &mut film, &mut tally, progress);
     let pinhole_seconds = start.elapsed().as_secs_f64();
     let mut stats = RenderStats {
         pinhole_seconds,
@@ -324,10 +305,10 @@ pub fn render(
         };
         let sites = maps::site_mask(&film.interval, w, h);
         progress.start(settings.mode.name(), h as u64);
-        let rows: Vec<(Vec<Vec3>, Vec<u32>)> = (0..h)
+        let rows: Vec<(Vec<Vec3>, Vec<u32>, Tally)> = (0..h)
             .into_par_iter()
             .map(|y| {
-                let mut local = RayCounts::default();
+                let mut local = Tally::new(settings.record_rays);
                 let mut color = film.color[y * w..(y + 1) * w].to_vec();
                 let mut samples = vec![0u32; w];
                 for x in 0..w {
@@ -342,12 +323,12 @@ pub fn render(
                         samples[x] = 1;
                     }
                 }
-                counts.add(&local);
                 progress.advance(1);
-                (color, samples)
+                (color, samples, local)
             })
             .collect();
-        for (y, (color, samples)) in rows.into_iter().enumerate() {
+        for (y, (color, samples, local)) in rows.into_iter().enumerate() {
+            tally.merge(local);
             film.color[y * w..(y + 1) * w].copy_from_slice(&color);
             film.samples[y * w..(y + 1) * w].copy_from_slice(&samples);
         }
@@ -356,7 +337,8 @@ pub fn render(
         stats.defocused_sites = film.samples.iter().filter(|&&s| s > 1).count() as u64;
     }
     progress.finish();
-    stats.rays = counts.get();
+    stats.rays = tally.counts;
+    stats.ray_log = tally.log;
     stats.seconds = start.elapsed().as_secs_f64();
     Ok((film, stats))
 }

@@ -30,24 +30,126 @@ impl RayCounts {
     }
 }
 
+/// The kind of rays in a packet.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RayKind {
+    Primary,
+    Shadow,
+    Secondary,
+}
+
+/// One packet exactly as it was handed to Embree, for replaying without shading.
+#[derive(Debug, Clone)]
+pub struct RecordedPacket {
+    pub kind: RayKind,
+    pub hint: RayHint,
+    /// Bit `i` set: lane `i` is active.
+    pub active: u16,
+    pub rays: [Ray; LANES],
+}
+
+/// What tracing did: ray counts, and (when `log` is `Some`) every packet traced, in order.
+#[derive(Debug, Default)]
+pub struct Tally {
+    pub counts: RayCounts,
+    pub log: Option<Vec<RecordedPacket>>,
+}
+
+impl Tally {
+    /// A tally that also records packets when `record` is set.
+    pub fn new(record: bool) -> Self {
+        Self {
+            counts: RayCounts::default(),
+            log: record.then(Vec::new),
+        }
+    }
+
+    /// Appends another tally (its packets after this one's).
+    pub fn merge(&mut self, other: Tally) {
+        self.counts.add(&other.counts);
+        if let (Some(log), Some(more)) = (&mut self.log, other.log) {
+            log.extend(more);
+        }
+    }
+
+    fn count(&mut self, kind: RayKind, active: usize) {
+        let n = active as u64;
+        match kind {
+            RayKind::Primary => self.counts.primary += n,
+            RayKind::Shadow => self.counts.shadow += n,
+            RayKind::Secondary => self.counts.secondary += n,
+        }
+    }
+
+    fn record(&mut self, kind: RayKind, hint: RayHint, lanes: impl Fn(usize) -> Option<Ray>) {
+        if let Some(log) = &mut self.log {
+            let mut packet = RecordedPacket {
+                kind,
+                hint,
+                active: 0,
+                rays: [Ray::new(Vec3::ZERO, Vec3::Z); LANES],
+            };
+            for lane in 0..LANES {
+                if let Some(ray) = lanes(lane) {
+                    packet.active |= 1 << lane;
+                    packet.rays[lane] = ray;
+                }
+            }
+            log.push(packet);
+        }
+    }
+}
+
+/// Traces recorded packets again, intersection only (no shading, no sampling), in parallel.
+/// Returns the number of rays traced.
+pub fn replay(scene: &crate::embree::Scene, packets: &[RecordedPacket]) -> u64 {
+    use rayon::prelude::*;
+    packets
+        .par_chunks(64)
+        .map(|chunk| {
+            let mut packet = RayPacket16::new();
+            let mut shadow = ShadowPacket16::new();
+            let mut rays = 0u64;
+            for rec in chunk {
+                let lanes = (0..LANES).filter(|l| rec.active & (1 << l) != 0);
+                if rec.kind == RayKind::Shadow {
+                    shadow.clear();
+                    lanes.for_each(|l| shadow.set(l, &rec.rays[l]));
+                    scene.occluded16(&mut shadow, rec.hint);
+                } else {
+                    packet.clear();
+                    lanes.for_each(|l| packet.set(l, &rec.rays[l]));
+                    scene.intersect16(&mut packet, rec.hint);
+                }
+                rays += rec.active.count_ones() as u64;
+            }
+            rays
+        })
+        .sum()
+}
+
 /// Offset for rays leaving a surface, scaled to the magnitude of the position so it survives
 /// f32 rounding far from the origin.
 fn surface_epsilon(p: Vec3) -> f32 {
     1e-4 * (1.0 + p.abs().max_element())
 }
 
-/// Traces the active lanes of `packet` and writes each lane's radiance to `radiance`
-/// (inactive lanes are left as they were). Writes the hit distance to `t_hit` (infinite for
-/// misses). `bounces` is how many mirror reflections may still follow.
+/// Traces the active lanes of `packet` (rays of `kind`) and writes each lane's radiance to
+/// `radiance` (inactive lanes are left as they were). Writes the hit distance to `t_hit`
+/// (infinite for misses). `bounces` is how many mirror reflections may still follow.
+#[allow(clippy::too_many_arguments)]
 pub fn trace_and_shade(
     world: &World,
     packet: &mut RayPacket16,
+    kind: RayKind,
     hint: RayHint,
     radiance: &mut [Vec3; LANES],
     t_hit: &mut [f32; LANES],
     bounces: u32,
-    counts: &mut RayCounts,
+    tally: &mut Tally,
 ) {
+    tally.count(kind, packet.active_count());
+    tally.record(kind, hint, |l| packet.is_active(l).then(|| packet.ray(l)));
     world.scene.intersect16(packet, hint);
     let mut points = [None::<(SurfacePoint, usize)>; LANES];
     let mut albedo = [Vec3::ZERO; LANES];
@@ -102,7 +204,8 @@ pub fn trace_and_shade(
         if active == 0 {
             continue;
         }
-        counts.shadow += active as u64;
+        tally.count(RayKind::Shadow, active);
+        tally.record(RayKind::Shadow, RayHint::Coherent, |l| shadow.is_active(l).then(|| shadow.ray(l)));
         world.scene.occluded16(&mut shadow, RayHint::Coherent);
         for lane in 0..LANES {
             if let (Some(ls), Some((sp, m))) = (&samples[lane], &points[lane]) {
@@ -132,17 +235,17 @@ pub fn trace_and_shade(
     if active == 0 {
         return;
     }
-    counts.secondary += active as u64;
     let mut reflected = [Vec3::ZERO; LANES];
     let mut t_unused = [0.0; LANES];
     trace_and_shade(
         world,
         &mut mirror,
+        RayKind::Secondary,
         RayHint::Incoherent,
         &mut reflected,
         &mut t_unused,
         bounces - 1,
-        counts,
+        tally,
     );
     for lane in 0..LANES {
         if mirror.is_active(lane) {
