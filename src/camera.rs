@@ -320,7 +320,17 @@ impl Camera {
     /// [`crate::sampler::aperture_point`]) through the point on the plane in focus that film
     /// position (px, py) images.
     pub fn lens_ray(&self, px: f32, py: f32, lens: Vec2) -> Ray {
-        let focus_point = self.eye + self.film_dir(px, py) * self.focus_distance;
+        self.lens_ray_through(self.focus_point(px, py), lens)
+    }
+
+    /// The point on the plane in focus that film position (px, py) images: every lens ray of
+    /// that pixel passes through it.
+    pub fn focus_point(&self, px: f32, py: f32) -> Vec3 {
+        self.eye + self.film_dir(px, py) * self.focus_distance
+    }
+
+    /// The ray from lens position `lens` through `focus_point` (see [`Camera::focus_point`]).
+    pub fn lens_ray_through(&self, focus_point: Vec3, lens: Vec2) -> Ray {
         let origin = self.eye + (self.right * lens.x + self.up * lens.y) * self.aperture_radius;
         Ray::new(origin, (focus_point - origin).normalize())
     }

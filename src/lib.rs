@@ -7,6 +7,7 @@
 //! Data flows one way: [`scene::SceneDesc`] -> [`scene::World`] (Embree geometry, materials)
 //! -> [`camera::Camera`] -> [`render::render`] -> [`render::Film`] -> [`output`].
 
+pub mod bench;
 pub mod camera;
 pub mod embree;
 pub mod metrics;

@@ -5,7 +5,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
-use dofray::camera::{Focus, LensSpec};
+use dofray::bench::{self, BenchConfig};
+use dofray::camera::{Camera, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::output;
 use dofray::render::{self, Mode, Progress, RenderSettings};
@@ -30,35 +31,19 @@ struct Cli {
 enum Command {
     /// Render a scene to an image (PNG: 8-bit sRGB; EXR: linear float with Z/coc/interval/samples).
     Render(RenderArgs),
+    /// Reproduce the seed's table: time pinhole, dense and adaptive modes, count their rays, and
+    /// measure their quality against dense and a converged reference.
+    Bench(BenchArgs),
     /// List the built-in scenes.
     Scenes,
 }
 
+/// Which scene, at what size, through which lens: shared by `render` and `bench`.
 #[derive(Args)]
-struct RenderArgs {
+struct SceneArgs {
     /// A built-in scene name (see `dofray scenes`).
     #[arg(default_value = "paper")]
     scene: String,
-    /// Output image: .png (8-bit sRGB) or .exr (linear RGB plus Z, coc, interval, samples).
-    #[arg(short, long, default_value = "dofray.png")]
-    output: PathBuf,
-    /// pinhole: no depth of field; dense: lens samples at every pixel (Cook's distributed ray
-    /// tracing); adaptive: the seed's sparse sample sites with interpolation.
-    #[arg(long, value_enum, default_value_t = Mode::Adaptive)]
-    mode: Mode,
-    /// Lens samples per defocused sample site (16 fill one ray packet).
-    /// [default: the scene's, else 16]
-    #[arg(long)]
-    spp: Option<u32>,
-    /// Sample interval as a fraction of the CoC diameter in defocused regions (the seed's k;
-    /// 0.4 is fast, 0.2 is near-identical to dense).
-    /// [default: the scene's, else 0.4]
-    #[arg(long, short = 'k')]
-    interval_factor: Option<f32>,
-    /// Use the seed's plain per-pixel interval rule instead of the conservative one that never
-    /// interpolates across an in-focus edge.
-    #[arg(long)]
-    paper_exact: bool,
     /// Image width in pixels (default: the scene's; height follows the aspect if not given).
     #[arg(long)]
     width: Option<u32>,
@@ -71,9 +56,6 @@ struct RenderArgs {
     /// Random seed of the lens samples; the same seed gives the same image bit for bit.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Weighting of lens samples over the aperture.
-    #[arg(long, value_enum, default_value_t = LensFilter::Box)]
-    filter: LensFilter,
     /// Aperture radius in scene units (overrides the scene's lens).
     #[arg(long)]
     aperture_radius: Option<f32>,
@@ -101,6 +83,34 @@ struct RenderArgs {
     /// Anamorphic ratio: aperture height over width (1 = round bokeh).
     #[arg(long)]
     anamorphic: Option<f32>,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Output image: .png (8-bit sRGB) or .exr (linear RGB plus Z, coc, interval, samples).
+    #[arg(short, long, default_value = "dofray.png")]
+    output: PathBuf,
+    /// pinhole: no depth of field; dense: lens samples at every pixel (Cook's distributed ray
+    /// tracing); adaptive: the seed's sparse sample sites with interpolation.
+    #[arg(long, value_enum, default_value_t = Mode::Adaptive)]
+    mode: Mode,
+    /// Lens samples per defocused sample site (16 fill one ray packet)
+    /// [default: the scene's, else 16].
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Sample interval as a fraction of the CoC diameter in defocused regions (the seed's k;
+    /// 0.4 is fast, 0.2 is near-identical to dense) [default: the scene's, else 0.4].
+    #[arg(long, short = 'k')]
+    interval_factor: Option<f32>,
+    /// Use the seed's plain per-pixel interval rule instead of the conservative one that never
+    /// interpolates across an in-focus edge.
+    #[arg(long)]
+    paper_exact: bool,
+    /// Weighting of lens samples over the aperture.
+    #[arg(long, value_enum, default_value_t = LensFilter::Box)]
+    filter: LensFilter,
     /// Also write the depth map and interval map as PNG pictures into this directory.
     #[arg(long)]
     aov_dir: Option<PathBuf>,
@@ -108,6 +118,35 @@ struct RenderArgs {
     #[arg(long)]
     json: bool,
     /// No progress bar and no summary line.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Lens samples per defocused sample site in every mode [default: the scene's, else 16].
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Timed repeats of each mode; medians are reported.
+    #[arg(long, default_value_t = 3)]
+    repeat: usize,
+    /// Lens samples per pixel of the converged reference image.
+    #[arg(long, default_value_t = 1024)]
+    reference_spp: u32,
+    /// Where the reference is cached between runs [default: $XDG_CACHE_HOME/dofray or
+    /// ~/.cache/dofray].
+    #[arg(long)]
+    cache_dir: Option<PathBuf>,
+    /// Write every image, the depth (figure 2) and interval (figure 3) maps, a side-by-side
+    /// comparison and an error heat map into this directory.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+    /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
 }
@@ -165,7 +204,7 @@ fn load_scene(name: &str) -> Result<SceneDesc> {
 }
 
 /// Applies command-line overrides of size and lens to the scene's camera.
-fn apply_overrides(desc: &mut SceneDesc, a: &RenderArgs) -> Result<()> {
+fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     let cam = &mut desc.camera;
     for (name, v) in [("--width", a.width), ("--height", a.height)] {
         if v == Some(0) {
@@ -222,29 +261,17 @@ fn apply_overrides(desc: &mut SceneDesc, a: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
-fn run_render(a: &RenderArgs) -> Result<()> {
-    let mut desc = load_scene(&a.scene)?;
-    let settings = RenderSettings {
-        mode: a.mode,
-        spp: a.spp.or(desc.spp).unwrap_or(16),
-        interval_factor: a.interval_factor.or(desc.interval_factor).unwrap_or(0.4),
-        paper_exact: a.paper_exact,
-        seed: a.seed,
-        filter: a.filter,
-        ..Default::default()
-    };
-    settings
-        .validate()
-        .map_err(|e| anyhow::anyhow!("{}", cli_message(&e)))?;
-    output::check_writable(&a.output)
-        .with_context(|| format!("cannot write the output image {}", a.output.display()))?;
-    if let Some(dir) = &a.aov_dir {
-        if !dir.is_dir() {
-            bail!("--aov-dir {} is not a directory", dir.display());
-        }
-    }
-    apply_overrides(&mut desc, a)?;
+/// A scene ready to render: its description, the Embree world and the camera.
+struct Prepared {
+    desc: SceneDesc,
+    world: World,
+    camera: Camera,
+    pool: rayon::ThreadPool,
+}
 
+fn prepare(a: &SceneArgs) -> Result<Prepared> {
+    let mut desc = load_scene(&a.scene)?;
+    apply_overrides(&mut desc, a)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()
@@ -252,16 +279,49 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let device = Device::new().context("cannot create the Embree device")?;
     let world =
         World::build(&desc, &device).with_context(|| format!("invalid scene {}", desc.name))?;
+    let forward = (desc.camera.look_at - desc.camera.eye).normalize_or_zero();
     let camera = desc
         .camera
         .build(|ray| {
-            let hit = world.scene.intersect1(ray)?;
-            Some(
-                (ray.at(hit.t) - ray.origin)
-                    .dot((desc.camera.look_at - desc.camera.eye).normalize()),
-            )
+            world
+                .scene
+                .intersect1(ray)
+                .map(|hit| (ray.at(hit.t) - ray.origin).dot(forward))
         })
         .context("invalid camera")?;
+    Ok(Prepared {
+        desc,
+        world,
+        camera,
+        pool,
+    })
+}
+
+fn run_render(a: &RenderArgs) -> Result<()> {
+    let mut settings = RenderSettings {
+        mode: a.mode,
+        paper_exact: a.paper_exact,
+        seed: a.scene.seed,
+        filter: a.filter,
+        ..Default::default()
+    };
+    output::check_writable(&a.output)?;
+    if let Some(dir) = &a.aov_dir {
+        if !dir.is_dir() {
+            bail!("--aov-dir {} is not a directory", dir.display());
+        }
+    }
+    let Prepared {
+        desc,
+        world,
+        camera,
+        pool,
+    } = prepare(&a.scene)?;
+    settings.spp = a.spp.or(desc.spp).unwrap_or(16);
+    settings.interval_factor = a.interval_factor.or(desc.interval_factor).unwrap_or(0.4);
+    settings
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{}", cli_message(&e)))?;
     let bar = Bar::new(a.quiet || a.json);
     let (film, stats) = pool.install(|| render::render(&world, &camera, &settings, &bar))?;
 
@@ -286,7 +346,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "spp": settings.spp,
             "interval_factor": json_f32(settings.interval_factor),
             "paper_exact": a.paper_exact,
-            "seed": a.seed,
+            "seed": settings.seed,
             "seconds": stats.seconds,
             "pinhole_seconds": stats.pinhole_seconds,
             "rays": stats.rays.total(),
@@ -316,6 +376,159 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
+fn default_cache_dir() -> PathBuf {
+    std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .unwrap_or_else(std::env::temp_dir)
+        .join("dofray")
+}
+
+fn run_bench(a: &BenchArgs) -> Result<()> {
+    if let Some(dir) = &a.out {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create --out directory {}", dir.display()))?;
+    }
+    let p = prepare(&a.scene)?;
+    let config = BenchConfig {
+        spp: a.spp.or(p.desc.spp).unwrap_or(16),
+        repeat: a.repeat,
+        reference_spp: a.reference_spp,
+        seed: a.scene.seed,
+        cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
+    };
+    if config.spp == 0 || config.reference_spp == 0 {
+        bail!("--spp and --reference-spp must be at least 1");
+    }
+    if config.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let bar = Bar::new(a.quiet || a.json);
+    let (report, images) = p
+        .pool
+        .install(|| bench::run(&p.desc, &p.world, &p.camera, &config, &bar))?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_table(&report);
+    }
+    if let Some(dir) = &a.out {
+        write_bench_images(dir, &report, &images)?;
+    }
+    Ok(())
+}
+
+fn print_table(r: &bench::BenchReport) {
+    println!(
+        "dofray bench: scene {}, {}x{}, {} spp, median of {} runs, {} threads; reference {} spp{}",
+        r.scene,
+        r.width,
+        r.height,
+        r.spp,
+        r.repeat,
+        r.threads,
+        r.reference_spp,
+        if r.reference_cached { " (cached)" } else { "" }
+    );
+    println!(
+        "{:<20} {:>8} {:>11} {:>8} {:>9} {:>8} {:>8} {:>9} {:>9} {:>8} {:>8}",
+        "mode",
+        "seconds",
+        "rays",
+        "Mrays/s",
+        "sites",
+        "x pinh.",
+        "speedup",
+        "PSNR dns",
+        "PSNR ref",
+        "SSIM ref",
+        "max err"
+    );
+    for row in &r.rows {
+        println!(
+            "{:<20} {:>8.3} {:>11} {:>8.2} {:>9} {:>8.2} {:>8.2} {:>9.2} {:>9.2} {:>8.4} {:>8.3}",
+            row.label,
+            row.seconds,
+            row.rays,
+            row.mrays_per_s,
+            row.sample_sites,
+            row.time_vs_pinhole,
+            row.speedup_vs_dense,
+            row.psnr_vs_dense,
+            row.psnr_vs_reference,
+            row.ssim_vs_reference,
+            row.max_error_vs_reference
+        );
+    }
+    println!(
+        "intersect-only replay of dense's rays: {:.2} Mrays/s; dense runs at {:.0}% of it",
+        r.intersect_only_mrays_per_s,
+        100.0 * r.dense_vs_intersect_only
+    );
+    println!("PSNR/SSIM in sRGB (what a viewer sees); \"inf\" = identical images.");
+}
+
+fn write_bench_images(
+    dir: &std::path::Path,
+    report: &bench::BenchReport,
+    images: &bench::BenchImages,
+) -> Result<()> {
+    let (w, h) = (report.width, report.height);
+    let to_vec3 = |rgb: &[[f32; 3]]| rgb.iter().map(|&c| glam::Vec3::from(c)).collect::<Vec<_>>();
+    let reference = to_vec3(&images.reference);
+    output::write_png_rgb(&dir.join("reference.png"), w, h, &reference)?;
+    for (label, film) in &images.films {
+        output::write_png_rgb(&dir.join(format!("{label}.png")), w, h, &film.color)?;
+    }
+    let film_of = |label: &str| {
+        images
+            .films
+            .iter()
+            .find(|(l, _)| l == label)
+            .map(|(_, f)| f)
+    };
+    let (Some(dense), Some(adaptive)) = (film_of("dense"), film_of("adaptive-k0.4")) else {
+        return Ok(());
+    };
+    output::write_png_rgb(
+        &dir.join("depth.png"),
+        w,
+        h,
+        &output::depth_picture(adaptive),
+    )?;
+    output::write_png_rgb(
+        &dir.join("interval.png"),
+        w,
+        h,
+        &output::interval_picture(adaptive),
+    )?;
+    // Side by side: reference | dense | adaptive k = 0.4.
+    let panels = [&reference, &dense.color, &adaptive.color];
+    let mut side = Vec::with_capacity(w * h * panels.len());
+    for y in 0..h {
+        for panel in panels {
+            side.extend_from_slice(&panel[y * w..(y + 1) * w]);
+        }
+    }
+    output::write_png_rgb(&dir.join("comparison.png"), w * panels.len(), h, &side)?;
+    for (label, film) in [("adaptive-k0.4", adaptive), ("dense", dense)] {
+        let errors = dofray::metrics::error_map(
+            &film.rgb(),
+            &images.reference,
+            w,
+            h,
+            dofray::metrics::Space::Srgb,
+        )?;
+        output::write_png_rgb(
+            &dir.join(format!("error-{label}.png")),
+            w,
+            h,
+            &output::heat_picture(&errors, 0.25),
+        )?;
+    }
+    Ok(())
+}
+
 /// An f32 as the f64 with the same shortest decimal form (0.4, not 0.4000000059604645).
 fn json_f32(v: f32) -> f64 {
     v.to_string().parse().unwrap_or(f64::NAN)
@@ -336,6 +549,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Render(a) => run_render(a),
+        Command::Bench(a) => run_bench(a),
         Command::Scenes => {
             for (name, about) in builtin::BUILTIN {
                 println!("{name:<10} {about}");

@@ -236,7 +236,10 @@ pub fn direct(
     let mut c = albedo * (1.0 - material.mirror) * cos;
     if material.specular != Vec3::ZERO {
         let h = (light.dir - view).normalize_or_zero();
-        c += material.specular * sp.normal.dot(h).max(0.0).powf(material.shininess);
+        let cos_h = sp.normal.dot(h);
+        if cos_h > 0.0 {
+            c += material.specular * cos_h.powf(material.shininess);
+        }
     }
     c * light.irradiance
 }

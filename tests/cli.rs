@@ -69,9 +69,21 @@ fn renders_png_and_exr_with_a_json_summary() {
     assert!(dir.join("depth.png").is_file() && dir.join("interval.png").is_file());
 
     let exr = dir.join("out.exr");
-    let out = dofray(&["render", "-o", exr.to_str().unwrap(), "--width", "40", "--mode", "dense", "--quiet"]);
+    let out = dofray(&[
+        "render",
+        "-o",
+        exr.to_str().unwrap(),
+        "--width",
+        "40",
+        "--mode",
+        "dense",
+        "--quiet",
+    ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    assert!(out.stdout.is_empty() && out.stderr.is_empty(), "--quiet prints nothing");
+    assert!(
+        out.stdout.is_empty() && out.stderr.is_empty(),
+        "--quiet prints nothing"
+    );
     let layers = exr::prelude::read_all_flat_layers_from_file(&exr).unwrap();
     let names: Vec<String> = layers.layer_data[0]
         .channel_data
@@ -80,7 +92,10 @@ fn renders_png_and_exr_with_a_json_summary() {
         .map(|c| c.name.to_string())
         .collect();
     for name in ["R", "G", "B", "Z", "coc", "interval", "samples"] {
-        assert!(names.iter().any(|n| n == name), "{name} missing from {names:?}");
+        assert!(
+            names.iter().any(|n| n == name),
+            "{name} missing from {names:?}"
+        );
     }
     std::fs::remove_dir_all(dir).unwrap();
 }
@@ -113,13 +128,27 @@ fn bad_arguments_are_rejected_with_a_message_and_no_output() {
         assert!(err.contains(needle), "{args:?}: {err}");
         assert!(!png.exists(), "{args:?} left an output file");
     }
-    let unwritable = dofray(&["render", "-o", "/nonexistent-dir/x/out.png", "--width", "16"]);
+    let unwritable = dofray(&[
+        "render",
+        "-o",
+        "/nonexistent-dir/x/out.png",
+        "--width",
+        "16",
+    ]);
     assert!(!unwritable.status.success());
-    assert!(stderr(&unwritable).contains("/nonexistent-dir/x/out.png"), "{}", stderr(&unwritable));
+    assert!(
+        stderr(&unwritable).contains("/nonexistent-dir/x/out.png"),
+        "{}",
+        stderr(&unwritable)
+    );
     let jpg = dir.join("out.jpg");
     let unknown = dofray(&["render", "-o", jpg.to_str().unwrap(), "--width", "16"]);
     assert!(!unknown.status.success());
-    assert!(stderr(&unknown).contains(".png or .exr"), "{}", stderr(&unknown));
+    assert!(
+        stderr(&unknown).contains(".png or .exr"),
+        "{}",
+        stderr(&unknown)
+    );
     assert!(!jpg.exists());
     // Nothing at all was left behind (no temporary files either).
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
@@ -131,7 +160,14 @@ fn help_and_scene_list() {
     let out = dofray(&["render", "--help"]);
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(out.status.success());
-    for flag in ["--mode", "--spp", "--interval-factor", "--paper-exact", "--json", "--aov-dir"] {
+    for flag in [
+        "--mode",
+        "--spp",
+        "--interval-factor",
+        "--paper-exact",
+        "--json",
+        "--aov-dir",
+    ] {
         assert!(text.contains(flag), "help lacks {flag}");
     }
     let out = dofray(&["scenes"]);

@@ -233,7 +233,7 @@ pub fn shade_site(
     tally: &mut Tally,
 ) -> Vec3 {
     let sampler = PixelSampler::new(settings.seed, (y * camera.width as usize + x) as u64);
-    let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+    let focus = camera.focus_point(x as f32 + 0.5, y as f32 + 0.5);
     let mut packet = RayPacket16::new();
     let mut radiance = [Vec3::ZERO; LANES];
     let mut t_hit = [0.0f32; LANES];
@@ -247,7 +247,7 @@ pub fn shade_site(
         for (lane, weight) in weights.iter_mut().enumerate().take(n) {
             let lens: Vec2 = aperture_point(sampler.get(index + lane as u32), &camera.aperture);
             *weight = settings.filter.weight(lens, camera.aperture.anamorphic);
-            packet.set(lane, &camera.lens_ray(px, py, lens));
+            packet.set(lane, &camera.lens_ray_through(focus, lens));
         }
         trace::trace_and_shade(
             world,

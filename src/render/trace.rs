@@ -205,7 +205,9 @@ pub fn trace_and_shade(
             continue;
         }
         tally.count(RayKind::Shadow, active);
-        tally.record(RayKind::Shadow, RayHint::Coherent, |l| shadow.is_active(l).then(|| shadow.ray(l)));
+        tally.record(RayKind::Shadow, RayHint::Coherent, |l| {
+            shadow.is_active(l).then(|| shadow.ray(l))
+        });
         world.scene.occluded16(&mut shadow, RayHint::Coherent);
         for lane in 0..LANES {
             if let (Some(ls), Some((sp, m))) = (&samples[lane], &points[lane]) {
@@ -217,18 +219,21 @@ pub fn trace_and_shade(
         }
     }
 
-    if bounces == 0 {
+    let reflects = |lane: usize| {
+        points[lane]
+            .as_ref()
+            .is_some_and(|(_, m)| world.materials[*m].mirror > 0.0)
+    };
+    if bounces == 0 || !(0..LANES).any(reflects) {
         return;
     }
     let mut mirror = RayPacket16::new();
-    for lane in 0..LANES {
-        if let Some((sp, m)) = &points[lane] {
-            if world.materials[*m].mirror > 0.0 {
-                let d = rays[lane].dir;
-                let r = d - 2.0 * d.dot(sp.normal) * sp.normal;
-                let eps = surface_epsilon(sp.position);
-                mirror.set(lane, &Ray::new(sp.position + sp.normal * eps, r));
-            }
+    for lane in (0..LANES).filter(|&l| reflects(l)) {
+        if let Some((sp, _)) = &points[lane] {
+            let d = rays[lane].dir;
+            let r = d - 2.0 * d.dot(sp.normal) * sp.normal;
+            let eps = surface_epsilon(sp.position);
+            mirror.set(lane, &Ray::new(sp.position + sp.normal * eps, r));
         }
     }
     let active = mirror.active_count();

@@ -70,7 +70,8 @@ pub fn paper() -> SceneDesc {
             material: i,
         })
         .collect();
-    // Ground quad at y = 0, 60 x 60 m around (0, 0, 4); UVs in metres for a 1 m checker.
+    // Ground quad at y = 0, 60 x 60 m around (0, 0, 4); UVs in metres for a 1 m checker. It is
+    // flat, so Embree's geometric normal serves for shading (no per-vertex normals).
     let (cx, cz, h) = (0.0f32, 4.0f32, 30.0f32);
     let corners = [
         [cx - h, cz - h],
@@ -83,7 +84,6 @@ pub fn paper() -> SceneDesc {
         vec![[0, 2, 1], [0, 3, 2]],
     )
     .and_then(|m| m.with_uvs(corners.to_vec()))
-    .and_then(|m| m.with_normals(vec![[0.0, 1.0, 0.0]; 4]))
     .expect("the built-in ground quad is valid");
     objects.push(Object::Mesh {
         mesh: ground,

@@ -1,0 +1,383 @@
+//! `dofray bench`: the seed's table reproduced in one run on one machine. Every mode is
+//! timed (median of several repeats), its rays counted, and its image compared with dense
+//! and with a converged reference; an intersect-only replay of exactly the rays dense traces
+//! shows how much of dense's time is the renderer's own work.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::camera::Camera;
+use crate::metrics::{self, Space};
+use crate::render::{self, Film, Mode, Progress, RenderSettings, RenderStats};
+use crate::scene::{SceneDesc, World};
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct BenchConfig {
+    /// Lens samples per defocused site for every mode.
+    pub spp: u32,
+    /// Timed repeats of each mode; the median is reported.
+    pub repeat: usize,
+    /// Lens samples per pixel of the converged reference (dense).
+    pub reference_spp: u32,
+    pub seed: u64,
+    /// Where the reference is cached (None: not cached).
+    pub cache_dir: Option<PathBuf>,
+}
+
+impl Default for BenchConfig {
+    fn default() -> Self {
+        Self {
+            spp: 16,
+            repeat: 3,
+            reference_spp: 1024,
+            seed: 0,
+            cache_dir: None,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error(transparent)]
+    Render(#[from] render::RenderError),
+    #[error(transparent)]
+    Metrics(#[from] metrics::MetricsError),
+    #[error("repeat must be at least 1")]
+    ZeroRepeat,
+    #[error("reference cache {path}: {source}")]
+    Cache {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// One mode's measurements (the row of the seed's table).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BenchRow {
+    /// Short label and file stem, e.g. `adaptive-k0.4`.
+    pub label: String,
+    pub mode: Mode,
+    pub interval_factor: Option<f32>,
+    pub paper_exact: bool,
+    /// Median wall time of the repeats.
+    pub seconds: f64,
+    pub rays: u64,
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+    pub secondary_rays: u64,
+    pub mrays_per_s: f64,
+    pub sample_sites: u64,
+    /// seconds / pinhole seconds (the seed reports 1 : 11.5 : 2.5).
+    pub time_vs_pinhole: f64,
+    pub speedup_vs_dense: f64,
+    /// sRGB PSNR (dB) against dense; null (infinite) for dense itself.
+    pub psnr_vs_dense: f64,
+    /// sRGB PSNR (dB) against the converged reference.
+    pub psnr_vs_reference: f64,
+    /// sRGB SSIM against the converged reference.
+    pub ssim_vs_reference: f64,
+    pub psnr_vs_reference_linear: f64,
+    pub ssim_vs_reference_linear: f64,
+    /// Largest per-pixel, per-channel sRGB error against the reference.
+    pub max_error_vs_reference: f64,
+}
+
+/// The whole benchmark.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BenchReport {
+    pub scene: String,
+    pub width: usize,
+    pub height: usize,
+    pub spp: u32,
+    pub repeat: usize,
+    pub threads: usize,
+    pub reference_spp: u32,
+    pub reference_cached: bool,
+    /// Time to render the reference (0 when it came from the cache).
+    pub reference_seconds: f64,
+    /// Rays per second of the intersect-only replay of exactly the rays dense traces.
+    pub intersect_only_mrays_per_s: f64,
+    pub intersect_only_seconds: f64,
+    /// Dense's rays/s as a fraction of the intersect-only rate.
+    pub dense_vs_intersect_only: f64,
+    pub rows: Vec<BenchRow>,
+}
+
+/// The images behind the report, for `--out`.
+pub struct BenchImages {
+    pub films: Vec<(String, Film)>,
+    pub reference: Vec<[f32; 3]>,
+}
+
+/// The modes of the seed's table, in order.
+fn modes() -> Vec<(String, Mode, Option<f32>, bool)> {
+    vec![
+        ("pinhole".into(), Mode::Pinhole, None, false),
+        ("dense".into(), Mode::Dense, None, false),
+        ("adaptive-k0.4".into(), Mode::Adaptive, Some(0.4), false),
+        ("adaptive-k0.2".into(), Mode::Adaptive, Some(0.2), false),
+        (
+            "adaptive-paper-k0.4".into(),
+            Mode::Adaptive,
+            Some(0.4),
+            true,
+        ),
+    ]
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+/// FNV-1a over formatted text: a stable hash (unlike std's) for the reference cache key.
+struct Fnv(u64);
+
+impl std::fmt::Write for Fnv {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        for b in s.bytes() {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+        Ok(())
+    }
+}
+
+/// The cache key of a reference: everything that changes its pixels.
+pub fn reference_key(desc: &SceneDesc, camera: &Camera, settings: &RenderSettings) -> String {
+    let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+    let _ = write!(
+        h,
+        "{}|{desc:?}|{camera:?}|{}|{}|{:?}|{}",
+        env!("CARGO_PKG_VERSION"),
+        settings.spp,
+        settings.seed,
+        settings.filter,
+        settings.bounces
+    );
+    format!(
+        "{}-{}x{}-{:016x}",
+        desc.name, camera.width, camera.height, h.0
+    )
+}
+
+const MAGIC: &[u8; 8] = b"DOFREF01";
+
+fn read_reference(path: &Path, width: usize, height: usize) -> Option<Vec<[f32; 3]>> {
+    let bytes = std::fs::read(path).ok()?;
+    let header = 16;
+    if bytes.len() != header + width * height * 12 || &bytes[..8] != MAGIC {
+        return None;
+    }
+    let dim = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
+    if dim(8) != width || dim(12) != height {
+        return None;
+    }
+    let floats: Vec<f32> = bytes[header..]
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+        .collect();
+    if floats.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    Some(floats.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+fn write_reference(
+    path: &Path,
+    width: usize,
+    height: usize,
+    rgb: &[[f32; 3]],
+) -> std::io::Result<()> {
+    let mut bytes = Vec::with_capacity(16 + rgb.len() * 12);
+    bytes.extend_from_slice(MAGIC);
+    bytes.extend_from_slice(&(width as u32).to_le_bytes());
+    bytes.extend_from_slice(&(height as u32).to_le_bytes());
+    for v in rgb.iter().flatten() {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
+    std::fs::write(&tmp, &bytes)
+        .and_then(|_| std::fs::rename(&tmp, path))
+        .inspect_err(|_| {
+            let _ = std::fs::remove_file(&tmp);
+        })
+}
+
+/// The converged reference: dense with `reference_spp` samples and a seed of its own (so its
+/// noise is independent of the modes it judges), from the cache when possible.
+fn reference(
+    desc: &SceneDesc,
+    world: &World,
+    camera: &Camera,
+    config: &BenchConfig,
+    progress: &dyn Progress,
+) -> Result<(Vec<[f32; 3]>, bool, f64), BenchError> {
+    let settings = RenderSettings {
+        mode: Mode::Dense,
+        spp: config.reference_spp,
+        seed: crate::sampler::hash64(config.seed ^ 0x5eed_5eed),
+        ..Default::default()
+    };
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let path = config
+        .cache_dir
+        .as_ref()
+        .map(|dir| dir.join(format!("{}.ref", reference_key(desc, camera, &settings))));
+    if let Some(rgb) = path.as_deref().and_then(|p| read_reference(p, w, h)) {
+        return Ok((rgb, true, 0.0));
+    }
+    let (film, stats) = render::render(world, camera, &settings, progress)?;
+    let rgb = film.rgb();
+    if let Some(path) = path {
+        write_reference(&path, w, h, &rgb).map_err(|source| BenchError::Cache { path, source })?;
+    }
+    Ok((rgb, false, stats.seconds))
+}
+
+/// Runs the benchmark. `desc` is only used for the reference cache key.
+pub fn run(
+    desc: &SceneDesc,
+    world: &World,
+    camera: &Camera,
+    config: &BenchConfig,
+    progress: &dyn Progress,
+) -> Result<(BenchReport, BenchImages), BenchError> {
+    if config.repeat == 0 {
+        return Err(BenchError::ZeroRepeat);
+    }
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let (reference, reference_cached, reference_seconds) =
+        reference(desc, world, camera, config, progress)?;
+
+    // Interleave the modes within each repeat so machine noise spreads over all of them.
+    let modes = modes();
+    let mut times = vec![Vec::new(); modes.len()];
+    let mut results: Vec<Option<(Film, RenderStats)>> = vec![None; modes.len()];
+    for _ in 0..config.repeat {
+        for (i, (_, mode, k, exact)) in modes.iter().enumerate() {
+            let settings = RenderSettings {
+                mode: *mode,
+                spp: config.spp,
+                interval_factor: k.unwrap_or(0.4),
+                paper_exact: *exact,
+                seed: config.seed,
+                ..Default::default()
+            };
+            let (film, stats) = render::render(world, camera, &settings, progress)?;
+            times[i].push(stats.seconds);
+            results[i].get_or_insert((film, stats));
+        }
+    }
+
+    // Intersect-only: replay exactly the packets dense traced, without shading or sampling.
+    let recording = RenderSettings {
+        mode: Mode::Dense,
+        spp: config.spp,
+        seed: config.seed,
+        record_rays: true,
+        ..Default::default()
+    };
+    let (_, recorded) = render::render(world, camera, &recording, progress)?;
+    let log = recorded.ray_log.unwrap_or_default();
+    let mut replay_times = Vec::new();
+    let mut replayed = 0;
+    for _ in 0..config.repeat {
+        let start = Instant::now();
+        replayed = render::replay(&world.scene, &log);
+        replay_times.push(start.elapsed().as_secs_f64());
+    }
+    drop(log);
+    let intersect_only_seconds = median(replay_times);
+    let intersect_only_mrays_per_s = replayed as f64 / intersect_only_seconds / 1e6;
+
+    let pinhole_seconds = median(times[0].clone());
+    let dense_seconds = median(times[1].clone());
+    let dense_rgb = results[1]
+        .as_ref()
+        .map(|(f, _)| f.rgb())
+        .unwrap_or_default();
+    let mut rows = Vec::new();
+    let mut films = Vec::new();
+    for (i, (label, mode, k, exact)) in modes.into_iter().enumerate() {
+        let (film, stats) = results[i].take().expect("every mode ran at least once");
+        let seconds = median(times[i].clone());
+        let rgb = film.rgb();
+        let vs_ref = |space| metrics::psnr(&rgb, &reference, w, h, space);
+        let ssim_ref = |space| metrics::ssim(&rgb, &reference, w, h, space);
+        rows.push(BenchRow {
+            label: label.clone(),
+            mode,
+            interval_factor: k,
+            paper_exact: exact,
+            seconds,
+            rays: stats.rays.total(),
+            primary_rays: stats.rays.primary,
+            shadow_rays: stats.rays.shadow,
+            secondary_rays: stats.rays.secondary,
+            mrays_per_s: stats.rays.total() as f64 / seconds / 1e6,
+            sample_sites: stats.sample_sites,
+            time_vs_pinhole: seconds / pinhole_seconds,
+            speedup_vs_dense: dense_seconds / seconds,
+            psnr_vs_dense: metrics::psnr(&rgb, &dense_rgb, w, h, Space::Srgb)?,
+            psnr_vs_reference: vs_ref(Space::Srgb)?,
+            ssim_vs_reference: ssim_ref(Space::Srgb)?,
+            psnr_vs_reference_linear: vs_ref(Space::Linear)?,
+            ssim_vs_reference_linear: ssim_ref(Space::Linear)?,
+            max_error_vs_reference: metrics::max_abs_error(&rgb, &reference, w, h, Space::Srgb)?,
+        });
+        films.push((label, film));
+    }
+    let dense_mrays = rows[1].mrays_per_s;
+    Ok((
+        BenchReport {
+            scene: desc.name.clone(),
+            width: w,
+            height: h,
+            spp: config.spp,
+            repeat: config.repeat,
+            threads: rayon::current_num_threads(),
+            reference_spp: config.reference_spp,
+            reference_cached,
+            reference_seconds,
+            intersect_only_mrays_per_s,
+            intersect_only_seconds,
+            dense_vs_intersect_only: dense_mrays / intersect_only_mrays_per_s,
+            rows,
+        },
+        BenchImages { films, reference },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reference_cache_round_trips_and_rejects_other_sizes() {
+        let dir = std::env::temp_dir().join(format!("dofray-bench-cache-{}", std::process::id()));
+        let path = dir.join("x.ref");
+        let rgb = vec![[0.25, 0.5, 1.0], [0.0, 2.0, 3.5]];
+        write_reference(&path, 2, 1, &rgb).unwrap();
+        assert_eq!(read_reference(&path, 2, 1), Some(rgb));
+        assert_eq!(read_reference(&path, 1, 2), None);
+        std::fs::write(&path, b"DOFREF01garbage").unwrap();
+        assert_eq!(read_reference(&path, 2, 1), None);
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn median_of_odd_and_even_counts() {
+        assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
+    }
+}
