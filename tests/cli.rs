@@ -173,3 +173,81 @@ fn help_and_scene_list() {
     let out = dofray(&["scenes"]);
     assert!(String::from_utf8_lossy(&out.stdout).contains("paper"));
 }
+
+#[test]
+fn bench_reports_every_mode_and_caches_the_reference() {
+    let dir = scratch("bench");
+    let cache = dir.join("cache");
+    let out_dir = dir.join("out");
+    let args = [
+        "bench",
+        "--width",
+        "64",
+        "--reference-spp",
+        "64",
+        "--repeat",
+        "1",
+        "--json",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+    ];
+    let first = dofray(&args);
+    assert!(first.status.success(), "{}", stderr(&first));
+    let report: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
+    assert_eq!(report["reference_cached"], false);
+    assert!(report["intersect_only_mrays_per_s"].as_f64().unwrap() > 0.0);
+    let rows = report["rows"].as_array().unwrap();
+    let labels: Vec<&str> = rows.iter().map(|r| r["label"].as_str().unwrap()).collect();
+    assert_eq!(
+        labels,
+        [
+            "pinhole",
+            "dense",
+            "adaptive-k0.4",
+            "adaptive-k0.2",
+            "adaptive-paper-k0.4"
+        ]
+    );
+    for row in rows {
+        for key in [
+            "mode",
+            "interval_factor",
+            "seconds",
+            "rays",
+            "mrays_per_s",
+            "sample_sites",
+            "speedup_vs_dense",
+            "psnr_vs_dense",
+            "psnr_vs_reference",
+            "ssim_vs_reference",
+        ] {
+            assert!(row.get(key).is_some(), "{key} missing in {row}");
+        }
+    }
+    assert_eq!(rows[1]["speedup_vs_dense"], 1.0);
+    // Dense against itself is infinitely close: JSON null.
+    assert!(rows[1]["psnr_vs_dense"].is_null());
+    // Adaptive traces fewer rays than dense, pinhole fewest.
+    let rays = |i: usize| rows[i]["rays"].as_u64().unwrap();
+    assert!(rays(0) < rays(2) && rays(2) < rays(1));
+    for file in [
+        "reference.png",
+        "dense.png",
+        "adaptive-k0.4.png",
+        "depth.png",
+        "interval.png",
+        "comparison.png",
+        "error-adaptive-k0.4.png",
+    ] {
+        assert!(out_dir.join(file).is_file(), "{file} not written");
+    }
+    let second = dofray(&args);
+    let report: serde_json::Value = serde_json::from_slice(&second.stdout).unwrap();
+    assert_eq!(
+        report["reference_cached"], true,
+        "second run reuses the reference"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
