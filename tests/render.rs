@@ -238,3 +238,79 @@ fn bad_settings_are_rejected() {
         );
     }
 }
+
+/// A mirror facing the camera shows the red sphere behind the camera, through one bounce.
+#[test]
+fn mirror_reflects_one_bounce() {
+    use dofray::embree::TriangleMesh;
+    use dofray::scene::MeshMaterials;
+    let mirror = TriangleMesh::new(
+        vec![
+            [-10.0, -10.0, 5.0],
+            [10.0, -10.0, 5.0],
+            [10.0, 10.0, 5.0],
+            [-10.0, 10.0, 5.0],
+        ],
+        vec![[0, 1, 2], [0, 2, 3]],
+    )
+    .unwrap();
+    let desc = SceneDesc {
+        name: "mirror".into(),
+        camera: CameraSpec {
+            eye: Vec3::ZERO,
+            look_at: Vec3::Z,
+            up: Vec3::Y,
+            vfov_deg: 20.0,
+            width: 32,
+            height: 32,
+            lens: LensSpec::Pinhole,
+            focus: Focus::Distance(5.0),
+            aperture: ApertureShape::default(),
+        },
+        materials: vec![
+            Material {
+                mirror: 1.0,
+                ..Material::diffuse(Vec3::ZERO)
+            },
+            Material::diffuse(Vec3::new(1.0, 0.0, 0.0)),
+        ],
+        objects: vec![
+            Object::Mesh {
+                mesh: mirror,
+                materials: MeshMaterials::One(0),
+            },
+            Object::Sphere {
+                center: Vec3::new(0.0, 0.0, -5.0),
+                radius: 1.0,
+                material: 1,
+            },
+        ],
+        lights: vec![],
+        ambient: Vec3::ONE,
+        background: Background::uniform(Vec3::new(0.0, 0.0, 1.0)),
+        spp: None,
+        interval_factor: None,
+    };
+    let (world, camera) = setup(&desc);
+    let pinhole = |bounces| RenderSettings {
+        mode: Mode::Pinhole,
+        bounces,
+        ..Default::default()
+    };
+    let (film, stats) = render(&world, &camera, &pinhole(1), &NoProgress).unwrap();
+    let centre = film.color[16 * 32 + 16];
+    assert!(
+        (centre - Vec3::new(1.0, 0.0, 0.0)).length() < 1e-4,
+        "{centre}"
+    );
+    // A corner's reflection passes beside the sphere and sees the sky.
+    assert!(
+        (film.color[0] - Vec3::new(0.0, 0.0, 1.0)).length() < 1e-4,
+        "{}",
+        film.color[0]
+    );
+    assert_eq!(stats.rays.secondary, 32 * 32);
+    let (film, stats) = render(&world, &camera, &pinhole(0), &NoProgress).unwrap();
+    assert_eq!(film.color[16 * 32 + 16], Vec3::ZERO);
+    assert_eq!(stats.rays.secondary, 0);
+}
