@@ -10,6 +10,7 @@
 pub mod bench;
 pub mod camera;
 pub mod embree;
+pub mod limits;
 pub mod metrics;
 pub mod output;
 pub mod render;

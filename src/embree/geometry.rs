@@ -1,20 +1,26 @@
 //! Geometry data as the Rust side keeps it: validated before Embree sees it, and shared with
 //! Embree (no copy) for as long as the scene lives.
 
+use std::sync::Arc;
+
 use glam::{Vec2, Vec3};
 
 use super::device::{EmbreeError, Result};
 
 /// A triangle mesh. Positions and indices are handed to Embree as shared buffers; normals and
 /// UVs stay on the Rust side for shading.
+///
+/// The buffers are reference-counted and never change once built, so cloning a mesh (as a
+/// scene description does when it builds a world) shares them instead of copying: a mesh costs
+/// its own size once however many descriptions and scenes hold it.
 #[derive(Debug, Clone)]
 pub struct TriangleMesh {
     /// One extra, zero vertex at the end: Embree reads vertices with 16-byte loads.
-    positions: Vec<[f32; 3]>,
+    positions: Arc<Vec<[f32; 3]>>,
     /// One extra triangle at the end, for the same reason.
-    indices: Vec<[u32; 3]>,
-    normals: Option<Vec<[f32; 3]>>,
-    uvs: Option<Vec<[f32; 2]>>,
+    indices: Arc<Vec<[u32; 3]>>,
+    normals: Option<Arc<Vec<[f32; 3]>>>,
+    uvs: Option<Arc<Vec<[f32; 2]>>>,
 }
 
 fn check_finite(values: &[f32], what: &str, width: usize) -> Result<()> {
@@ -59,8 +65,8 @@ impl TriangleMesh {
         positions.push([0.0; 3]);
         indices.push([0; 3]);
         Ok(Self {
-            positions,
-            indices,
+            positions: Arc::new(positions),
+            indices: Arc::new(indices),
             normals: None,
             uvs: None,
         })
@@ -76,11 +82,11 @@ impl TriangleMesh {
             )));
         }
         check_finite(normals.as_flattened(), "normal", 3)?;
-        let normals = normals
-            .into_iter()
-            .map(|n| Vec3::from(n).normalize_or_zero().to_array())
-            .collect();
-        self.normals = Some(normals);
+        let mut normals = normals;
+        for n in &mut normals {
+            *n = Vec3::from(*n).normalize_or_zero().to_array();
+        }
+        self.normals = Some(Arc::new(normals));
         Ok(self)
     }
 
@@ -94,7 +100,7 @@ impl TriangleMesh {
             )));
         }
         check_finite(uvs.as_flattened(), "UV", 2)?;
-        self.uvs = Some(uvs);
+        self.uvs = Some(Arc::new(uvs));
         Ok(self)
     }
 
@@ -114,7 +120,16 @@ impl TriangleMesh {
         &self.indices[..self.triangle_count()]
     }
 
-    /// Bytes held by the mesh's buffers (what a 1M-triangle mesh costs in memory).
+    pub fn normals(&self) -> Option<&[[f32; 3]]> {
+        self.normals.as_deref().map(Vec::as_slice)
+    }
+
+    pub fn uvs(&self) -> Option<&[[f32; 2]]> {
+        self.uvs.as_deref().map(Vec::as_slice)
+    }
+
+    /// Bytes held by the mesh's buffers (what a 1M-triangle mesh costs in memory; clones share
+    /// them).
     pub fn heap_bytes(&self) -> usize {
         self.positions.capacity() * 12
             + self.indices.capacity() * 12

@@ -2,6 +2,14 @@
 //! the materials and lights that shade its hits).
 
 pub mod builtin;
+pub mod error;
+pub mod file;
+pub mod gltf;
+pub mod model;
+pub mod obj;
+pub mod texture;
+
+pub use error::{LoadError, Location};
 
 use std::f32::consts::{PI, TAU};
 
@@ -88,6 +96,30 @@ pub struct SceneDesc {
     pub spp: Option<u32>,
     /// The seed's interval factor k the scene asks for (the command line may override it).
     pub interval_factor: Option<f32>,
+}
+
+/// Loads a scene: a built-in scene by name (see [`builtin::BUILTIN`]), a `.toml` scene file
+/// (`docs/scene-format.md`), or a `.obj`, `.gltf` or `.glb` model, which gets the glTF camera if
+/// it has one (else a view framing its bounds), a small aperture focused on the bounds' centre,
+/// a key light and the default sky.
+pub fn load(path_or_name: &str) -> Result<SceneDesc, LoadError> {
+    let path = std::path::Path::new(path_or_name);
+    match file::extension(path).as_deref() {
+        Some("toml") => file::load(path),
+        Some("obj" | "gltf" | "glb") => {
+            let mut textures = texture::TextureCache::default();
+            let model = file::load_model(path, &model::Transform::IDENTITY, &mut textures)?;
+            model::model_scene(path, model)
+        }
+        _ => builtin::builtin(path_or_name).ok_or_else(|| LoadError::UnknownScene {
+            name: path_or_name.to_string(),
+            builtins: builtin::BUILTIN
+                .iter()
+                .map(|(n, _)| *n)
+                .collect::<Vec<_>>()
+                .join(", "),
+        }),
+    }
 }
 
 /// Material lookup for one Embree geometry.

@@ -1,0 +1,283 @@
+//! Errors from loading scenes and models: each names the file, and the line, column and key
+//! where there is one, and says what was expected.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use crate::limits::MemoryError;
+
+/// Where in an input file something went wrong.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Location {
+    pub path: PathBuf,
+    /// 1-based line, when known.
+    pub line: Option<usize>,
+    /// 1-based column (in characters), when known.
+    pub column: Option<usize>,
+    /// The TOML key path (`objects[2].radius`), when known.
+    pub key: Option<String>,
+}
+
+impl Location {
+    /// The whole file.
+    pub fn file(path: &Path) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            line: None,
+            column: None,
+            key: None,
+        }
+    }
+
+    /// A line of a file.
+    pub fn line(path: &Path, line: usize) -> Self {
+        Self {
+            line: Some(line),
+            ..Self::file(path)
+        }
+    }
+
+    /// The position of byte `offset` of `src` (the text of `path`), and the key path there.
+    pub fn at_offset(path: &Path, src: &str, offset: usize) -> Self {
+        let (line, column) = line_column(src, offset);
+        Self {
+            path: path.to_path_buf(),
+            line: Some(line),
+            column: Some(column),
+            key: key_path(src, offset),
+        }
+    }
+
+    /// The same location with an explicit key path.
+    pub fn with_key(mut self, key: impl Into<String>) -> Self {
+        self.key = Some(key.into());
+        self
+    }
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+            if let Some(column) = self.column {
+                write!(f, ":{column}")?;
+            }
+        }
+        if let Some(key) = &self.key {
+            write!(f, ": `{key}`")?;
+        }
+        Ok(())
+    }
+}
+
+/// Why a scene or model could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// Neither a built-in scene nor a file of a known type.
+    #[error(
+        "unknown scene {name:?}: expected a built-in scene ({builtins}), a .toml scene file, \
+         or a .obj, .gltf or .glb model"
+    )]
+    UnknownScene { name: String, builtins: String },
+    /// A file could not be opened or read.
+    #[error("{}: cannot read: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    /// The TOML scene is malformed: a syntax error, an unknown key, a wrong type or an
+    /// invalid value (NaN, infinity, a size or radius <= 0, ...).
+    #[error("{at}: {message}")]
+    Toml { at: Location, message: String },
+    /// The scene is well-formed TOML but inconsistent (a material that does not exist, two
+    /// lenses at once, a key that does not apply to an object's type, ...).
+    #[error("{at}: {message}")]
+    Invalid { at: Location, message: String },
+    /// A file the scene (or a model) refers to failed to load.
+    #[error("{at}: {what}: {source}")]
+    Referenced {
+        at: Location,
+        what: &'static str,
+        source: Box<LoadError>,
+    },
+    /// A malformed Wavefront OBJ or MTL file.
+    #[error("{at}: {message}")]
+    Obj { at: Location, message: String },
+    /// A malformed glTF 2.0 file (.gltf or .glb).
+    #[error("{at}: {message}")]
+    Gltf { at: Location, message: String },
+    /// An image that could not be decoded.
+    #[error("{}: {message}", path.display())]
+    Image { path: PathBuf, message: String },
+    /// Mesh data that cannot be traced (non-finite coordinates, face indices out of range, ...).
+    #[error("{at}: {message}")]
+    Geometry { at: Location, message: String },
+    /// A scene without anything to see.
+    #[error("{}: the scene has no objects (expected at least one [[objects]] entry or a mesh with triangles)", path.display())]
+    Empty { path: PathBuf },
+    /// An image too large for the available memory.
+    #[error("{}: {source}", path.display())]
+    Memory { path: PathBuf, source: MemoryError },
+}
+
+impl LoadError {
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    pub(crate) fn invalid(at: Location, message: impl Into<String>) -> Self {
+        Self::Invalid {
+            at,
+            message: message.into(),
+        }
+    }
+
+    /// Wraps the failure of a file referenced from `at`.
+    pub(crate) fn referenced(self, at: Location, what: &'static str) -> Self {
+        Self::Referenced {
+            at,
+            what,
+            source: Box::new(self),
+        }
+    }
+
+    /// The innermost error (the one a referenced file reported).
+    pub fn root(&self) -> &LoadError {
+        match self {
+            Self::Referenced { source, .. } => source.root(),
+            other => other,
+        }
+    }
+}
+
+/// 1-based line and column (in characters) of byte `offset` in `src`.
+pub fn line_column(src: &str, offset: usize) -> (usize, usize) {
+    let mut offset = offset.min(src.len());
+    while !src.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let before = &src[..offset];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = src[line_start..offset].chars().count() + 1;
+    (line, column)
+}
+
+fn is_key_char(c: char) -> bool {
+    c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.' || c == '"' || c == '\''
+}
+
+/// A table header line (`[name]` or `[[name]]`): its name and whether it is an array of tables.
+fn header(line: &str) -> Option<(&str, bool)> {
+    let line = line.split('#').next().unwrap_or("").trim();
+    let (inner, array) = if let Some(rest) = line.strip_prefix("[[") {
+        (rest.strip_suffix("]]")?, true)
+    } else {
+        (line.strip_prefix('[')?.strip_suffix(']')?, false)
+    };
+    let inner = inner.trim();
+    (!inner.is_empty() && inner.chars().all(|c| is_key_char(c) || c == ' '))
+        .then_some((inner, array))
+}
+
+/// The key before the last `=` of `text`, if any.
+fn key_before_eq(text: &str) -> Option<&str> {
+    let eq = text.rfind('=')?;
+    let before = text[..eq].trim_end();
+    let start = before
+        .char_indices()
+        .rev()
+        .find(|&(_, c)| !is_key_char(c))
+        .map_or(0, |(i, c)| i + c.len_utf8());
+    let key = &before[start..];
+    (!key.is_empty()).then_some(key)
+}
+
+/// Best-effort TOML key path of the value or key at byte `offset` of `src`:
+/// the enclosing table (`objects[2]` for the third `[[objects]]`) and the key on that line.
+pub fn key_path(src: &str, offset: usize) -> Option<String> {
+    let mut offset = offset.min(src.len());
+    while !src.is_char_boundary(offset) {
+        offset -= 1;
+    }
+    let line_start = src[..offset].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = src[offset..].find('\n').map_or(src.len(), |i| offset + i);
+    let line = &src[line_start..line_end];
+    let col = offset - line_start;
+
+    // The enclosing table, counting earlier headers of the same array of tables.
+    let mut table: Option<(String, bool, usize)> = None;
+    let mut counts: std::collections::HashMap<String, usize> = Default::default();
+    for l in src[..line_start].lines() {
+        if let Some((name, array)) = header(l) {
+            let n = counts.entry(name.to_string()).or_default();
+            table = Some((name.to_string(), array, *n));
+            *n += 1;
+        }
+    }
+    if header(line).is_some() {
+        // The error is about a table itself; point at the table being opened.
+        let (name, array) = header(line)?;
+        let n = counts.get(name).copied().unwrap_or(0);
+        return Some(if array {
+            format!("{name}[{n}]")
+        } else {
+            name.to_string()
+        });
+    }
+
+    // The key: before the last `=` left of the offset, else the key starting at the offset
+    // (an unknown key), else the key of the nearest earlier line (a multi-line value).
+    let here = &line[col.min(line.len())..];
+    let token_len = here.find(|c: char| !is_key_char(c)).unwrap_or(here.len());
+    let token = &here[..token_len];
+    let after_token = here[token_len..].trim_start();
+    let key = if let Some(k) = key_before_eq(&line[..col.min(line.len())]) {
+        Some(k.to_string())
+    } else if !token.is_empty() && after_token.starts_with('=') {
+        Some(token.to_string())
+    } else {
+        src[..line_start]
+            .lines()
+            .rev()
+            .take_while(|l| header(l).is_none())
+            .find_map(key_before_eq)
+            .map(str::to_string)
+    };
+    let table = table.map(
+        |(name, array, n)| {
+            if array { format!("{name}[{n}]") } else { name }
+        },
+    );
+    match (table, key) {
+        (Some(t), Some(k)) => Some(format!("{t}.{k}")),
+        (None, Some(k)) => Some(k),
+        (Some(t), None) => Some(t),
+        (None, None) => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn offsets_become_lines_columns_and_keys() {
+        let src = "name = \"x\"\n[camera]\neye = [0, nan, 1]\n\n[[objects]]\ntype = \"sphere\"\n\n[[objects]]\nradius = -1\nradis = 2\n";
+        let off = src.find("nan").unwrap();
+        assert_eq!(line_column(src, off), (3, 11));
+        assert_eq!(key_path(src, off).as_deref(), Some("camera.eye"));
+        let off = src.find("-1").unwrap();
+        assert_eq!(key_path(src, off).as_deref(), Some("objects[1].radius"));
+        let off = src.find("radis").unwrap();
+        assert_eq!(key_path(src, off).as_deref(), Some("objects[1].radis"));
+        assert_eq!(key_path(src, 0).as_deref(), Some("name"));
+        let src = "[camera]\neye = [\n  0,\n  inf, 1]\n";
+        let off = src.find("inf").unwrap();
+        assert_eq!(key_path(src, off).as_deref(), Some("camera.eye"));
+    }
+}

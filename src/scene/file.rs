@@ -1,0 +1,1239 @@
+//! The TOML scene format (documented key by key in `docs/scene-format.md`).
+//!
+//! Every table rejects unknown keys, so a typo is an error rather than a silently ignored
+//! setting. Numbers are checked as they are read (finite; sizes and radii > 0; colours >= 0),
+//! so errors carry the line, column and key of the offending value.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::{Mat3, Vec3};
+use serde::Deserialize;
+use serde::de::{self, Deserializer, SeqAccess, Unexpected, Visitor};
+use toml::Spanned;
+
+use super::error::{LoadError, Location};
+use super::model::{
+    self, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, Transform, default_background,
+    default_light, default_material, euler_xyz_deg,
+};
+use super::texture::TextureCache;
+use super::{Background, MeshMaterials, Object, SceneDesc};
+use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
+use crate::embree::TriangleMesh;
+use crate::shade::{ImageTexture, Light, Material, Pattern, Texture, Wrap};
+
+// ---------------------------------------------------------------------------------------------
+// Checked numbers: rejected while parsing, so the error points at the value.
+
+struct NumberVisitor {
+    expected: &'static str,
+    ok: fn(f32) -> bool,
+}
+
+impl NumberVisitor {
+    fn check<E: de::Error>(&self, v: f64, unexpected: Unexpected) -> Result<f32, E> {
+        let f = v as f32;
+        if v.is_finite() && f.is_finite() && (self.ok)(f) {
+            Ok(f)
+        } else {
+            Err(E::invalid_value(unexpected, self))
+        }
+    }
+}
+
+impl Visitor<'_> for NumberVisitor {
+    type Value = f32;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str(self.expected)
+    }
+
+    fn visit_f64<E: de::Error>(self, v: f64) -> Result<f32, E> {
+        self.check(v, Unexpected::Float(v))
+    }
+
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<f32, E> {
+        self.check(v as f64, Unexpected::Signed(v))
+    }
+
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<f32, E> {
+        self.check(v as f64, Unexpected::Unsigned(v))
+    }
+}
+
+macro_rules! number {
+    ($(#[$doc:meta])* $name:ident, $expected:expr, $ok:expr) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        struct $name(f32);
+
+        impl<'de> Deserialize<'de> for $name {
+            fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                d.deserialize_any(NumberVisitor {
+                    expected: $expected,
+                    ok: $ok,
+                })
+                .map($name)
+            }
+        }
+    };
+}
+
+number!(
+    /// Any finite number.
+    Finite,
+    "a finite number",
+    |_| true
+);
+number!(
+    /// A finite number > 0 (sizes, radii, distances).
+    Positive,
+    "a finite number > 0",
+    |v| v > 0.0
+);
+number!(
+    /// A finite number >= 0.
+    NonNeg,
+    "a finite number >= 0",
+    |v| v >= 0.0
+);
+number!(
+    /// A fraction in [0, 1].
+    Unit,
+    "a number between 0 and 1",
+    |v| (0.0..=1.0).contains(&v)
+);
+number!(
+    /// A field of view in degrees, strictly between 0 and 180.
+    Fov,
+    "an angle in degrees between 0 and 180 (exclusive)",
+    |v| v > 0.0 && v < 180.0
+);
+
+/// A whole number with a lower bound (image sizes, sample counts, blade counts).
+struct CountVisitor {
+    expected: &'static str,
+    min: u64,
+}
+
+impl Visitor<'_> for CountVisitor {
+    type Value = u32;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str(self.expected)
+    }
+
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<u32, E> {
+        if v < 0 {
+            return Err(E::invalid_value(Unexpected::Signed(v), &self));
+        }
+        self.visit_u64(v as u64)
+    }
+
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<u32, E> {
+        if v >= self.min && v <= u32::MAX as u64 {
+            Ok(v as u32)
+        } else {
+            Err(E::invalid_value(Unexpected::Unsigned(v), &self))
+        }
+    }
+}
+
+macro_rules! count {
+    ($(#[$doc:meta])* $name:ident, $expected:expr, $min:expr) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        struct $name(u32);
+
+        impl<'de> Deserialize<'de> for $name {
+            fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                d.deserialize_any(CountVisitor {
+                    expected: $expected,
+                    min: $min,
+                })
+                .map($name)
+            }
+        }
+    };
+}
+
+count!(
+    /// An image dimension in pixels.
+    Pixels,
+    "a whole number of pixels >= 1",
+    1
+);
+count!(
+    /// A count of at least one.
+    AtLeastOne,
+    "a whole number >= 1",
+    1
+);
+count!(
+    /// A pixel coordinate or a count that may be zero.
+    Whole,
+    "a whole number >= 0",
+    0
+);
+
+/// Three finite coordinates.
+type V3 = [Finite; 3];
+
+fn v3(v: V3) -> Vec3 {
+    Vec3::new(v[0].0, v[1].0, v[2].0)
+}
+
+/// A colour: a number (grey) or `[r, g, b]`, linear, each >= 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Color(Vec3);
+
+struct ColorVisitor;
+
+impl<'de> Visitor<'de> for ColorVisitor {
+    type Value = Vec3;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a colour: a number >= 0 (grey) or an array [r, g, b] of numbers >= 0")
+    }
+
+    fn visit_f64<E: de::Error>(self, v: f64) -> Result<Vec3, E> {
+        if v.is_finite() && v >= 0.0 && (v as f32).is_finite() {
+            Ok(Vec3::splat(v as f32))
+        } else {
+            Err(E::invalid_value(Unexpected::Float(v), &self))
+        }
+    }
+
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<Vec3, E> {
+        if v >= 0 {
+            Ok(Vec3::splat(v as f32))
+        } else {
+            Err(E::invalid_value(Unexpected::Signed(v), &self))
+        }
+    }
+
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<Vec3, E> {
+        Ok(Vec3::splat(v as f32))
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec3, A::Error> {
+        let mut c = [0.0f32; 3];
+        for (i, slot) in c.iter_mut().enumerate() {
+            *slot = seq
+                .next_element::<NonNeg>()?
+                .ok_or_else(|| de::Error::invalid_length(i, &self))?
+                .0;
+        }
+        if seq.next_element::<de::IgnoredAny>()?.is_some() {
+            return Err(de::Error::invalid_length(4, &self));
+        }
+        Ok(Vec3::from(c))
+    }
+}
+
+impl<'de> Deserialize<'de> for Color {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(ColorVisitor).map(Color)
+    }
+}
+
+/// A scale: a number (uniform) or `[x, y, z]`, each > 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Scale(Vec3);
+
+struct ScaleVisitor;
+
+impl<'de> Visitor<'de> for ScaleVisitor {
+    type Value = Vec3;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("a scale: a number > 0 or an array [x, y, z] of numbers > 0")
+    }
+
+    fn visit_f64<E: de::Error>(self, v: f64) -> Result<Vec3, E> {
+        if v.is_finite() && v > 0.0 && (v as f32) > 0.0 && (v as f32).is_finite() {
+            Ok(Vec3::splat(v as f32))
+        } else {
+            Err(E::invalid_value(Unexpected::Float(v), &self))
+        }
+    }
+
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<Vec3, E> {
+        if v > 0 {
+            Ok(Vec3::splat(v as f32))
+        } else {
+            Err(E::invalid_value(Unexpected::Signed(v), &self))
+        }
+    }
+
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<Vec3, E> {
+        self.visit_f64(v as f64)
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec3, A::Error> {
+        let mut c = [0.0f32; 3];
+        for (i, slot) in c.iter_mut().enumerate() {
+            *slot = seq
+                .next_element::<Positive>()?
+                .ok_or_else(|| de::Error::invalid_length(i, &self))?
+                .0;
+        }
+        if seq.next_element::<de::IgnoredAny>()?.is_some() {
+            return Err(de::Error::invalid_length(4, &self));
+        }
+        Ok(Vec3::from(c))
+    }
+}
+
+impl<'de> Deserialize<'de> for Scale {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(ScaleVisitor).map(Scale)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The file's shape.
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    name: Option<String>,
+    ambient: Option<Color>,
+    image: Option<RawImage>,
+    render: Option<RawRender>,
+    camera: Option<RawCamera>,
+    background: Option<Spanned<RawBackground>>,
+    lights: Option<Vec<Spanned<RawLight>>>,
+    #[serde(default)]
+    textures: Vec<Spanned<RawTexture>>,
+    #[serde(default)]
+    materials: Vec<Spanned<RawMaterial>>,
+    #[serde(default)]
+    objects: Vec<Spanned<RawObject>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawImage {
+    width: Option<Pixels>,
+    height: Option<Pixels>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRender {
+    spp: Option<AtLeastOne>,
+    interval_factor: Option<Positive>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    eye: Option<V3>,
+    look_at: Option<V3>,
+    up: Option<Spanned<V3>>,
+    vfov: Option<Spanned<Fov>>,
+    aperture_radius: Option<Spanned<NonNeg>>,
+    f_number: Option<Spanned<Positive>>,
+    focal_length_mm: Option<Spanned<Positive>>,
+    sensor_width_mm: Option<Spanned<Positive>>,
+    sharp_range: Option<Spanned<Positive>>,
+    spread: Option<Spanned<NonNeg>>,
+    focus_distance: Option<Spanned<Positive>>,
+    focus_point: Option<Spanned<V3>>,
+    focus_pixel: Option<Spanned<[Whole; 2]>>,
+    blades: Option<Spanned<Whole>>,
+    blade_rotation: Option<Finite>,
+    anamorphic: Option<Positive>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBackground {
+    color: Option<Color>,
+    horizon: Option<Color>,
+    zenith: Option<Color>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum LightKind {
+    Point,
+    Directional,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLight {
+    #[serde(rename = "type")]
+    kind: LightKind,
+    position: Option<V3>,
+    intensity: Option<Color>,
+    direction: Option<Spanned<V3>>,
+    irradiance: Option<Color>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTexture {
+    name: Spanned<String>,
+    image: Option<Spanned<String>>,
+    wrap: Option<Wrap>,
+    srgb: Option<bool>,
+    pattern: Option<Pattern>,
+    a: Option<Color>,
+    b: Option<Color>,
+    scale: Option<Positive>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMaterial {
+    name: Spanned<String>,
+    diffuse: Option<Color>,
+    texture: Option<Spanned<String>>,
+    specular: Option<Color>,
+    shininess: Option<Positive>,
+    mirror: Option<Unit>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum ObjectKind {
+    Sphere,
+    Quad,
+    Mesh,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawObject {
+    #[serde(rename = "type")]
+    kind: ObjectKind,
+    material: Option<Spanned<String>>,
+    center: Option<Spanned<V3>>,
+    radius: Option<Spanned<Positive>>,
+    size: Option<Spanned<[Positive; 2]>>,
+    file: Option<Spanned<String>>,
+    translate: Option<Spanned<V3>>,
+    rotate: Option<Spanned<V3>>,
+    rotate_axis: Option<Spanned<V3>>,
+    rotate_angle: Option<Spanned<Finite>>,
+    scale: Option<Spanned<Scale>>,
+}
+
+// ---------------------------------------------------------------------------------------------
+// From the file's shape to a scene.
+
+/// The scene file being built: its path and text, for error locations and relative paths.
+struct Ctx<'a> {
+    path: &'a Path,
+    src: &'a str,
+    dir: PathBuf,
+}
+
+impl Ctx<'_> {
+    fn at(&self, span: Range<usize>) -> Location {
+        Location::at_offset(self.path, self.src, span.start)
+    }
+
+    fn at_key(&self, span: Range<usize>, key: impl Into<String>) -> Location {
+        self.at(span).with_key(key)
+    }
+
+    fn invalid(
+        &self,
+        span: Range<usize>,
+        key: impl Into<String>,
+        message: impl Into<String>,
+    ) -> LoadError {
+        LoadError::invalid(self.at_key(span, key), message)
+    }
+
+    fn resolve(&self, file: &str) -> PathBuf {
+        self.dir.join(file)
+    }
+}
+
+/// A defined texture, before a material uses it.
+enum TextureDef {
+    Image(Arc<ImageTexture>),
+    Procedural {
+        pattern: Pattern,
+        a: Vec3,
+        b: Vec3,
+        scale: f32,
+    },
+}
+
+/// Loads a TOML scene file.
+pub fn load(path: &Path) -> Result<SceneDesc, LoadError> {
+    let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+    let src = String::from_utf8(bytes).map_err(|e| {
+        let (line, column) = super::error::line_column(
+            &String::from_utf8_lossy(e.as_bytes()),
+            e.utf8_error().valid_up_to(),
+        );
+        LoadError::Toml {
+            at: Location {
+                line: Some(line),
+                column: Some(column),
+                ..Location::file(path)
+            },
+            message: "invalid UTF-8 (a TOML file must be UTF-8 text)".into(),
+        }
+    })?;
+    parse(&src, path)
+}
+
+/// Parses a TOML scene from `src`; `path` names it in errors, and relative file names in it
+/// resolve against `path`'s directory.
+pub fn parse(src: &str, path: &Path) -> Result<SceneDesc, LoadError> {
+    let raw: RawScene = toml::from_str(src).map_err(|e| {
+        let at = match e.span() {
+            Some(span) => Location::at_offset(path, src, span.start),
+            None => Location::file(path),
+        };
+        LoadError::Toml {
+            at,
+            message: e.message().trim().replace('\n', "; "),
+        }
+    })?;
+    let ctx = Ctx {
+        path,
+        src,
+        dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
+    };
+    build(&ctx, raw)
+}
+
+fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
+    let mut cache = TextureCache::default();
+
+    // Textures by name.
+    let mut textures: HashMap<String, TextureDef> = HashMap::new();
+    for (i, t) in raw.textures.into_iter().enumerate() {
+        let span = t.span();
+        let t = t.into_inner();
+        let key = format!("textures[{i}]");
+        let name = t.name.get_ref().clone();
+        if textures.contains_key(&name) {
+            return Err(ctx.invalid(
+                t.name.span(),
+                format!("{key}.name"),
+                format!("texture {name:?} is defined twice"),
+            ));
+        }
+        let def = match (&t.image, t.pattern) {
+            (Some(file), None) => {
+                for (k, set) in [
+                    ("a", t.a.is_some()),
+                    ("b", t.b.is_some()),
+                    ("scale", t.scale.is_some()),
+                ] {
+                    if set {
+                        return Err(ctx.invalid(span.clone(), format!("{key}.{k}"), format!("`{k}` applies to procedural textures (with `pattern`), not to images")));
+                    }
+                }
+                let p = ctx.resolve(file.get_ref());
+                let image = cache
+                    .file(&p, t.srgb.unwrap_or(true), t.wrap.unwrap_or_default())
+                    .map_err(|e| {
+                        e.referenced(ctx.at_key(file.span(), format!("{key}.image")), "texture")
+                    })?;
+                TextureDef::Image(image)
+            }
+            (None, Some(pattern)) => {
+                for (k, set) in [("wrap", t.wrap.is_some()), ("srgb", t.srgb.is_some())] {
+                    if set {
+                        return Err(ctx.invalid(
+                            span.clone(),
+                            format!("{key}.{k}"),
+                            format!("`{k}` applies to image textures, not to patterns"),
+                        ));
+                    }
+                }
+                TextureDef::Procedural {
+                    pattern,
+                    a: t.a.map_or(Vec3::splat(0.9), |c| c.0),
+                    b: t.b.map_or(Vec3::splat(0.1), |c| c.0),
+                    scale: t.scale.map_or(1.0, |s| s.0),
+                }
+            }
+            (Some(_), Some(_)) => {
+                return Err(ctx.invalid(
+                    span,
+                    key,
+                    "a texture is either an `image` or a `pattern`, not both",
+                ));
+            }
+            (None, None) => {
+                return Err(ctx.invalid(span, key, "a texture needs `image = \"file.png\"` or `pattern = \"checker\"` (or stripes, grid, dots, noise, marble)"));
+            }
+        };
+        textures.insert(name, def);
+    }
+
+    // Materials by name, in file order.
+    let mut materials = Vec::new();
+    let mut material_index: HashMap<String, usize> = HashMap::new();
+    for (i, m) in raw.materials.into_iter().enumerate() {
+        let m = m.into_inner();
+        let key = format!("materials[{i}]");
+        let name = m.name.get_ref().clone();
+        if material_index.contains_key(&name) {
+            return Err(ctx.invalid(
+                m.name.span(),
+                format!("{key}.name"),
+                format!("material {name:?} is defined twice"),
+            ));
+        }
+        let tint = m.diffuse.map(|c| c.0);
+        let diffuse = match &m.texture {
+            None => Texture::Constant(tint.unwrap_or(Vec3::splat(0.8))),
+            Some(t) => match textures.get(t.get_ref()) {
+                Some(TextureDef::Image(image)) => Texture::Image {
+                    image: image.clone(),
+                    tint: tint.unwrap_or(Vec3::ONE),
+                },
+                Some(&TextureDef::Procedural {
+                    pattern,
+                    a,
+                    b,
+                    scale,
+                }) => Texture::Procedural {
+                    pattern,
+                    a: tint.map_or(a, |c| a * c),
+                    b: tint.map_or(b, |c| b * c),
+                    scale,
+                },
+                None => {
+                    return Err(ctx.invalid(
+                        t.span(),
+                        format!("{key}.texture"),
+                        format!(
+                            "no texture named {:?} (defined: {})",
+                            t.get_ref(),
+                            names(textures.keys())
+                        ),
+                    ));
+                }
+            },
+        };
+        materials.push(Material {
+            diffuse,
+            specular: m.specular.map_or(Vec3::ZERO, |c| c.0),
+            shininess: m.shininess.map_or(32.0, |s| s.0),
+            mirror: m.mirror.map_or(0.0, |u| u.0),
+        });
+        material_index.insert(name, materials.len() - 1);
+    }
+    let named_materials = material_index.clone();
+    let mut default_index = material_index.get("default").copied();
+    let mut default_material_index = |materials: &mut Vec<Material>| {
+        *default_index.get_or_insert_with(|| {
+            materials.push(default_material());
+            materials.len() - 1
+        })
+    };
+
+    // Objects.
+    let mut objects = Vec::new();
+    for (i, o) in raw.objects.into_iter().enumerate() {
+        let span = o.span();
+        let o = o.into_inner();
+        let key = format!("objects[{i}]");
+        let kind = o.kind;
+        let kind_name = match kind {
+            ObjectKind::Sphere => "sphere",
+            ObjectKind::Quad => "quad",
+            ObjectKind::Mesh => "mesh",
+        };
+        let allowed: &[&str] = match kind {
+            ObjectKind::Sphere => &["center", "radius"],
+            ObjectKind::Quad => &["center", "size"],
+            ObjectKind::Mesh => &["file"],
+        };
+        for (k, set) in [
+            ("center", o.center.is_some()),
+            ("radius", o.radius.is_some()),
+            ("size", o.size.is_some()),
+            ("file", o.file.is_some()),
+        ] {
+            if set && !allowed.contains(&k) {
+                return Err(ctx.invalid(
+                    span.clone(),
+                    format!("{key}.{k}"),
+                    format!(
+                        "`{k}` does not apply to a {kind_name} (it takes {})",
+                        allowed
+                            .iter()
+                            .map(|a| format!("`{a}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ));
+            }
+        }
+        let transform = object_transform(ctx, &key, &o)?;
+        let material = match &o.material {
+            Some(m) => Some(*named_materials.get(m.get_ref()).ok_or_else(|| {
+                ctx.invalid(
+                    m.span(),
+                    format!("{key}.material"),
+                    format!(
+                        "no material named {:?} (defined: {})",
+                        m.get_ref(),
+                        names(named_materials.keys())
+                    ),
+                )
+            })?),
+            None => None,
+        };
+        match kind {
+            ObjectKind::Sphere => {
+                let radius = o.radius.as_ref().ok_or_else(|| {
+                    ctx.invalid(
+                        span.clone(),
+                        key.clone(),
+                        "a sphere needs `radius` (a number > 0)",
+                    )
+                })?;
+                let center = o.center.as_ref().map_or(Vec3::ZERO, |c| v3(*c.get_ref()));
+                let (center, radius) = match &transform {
+                    None => (center, radius.get_ref().0),
+                    Some((t, scale)) => {
+                        if (scale.x - scale.y).abs() > 1e-6 * scale.x
+                            || (scale.x - scale.z).abs() > 1e-6 * scale.x
+                        {
+                            let s = o.scale.as_ref().map_or(span.clone(), |s| s.span());
+                            return Err(ctx.invalid(
+                                s,
+                                format!("{key}.scale"),
+                                "a sphere can only be scaled uniformly (give one number)",
+                            ));
+                        }
+                        (
+                            t.affine.transform_point3(center),
+                            radius.get_ref().0 * scale.x,
+                        )
+                    }
+                };
+                if !(center.is_finite() && radius.is_finite() && radius > 0.0) {
+                    return Err(ctx.invalid(span, key, "the transformed sphere is not finite"));
+                }
+                let material = material.unwrap_or_else(|| default_material_index(&mut materials));
+                objects.push(Object::Sphere {
+                    center,
+                    radius,
+                    material,
+                });
+            }
+            ObjectKind::Quad => {
+                let size = o.size.as_ref().ok_or_else(|| {
+                    ctx.invalid(
+                        span.clone(),
+                        key.clone(),
+                        "a quad needs `size = [width, depth]` (numbers > 0)",
+                    )
+                })?;
+                let [w, d] = *size.get_ref();
+                let c = o.center.as_ref().map_or(Vec3::ZERO, |c| v3(*c.get_ref()));
+                let corners = [
+                    [c.x - w.0 * 0.5, c.z - d.0 * 0.5],
+                    [c.x + w.0 * 0.5, c.z - d.0 * 0.5],
+                    [c.x + w.0 * 0.5, c.z + d.0 * 0.5],
+                    [c.x - w.0 * 0.5, c.z + d.0 * 0.5],
+                ];
+                // Flat, so Embree's geometric normal serves for shading (no vertex normals).
+                let mut positions: Vec<[f32; 3]> =
+                    corners.iter().map(|&[x, z]| [x, c.y, z]).collect();
+                let mut indices = vec![[0, 2, 1], [0, 3, 2]];
+                if let Some((t, _)) = &transform {
+                    for p in &mut positions {
+                        *p = t.point(*p);
+                    }
+                    if t.mirrors {
+                        for tri in &mut indices {
+                            tri.swap(1, 2);
+                        }
+                    }
+                }
+                let mesh = TriangleMesh::new(positions, indices)
+                    .and_then(|m| m.with_uvs(corners.to_vec()))
+                    .map_err(|e| {
+                        ctx.invalid(span.clone(), key.clone(), format!("invalid quad: {e}"))
+                    })?;
+                let material = material.unwrap_or_else(|| default_material_index(&mut materials));
+                objects.push(Object::Mesh {
+                    mesh,
+                    materials: MeshMaterials::One(material),
+                });
+            }
+            ObjectKind::Mesh => {
+                let file = o.file.as_ref().ok_or_else(|| {
+                    ctx.invalid(
+                        span.clone(),
+                        key.clone(),
+                        "a mesh needs `file` (an .obj, .gltf or .glb file)",
+                    )
+                })?;
+                let at = ctx.at_key(file.span(), format!("{key}.file"));
+                let p = ctx.resolve(file.get_ref());
+                let t = transform.map(|(t, _)| t).unwrap_or(Transform::IDENTITY);
+                let model = load_model(&p, &t, &mut cache).map_err(|e| match e {
+                    LoadError::UnknownScene { .. } => LoadError::invalid(
+                        at.clone(),
+                        format!(
+                            "unsupported mesh file {:?}: expected .obj, .gltf or .glb",
+                            file.get_ref()
+                        ),
+                    ),
+                    e => e.referenced(at.clone(), "mesh"),
+                })?;
+                let offset = materials.len();
+                let model_materials = model.materials.len();
+                materials.extend(model.materials.into_iter().map(|(_, m)| m));
+                for m in model.meshes {
+                    let index = match (material, m.material) {
+                        (Some(over), _) => over,
+                        (None, Some(k)) if k < model_materials => offset + k,
+                        (None, _) => default_material_index(&mut materials),
+                    };
+                    objects.push(Object::Mesh {
+                        mesh: m.mesh,
+                        materials: MeshMaterials::One(index),
+                    });
+                }
+            }
+        }
+    }
+    if objects.is_empty() {
+        return Err(LoadError::Empty {
+            path: ctx.path.to_path_buf(),
+        });
+    }
+
+    // Image, camera and lens.
+    let width = raw
+        .image
+        .as_ref()
+        .and_then(|i| i.width)
+        .map_or(DEFAULT_WIDTH, |p| p.0);
+    let height = raw
+        .image
+        .as_ref()
+        .and_then(|i| i.height)
+        .map_or(DEFAULT_HEIGHT, |p| p.0);
+    let camera = camera(ctx, raw.camera, width, height, &objects)?;
+
+    // Lights and environment.
+    let lights = match raw.lights {
+        None => vec![default_light(
+            (camera.look_at - camera.eye).normalize_or(Vec3::Z),
+        )],
+        Some(lights) => lights
+            .into_iter()
+            .enumerate()
+            .map(|(i, l)| light(ctx, i, l))
+            .collect::<Result<_, _>>()?,
+    };
+    let background = match raw.background {
+        None => default_background(),
+        Some(b) => {
+            let span = b.span();
+            let b = b.into_inner();
+            match (b.color, b.horizon, b.zenith) {
+                (Some(c), None, None) => Background::uniform(c.0),
+                (None, h, z) => {
+                    let d = default_background();
+                    Background {
+                        horizon: h.map_or(d.horizon, |c| c.0),
+                        zenith: z.map_or(d.zenith, |c| c.0),
+                    }
+                }
+                _ => return Err(ctx.invalid(span, "background", "give either `color` (a uniform background) or `horizon` and `zenith`, not both")),
+            }
+        }
+    };
+    let render = raw.render.unwrap_or(RawRender {
+        spp: None,
+        interval_factor: None,
+    });
+    let name = raw.name.unwrap_or_else(|| {
+        ctx.path
+            .file_stem()
+            .map_or_else(|| "scene".into(), |s| s.to_string_lossy().into_owned())
+    });
+    Ok(SceneDesc {
+        name,
+        camera,
+        materials,
+        objects,
+        lights,
+        ambient: raw.ambient.map_or(Vec3::splat(0.1), |c| c.0),
+        background,
+        spp: render.spp.map(|s| s.0),
+        interval_factor: render.interval_factor.map(|k| k.0),
+    })
+}
+
+/// A readable list of defined names.
+fn names<'a>(names: impl Iterator<Item = &'a String>) -> String {
+    let mut v: Vec<&str> = names.map(String::as_str).collect();
+    if v.is_empty() {
+        return "none".into();
+    }
+    v.sort_unstable();
+    v.iter()
+        .map(|n| format!("{n:?}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The object's transform and its scale (`None` when it has no transform keys).
+fn object_transform(
+    ctx: &Ctx,
+    key: &str,
+    o: &RawObject,
+) -> Result<Option<(Transform, Vec3)>, LoadError> {
+    if o.translate.is_none()
+        && o.rotate.is_none()
+        && o.rotate_axis.is_none()
+        && o.rotate_angle.is_none()
+        && o.scale.is_none()
+    {
+        return Ok(None);
+    }
+    let rotation = match (&o.rotate, &o.rotate_axis, &o.rotate_angle) {
+        (None, None, None) => Mat3::IDENTITY,
+        (Some(r), None, None) => euler_xyz_deg(v3(*r.get_ref())),
+        (None, Some(axis), Some(angle)) => {
+            let a = v3(*axis.get_ref());
+            if a.length_squared() == 0.0 || !a.is_finite() {
+                return Err(ctx.invalid(
+                    axis.span(),
+                    format!("{key}.rotate_axis"),
+                    "the rotation axis must not be zero",
+                ));
+            }
+            Mat3::from_axis_angle(a.normalize(), angle.get_ref().0.to_radians())
+        }
+        (Some(r), Some(_), _) | (Some(r), _, Some(_)) => {
+            return Err(ctx.invalid(r.span(), format!("{key}.rotate"), "give either `rotate` (Euler angles) or `rotate_axis` with `rotate_angle`, not both"));
+        }
+        (None, Some(axis), None) => {
+            return Err(ctx.invalid(
+                axis.span(),
+                format!("{key}.rotate_axis"),
+                "`rotate_axis` needs `rotate_angle` (degrees)",
+            ));
+        }
+        (None, None, Some(angle)) => {
+            return Err(ctx.invalid(
+                angle.span(),
+                format!("{key}.rotate_angle"),
+                "`rotate_angle` needs `rotate_axis`",
+            ));
+        }
+    };
+    let scale = o.scale.as_ref().map_or(Vec3::ONE, |s| s.get_ref().0);
+    let translate = o
+        .translate
+        .as_ref()
+        .map_or(Vec3::ZERO, |t| v3(*t.get_ref()));
+    let span = o
+        .scale
+        .as_ref()
+        .map(|s| s.span())
+        .or(o.translate.as_ref().map(|t| t.span()))
+        .unwrap_or(0..0);
+    let t = Transform::from_srt(scale, rotation, translate).ok_or_else(|| {
+        ctx.invalid(
+            span,
+            key.to_string(),
+            "the transform is singular or not finite",
+        )
+    })?;
+    Ok(Some((t, scale)))
+}
+
+fn camera(
+    ctx: &Ctx,
+    raw: Option<RawCamera>,
+    width: u32,
+    height: u32,
+    objects: &[Object],
+) -> Result<CameraSpec, LoadError> {
+    let raw = raw.unwrap_or(RawCamera {
+        eye: None,
+        look_at: None,
+        up: None,
+        vfov: None,
+        aperture_radius: None,
+        f_number: None,
+        focal_length_mm: None,
+        sensor_width_mm: None,
+        sharp_range: None,
+        spread: None,
+        focus_distance: None,
+        focus_point: None,
+        focus_pixel: None,
+        blades: None,
+        blade_rotation: None,
+        anamorphic: None,
+    });
+    let vfov_deg = raw.vfov.as_ref().map_or(DEFAULT_VFOV, |v| v.get_ref().0);
+    let up = raw.up.as_ref().map_or(Vec3::Y, |u| v3(*u.get_ref()));
+    let (eye, look_at) = match (raw.eye, raw.look_at) {
+        (Some(e), Some(l)) => (v3(e), v3(l)),
+        (e, l) => {
+            let (lo, hi) = model::bounds(objects).unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
+            let (fe, fl) = model::frame(lo, hi, vfov_deg, width as f32 / height as f32);
+            (e.map_or(fe, v3), l.map_or(fl, v3))
+        }
+    };
+    let camera_span = || {
+        [
+            raw.up.as_ref().map(|u| u.span()),
+            raw.vfov.as_ref().map(|v| v.span()),
+        ]
+        .into_iter()
+        .flatten()
+        .next()
+        .unwrap_or(0..0)
+    };
+    if (look_at - eye).length_squared() == 0.0 {
+        return Err(ctx.invalid(
+            camera_span(),
+            "camera.look_at",
+            "`look_at` must differ from `eye`",
+        ));
+    }
+    if (look_at - eye).cross(up).length_squared()
+        <= 1e-12 * (look_at - eye).length_squared() * up.length_squared()
+    {
+        let span = raw.up.as_ref().map_or(camera_span(), |u| u.span());
+        return Err(ctx.invalid(
+            span,
+            "camera.up",
+            "`up` must not be zero or parallel to the view direction (eye to look_at)",
+        ));
+    }
+
+    // Lens: at most one parameterisation.
+    let lenses: Vec<(&str, Range<usize>)> = [
+        (
+            "aperture_radius",
+            raw.aperture_radius.as_ref().map(|s| s.span()),
+        ),
+        ("f_number", raw.f_number.as_ref().map(|s| s.span())),
+        ("sharp_range", raw.sharp_range.as_ref().map(|s| s.span())),
+    ]
+    .into_iter()
+    .filter_map(|(k, s)| s.map(|s| (k, s)))
+    .collect();
+    if lenses.len() > 1 {
+        return Err(ctx.invalid(lenses[1].1.clone(), format!("camera.{}", lenses[1].0), format!("`{}` and `{}` both set the lens; give one of aperture_radius, f_number (photographic) or sharp_range + spread (the seed's)", lenses[0].0, lenses[1].0)));
+    }
+    if raw.f_number.is_none() {
+        for (k, s) in [
+            ("focal_length_mm", &raw.focal_length_mm),
+            ("sensor_width_mm", &raw.sensor_width_mm),
+        ] {
+            if let Some(s) = s {
+                return Err(ctx.invalid(
+                    s.span(),
+                    format!("camera.{k}"),
+                    format!("`{k}` describes a photographic lens and needs `f_number`"),
+                ));
+            }
+        }
+    } else if let Some(v) = &raw.vfov {
+        return Err(ctx.invalid(v.span(), "camera.vfov", "a photographic lens (`f_number`) sets the field of view from focal_length_mm and sensor_width_mm; remove `vfov`"));
+    }
+    if raw.sharp_range.is_some() != raw.spread.is_some() {
+        let (k, s) = match (&raw.sharp_range, &raw.spread) {
+            (Some(s), _) => ("sharp_range", s.span()),
+            (_, Some(s)) => ("spread", s.span()),
+            _ => unreachable!(),
+        };
+        return Err(ctx.invalid(
+            s,
+            format!("camera.{k}"),
+            "the seed's lens needs both `sharp_range` (scene units) and `spread` (pixels)",
+        ));
+    }
+    let lens = if let Some(r) = &raw.aperture_radius {
+        if r.get_ref().0 == 0.0 {
+            LensSpec::Pinhole
+        } else {
+            LensSpec::Aperture {
+                radius: r.get_ref().0,
+            }
+        }
+    } else if let Some(n) = &raw.f_number {
+        LensSpec::Photographic {
+            focal_length_mm: raw.focal_length_mm.as_ref().map_or(50.0, |f| f.get_ref().0),
+            f_number: n.get_ref().0,
+            sensor_width_mm: raw.sensor_width_mm.as_ref().map_or(36.0, |s| s.get_ref().0),
+        }
+    } else if let (Some(r), Some(s)) = (&raw.sharp_range, &raw.spread) {
+        LensSpec::Seed {
+            sharp_range: r.get_ref().0,
+            spread: s.get_ref().0,
+        }
+    } else {
+        LensSpec::Pinhole
+    };
+
+    // Focus: at most one way.
+    let focuses: Vec<(&str, Range<usize>)> = [
+        (
+            "focus_distance",
+            raw.focus_distance.as_ref().map(|s| s.span()),
+        ),
+        ("focus_point", raw.focus_point.as_ref().map(|s| s.span())),
+        ("focus_pixel", raw.focus_pixel.as_ref().map(|s| s.span())),
+    ]
+    .into_iter()
+    .filter_map(|(k, s)| s.map(|s| (k, s)))
+    .collect();
+    if focuses.len() > 1 {
+        return Err(ctx.invalid(
+            focuses[1].1.clone(),
+            format!("camera.{}", focuses[1].0),
+            format!(
+                "`{}` and `{}` both set the focus; give one",
+                focuses[0].0, focuses[1].0
+            ),
+        ));
+    }
+    let focus = if let Some(d) = &raw.focus_distance {
+        Focus::Distance(d.get_ref().0)
+    } else if let Some(p) = &raw.focus_point {
+        let p = v3(*p.get_ref());
+        Focus::Point(p)
+    } else if let Some(px) = &raw.focus_pixel {
+        let [x, y] = *px.get_ref();
+        if x.0 >= width || y.0 >= height {
+            return Err(ctx.invalid(px.span(), "camera.focus_pixel", format!("pixel ({}, {}) is outside the {width}x{height} image (x < width, y < height, counted from the top left)", x.0, y.0)));
+        }
+        Focus::Pixel { x: x.0, y: y.0 }
+    } else {
+        Focus::Point(look_at)
+    };
+    if let Focus::Point(p) = focus {
+        if (p - eye).dot(look_at - eye) <= 0.0 {
+            let span = raw.focus_point.as_ref().map_or(camera_span(), |s| s.span());
+            return Err(ctx.invalid(
+                span,
+                "camera.focus_point",
+                "the point in focus must be in front of the camera",
+            ));
+        }
+    }
+    let blades = raw.blades.as_ref().map_or(0, |b| b.get_ref().0);
+    if blades == 1 || blades == 2 {
+        return Err(ctx.invalid(
+            raw.blades.as_ref().map(|b| b.span()).unwrap_or(0..0),
+            "camera.blades",
+            "`blades` must be 0 (a circular aperture) or at least 3",
+        ));
+    }
+    Ok(CameraSpec {
+        eye,
+        look_at,
+        up,
+        vfov_deg,
+        width,
+        height,
+        lens,
+        focus,
+        aperture: ApertureShape {
+            blades,
+            rotation_deg: raw.blade_rotation.map_or(0.0, |r| r.0),
+            anamorphic: raw.anamorphic.map_or(1.0, |a| a.0),
+        },
+    })
+}
+
+fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<Light, LoadError> {
+    let span = l.span();
+    let l = l.into_inner();
+    let key = format!("lights[{i}]");
+    match l.kind {
+        LightKind::Point => {
+            for (k, set) in [
+                ("direction", l.direction.is_some()),
+                ("irradiance", l.irradiance.is_some()),
+            ] {
+                if set {
+                    return Err(ctx.invalid(span, format!("{key}.{k}"), format!("`{k}` belongs to directional lights; a point light takes `position` and `intensity`")));
+                }
+            }
+            let position = l
+                .position
+                .ok_or_else(|| ctx.invalid(span, key, "a point light needs `position`"))?;
+            Ok(Light::Point {
+                position: v3(position),
+                intensity: l.intensity.map_or(Vec3::splat(100.0), |c| c.0),
+            })
+        }
+        LightKind::Directional => {
+            for (k, set) in [
+                ("position", l.position.is_some()),
+                ("intensity", l.intensity.is_some()),
+            ] {
+                if set {
+                    return Err(ctx.invalid(span, format!("{key}.{k}"), format!("`{k}` belongs to point lights; a directional light takes `direction` and `irradiance`")));
+                }
+            }
+            let direction = l.direction.ok_or_else(|| {
+                ctx.invalid(
+                    span.clone(),
+                    key.clone(),
+                    "a directional light needs `direction`",
+                )
+            })?;
+            let d = v3(*direction.get_ref());
+            if d.length_squared() == 0.0 {
+                return Err(ctx.invalid(
+                    direction.span(),
+                    format!("{key}.direction"),
+                    "the direction must not be zero",
+                ));
+            }
+            Ok(Light::Directional {
+                direction: d,
+                irradiance: l.irradiance.map_or(Vec3::ONE, |c| c.0),
+            })
+        }
+    }
+}
+
+/// Loads a mesh file by its extension (`UnknownScene` when the extension is not a mesh's).
+pub fn load_model(
+    path: &Path,
+    transform: &Transform,
+    textures: &mut TextureCache,
+) -> Result<model::Model, LoadError> {
+    match extension(path).as_deref() {
+        Some("obj") => super::obj::load(path, transform, textures),
+        Some("gltf" | "glb") => super::gltf::load(path, transform, textures),
+        _ => Err(LoadError::UnknownScene {
+            name: path.display().to_string(),
+            builtins: String::new(),
+        }),
+    }
+}
+
+/// A path's extension, lower-cased.
+pub fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+}

@@ -1,0 +1,592 @@
+//! glTF 2.0 models (`.gltf` with external or embedded buffers, and binary `.glb`), via `gltf`.
+//!
+//! The default scene's node tree is walked with each node's transform; every triangle primitive
+//! becomes one mesh with positions, normals (inverse-transpose transformed) and the UV set of
+//! its base-colour texture. Materials: base-colour factor and texture (sRGB) become the diffuse
+//! colour; metallic and roughness map to a Blinn-Phong highlight and a mirror term (see
+//! `docs/scene-format.md`). The first perspective camera met in the tree is returned too.
+//! Accessors are checked before they are read, and a panic inside the parser becomes an error.
+
+use std::collections::HashMap;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use ::gltf::accessor::{DataType, Dimensions};
+use ::gltf::mesh::Mode;
+use ::gltf::texture::WrappingMode;
+use glam::{Affine3A, Mat4, Vec3};
+
+use super::error::{LoadError, Location};
+use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh};
+use super::texture::{TextureCache, decode};
+use crate::shade::{ImageTexture, Material, Texture, Wrap};
+
+fn gltf_error(path: &Path, message: impl Into<String>) -> LoadError {
+    LoadError::Gltf {
+        at: Location::file(path),
+        message: message.into(),
+    }
+}
+
+/// Decodes standard base64 (padding optional, whitespace ignored).
+pub fn base64_decode(text: &str) -> Option<Vec<u8>> {
+    let mut out = Vec::with_capacity(text.len() / 4 * 3);
+    let mut acc = 0u32;
+    let mut bits = 0;
+    let mut padding = 0;
+    for c in text.bytes() {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            b'=' => {
+                padding += 1;
+                continue;
+            }
+            b' ' | b'\n' | b'\r' | b'\t' => continue,
+            _ => return None,
+        };
+        if padding > 0 {
+            return None;
+        }
+        acc = (acc << 6) | v as u32;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+        }
+    }
+    (padding <= 2).then_some(out)
+}
+
+/// Decodes `%XX` escapes of a relative URI.
+fn percent_decode(uri: &str) -> Vec<u8> {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' && i + 2 < b.len() {
+            let hex = std::str::from_utf8(&b[i + 1..i + 3])
+                .ok()
+                .and_then(|h| u8::from_str_radix(h, 16).ok());
+            if let Some(v) = hex {
+                out.push(v);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(b[i]);
+        i += 1;
+    }
+    out
+}
+
+/// The bytes a URI names: a base64 `data:` URI, or a file relative to the model.
+fn read_uri(path: &Path, base: &Path, uri: &str, what: &'static str) -> Result<Vec<u8>, LoadError> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let (_, data) = rest.split_once(";base64,").ok_or_else(|| {
+            gltf_error(path, format!("{what}: only base64 data URIs are supported"))
+        })?;
+        return base64_decode(data)
+            .ok_or_else(|| gltf_error(path, format!("{what}: malformed base64 in a data URI")));
+    }
+    let scheme = uri.find(':').filter(|&i| {
+        i > 1
+            && uri[..i]
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+    });
+    if scheme.is_some() {
+        return Err(gltf_error(
+            path,
+            format!("{what}: unsupported URI {uri:?} (expected a relative file or a data URI)"),
+        ));
+    }
+    let decoded = String::from_utf8(percent_decode(uri))
+        .map_err(|_| gltf_error(path, format!("{what}: URI {uri:?} is not UTF-8")))?;
+    let file = base.join(decoded);
+    std::fs::read(&file).map_err(|e| LoadError::io(&file, e).referenced(Location::file(path), what))
+}
+
+/// Checks that reading `accessor` cannot go out of its buffer or hit a type the reader does
+/// not expect.
+fn check_accessor(
+    path: &Path,
+    buffers: &[Vec<u8>],
+    accessor: &::gltf::Accessor,
+    what: &str,
+    dims: Dimensions,
+    types: &[DataType],
+) -> Result<(), LoadError> {
+    let fail = |m: String| gltf_error(path, format!("accessor {} ({what}): {m}", accessor.index()));
+    if accessor.dimensions() != dims || !types.contains(&accessor.data_type()) {
+        return Err(fail(format!(
+            "expected {dims:?} of {types:?}, got {:?} of {:?}",
+            accessor.dimensions(),
+            accessor.data_type()
+        )));
+    }
+    if accessor.sparse().is_some() {
+        return Err(fail("sparse accessors are not supported".into()));
+    }
+    let count = accessor.count();
+    if count == 0 {
+        return Err(fail("no elements".into()));
+    }
+    let view = accessor
+        .view()
+        .ok_or_else(|| fail("no buffer view (expected the data in a buffer)".into()))?;
+    let size = accessor.size();
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(fail(format!("byte stride {stride} < element size {size}")));
+    }
+    let data = buffers
+        .get(view.buffer().index())
+        .ok_or_else(|| fail("missing buffer".into()))?;
+    let view_end = view.offset().checked_add(view.length());
+    let need = (count - 1)
+        .checked_mul(stride)
+        .and_then(|n| n.checked_add(size))
+        .and_then(|n| n.checked_add(accessor.offset()));
+    match (view_end, need) {
+        (Some(end), Some(need)) if end <= data.len() && need <= view.length() => Ok(()),
+        _ => Err(fail(format!(
+            "{count} elements do not fit in buffer view {} (truncated file?)",
+            view.index()
+        ))),
+    }
+}
+
+struct Loader<'a> {
+    path: &'a Path,
+    base: PathBuf,
+    buffers: Vec<Vec<u8>>,
+    textures: &'a mut TextureCache,
+    images: HashMap<usize, Arc<ImageTexture>>,
+    materials: Vec<(String, Material)>,
+    /// glTF material index -> our material index.
+    material_map: HashMap<usize, usize>,
+    meshes: Vec<ModelMesh>,
+    camera: Option<ModelCamera>,
+    visits: usize,
+}
+
+/// Nodes visited at most (a guard against node graphs that reuse subtrees exponentially).
+const MAX_NODE_VISITS: usize = 1 << 20;
+/// Deepest node nesting followed (a guard against cycles).
+const MAX_DEPTH: usize = 256;
+
+/// Loads a `.gltf` or `.glb` file, applying `transform` on top of its node transforms.
+pub fn load(
+    path: &Path,
+    transform: &Transform,
+    textures: &mut TextureCache,
+) -> Result<Model, LoadError> {
+    let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+    let invalid = |e: &dyn std::fmt::Display| {
+        gltf_error(
+            path,
+            format!("not a valid glTF 2.0 file (expected .gltf JSON or .glb): {e}"),
+        )
+    };
+    let parsed = catch_unwind(AssertUnwindSafe(|| {
+        let ::gltf::Gltf { document, blob } =
+            ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| invalid(&e))?;
+        // gltf's validation indexes accessors by the primitives' POSITION before checking them.
+        let root = document.into_json();
+        for (m, mesh) in root.meshes.iter().enumerate() {
+            for (p, prim) in mesh.primitives.iter().enumerate() {
+                let refs = prim.attributes.values().chain(prim.indices.as_ref());
+                if let Some(bad) = refs.map(|i| i.value()).find(|&i| i >= root.accessors.len()) {
+                    return Err(invalid(&format!(
+                        "mesh {m} primitive {p} refers to accessor {bad}, but there are {}",
+                        root.accessors.len()
+                    )));
+                }
+            }
+        }
+        let document = ::gltf::Document::from_json(root).map_err(|e| invalid(&e))?;
+        Ok((document, blob))
+    }))
+    .map_err(|_| gltf_error(path, "malformed file (the glTF parser failed on it)"))?;
+    let (document, blob) = parsed?;
+    drop(bytes);
+    let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
+
+    let mut blob = blob;
+    let mut buffers = Vec::new();
+    for buffer in document.buffers() {
+        let data = match buffer.source() {
+            ::gltf::buffer::Source::Bin => blob.take().ok_or_else(|| {
+                gltf_error(
+                    path,
+                    format!(
+                        "buffer {} refers to a missing GLB binary chunk",
+                        buffer.index()
+                    ),
+                )
+            })?,
+            ::gltf::buffer::Source::Uri(uri) => read_uri(path, &base, uri, "buffer")?,
+        };
+        if data.len() < buffer.length() {
+            return Err(gltf_error(
+                path,
+                format!(
+                    "buffer {} has {} bytes, expected {} (truncated file?)",
+                    buffer.index(),
+                    data.len(),
+                    buffer.length()
+                ),
+            ));
+        }
+        buffers.push(data);
+    }
+
+    let mut loader = Loader {
+        path,
+        base,
+        buffers,
+        textures,
+        images: HashMap::new(),
+        materials: Vec::new(),
+        material_map: HashMap::new(),
+        meshes: Vec::new(),
+        camera: None,
+        visits: 0,
+    };
+    let roots: Vec<::gltf::Node> = match document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    {
+        Some(scene) => scene.nodes().collect(),
+        None => {
+            // No scene: every node that is nobody's child is a root.
+            let mut child = vec![false; document.nodes().len()];
+            for n in document.nodes() {
+                for c in n.children() {
+                    child[c.index()] = true;
+                }
+            }
+            document.nodes().filter(|n| !child[n.index()]).collect()
+        }
+    };
+    for root in roots {
+        let walked = catch_unwind(AssertUnwindSafe(|| loader.node(&root, transform, 0)))
+            .map_err(|_| gltf_error(path, "malformed file (reading its data failed)"))?;
+        walked?;
+    }
+    if loader.meshes.is_empty() {
+        return Err(gltf_error(path, "no triangle meshes in the scene"));
+    }
+    Ok(Model {
+        meshes: loader.meshes,
+        materials: loader.materials,
+        camera: loader.camera,
+    })
+}
+
+impl Loader<'_> {
+    fn node(
+        &mut self,
+        node: &::gltf::Node,
+        parent: &Transform,
+        depth: usize,
+    ) -> Result<(), LoadError> {
+        self.visits += 1;
+        if depth > MAX_DEPTH || self.visits > MAX_NODE_VISITS {
+            return Err(gltf_error(
+                self.path,
+                format!("node {}: the node tree is cyclic or too deep", node.index()),
+            ));
+        }
+        let local = Mat4::from_cols_array_2d(&node.transform().matrix());
+        let local = Affine3A::from_mat4(local);
+        let world = Transform::new(local)
+            .and_then(|l| parent.after(&l))
+            .ok_or_else(|| {
+                gltf_error(
+                    self.path,
+                    format!("node {}: singular or non-finite transform", node.index()),
+                )
+            })?;
+        if self.camera.is_none()
+            && let Some(camera) = node.camera()
+            && let ::gltf::camera::Projection::Perspective(p) = camera.projection()
+        {
+            let eye = world.affine.transform_point3(Vec3::ZERO);
+            let forward = world
+                .affine
+                .transform_vector3(Vec3::NEG_Z)
+                .normalize_or_zero();
+            let up = world.affine.transform_vector3(Vec3::Y).normalize_or_zero();
+            let vfov_deg = p.yfov().to_degrees();
+            if eye.is_finite() && forward != Vec3::ZERO && vfov_deg > 0.0 && vfov_deg < 180.0 {
+                self.camera = Some(ModelCamera {
+                    eye,
+                    forward,
+                    up,
+                    vfov_deg,
+                    aspect: p.aspect_ratio(),
+                });
+            }
+        }
+        if let Some(m) = node.mesh() {
+            for prim in m.primitives() {
+                self.primitive(&m, &prim, &world)?;
+            }
+        }
+        for child in node.children() {
+            self.node(&child, &world, depth + 1)?;
+        }
+        Ok(())
+    }
+
+    fn primitive(
+        &mut self,
+        m: &::gltf::Mesh,
+        prim: &::gltf::Primitive,
+        world: &Transform,
+    ) -> Result<(), LoadError> {
+        let mode = prim.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            return Ok(()); // points and lines have no surface
+        }
+        let what = format!("mesh {} primitive {}", m.index(), prim.index());
+        let positions = prim
+            .get(&::gltf::Semantic::Positions)
+            .ok_or_else(|| gltf_error(self.path, format!("{what}: no POSITION attribute")))?;
+        let (path, buffers) = (self.path, &self.buffers);
+        check_accessor(
+            path,
+            buffers,
+            &positions,
+            "POSITION",
+            Dimensions::Vec3,
+            &[DataType::F32],
+        )?;
+        let normals = prim.get(&::gltf::Semantic::Normals);
+        if let Some(n) = &normals {
+            check_accessor(
+                path,
+                buffers,
+                n,
+                "NORMAL",
+                Dimensions::Vec3,
+                &[DataType::F32],
+            )?;
+        }
+        if let Some(i) = prim.indices() {
+            check_accessor(
+                path,
+                buffers,
+                &i,
+                "indices",
+                Dimensions::Scalar,
+                &[DataType::U8, DataType::U16, DataType::U32],
+            )?;
+        }
+        let material = prim.material();
+        let uv_set = material
+            .pbr_metallic_roughness()
+            .base_color_texture()
+            .map_or(0, |t| t.tex_coord());
+        let uvs = prim.get(&::gltf::Semantic::TexCoords(uv_set));
+        if let Some(t) = &uvs {
+            check_accessor(
+                path,
+                buffers,
+                t,
+                "TEXCOORD",
+                Dimensions::Vec2,
+                &[DataType::F32, DataType::U8, DataType::U16],
+            )?;
+        }
+
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(Vec::as_slice));
+        let count = positions.count();
+        let mut p = Vec::with_capacity(count + 1);
+        if let Some(it) = reader.read_positions() {
+            p.extend(it.map(|v| world.point(v)));
+        }
+        let n: Option<Vec<[f32; 3]>> = normals
+            .is_some()
+            .then(|| reader.read_normals())
+            .flatten()
+            .map(|it| it.map(|v| world.normal(v)).collect())
+            .filter(|n: &Vec<[f32; 3]>| n.len() == p.len());
+        // glTF's v runs down the image; ours runs up.
+        let uv: Option<Vec<[f32; 2]>> = uvs
+            .is_some()
+            .then(|| reader.read_tex_coords(uv_set))
+            .flatten()
+            .map(|it| it.into_f32().map(|[u, v]| [u, 1.0 - v]).collect())
+            .filter(|t: &Vec<[f32; 2]>| t.len() == p.len());
+        let idx: Vec<u32> = match reader.read_indices() {
+            Some(it) if prim.indices().is_some() => it.into_u32().collect(),
+            _ => (0..p.len() as u32).collect(),
+        };
+        let mut tris: Vec<[u32; 3]> = match mode {
+            Mode::Triangles => {
+                let mut t = Vec::with_capacity(idx.len() / 3 + 1);
+                t.extend(idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+                t
+            }
+            Mode::TriangleStrip => idx
+                .windows(3)
+                .enumerate()
+                .map(|(i, w)| {
+                    if i % 2 == 0 {
+                        [w[0], w[1], w[2]]
+                    } else {
+                        [w[1], w[0], w[2]]
+                    }
+                })
+                .collect(),
+            _ => (2..idx.len())
+                .map(|i| [idx[0], idx[i - 1], idx[i]])
+                .collect(),
+        };
+        drop(idx);
+        if world.mirrors {
+            for t in &mut tris {
+                t.swap(1, 2);
+            }
+        }
+        if tris.is_empty() || p.is_empty() {
+            return Ok(());
+        }
+        let mesh = mesh(self.path, &what, p, tris, n, uv)?;
+        let material = match material.index() {
+            Some(i) => Some(self.material(&material, i)?),
+            None => None,
+        };
+        self.meshes.push(ModelMesh { mesh, material });
+        Ok(())
+    }
+
+    fn material(&mut self, m: &::gltf::Material, index: usize) -> Result<usize, LoadError> {
+        if let Some(&i) = self.material_map.get(&index) {
+            return Ok(i);
+        }
+        let pbr = m.pbr_metallic_roughness();
+        let [r, g, b, _] = pbr.base_color_factor();
+        let base = Vec3::new(r, g, b);
+        let base = if base.is_finite() {
+            base.max(Vec3::ZERO)
+        } else {
+            Vec3::ONE
+        };
+        let diffuse = match pbr.base_color_texture() {
+            Some(info) => {
+                let texture = info.texture();
+                let wrap = match texture.sampler().wrap_s() {
+                    WrappingMode::ClampToEdge => Wrap::Clamp,
+                    _ => Wrap::Repeat,
+                };
+                let image = self.image(&texture.source(), wrap)?;
+                Texture::Image { image, tint: base }
+            }
+            None => Texture::Constant(base),
+        };
+        let metallic = pbr.metallic_factor();
+        let metallic = if metallic.is_finite() {
+            metallic.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let roughness = pbr.roughness_factor();
+        let roughness = if roughness.is_finite() {
+            roughness.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let alpha = (roughness * roughness).max(1e-3);
+        let shininess = (2.0 / (alpha * alpha) - 2.0).clamp(1.0, 10_000.0);
+        let specular = Vec3::splat(0.04).lerp(base, metallic) * (1.0 - roughness);
+        let mirror = metallic * (1.0 - roughness) * (1.0 - roughness);
+        let name = m
+            .name()
+            .map_or_else(|| format!("material {index}"), str::to_string);
+        self.materials.push((
+            name,
+            Material {
+                diffuse,
+                specular,
+                shininess,
+                mirror,
+            },
+        ));
+        let i = self.materials.len() - 1;
+        self.material_map.insert(index, i);
+        Ok(i)
+    }
+
+    fn image(&mut self, image: &::gltf::Image, wrap: Wrap) -> Result<Arc<ImageTexture>, LoadError> {
+        let key = image.index() * 2 + (wrap == Wrap::Repeat) as usize;
+        if let Some(t) = self.images.get(&key) {
+            return Ok(t.clone());
+        }
+        let what = format!("image {}", image.index());
+        let texture = match image.source() {
+            ::gltf::image::Source::View { view, .. } => {
+                let bytes = self
+                    .buffers
+                    .get(view.buffer().index())
+                    .and_then(|b| b.get(view.offset()..view.offset().checked_add(view.length())?))
+                    .ok_or_else(|| {
+                        gltf_error(self.path, format!("{what}: buffer view out of range"))
+                    })?;
+                let t = decode(bytes, true, wrap)
+                    .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
+                Arc::new(t)
+            }
+            ::gltf::image::Source::Uri { uri, .. }
+                if !uri.starts_with("data:") && !uri.contains(':') =>
+            {
+                let decoded = String::from_utf8(percent_decode(uri)).map_err(|_| {
+                    gltf_error(self.path, format!("{what}: URI {uri:?} is not UTF-8"))
+                })?;
+                let file = self.base.join(decoded);
+                self.textures
+                    .file(&file, true, wrap)
+                    .map_err(|e| e.referenced(Location::file(self.path), "texture"))?
+            }
+            ::gltf::image::Source::Uri { uri, .. } => {
+                let bytes = read_uri(self.path, &self.base, uri, "image")?;
+                let t = decode(&bytes, true, wrap)
+                    .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
+                Arc::new(t)
+            }
+        };
+        self.images.insert(key, texture.clone());
+        Ok(texture)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_round_trips() {
+        assert_eq!(base64_decode("aGVsbG8=").unwrap(), b"hello");
+        assert_eq!(base64_decode("aGVsbG8").unwrap(), b"hello");
+        assert_eq!(base64_decode("").unwrap(), b"");
+        assert!(base64_decode("a*b").is_none());
+        assert!(base64_decode("aG=Vs").is_none());
+    }
+
+    #[test]
+    fn percent_escapes_decode() {
+        assert_eq!(percent_decode("a%20b.bin"), b"a b.bin");
+        assert_eq!(percent_decode("100%"), b"100%");
+        assert_eq!(percent_decode("%zz"), b"%zz");
+    }
+}

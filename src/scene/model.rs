@@ -1,0 +1,325 @@
+//! What the mesh loaders return, object transforms, and scenes made around a bare model file
+//! (a framing camera, a default lens and light).
+
+use std::path::Path;
+
+use glam::{Affine3A, Mat3, Vec3};
+
+use super::error::{LoadError, Location};
+use super::{Background, MeshMaterials, Object, SceneDesc};
+use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
+use crate::embree::TriangleMesh;
+use crate::shade::{Light, Material};
+
+/// An affine transform for points, with the inverse transpose for normals.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Transform {
+    pub affine: Affine3A,
+    /// Inverse transpose of the linear part: transforms normals.
+    pub normal: Mat3,
+    /// The transform mirrors (negative determinant): triangle winding is reversed.
+    pub mirrors: bool,
+}
+
+impl Default for Transform {
+    fn default() -> Self {
+        Self::IDENTITY
+    }
+}
+
+impl Transform {
+    pub const IDENTITY: Self = Self {
+        affine: Affine3A::IDENTITY,
+        normal: Mat3::IDENTITY,
+        mirrors: false,
+    };
+
+    /// The transform of an affine matrix, or `None` if it is singular or not finite.
+    pub fn new(affine: Affine3A) -> Option<Self> {
+        let linear = Mat3::from(affine.matrix3);
+        let det = linear.determinant();
+        if !(det.is_finite() && det != 0.0 && affine.translation.is_finite()) {
+            return None;
+        }
+        let normal = linear.inverse().transpose();
+        normal.is_finite().then_some(Self {
+            affine,
+            normal,
+            mirrors: det < 0.0,
+        })
+    }
+
+    /// Scale, then rotate, then translate: `translate * rotate * scale`.
+    pub fn from_srt(scale: Vec3, rotate: Mat3, translate: Vec3) -> Option<Self> {
+        Self::new(Affine3A::from_mat3_translation(
+            rotate * Mat3::from_diagonal(scale),
+            translate,
+        ))
+    }
+
+    /// `self` applied after `inner` (`self * inner`).
+    pub fn after(&self, inner: &Transform) -> Option<Self> {
+        Self::new(self.affine * inner.affine)
+    }
+
+    pub fn point(&self, p: [f32; 3]) -> [f32; 3] {
+        self.affine.transform_point3(Vec3::from(p)).to_array()
+    }
+
+    pub fn normal(&self, n: [f32; 3]) -> [f32; 3] {
+        (self.normal * Vec3::from(n)).normalize_or_zero().to_array()
+    }
+
+    pub fn is_identity(&self) -> bool {
+        self.affine == Affine3A::IDENTITY
+    }
+}
+
+/// Rotation by Euler angles in degrees about the fixed X, then Y, then Z axes
+/// (`Rz * Ry * Rx`).
+pub fn euler_xyz_deg(deg: Vec3) -> Mat3 {
+    let r = deg * (std::f32::consts::PI / 180.0);
+    Mat3::from_rotation_z(r.z) * Mat3::from_rotation_y(r.y) * Mat3::from_rotation_x(r.x)
+}
+
+/// A camera found in a model file (glTF), in world space.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelCamera {
+    pub eye: Vec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    pub up: Vec3,
+    pub vfov_deg: f32,
+    /// Width over height, if the file gives one.
+    pub aspect: Option<f32>,
+}
+
+/// One mesh of a model with the model material it uses (`None`: the default material).
+#[derive(Debug, Clone)]
+pub struct ModelMesh {
+    pub mesh: TriangleMesh,
+    pub material: Option<usize>,
+}
+
+/// What a mesh loader returns: meshes (already transformed), named materials and maybe a camera.
+#[derive(Debug, Clone, Default)]
+pub struct Model {
+    pub meshes: Vec<ModelMesh>,
+    pub materials: Vec<(String, Material)>,
+    pub camera: Option<ModelCamera>,
+}
+
+impl Model {
+    pub fn triangle_count(&self) -> usize {
+        self.meshes.iter().map(|m| m.mesh.triangle_count()).sum()
+    }
+}
+
+/// The material of surfaces that name none: light grey, matte.
+pub fn default_material() -> Material {
+    Material::diffuse(Vec3::splat(0.8))
+}
+
+/// Builds a mesh from loader buffers, naming the file in validation errors.
+pub fn mesh(
+    path: &Path,
+    what: &str,
+    positions: Vec<[f32; 3]>,
+    indices: Vec<[u32; 3]>,
+    normals: Option<Vec<[f32; 3]>>,
+    uvs: Option<Vec<[f32; 2]>>,
+) -> Result<TriangleMesh, LoadError> {
+    let fail = |e: crate::embree::EmbreeError| LoadError::Geometry {
+        at: Location::file(path),
+        message: format!("{what}: {e}"),
+    };
+    let mut m = TriangleMesh::new(positions, indices).map_err(fail)?;
+    if let Some(n) = normals {
+        m = m.with_normals(n).map_err(fail)?;
+    }
+    if let Some(uv) = uvs {
+        m = m.with_uvs(uv).map_err(fail)?;
+    }
+    Ok(m)
+}
+
+/// Bounds of a set of objects, if any has extent.
+pub fn bounds(objects: &[Object]) -> Option<(Vec3, Vec3)> {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for o in objects {
+        match o {
+            Object::Sphere { center, radius, .. } => {
+                lo = lo.min(*center - *radius);
+                hi = hi.max(*center + *radius);
+            }
+            Object::Mesh { mesh, .. } => {
+                for p in mesh.positions() {
+                    let p = Vec3::from(*p);
+                    lo = lo.min(p);
+                    hi = hi.max(p);
+                }
+            }
+        }
+    }
+    (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+}
+
+/// An eye position that frames bounds `(lo, hi)` from the front-right-above (+Z is the front,
+/// as in glTF), with vertical field of view `vfov_deg` and aspect `aspect` (width / height).
+pub fn frame(lo: Vec3, hi: Vec3, vfov_deg: f32, aspect: f32) -> (Vec3, Vec3) {
+    let center = (lo + hi) * 0.5;
+    let radius = ((hi - lo).length() * 0.5).max(1e-3);
+    let vertical = vfov_deg.to_radians() * 0.5;
+    let horizontal = (vertical.tan() * aspect).atan();
+    let half = vertical.min(horizontal);
+    let distance = radius / half.sin() * 1.05;
+    let dir = Vec3::new(0.45, 0.35, 1.0).normalize();
+    (center + dir * distance, center)
+}
+
+/// A key light from above, behind and to the left of a camera looking along `forward`.
+pub fn default_light(forward: Vec3) -> Light {
+    let right = forward.cross(Vec3::Y).normalize_or(Vec3::X);
+    let direction = (forward * 0.5 + right * 0.35 - Vec3::Y).normalize();
+    Light::Directional {
+        direction,
+        irradiance: Vec3::splat(2.2),
+    }
+}
+
+/// The sky of scenes that do not set one (the paper scene's).
+pub fn default_background() -> Background {
+    Background {
+        horizon: Vec3::new(0.75, 0.82, 0.95),
+        zenith: Vec3::new(0.3, 0.45, 0.8),
+    }
+}
+
+/// Default image size.
+pub const DEFAULT_WIDTH: u32 = 640;
+pub const DEFAULT_HEIGHT: u32 = 480;
+/// Default vertical field of view, degrees.
+pub const DEFAULT_VFOV: f32 = 40.0;
+/// Default aperture radius for a bare model, as a fraction of its bounds' diagonal.
+pub const MODEL_APERTURE_FRACTION: f32 = 0.02;
+
+/// A scene around a model file: the model's meshes and materials, the glTF camera if it has
+/// one (else a view framing the model), a small aperture focused on the bounds' centre, one
+/// key light, some ambient light and the default sky.
+pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
+    if model.meshes.is_empty() {
+        return Err(LoadError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    let mut materials: Vec<Material> = model.materials.into_iter().map(|(_, m)| m).collect();
+    let default = materials.len();
+    materials.push(default_material());
+    let objects: Vec<Object> = model
+        .meshes
+        .into_iter()
+        .map(|m| Object::Mesh {
+            mesh: m.mesh,
+            materials: MeshMaterials::One(m.material.unwrap_or(default)),
+        })
+        .collect();
+    let (lo, hi) = bounds(&objects).ok_or_else(|| LoadError::Empty {
+        path: path.to_path_buf(),
+    })?;
+    let center = (lo + hi) * 0.5;
+    let diagonal = (hi - lo).length().max(1e-3);
+
+    let (mut width, mut height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
+    let (eye, look_at, up, vfov_deg) = match model.camera {
+        Some(c) => {
+            if let Some(aspect) = c.aspect.filter(|a| a.is_finite() && *a > 0.05 && *a < 20.0) {
+                width = DEFAULT_WIDTH;
+                height = ((DEFAULT_WIDTH as f32 / aspect).round() as u32).max(1);
+            }
+            let along = (center - c.eye).dot(c.forward);
+            let up = if c.up.cross(c.forward).length_squared() > 1e-6 {
+                c.up
+            } else {
+                Vec3::Y
+            };
+            (c.eye, c.eye + c.forward * along.max(1e-3), up, c.vfov_deg)
+        }
+        None => {
+            let (eye, look_at) = frame(lo, hi, DEFAULT_VFOV, width as f32 / height as f32);
+            (eye, look_at, Vec3::Y, DEFAULT_VFOV)
+        }
+    };
+    // Focus on the bounds' centre when it is in front of the camera, else on the look-at point.
+    let focus = if (center - eye).dot(look_at - eye) > 0.0 {
+        center
+    } else {
+        look_at
+    };
+    if width == 0 || height == 0 {
+        (width, height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
+    }
+    let name = path
+        .file_stem()
+        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+    Ok(SceneDesc {
+        name,
+        camera: CameraSpec {
+            eye,
+            look_at,
+            up,
+            vfov_deg,
+            width,
+            height,
+            lens: LensSpec::Aperture {
+                radius: MODEL_APERTURE_FRACTION * diagonal,
+            },
+            focus: Focus::Point(focus),
+            aperture: ApertureShape::default(),
+        },
+        materials,
+        objects,
+        lights: vec![default_light((look_at - eye).normalize_or(Vec3::NEG_Z))],
+        ambient: Vec3::splat(0.15),
+        background: default_background(),
+        spp: None,
+        interval_factor: None,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normals_use_the_inverse_transpose() {
+        let t = Transform::from_srt(Vec3::new(2.0, 1.0, 1.0), Mat3::IDENTITY, Vec3::ZERO).unwrap();
+        // A 45-degree surface stretched along x gets a normal tilted towards x less.
+        let n = Vec3::from(t.normal([1.0, 1.0, 0.0]));
+        assert!(
+            (n - Vec3::new(0.5, 1.0, 0.0).normalize()).length() < 1e-6,
+            "{n}"
+        );
+        assert!(
+            Transform::from_srt(Vec3::new(0.0, 1.0, 1.0), Mat3::IDENTITY, Vec3::ZERO).is_none()
+        );
+        let m = Transform::from_srt(Vec3::new(-1.0, 1.0, 1.0), Mat3::IDENTITY, Vec3::ZERO).unwrap();
+        assert!(m.mirrors);
+    }
+
+    #[test]
+    fn euler_rotates_x_then_y_then_z() {
+        let r = euler_xyz_deg(Vec3::new(90.0, 90.0, 0.0));
+        // X first takes +Y to +Z, then Y takes +Z to +X.
+        assert!((r * Vec3::Y - Vec3::X).length() < 1e-6);
+    }
+
+    #[test]
+    fn framing_sees_the_whole_bounds() {
+        let (lo, hi) = (Vec3::splat(-1.0), Vec3::splat(1.0));
+        let (eye, look_at) = frame(lo, hi, 40.0, 4.0 / 3.0);
+        assert_eq!(look_at, Vec3::ZERO);
+        let d = eye.length();
+        assert!(d * (20f32).to_radians().sin() >= 3f32.sqrt(), "{d}");
+    }
+}

@@ -1,0 +1,132 @@
+//! Image textures: PNG and JPEG files decoded with `image`, converted to linear RGB, and shared
+//! between the materials that use them.
+
+use std::collections::HashMap;
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use glam::Vec3;
+
+use super::error::LoadError;
+use crate::shade::{ImageTexture, Wrap};
+
+/// The sRGB transfer function, inverted: an encoded value in [0, 1] to linear.
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Decodes a PNG or JPEG image. Colour textures are sRGB-encoded (`srgb`: converted to linear
+/// here); data textures are not. Alpha is ignored.
+pub fn decode(bytes: &[u8], srgb: bool, wrap: Wrap) -> Result<ImageTexture, String> {
+    let reader = image::ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?;
+    if reader.format().is_none() {
+        return Err("not a PNG or JPEG image (unrecognised format)".into());
+    }
+    let img = reader.decode().map_err(|e| format!("cannot decode: {e}"))?;
+    let (width, height) = (img.width() as usize, img.height() as usize);
+    if width == 0 || height == 0 {
+        return Err(format!("the image is empty ({width}x{height})"));
+    }
+    let texels: Vec<Vec3> = match img {
+        image::DynamicImage::ImageLuma8(_)
+        | image::DynamicImage::ImageLumaA8(_)
+        | image::DynamicImage::ImageRgb8(_)
+        | image::DynamicImage::ImageRgba8(_) => {
+            let lut: [f32; 256] = std::array::from_fn(|i| {
+                let v = i as f32 / 255.0;
+                if srgb { srgb_to_linear(v) } else { v }
+            });
+            let rgb = img.into_rgb8();
+            rgb.pixels()
+                .map(|p| Vec3::new(lut[p[0] as usize], lut[p[1] as usize], lut[p[2] as usize]))
+                .collect()
+        }
+        other => {
+            let rgb = other.into_rgb32f();
+            rgb.pixels()
+                .map(|p| {
+                    let c = Vec3::new(p[0], p[1], p[2]);
+                    if srgb {
+                        Vec3::new(
+                            srgb_to_linear(c.x),
+                            srgb_to_linear(c.y),
+                            srgb_to_linear(c.z),
+                        )
+                    } else {
+                        c
+                    }
+                })
+                .collect()
+        }
+    };
+    if texels.iter().any(|t| !t.is_finite()) {
+        return Err("the image has non-finite texels".into());
+    }
+    Ok(ImageTexture {
+        width,
+        height,
+        texels,
+        wrap,
+    })
+}
+
+/// Decoded textures by (file, sRGB, wrap), so a file used by many materials is decoded once.
+#[derive(Default)]
+pub struct TextureCache {
+    files: HashMap<(PathBuf, bool, bool), Arc<ImageTexture>>,
+}
+
+impl TextureCache {
+    /// The texture in image file `path`.
+    pub fn file(
+        &mut self,
+        path: &Path,
+        srgb: bool,
+        wrap: Wrap,
+    ) -> Result<Arc<ImageTexture>, LoadError> {
+        let key = (path.to_path_buf(), srgb, wrap == Wrap::Repeat);
+        if let Some(t) = self.files.get(&key) {
+            return Ok(t.clone());
+        }
+        let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+        let texture = Arc::new(
+            decode(&bytes, srgb, wrap).map_err(|message| LoadError::Image {
+                path: path.to_path_buf(),
+                message,
+            })?,
+        );
+        self.files.insert(key, texture.clone());
+        Ok(texture)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn srgb_decoding_is_linearised() {
+        assert_eq!(srgb_to_linear(0.0), 0.0);
+        assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
+        assert!((srgb_to_linear(0.5) - 0.214).abs() < 1e-3);
+        let mut png = Vec::new();
+        image::RgbImage::from_raw(2, 1, vec![255, 128, 0, 0, 0, 255])
+            .unwrap()
+            .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
+        let t = decode(&png, true, Wrap::Clamp).unwrap();
+        assert_eq!((t.width, t.height), (2, 1));
+        assert!((t.texels[0].y - 0.2158).abs() < 1e-3, "{:?}", t.texels[0]);
+        let raw = decode(&png, false, Wrap::Clamp).unwrap();
+        assert!((raw.texels[0].y - 128.0 / 255.0).abs() < 1e-6);
+        assert!(decode(&png[..png.len() / 2], true, Wrap::Clamp).is_err());
+        assert!(decode(b"not an image", true, Wrap::Clamp).is_err());
+    }
+}
