@@ -994,6 +994,31 @@ fn tiny_gltf(indices: &[u16]) -> (serde_json::Value, Vec<u8>) {
 }
 
 #[test]
+fn gltf_strips_fans_and_unindexed_triangles_load() {
+    let dir = scratch("gltfmodes");
+    let (doc, bin) = tiny_gltf(&[0, 1, 2]);
+    for (mode, indexed, tris) in [(4, false, 1), (5, true, 1), (6, true, 1), (0, true, 0)] {
+        let mut d = doc.clone();
+        d["meshes"][0]["primitives"][0]["mode"] = serde_json::json!(mode);
+        if !indexed {
+            d["meshes"][0]["primitives"][0]
+                .as_object_mut()
+                .unwrap()
+                .remove("indices");
+        }
+        let path = dir.join(format!("mode{mode}.glb"));
+        std::fs::write(&path, scene_assets::glb(&d, &bin)).unwrap();
+        match load(&path) {
+            Ok(desc) => assert_eq!(meshes(&desc)[0].0.triangle_count(), tris, "mode {mode}"),
+            Err(e) => {
+                assert_eq!(tris, 0, "mode {mode}: {e}");
+                assert_names(&e.to_string(), "mode0.glb", &["no triangle meshes"]);
+            }
+        }
+    }
+}
+
+#[test]
 fn malformed_and_truncated_gltf_files_are_rejected() {
     let dir = scratch("gltfbad");
     let gltf = std::fs::read(assets().join("vase.gltf")).unwrap();

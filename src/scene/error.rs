@@ -4,8 +4,6 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
-use crate::limits::MemoryError;
-
 /// Where in an input file something went wrong.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Location {
@@ -116,9 +114,6 @@ pub enum LoadError {
     /// A scene without anything to see.
     #[error("{}: the scene has no objects (expected at least one [[objects]] entry or a mesh with triangles)", path.display())]
     Empty { path: PathBuf },
-    /// An image too large for the available memory.
-    #[error("{}: {source}", path.display())]
-    Memory { path: PathBuf, source: MemoryError },
 }
 
 impl LoadError {
@@ -212,11 +207,14 @@ pub fn key_path(src: &str, offset: usize) -> Option<String> {
     // The enclosing table, counting earlier headers of the same array of tables.
     let mut table: Option<(String, bool, usize)> = None;
     let mut counts: std::collections::HashMap<String, usize> = Default::default();
+    // Name -> (is an array of tables, headers seen).
+    let mut arrays: std::collections::HashMap<String, (bool, usize)> = Default::default();
     for l in src[..line_start].lines() {
         if let Some((name, array)) = header(l) {
             let n = counts.entry(name.to_string()).or_default();
             table = Some((name.to_string(), array, *n));
             *n += 1;
+            arrays.insert(name.to_string(), (array, *n));
         }
     }
     if header(line).is_some() {
@@ -248,11 +246,18 @@ pub fn key_path(src: &str, offset: usize) -> Option<String> {
             .find_map(key_before_eq)
             .map(str::to_string)
     };
-    let table = table.map(
-        |(name, array, n)| {
-            if array { format!("{name}[{n}]") } else { name }
-        },
-    );
+    let table = table.map(|(name, array, n)| {
+        if array {
+            return format!("{name}[{n}]");
+        }
+        // `[objects.extra]` after `[[objects]]` is a sub-table of the latest array element.
+        if let Some((first, rest)) = name.split_once('.')
+            && let Some(&(true, count)) = arrays.get(first)
+        {
+            return format!("{first}[{}].{rest}", count - 1);
+        }
+        name
+    });
     match (table, key) {
         (Some(t), Some(k)) => Some(format!("{t}.{k}")),
         (None, Some(k)) => Some(k),
@@ -279,5 +284,8 @@ mod tests {
         let src = "[camera]\neye = [\n  0,\n  inf, 1]\n";
         let off = src.find("inf").unwrap();
         assert_eq!(key_path(src, off).as_deref(), Some("camera.eye"));
+        let src = "[[objects]]\n[[objects]]\n[objects.extra]\nx = 1\n";
+        let off = src.find("x =").unwrap();
+        assert_eq!(key_path(src, off).as_deref(), Some("objects[1].extra.x"));
     }
 }

@@ -428,32 +428,45 @@ impl Loader<'_> {
             .flatten()
             .map(|it| it.into_f32().map(|[u, v]| [u, 1.0 - v]).collect())
             .filter(|t: &Vec<[f32; 2]>| t.len() == p.len());
-        let idx: Vec<u32> = match reader.read_indices() {
-            Some(it) if prim.indices().is_some() => it.into_u32().collect(),
-            _ => (0..p.len() as u32).collect(),
-        };
-        let mut tris: Vec<[u32; 3]> = match mode {
-            Mode::Triangles => {
-                let mut t = Vec::with_capacity(idx.len() / 3 + 1);
-                t.extend(idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
-                t
-            }
-            Mode::TriangleStrip => idx
-                .windows(3)
-                .enumerate()
-                .map(|(i, w)| {
-                    if i % 2 == 0 {
-                        [w[0], w[1], w[2]]
-                    } else {
-                        [w[1], w[0], w[2]]
+        let indices = prim
+            .indices()
+            .and_then(|_| reader.read_indices())
+            .map(|r| r.into_u32());
+        let mut tris: Vec<[u32; 3]> = if mode == Mode::Triangles {
+            // Straight into triangles (one spare slot for TriangleMesh's padding).
+            let count = prim.indices().map_or(p.len(), |a| a.count()) / 3;
+            let mut t = Vec::with_capacity(count + 1);
+            match indices {
+                Some(mut it) => {
+                    while let (Some(a), Some(b), Some(c)) = (it.next(), it.next(), it.next()) {
+                        t.push([a, b, c]);
                     }
-                })
-                .collect(),
-            _ => (2..idx.len())
-                .map(|i| [idx[0], idx[i - 1], idx[i]])
-                .collect(),
+                }
+                None => t.extend((0..count as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2])),
+            }
+            t
+        } else {
+            let idx: Vec<u32> = match indices {
+                Some(it) => it.collect(),
+                None => (0..p.len() as u32).collect(),
+            };
+            if mode == Mode::TriangleStrip {
+                idx.windows(3)
+                    .enumerate()
+                    .map(|(i, w)| {
+                        if i % 2 == 0 {
+                            [w[0], w[1], w[2]]
+                        } else {
+                            [w[1], w[0], w[2]]
+                        }
+                    })
+                    .collect()
+            } else {
+                (2..idx.len())
+                    .map(|i| [idx[0], idx[i - 1], idx[i]])
+                    .collect()
+            }
         };
-        drop(idx);
         if world.mirrors {
             for t in &mut tris {
                 t.swap(1, 2);
