@@ -138,6 +138,8 @@ impl TriangleMesh {
     }
 
     /// The buffers Embree shares: (vertex pointer, vertex count, index pointer, triangle count).
+    /// They are never modified after construction, so the pointers stay valid for as long as
+    /// this mesh or any clone of it lives.
     pub(super) fn raw_buffers(&self) -> (*const [f32; 3], usize, *const [u32; 3], usize) {
         (
             self.positions.as_ptr(),
