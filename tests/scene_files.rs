@@ -323,6 +323,22 @@ fn gltf_and_glb_load_nodes_materials_uvs_and_camera() {
 }
 
 #[test]
+fn the_world_shares_mesh_buffers_with_the_description() {
+    // No copy of a (possibly huge) mesh when the world is built: Embree reads the very buffers
+    // the loader filled.
+    let desc = load(&assets().join("vase.glb")).unwrap();
+    let world = world(&desc);
+    let mesh = meshes(&desc)[0].0;
+    match world.scene.geometry(dofray::embree::GeometryId(0)) {
+        dofray::embree::Geometry::Mesh(m) => {
+            assert_eq!(m.positions().as_ptr(), mesh.positions().as_ptr());
+            assert_eq!(m.indices().as_ptr(), mesh.indices().as_ptr());
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
 fn a_bare_obj_gets_a_camera_that_frames_it() {
     let desc = load(&assets().join("torus.obj")).unwrap();
     let cam = desc.camera.build(|_| None).unwrap();
