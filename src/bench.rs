@@ -46,10 +46,10 @@ pub enum BenchError {
     Metrics(#[from] metrics::MetricsError),
     #[error("repeat must be at least 1")]
     ZeroRepeat,
-    #[error("reference cache {path}: {source}")]
+    #[error("reference cache {}: {error}", path.display())]
     Cache {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
 }
 
@@ -161,10 +161,19 @@ pub fn reference_key(desc: &SceneDesc, camera: &Camera, settings: &RenderSetting
         settings.filter,
         settings.bounces
     );
-    format!(
-        "{}-{}x{}-{:016x}",
-        desc.name, camera.width, camera.height, h.0
-    )
+    // The name becomes part of a file name: keep it to characters every file system accepts.
+    let name: String = desc
+        .name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("{name}-{}x{}-{:016x}", camera.width, camera.height, h.0)
 }
 
 const MAGIC: &[u8; 8] = b"DOFREF01";
@@ -239,7 +248,7 @@ fn reference(
     let (film, stats) = render::render(world, camera, &settings, progress)?;
     let rgb = film.rgb();
     if let Some(path) = path {
-        write_reference(&path, w, h, &rgb).map_err(|source| BenchError::Cache { path, source })?;
+        write_reference(&path, w, h, &rgb).map_err(|error| BenchError::Cache { path, error })?;
     }
     Ok((rgb, false, stats.seconds))
 }

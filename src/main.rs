@@ -41,7 +41,8 @@ enum Command {
 /// Which scene, at what size, through which lens: shared by `render` and `bench`.
 #[derive(Args)]
 struct SceneArgs {
-    /// A built-in scene name (see `dofray scenes`).
+    /// What to render: a built-in scene name (see `dofray scenes`), a TOML scene file
+    /// (docs/scene-format.md), or a model file (.obj, .gltf, .glb) framed by a default camera.
     #[arg(default_value = "paper")]
     scene: String,
     /// Image width in pixels (default: the scene's; height follows the aspect if not given).
@@ -193,16 +194,6 @@ impl Progress for Bar {
     }
 }
 
-fn load_scene(name: &str) -> Result<SceneDesc> {
-    builtin::builtin(name).with_context(|| {
-        let names: Vec<&str> = builtin::BUILTIN.iter().map(|(n, _)| *n).collect();
-        format!(
-            "unknown scene {name:?}: expected one of {}",
-            names.join(", ")
-        )
-    })
-}
-
 /// Applies command-line overrides of size and lens to the scene's camera.
 fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     let cam = &mut desc.camera;
@@ -211,6 +202,7 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
             bail!("{name} must be at least 1 pixel");
         }
     }
+    let (old_w, old_h) = (cam.width, cam.height);
     match (a.width, a.height) {
         (Some(w), Some(h)) => (cam.width, cam.height) = (w, h),
         (Some(w), None) => {
@@ -226,6 +218,14 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
             cam.height = h;
         }
         (None, None) => {}
+    }
+    // An autofocus pixel from the scene names a place in the picture: keep it there at a new size.
+    if let Focus::Pixel { x, y } = &mut cam.focus {
+        let scale = |v: u32, from: u32, to: u32| {
+            (((v as f64 + 0.5) * to as f64 / from.max(1) as f64) as u32).min(to.saturating_sub(1))
+        };
+        *x = scale(*x, old_w, cam.width);
+        *y = scale(*y, old_h, cam.height);
     }
     if let Some(r) = a.aperture_radius {
         if !(r.is_finite() && r >= 0.0) {
@@ -270,8 +270,9 @@ struct Prepared {
 }
 
 fn prepare(a: &SceneArgs) -> Result<Prepared> {
-    let mut desc = load_scene(&a.scene)?;
+    let mut desc = dofray::scene::load(&a.scene)?;
     apply_overrides(&mut desc, a)?;
+    dofray::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(a.threads.unwrap_or(0))
         .build()

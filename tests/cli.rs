@@ -251,3 +251,83 @@ fn bench_reports_every_mode_and_caches_the_reference() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+fn repo(rel: &str) -> String {
+    format!("{}/{rel}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn renders_scene_files_and_models() {
+    let dir = scratch("files");
+    for (input, extra) in [
+        ("scenes/paper.toml", &["--autofocus", "40,30"][..]),
+        ("scenes/gallery.toml", &[][..]),
+        ("scenes/vase.toml", &["--spp", "4", "--f-number", "2"][..]),
+        ("scenes/assets/vase.glb", &[][..]),
+        ("scenes/assets/torus.obj", &["--mode", "dense"][..]),
+    ] {
+        let png = dir.join("out.png");
+        let _ = std::fs::remove_file(&png);
+        let path = repo(input);
+        let mut args = vec![
+            "render",
+            &path,
+            "-o",
+            png.to_str().unwrap(),
+            "--width",
+            "80",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let out = dofray(&args);
+        assert!(out.status.success(), "{input}: {}", stderr(&out));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(json["width"], 80, "{input}");
+        let img = image::open(&png).unwrap().to_rgb8();
+        assert_eq!(img.width(), 80, "{input}");
+        // Something is in view: the picture is not one flat colour.
+        let first = img.get_pixel(0, 0);
+        assert!(img.pixels().any(|p| p != first), "{input}: a flat image");
+    }
+}
+
+#[test]
+fn bad_scene_files_and_huge_images_are_refused_without_output() {
+    let dir = scratch("refuse");
+    let png = dir.join("out.png");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[camera]\nvfov = 40\nfov = 40\n").unwrap();
+    let missing = dir.join("missing.obj");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (vec![bad.display().to_string()], "bad.toml:3"),
+        (vec![bad.display().to_string()], "unknown field `fov`"),
+        (
+            vec![missing.display().to_string()],
+            "missing.obj: cannot read",
+        ),
+        (
+            vec!["no-such-scene".into()],
+            "unknown scene \"no-such-scene\"",
+        ),
+        (
+            vec![
+                "paper".into(),
+                "--width".into(),
+                "400000".into(),
+                "--height".into(),
+                "400000".into(),
+            ],
+            "choose a smaller --width/--height",
+        ),
+    ];
+    for (args, expected) in cases {
+        let mut all = vec!["render".to_string(), "-o".into(), png.display().to_string()];
+        all.extend(args);
+        let all: Vec<&str> = all.iter().map(String::as_str).collect();
+        let out = dofray(&all);
+        assert!(!out.status.success(), "{all:?} succeeded");
+        let err = stderr(&out);
+        assert!(err.contains(expected), "{all:?}: {err}");
+        assert!(!png.exists(), "{all:?} left an output file");
+    }
+}

@@ -79,10 +79,10 @@ pub enum LoadError {
     )]
     UnknownScene { name: String, builtins: String },
     /// A file could not be opened or read.
-    #[error("{}: cannot read: {source}", path.display())]
+    #[error("{}: cannot read: {error}", path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The TOML scene is malformed: a syntax error, an unknown key, a wrong type or an
     /// invalid value (NaN, infinity, a size or radius <= 0, ...).
@@ -93,11 +93,12 @@ pub enum LoadError {
     #[error("{at}: {message}")]
     Invalid { at: Location, message: String },
     /// A file the scene (or a model) refers to failed to load.
-    #[error("{at}: {what}: {source}")]
+    #[error("{at}: {what}: {cause}")]
     Referenced {
         at: Location,
         what: &'static str,
-        source: Box<LoadError>,
+        /// The referenced file's own error (its message is part of this one's).
+        cause: Box<LoadError>,
     },
     /// A malformed Wavefront OBJ or MTL file.
     #[error("{at}: {message}")]
@@ -117,10 +118,10 @@ pub enum LoadError {
 }
 
 impl LoadError {
-    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+    pub(crate) fn io(path: &Path, error: std::io::Error) -> Self {
         Self::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         }
     }
 
@@ -136,14 +137,14 @@ impl LoadError {
         Self::Referenced {
             at,
             what,
-            source: Box::new(self),
+            cause: Box::new(self),
         }
     }
 
     /// The innermost error (the one a referenced file reported).
     pub fn root(&self) -> &LoadError {
         match self {
-            Self::Referenced { source, .. } => source.root(),
+            Self::Referenced { cause, .. } => cause.root(),
             other => other,
         }
     }
