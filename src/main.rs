@@ -12,6 +12,8 @@ use dofray::output;
 use dofray::render::{self, Mode, Progress, RenderSettings};
 use dofray::sampler::LensFilter;
 use dofray::scene::{SceneDesc, World, builtin};
+use dofray::shade::Light;
+use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Depth-of-field ray tracer on Intel Embree.
@@ -84,6 +86,14 @@ struct SceneArgs {
     /// Anamorphic ratio: aperture height over width (1 = round bokeh).
     #[arg(long)]
     anamorphic: Option<f32>,
+    /// A light replacing the scene's lights (repeat for several):
+    /// `point:X,Y,Z[:INTENSITY]` (a point light, radiant intensity, default 100) or
+    /// `sun:DX,DY,DZ[:IRRADIANCE]` (a directional light shining along DX,DY,DZ, default 2).
+    #[arg(long = "light", value_name = "KIND:X,Y,Z[:POWER]", value_parser = parse_light)]
+    lights: Vec<Light>,
+    /// Ambient light level (replaces the scene's).
+    #[arg(long)]
+    ambient: Option<f32>,
 }
 
 #[derive(Args)]
@@ -156,6 +166,48 @@ fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
     let (x, y) = s.split_once(',').ok_or("expected X,Y (e.g. 320,240)")?;
     let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?}: {e}"));
     Ok((parse(x)?, parse(y)?))
+}
+
+fn parse_light(s: &str) -> Result<Light, String> {
+    let mut parts = s.split(':');
+    let kind = parts.next().unwrap_or_default();
+    let xyz = parts
+        .next()
+        .ok_or("expected KIND:X,Y,Z[:POWER], e.g. point:0,5,0:100 or sun:-1,-2,1")?;
+    let number = |v: &str| match v.trim().parse::<f32>() {
+        Ok(n) if n.is_finite() => Ok(n),
+        _ => Err(format!("{v:?} is not a finite number")),
+    };
+    let v: Vec<f32> = xyz.split(',').map(number).collect::<Result<_, _>>()?;
+    let [x, y, z] = v[..] else {
+        return Err(format!("expected three coordinates X,Y,Z, got {xyz:?}"));
+    };
+    let power = parts.next().map(number).transpose()?;
+    if parts.next().is_some() {
+        return Err("expected at most KIND:X,Y,Z:POWER".into());
+    }
+    if power.is_some_and(|p| p < 0.0) {
+        return Err("the light's power must be >= 0".into());
+    }
+    let p = Vec3::new(x, y, z);
+    match kind {
+        "point" => Ok(Light::Point {
+            position: p,
+            intensity: Vec3::splat(power.unwrap_or(100.0)),
+        }),
+        "sun" | "directional" => {
+            if p.length_squared() == 0.0 {
+                return Err("a sun's direction must not be 0,0,0".into());
+            }
+            Ok(Light::Directional {
+                direction: p.normalize(),
+                irradiance: Vec3::splat(power.unwrap_or(2.0)),
+            })
+        }
+        other => Err(format!(
+            "unknown light kind {other:?}: expected point or sun"
+        )),
+    }
 }
 
 /// An indicatif bar on stderr; it draws nothing when stderr is not a terminal.
@@ -257,6 +309,15 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     }
     if let Some(r) = a.anamorphic {
         cam.aperture.anamorphic = r;
+    }
+    if !a.lights.is_empty() {
+        desc.lights = a.lights.clone();
+    }
+    if let Some(v) = a.ambient {
+        if !(v.is_finite() && v >= 0.0) {
+            bail!("--ambient must be a finite number >= 0, got {v}");
+        }
+        desc.ambient = Vec3::splat(v);
     }
     Ok(())
 }

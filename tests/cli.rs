@@ -331,3 +331,42 @@ fn bad_scene_files_and_huge_images_are_refused_without_output() {
         assert!(!png.exists(), "{all:?} left an output file");
     }
 }
+
+#[test]
+fn lights_from_the_command_line_replace_the_scenes() {
+    let dir = scratch("lights");
+    let mean = |light: &str| {
+        let png = dir.join("l.png");
+        let out = dofray(&[
+            "render",
+            "-o",
+            png.to_str().unwrap(),
+            "--width",
+            "48",
+            "--mode",
+            "pinhole",
+            "--ambient",
+            "0",
+            "--light",
+            light,
+            "--quiet",
+        ]);
+        assert!(out.status.success(), "{light}: {}", stderr(&out));
+        let img = image::open(&png).unwrap().to_luma8();
+        img.pixels().map(|p| p.0[0] as f64).sum::<f64>() / img.pixels().len() as f64
+    };
+    let bright = mean("sun:0.3,-1,0.2:3");
+    let dim = mean("sun:0.3,-1,0.2:0.5");
+    assert!(bright > dim + 10.0, "bright {bright} vs dim {dim}");
+
+    for (light, expected) in [
+        ("moon:1,2,3", "expected point or sun"),
+        ("point:1,2", "three coordinates"),
+        ("point:1,2,3:-4", ">= 0"),
+        ("sun:0,0,0", "must not be 0,0,0"),
+    ] {
+        let out = dofray(&["render", "-o", "x.png", "--light", light]);
+        assert!(!out.status.success(), "{light} accepted");
+        assert!(stderr(&out).contains(expected), "{light}: {}", stderr(&out));
+    }
+}
