@@ -335,6 +335,36 @@ impl Camera {
         Ray::new(origin, (focus_point - origin).normalize())
     }
 
+    /// [`Camera::lens_ray_through`] for 16 lens positions at once (x and y coordinates), bit for
+    /// bit equal to it lane by lane; writes origins and unit directions as structure of arrays
+    /// (x, y, z components), the layout of a ray packet.
+    pub fn lens_rays16(
+        &self,
+        focus_point: Vec3,
+        lens_x: &[f32; 16],
+        lens_y: &[f32; 16],
+        origin: &mut [[f32; 16]; 3],
+        dir: &mut [[f32; 16]; 3],
+    ) {
+        let (eye, right, up, r) = (self.eye, self.right, self.up, self.aperture_radius);
+        for lane in 0..16 {
+            let (lx, ly) = (lens_x[lane], lens_y[lane]);
+            // Written out as glam evaluates `eye + (right * lx + up * ly) * r` and
+            // `(focus - origin).normalize()` (v * (1 / sqrt(x*x + y*y + z*z))).
+            let ox = eye.x + (right.x * lx + up.x * ly) * r;
+            let oy = eye.y + (right.y * lx + up.y * ly) * r;
+            let oz = eye.z + (right.z * lx + up.z * ly) * r;
+            let (dx, dy, dz) = (focus_point.x - ox, focus_point.y - oy, focus_point.z - oz);
+            let recip = 1.0 / (dx * dx + dy * dy + dz * dz).sqrt();
+            origin[0][lane] = ox;
+            origin[1][lane] = oy;
+            origin[2][lane] = oz;
+            dir[0][lane] = dx * recip;
+            dir[1][lane] = dy * recip;
+            dir[2][lane] = dz * recip;
+        }
+    }
+
     /// Depth along the view axis of the point at parameter `t` of `ray` (unit direction).
     pub fn depth_along_axis(&self, ray: &Ray, t: f32) -> f32 {
         (ray.at(t) - self.eye).dot(self.forward)
@@ -478,6 +508,25 @@ mod tests {
         }
         let p = cam.project(target).unwrap();
         assert!((p - Vec2::new(100.5, 50.5)).length() < 1e-2, "{p}");
+    }
+
+    #[test]
+    fn batched_lens_rays_equal_single_ones_bit_for_bit() {
+        let cam = spec(LensSpec::Aperture { radius: 0.3 })
+            .build(no_autofocus)
+            .unwrap();
+        let focus = cam.focus_point(100.5, 50.5);
+        let lx: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.37).sin());
+        let ly: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.61).cos() * 1.3);
+        let (mut origin, mut dir) = ([[0.0; 16]; 3], [[0.0; 16]; 3]);
+        cam.lens_rays16(focus, &lx, &ly, &mut origin, &mut dir);
+        for lane in 0..16 {
+            let r = cam.lens_ray_through(focus, Vec2::new(lx[lane], ly[lane]));
+            for k in 0..3 {
+                assert_eq!(origin[k][lane].to_bits(), r.origin[k].to_bits());
+                assert_eq!(dir[k][lane].to_bits(), r.dir[k].to_bits());
+            }
+        }
     }
 
     #[test]

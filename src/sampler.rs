@@ -27,7 +27,7 @@ fn sobol0(i: u32) -> u32 {
 }
 
 /// Second Sobol dimension (its generator matrix is Pascal's triangle mod 2).
-fn sobol1(mut i: u32) -> u32 {
+const fn sobol1(mut i: u32) -> u32 {
     let mut v = 1u32 << 31;
     let mut r = 0;
     while i != 0 {
@@ -40,6 +40,23 @@ fn sobol1(mut i: u32) -> u32 {
     r
 }
 
+/// `sobol1(i)` bit-reversed for i in 0..16. Sobol dimensions are linear over GF(2) in the
+/// bits of the index, so `sobol1(base | i) == sobol1(base) ^ sobol1(i)` when base's low four
+/// bits are zero: one packet of 16 samples needs one full `sobol1` and 16 table lookups.
+const SOBOL1_LOW_REVERSED: [u32; 16] = {
+    let mut t = [0u32; 16];
+    let mut i = 0;
+    while i < 16 {
+        t[i] = sobol1(i as u32).reverse_bits();
+        i += 1;
+    }
+    t
+};
+
+/// Samples per [`PixelSampler::get16`] call.
+pub const BATCH: usize = 16;
+
+#[inline]
 fn laine_karras(mut x: u32, seed: u32) -> u32 {
     x = x.wrapping_add(seed);
     x ^= x.wrapping_mul(0x6c50_b47c);
@@ -54,9 +71,11 @@ fn owen_scramble(x: u32, seed: u32) -> u32 {
     laine_karras(x.reverse_bits(), seed).reverse_bits()
 }
 
+#[inline]
 fn to_unit(x: u32) -> f32 {
-    // 24 bits keep the result strictly below 1.0 in f32.
-    (x >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+    // 24 bits keep the result strictly below 1.0 in f32 (and fit an i32, whose conversion
+    // vectorises; the value is the same as converting the u32).
+    ((x >> 8) as i32) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
 /// The sample stream of one pixel: point `i` of an Owen-scrambled 2D Sobol sequence.
@@ -83,30 +102,67 @@ impl PixelSampler {
             to_unit(owen_scramble(sobol1(i), self.seed_y)),
         )
     }
+
+    /// Samples `first .. first + 16` as structure of arrays (x coordinates, y coordinates),
+    /// bit for bit equal to [`PixelSampler::get`] of each index. `first` must be a multiple of
+    /// 16 (other values fall back to `get`).
+    pub fn get16(&self, first: u32) -> ([f32; BATCH], [f32; BATCH]) {
+        let mut u = [0.0f32; BATCH];
+        let mut v = [0.0f32; BATCH];
+        if first % BATCH as u32 != 0 {
+            for lane in 0..BATCH {
+                let p = self.get(first.wrapping_add(lane as u32));
+                (u[lane], v[lane]) = (p.x, p.y);
+            }
+            return (u, v);
+        }
+        // owen_scramble(sobol0(i)) = reverse(laine_karras(i)): sobol0 is a bit reversal.
+        let high_y = sobol1(first).reverse_bits();
+        for lane in 0..BATCH {
+            let x = laine_karras(first | lane as u32, self.seed_x);
+            let y = laine_karras(high_y ^ SOBOL1_LOW_REVERSED[lane], self.seed_y);
+            u[lane] = to_unit(x.reverse_bits());
+            v[lane] = to_unit(y.reverse_bits());
+        }
+        (u, v)
+    }
 }
 
 /// Shirley & Chiu's concentric map from the unit square to the unit disc (area-preserving,
 /// low distortion, so stratification survives).
 pub fn concentric_disc(u: Vec2) -> Vec2 {
-    let a = 2.0 * u.x - 1.0;
-    let b = 2.0 * u.y - 1.0;
-    if a == 0.0 && b == 0.0 {
-        return Vec2::ZERO;
-    }
-    // phi = pi/4 * t with |t| <= 1 in the first case, pi/2 - pi/4 * t in the second, whose
-    // cosine and sine are the first case's swapped; so only |angle| <= pi/4 is ever evaluated.
-    if a.abs() > b.abs() {
-        let (s, c) = sin_cos_quarter(FRAC_PI_4 * (b / a));
-        Vec2::new(a * c, a * s)
+    let (x, y) = concentric_xy(u.x, u.y);
+    Vec2::new(x, y)
+}
+
+/// [`concentric_disc`] on coordinates, without branches (the choice of wedge is random per
+/// sample, so a branch mispredicts half the time; selects also let batches vectorise).
+#[inline(always)]
+fn concentric_xy(ux: f32, uy: f32) -> (f32, f32) {
+    let a = 2.0 * ux - 1.0;
+    let b = 2.0 * uy - 1.0;
+    // phi = pi/4 * t with |t| <= 1 when |a| > |b|, else pi/2 - pi/4 * t, whose cosine and
+    // sine are the first case's swapped; so only |angle| <= pi/4 is ever evaluated.
+    let first = a.abs() > b.abs();
+    let (r, other) = if first { (a, b) } else { (b, a) };
+    let (s, c) = sin_cos_quarter(FRAC_PI_4 * (other / r));
+    let (x, y) = if first {
+        (r * c, r * s)
     } else {
-        let (s, c) = sin_cos_quarter(FRAC_PI_4 * (a / b));
-        Vec2::new(b * s, b * c)
+        (r * s, r * c)
+    };
+    // The centre maps to itself (0 / 0 above).
+    if a == 0.0 && b == 0.0 {
+        (0.0, 0.0)
+    } else {
+        (x, y)
     }
 }
 
 /// sin and cos for |x| <= pi/4 by their Taylor series to x^11 / x^12 (error below 2e-9, far
 /// under f32 precision): the concentric map runs once per lens sample, and libm's general
 /// sincosf was a visible share of a dense render.
+#[inline(always)]
 fn sin_cos_quarter(x: f32) -> (f32, f32) {
     let x2 = x * x;
     let sin = x
@@ -144,6 +200,31 @@ pub fn aperture_point(u: Vec2, shape: &ApertureShape) -> Vec2 {
         concentric_disc(u)
     };
     Vec2::new(p.x, p.y * shape.anamorphic)
+}
+
+/// [`aperture_point`] of 16 samples given as structure of arrays (as [`PixelSampler::get16`]
+/// returns them), bit for bit equal to it lane by lane.
+pub fn aperture_points16(
+    u: &[f32; BATCH],
+    v: &[f32; BATCH],
+    shape: &ApertureShape,
+) -> ([f32; BATCH], [f32; BATCH]) {
+    let mut x = [0.0f32; BATCH];
+    let mut y = [0.0f32; BATCH];
+    if shape.blades >= 3 {
+        for lane in 0..BATCH {
+            let p = aperture_point(Vec2::new(u[lane], v[lane]), shape);
+            (x[lane], y[lane]) = (p.x, p.y);
+        }
+    } else {
+        let stretch = shape.anamorphic;
+        for lane in 0..BATCH {
+            let (px, py) = concentric_xy(u[lane], v[lane]);
+            x[lane] = px;
+            y[lane] = py * stretch;
+        }
+    }
+    (x, y)
 }
 
 /// How lens samples are weighted when averaged: the filter over the CoC that the seed leaves
@@ -214,6 +295,90 @@ mod tests {
         assert_eq!(a.get(5), b.get(5));
         assert_ne!(a.get(5), c.get(5));
         assert_ne!(a.get(5), d.get(5));
+    }
+
+    #[test]
+    fn batches_equal_single_samples_bit_for_bit() {
+        let shapes = [
+            ApertureShape::default(),
+            ApertureShape {
+                anamorphic: 1.7,
+                ..ApertureShape::default()
+            },
+            ApertureShape {
+                blades: 6,
+                rotation_deg: 10.0,
+                anamorphic: 0.6,
+            },
+        ];
+        for pixel in 0..200u64 {
+            let s = PixelSampler::new(3, pixel * 7919);
+            for first in [0u32, 16, 32, 48, 1024, 4096 + 32, 7, u32::MAX - 15] {
+                let (u, v) = s.get16(first);
+                for lane in 0..BATCH {
+                    let p = s.get(first.wrapping_add(lane as u32));
+                    assert_eq!(
+                        (u[lane].to_bits(), v[lane].to_bits()),
+                        (p.x.to_bits(), p.y.to_bits())
+                    );
+                }
+                for shape in &shapes {
+                    let (x, y) = aperture_points16(&u, &v, shape);
+                    for lane in 0..BATCH {
+                        let p = aperture_point(Vec2::new(u[lane], v[lane]), shape);
+                        assert_eq!(
+                            (x[lane].to_bits(), y[lane].to_bits()),
+                            (p.x.to_bits(), p.y.to_bits())
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// The concentric map as first written, with branches: the branchless one must agree.
+    fn concentric_disc_branching(u: Vec2) -> Vec2 {
+        let a = 2.0 * u.x - 1.0;
+        let b = 2.0 * u.y - 1.0;
+        if a == 0.0 && b == 0.0 {
+            return Vec2::ZERO;
+        }
+        if a.abs() > b.abs() {
+            let (s, c) = sin_cos_quarter(FRAC_PI_4 * (b / a));
+            Vec2::new(a * c, a * s)
+        } else {
+            let (s, c) = sin_cos_quarter(FRAC_PI_4 * (a / b));
+            Vec2::new(b * s, b * c)
+        }
+    }
+
+    #[test]
+    fn branchless_concentric_map_is_unchanged() {
+        let n = 257;
+        for i in 0..=n {
+            for j in 0..=n {
+                let u = Vec2::new(i as f32 / n as f32, j as f32 / n as f32);
+                let (a, b) = (concentric_disc(u), concentric_disc_branching(u));
+                assert_eq!(
+                    (a.x.to_bits(), a.y.to_bits()),
+                    (b.x.to_bits(), b.y.to_bits()),
+                    "{u}"
+                );
+            }
+        }
+        for u in [
+            Vec2::splat(0.5),
+            Vec2::new(0.5, 0.0),
+            Vec2::new(0.0, 0.5),
+            Vec2::ZERO,
+        ] {
+            let (a, b) = (concentric_disc(u), concentric_disc_branching(u));
+            assert_eq!(
+                (a.x.to_bits(), a.y.to_bits()),
+                (b.x.to_bits(), b.y.to_bits()),
+                "{u}"
+            );
+        }
     }
 
     #[test]
