@@ -23,7 +23,7 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
-use crate::sampler::{LensFilter, PixelSampler, aperture_point};
+use crate::sampler::{LensFilter, PixelSampler, aperture_points16};
 use crate::scene::World;
 pub use film::Film;
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
@@ -170,6 +170,7 @@ fn pinhole_pass(
             let mut color = vec![Vec3::ZERO; rows * w];
             let mut depth = vec![f32::INFINITY; rows * w];
             let mut packet = RayPacket16::new();
+            let mut scratch = trace::Scratch::new();
             let mut radiance = [Vec3::ZERO; LANES];
             let mut t_hit = [0.0f32; LANES];
             let mut local = Tally::new(settings.record_rays);
@@ -193,6 +194,7 @@ fn pinhole_pass(
                     &mut radiance,
                     &mut t_hit,
                     settings.bounces,
+                    &mut scratch,
                     &mut local,
                 );
                 for (lane, &(x, y)) in lanes.iter().enumerate() {
@@ -222,46 +224,72 @@ fn pinhole_pass(
     }
 }
 
+/// Per-thread scratch space for [`shade_site`]: a packet for the lens samples and
+/// [`trace_and_shade`](trace::trace_and_shade)'s own.
+#[derive(Default)]
+pub struct SiteScratch {
+    packet: RayPacket16,
+    trace: trace::Scratch,
+}
+
+impl SiteScratch {
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
 /// Shades one sample site with `spp` lens samples traced as 16-wide packets, weighted by the
-/// lens filter. Deterministic in (seed, pixel, sample index).
+/// lens filter. Deterministic in (seed, pixel, sample index); `scratch` only saves building
+/// packets per site (its contents on entry do not matter).
 pub fn shade_site(
     world: &World,
     camera: &Camera,
     settings: &RenderSettings,
-    x: usize,
-    y: usize,
+    (x, y): (usize, usize),
+    scratch: &mut SiteScratch,
     tally: &mut Tally,
 ) -> Vec3 {
+    let SiteScratch { packet, trace } = scratch;
     let sampler = PixelSampler::new(settings.seed, (y * camera.width as usize + x) as u64);
     let focus = camera.focus_point(x as f32 + 0.5, y as f32 + 0.5);
-    let mut packet = RayPacket16::new();
     let mut radiance = [Vec3::ZERO; LANES];
     let mut t_hit = [0.0f32; LANES];
-    let mut weights = [0.0f32; LANES];
+    let mut origin = [[0.0f32; LANES]; 3];
+    let mut dir = [[0.0f32; LANES]; 3];
     let mut sum = Vec3::ZERO;
     let mut weight_sum = 0.0f32;
     let mut index = 0;
     while index < settings.spp {
-        packet.clear();
         let n = (settings.spp - index).min(LANES as u32) as usize;
-        for (lane, weight) in weights.iter_mut().enumerate().take(n) {
-            let lens: Vec2 = aperture_point(sampler.get(index + lane as u32), &camera.aperture);
-            *weight = settings.filter.weight(lens, camera.aperture.anamorphic);
-            packet.set(lane, &camera.lens_ray_through(focus, lens));
-        }
+        // All 16 lanes are computed (lanes past `n` are simply not traced).
+        let (u, v) = sampler.get16(index);
+        let (lens_x, lens_y) = aperture_points16(&u, &v, &camera.aperture);
+        camera.lens_rays16(focus, &lens_x, &lens_y, &mut origin, &mut dir);
+        packet.set_lanes(n, &origin, &dir);
         trace::trace_and_shade(
             world,
-            &mut packet,
+            packet,
             RayKind::Primary,
             RayHint::Coherent,
             &mut radiance,
             &mut t_hit,
             settings.bounces,
+            trace,
             tally,
         );
-        for (c, w) in radiance.iter().zip(&weights).take(n) {
-            sum += *c * *w;
-            weight_sum += w;
+        if settings.filter == LensFilter::Box {
+            // Every weight is 1 (and c * 1 == c exactly).
+            for c in &radiance[..n] {
+                sum += *c;
+                weight_sum += 1.0;
+            }
+        } else {
+            for lane in 0..n {
+                let lens = Vec2::new(lens_x[lane], lens_y[lane]);
+                let w = settings.filter.weight(lens, camera.aperture.anamorphic);
+                sum += radiance[lane] * w;
+                weight_sum += w;
+            }
         }
         index += n as u32;
     }
@@ -311,13 +339,15 @@ pub fn render(
                 let mut local = Tally::new(settings.record_rays);
                 let mut color = film.color[y * w..(y + 1) * w].to_vec();
                 let mut samples = vec![0u32; w];
+                let mut scratch = SiteScratch::new();
                 for x in 0..w {
                     let p = y * w + x;
                     if !sites[p] {
                         continue;
                     }
                     if blurred[p] {
-                        color[x] = shade_site(world, camera, settings, x, y, &mut local);
+                        color[x] =
+                            shade_site(world, camera, settings, (x, y), &mut scratch, &mut local);
                         samples[x] = settings.spp;
                     } else {
                         samples[x] = 1;

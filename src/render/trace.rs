@@ -134,6 +134,27 @@ fn surface_epsilon(p: Vec3) -> f32 {
     1e-4 * (1.0 + p.abs().max_element())
 }
 
+/// Per-thread scratch space for [`trace_and_shade`]: the shadow packet and, built on first
+/// use, the packet and scratch space of the next mirror bounce. Reusing it keeps packets
+/// (about 2 KB each) from being built and zeroed per call.
+#[derive(Default)]
+pub struct Scratch {
+    shadow: ShadowPacket16,
+    bounce: Option<Box<(RayPacket16, Scratch)>>,
+}
+
+impl Scratch {
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+const NO_POINT: SurfacePoint = SurfacePoint {
+    position: Vec3::ZERO,
+    normal: Vec3::ZERO,
+    uv: glam::Vec2::ZERO,
+};
+
 /// Traces the active lanes of `packet` (rays of `kind`) and writes each lane's radiance to
 /// `radiance` (inactive lanes are left as they were). Writes the hit distance to `t_hit`
 /// (infinite for misses). `bounces` is how many mirror reflections may still follow.
@@ -146,20 +167,24 @@ pub fn trace_and_shade(
     radiance: &mut [Vec3; LANES],
     t_hit: &mut [f32; LANES],
     bounces: u32,
+    scratch: &mut Scratch,
     tally: &mut Tally,
 ) {
     tally.count(kind, packet.active_count());
     tally.record(kind, hint, |l| packet.is_active(l).then(|| packet.ray(l)));
     world.scene.intersect16(packet, hint);
-    let mut points = [None::<(SurfacePoint, usize)>; LANES];
+    // Lanes whose ray hit a surface (bit per lane), and what they hit.
+    let mut hits = 0u32;
+    let mut points = [NO_POINT; LANES];
+    let mut material_of = [0usize; LANES];
     let mut albedo = [Vec3::ZERO; LANES];
-    let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); LANES];
+    let mut dirs = [Vec3::ZERO; LANES];
     for lane in 0..LANES {
         if !packet.is_active(lane) {
             continue;
         }
         let ray = packet.ray(lane);
-        rays[lane] = ray;
+        dirs[lane] = ray.dir;
         match packet.hit(lane) {
             None => {
                 radiance[lane] = world.background.radiance(ray.dir);
@@ -167,25 +192,33 @@ pub fn trace_and_shade(
             }
             Some(hit) => {
                 let sp = world.surface_point(&ray, &hit);
-                let material = world.material(&hit);
+                let m = world.material_index(&hit);
+                let material = &world.materials[m];
                 albedo[lane] = material.diffuse.sample(sp.uv);
                 radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror);
                 t_hit[lane] = hit.t;
-                points[lane] = Some((sp, world.material_index(&hit)));
+                points[lane] = sp;
+                material_of[lane] = m;
+                hits |= 1 << lane;
             }
         }
     }
+    if hits == 0 {
+        return;
+    }
 
-    let mut shadow = ShadowPacket16::new();
+    let shadow = &mut scratch.shadow;
+    let mut samples = [None; LANES];
     for light in &world.lights {
         shadow.clear();
-        let mut samples = [None; LANES];
         for lane in 0..LANES {
-            let Some((sp, _)) = &points[lane] else {
+            if hits & (1 << lane) == 0 {
                 continue;
-            };
+            }
+            let sp = &points[lane];
             let ls = light.sample(sp.position);
             if sp.normal.dot(ls.dir) <= 0.0 {
+                samples[lane] = None;
                 continue;
             }
             let eps = surface_epsilon(sp.position);
@@ -208,55 +241,53 @@ pub fn trace_and_shade(
         tally.record(RayKind::Shadow, RayHint::Coherent, |l| {
             shadow.is_active(l).then(|| shadow.ray(l))
         });
-        world.scene.occluded16(&mut shadow, RayHint::Coherent);
+        world.scene.occluded16(shadow, RayHint::Coherent);
         for lane in 0..LANES {
-            if let (Some(ls), Some((sp, m))) = (&samples[lane], &points[lane]) {
+            if hits & (1 << lane) == 0 {
+                continue;
+            }
+            if let Some(ls) = &samples[lane] {
                 if !shadow.occluded(lane) {
-                    let material = &world.materials[*m];
-                    radiance[lane] += shade::direct(material, albedo[lane], sp, rays[lane].dir, ls);
+                    let material = &world.materials[material_of[lane]];
+                    radiance[lane] +=
+                        shade::direct(material, albedo[lane], &points[lane], dirs[lane], ls);
                 }
             }
         }
     }
 
-    let reflects = |lane: usize| {
-        points[lane]
-            .as_ref()
-            .is_some_and(|(_, m)| world.materials[*m].mirror > 0.0)
-    };
+    let reflects =
+        |lane: usize| hits & (1 << lane) != 0 && world.materials[material_of[lane]].mirror > 0.0;
     if bounces == 0 || !(0..LANES).any(reflects) {
         return;
     }
-    let mut mirror = RayPacket16::new();
+    let (mirror, next) = &mut **scratch
+        .bounce
+        .get_or_insert_with(|| Box::new((RayPacket16::new(), Scratch::new())));
+    mirror.clear();
     for lane in (0..LANES).filter(|&l| reflects(l)) {
-        if let Some((sp, _)) = &points[lane] {
-            let d = rays[lane].dir;
-            let r = d - 2.0 * d.dot(sp.normal) * sp.normal;
-            let eps = surface_epsilon(sp.position);
-            mirror.set(lane, &Ray::new(sp.position + sp.normal * eps, r));
-        }
-    }
-    let active = mirror.active_count();
-    if active == 0 {
-        return;
+        let sp = &points[lane];
+        let d = dirs[lane];
+        let r = d - 2.0 * d.dot(sp.normal) * sp.normal;
+        let eps = surface_epsilon(sp.position);
+        mirror.set(lane, &Ray::new(sp.position + sp.normal * eps, r));
     }
     let mut reflected = [Vec3::ZERO; LANES];
     let mut t_unused = [0.0; LANES];
     trace_and_shade(
         world,
-        &mut mirror,
+        mirror,
         RayKind::Secondary,
         RayHint::Incoherent,
         &mut reflected,
         &mut t_unused,
         bounces - 1,
+        next,
         tally,
     );
     for lane in 0..LANES {
         if mirror.is_active(lane) {
-            if let Some((_, m)) = &points[lane] {
-                radiance[lane] += reflected[lane] * world.materials[*m].mirror;
-            }
+            radiance[lane] += reflected[lane] * world.materials[material_of[lane]].mirror;
         }
     }
 }
