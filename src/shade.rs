@@ -221,6 +221,36 @@ pub struct SurfacePoint {
     pub uv: Vec2,
 }
 
+/// The [`SurfacePoint`]s of a 16-ray packet, positions and normals as structure of arrays
+/// (x, y, z components) so per-lane arithmetic over them vectorises.
+#[derive(Debug, Clone)]
+pub struct SurfacePoints16 {
+    pub position: [[f32; 16]; 3],
+    pub normal: [[f32; 16]; 3],
+    pub uv: [Vec2; 16],
+}
+
+impl Default for SurfacePoints16 {
+    fn default() -> Self {
+        Self {
+            position: [[0.0; 16]; 3],
+            normal: [[0.0; 16]; 3],
+            uv: [Vec2::ZERO; 16],
+        }
+    }
+}
+
+impl SurfacePoints16 {
+    pub fn get(&self, lane: usize) -> SurfacePoint {
+        let (p, n) = (&self.position, &self.normal);
+        SurfacePoint {
+            position: Vec3::new(p[0][lane], p[1][lane], p[2][lane]),
+            normal: Vec3::new(n[0][lane], n[1][lane], n[2][lane]),
+            uv: self.uv[lane],
+        }
+    }
+}
+
 /// Direct lighting from one light through an unoccluded shadow ray: diffuse + highlight.
 pub fn direct(
     material: &Material,

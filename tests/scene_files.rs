@@ -166,6 +166,57 @@ fn every_scene_file_loads_builds_and_renders() {
     assert_eq!(names, ["gallery", "paper", "vase"]);
 }
 
+/// The packet-wide surface points the renderer shades equal `World::surface_point` of each
+/// lane bit for bit, on spheres, meshes with and without normals and UVs, and misses.
+#[test]
+fn packet_surface_points_equal_single_ones() {
+    use dofray::embree::{LANES, RayHint, RayPacket16};
+    use dofray::shade::SurfacePoints16;
+    for name in ["paper", "gallery", "vase"] {
+        let desc = load(&repo().join(format!("scenes/{name}.toml"))).unwrap();
+        let world = world(&desc);
+        let camera = desc.camera.build(|_| Some(1.0)).unwrap();
+        let mut packet = RayPacket16::new();
+        let mut points = SurfacePoints16::default();
+        let mut hit_lanes = 0;
+        for block in 0..200u32 {
+            packet.clear();
+            for lane in 0..LANES as u32 {
+                let i = block * LANES as u32 + lane;
+                let px = (i * 37 % camera.width) as f32 + 0.25;
+                let py = (i * 53 % camera.height) as f32 + 0.75;
+                // Inactive lanes mixed in: every fifth lane stays off.
+                if i % 5 != 3 {
+                    packet.set(lane as usize, &camera.pinhole_ray(px, py));
+                }
+            }
+            world.scene.intersect16(&mut packet, RayHint::Incoherent);
+            let hits = packet.hit_mask();
+            world.surface_points16(&packet, hits, &mut points);
+            for lane in 0..LANES {
+                let expected = packet.hit(lane).map(|hit| {
+                    let sp = world.surface_point(&packet.ray(lane), &hit);
+                    (sp.position, sp.normal, sp.uv)
+                });
+                assert_eq!(hits & (1 << lane) != 0, expected.is_some());
+                if let Some((p, n, uv)) = expected {
+                    let got = points.get(lane);
+                    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(
+                        bits(&got.position.to_array()),
+                        bits(&p.to_array()),
+                        "{name}"
+                    );
+                    assert_eq!(bits(&got.normal.to_array()), bits(&n.to_array()), "{name}");
+                    assert_eq!(bits(&got.uv.to_array()), bits(&uv.to_array()), "{name}");
+                    hit_lanes += 1;
+                }
+            }
+        }
+        assert!(hit_lanes > 1000, "{name}: {hit_lanes}");
+    }
+}
+
 #[test]
 fn the_mesh_scenes_use_meshes_and_image_textures() {
     for name in ["gallery", "vase"] {

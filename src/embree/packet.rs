@@ -165,6 +165,42 @@ impl RayPacket16 {
         self.valid.0 = std::array::from_fn(|lane| if lane < active { -1 } else { 0 });
     }
 
+    /// Ray origins of all lanes as structure of arrays (x, y, z).
+    pub fn origins(&self) -> [&[f32; LANES]; 3] {
+        let r = &self.rayhit.ray;
+        [&r.org_x, &r.org_y, &r.org_z]
+    }
+
+    /// Ray directions of all lanes as structure of arrays (x, y, z).
+    pub fn dirs(&self) -> [&[f32; LANES]; 3] {
+        let r = &self.rayhit.ray;
+        [&r.dir_x, &r.dir_y, &r.dir_z]
+    }
+
+    /// `tfar` of all lanes (after tracing: the hit distance of lanes that hit).
+    pub fn tfars(&self) -> &[f32; LANES] {
+        &self.rayhit.ray.tfar
+    }
+
+    /// Unnormalised geometric normals of all lanes as structure of arrays (x, y, z); only
+    /// meaningful in lanes that hit.
+    pub fn geometric_normals(&self) -> [&[f32; LANES]; 3] {
+        let h = &self.rayhit.hit;
+        [&h.Ng_x, &h.Ng_y, &h.Ng_z]
+    }
+
+    /// Bit `i` set: lane `i` is active and its ray hit something.
+    pub fn hit_mask(&self) -> u32 {
+        let h = &self.rayhit.hit;
+        let mut mask = 0;
+        for lane in 0..LANES {
+            if self.valid.0[lane] != 0 && h.geomID[lane] != sys::RTC_INVALID_GEOMETRY_ID {
+                mask |= 1 << lane;
+            }
+        }
+        mask
+    }
+
     /// Deactivates one lane; Embree will neither read nor write it.
     pub fn set_inactive(&mut self, lane: usize) {
         self.valid.0[lane] = 0;
@@ -229,6 +265,32 @@ impl ShadowPacket16 {
     pub fn set(&mut self, lane: usize, ray: &Ray) {
         init_ray(&mut self.rays, lane, ray);
         self.valid.0[lane] = -1;
+    }
+
+    /// Fills every lane with the segment from `origin` along `dir` for `t` in `[0, tfar]`
+    /// (structure of arrays) and activates the lanes whose bit is set in `active`. Equal to
+    /// `clear` then `set` of each active lane.
+    pub fn set_segments(
+        &mut self,
+        active: u32,
+        origin: &[[f32; LANES]; 3],
+        dir: &[[f32; LANES]; 3],
+        tfar: &[f32; LANES],
+    ) {
+        let raw = &mut self.rays;
+        raw.org_x = origin[0];
+        raw.org_y = origin[1];
+        raw.org_z = origin[2];
+        raw.dir_x = dir[0];
+        raw.dir_y = dir[1];
+        raw.dir_z = dir[2];
+        raw.tnear = [0.0; LANES];
+        raw.tfar = *tfar;
+        raw.time = [0.0; LANES];
+        raw.mask = [u32::MAX; LANES];
+        raw.id = std::array::from_fn(|lane| lane as u32);
+        raw.flags = [0; LANES];
+        self.valid.0 = std::array::from_fn(|lane| -(((active >> lane) & 1) as i32));
     }
 
     pub fn is_active(&self, lane: usize) -> bool {

@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::scene::World;
-use crate::shade::{self, SurfacePoint};
+use crate::shade::{self, Light, LightSample, SurfacePoints16};
 
 /// Rays traced, by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -140,6 +140,7 @@ fn surface_epsilon(p: Vec3) -> f32 {
 #[derive(Default)]
 pub struct Scratch {
     shadow: ShadowPacket16,
+    points: SurfacePoints16,
     bounce: Option<Box<(RayPacket16, Scratch)>>,
 }
 
@@ -148,12 +149,6 @@ impl Scratch {
         Self::default()
     }
 }
-
-const NO_POINT: SurfacePoint = SurfacePoint {
-    position: Vec3::ZERO,
-    normal: Vec3::ZERO,
-    uv: glam::Vec2::ZERO,
-};
 
 /// Traces the active lanes of `packet` (rays of `kind`) and writes each lane's radiance to
 /// `radiance` (inactive lanes are left as they were). Writes the hit distance to `t_hit`
@@ -173,85 +168,121 @@ pub fn trace_and_shade(
     tally.count(kind, packet.active_count());
     tally.record(kind, hint, |l| packet.is_active(l).then(|| packet.ray(l)));
     world.scene.intersect16(packet, hint);
-    // Lanes whose ray hit a surface (bit per lane), and what they hit.
-    let mut hits = 0u32;
-    let mut points = [NO_POINT; LANES];
-    let mut material_of = [0usize; LANES];
-    let mut albedo = [Vec3::ZERO; LANES];
-    let mut dirs = [Vec3::ZERO; LANES];
+    // Lanes whose ray hit a surface (bit per lane).
+    let hits = packet.hit_mask();
+    let dir = packet.dirs();
+    let view = |lane: usize| Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
     for lane in 0..LANES {
-        if !packet.is_active(lane) {
-            continue;
-        }
-        let ray = packet.ray(lane);
-        dirs[lane] = ray.dir;
-        match packet.hit(lane) {
-            None => {
-                radiance[lane] = world.background.radiance(ray.dir);
-                t_hit[lane] = f32::INFINITY;
-            }
-            Some(hit) => {
-                let sp = world.surface_point(&ray, &hit);
-                let m = world.material_index(&hit);
-                let material = &world.materials[m];
-                albedo[lane] = material.diffuse.sample(sp.uv);
-                radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror);
-                t_hit[lane] = hit.t;
-                points[lane] = sp;
-                material_of[lane] = m;
-                hits |= 1 << lane;
-            }
+        if packet.is_active(lane) && hits & (1 << lane) == 0 {
+            radiance[lane] = world.background.radiance(view(lane));
+            t_hit[lane] = f32::INFINITY;
         }
     }
     if hits == 0 {
         return;
     }
+    let points = &mut scratch.points;
+    world.surface_points16(packet, hits, points);
+    let mut material_of = [0usize; LANES];
+    let mut albedo = [Vec3::ZERO; LANES];
+    let tfar = packet.tfars();
+    for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+        let hit = packet.hit(lane).expect("lanes in `hits` hit");
+        let m = world.material_index(&hit);
+        let material = &world.materials[m];
+        albedo[lane] = material.diffuse.sample(points.uv[lane]);
+        radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror);
+        t_hit[lane] = tfar[lane];
+        material_of[lane] = m;
+    }
 
     let shadow = &mut scratch.shadow;
-    let mut samples = [None; LANES];
+    let (pos, nrm) = (&points.position, &points.normal);
+    // Shadow rays and light samples of all lanes, as structure of arrays.
+    let mut origin = [[0.0f32; LANES]; 3];
+    let mut to_light = [[0.0f32; LANES]; 3];
+    let mut seg_end = [0.0f32; LANES];
+    let mut distance = [0.0f32; LANES];
+    let mut irradiance = [[0.0f32; LANES]; 3];
     for light in &world.lights {
-        shadow.clear();
+        // Light::sample, written out over all lanes.
+        match *light {
+            Light::Point {
+                position,
+                intensity,
+            } => {
+                for lane in 0..LANES {
+                    let d = [
+                        position.x - pos[0][lane],
+                        position.y - pos[1][lane],
+                        position.z - pos[2][lane],
+                    ];
+                    let dist2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).max(1e-12);
+                    let dist = dist2.sqrt();
+                    for k in 0..3 {
+                        to_light[k][lane] = d[k] / dist;
+                        irradiance[k][lane] = intensity[k] / dist2;
+                    }
+                    distance[lane] = dist;
+                }
+            }
+            Light::Directional { .. } => {
+                let ls = light.sample(Vec3::ZERO);
+                for k in 0..3 {
+                    to_light[k] = [ls.dir[k]; LANES];
+                    irradiance[k] = [ls.irradiance[k]; LANES];
+                }
+                distance = [ls.distance; LANES];
+            }
+        }
+        let mut lit = 0u32;
         for lane in 0..LANES {
-            if hits & (1 << lane) == 0 {
-                continue;
-            }
-            let sp = &points[lane];
-            let ls = light.sample(sp.position);
-            if sp.normal.dot(ls.dir) <= 0.0 {
-                samples[lane] = None;
-                continue;
-            }
-            let eps = surface_epsilon(sp.position);
-            let tfar = if ls.distance.is_finite() {
-                ls.distance * (1.0 - 1e-4) - eps
+            let cos = nrm[0][lane] * to_light[0][lane]
+                + nrm[1][lane] * to_light[1][lane]
+                + nrm[2][lane] * to_light[2][lane];
+            // Not `cos > 0`: a NaN cosine counts as lit, as in the per-lane code.
+            let facing_away = cos <= 0.0;
+            lit |= (!facing_away as u32) << lane;
+            // surface_epsilon, then the segment towards the light.
+            let max = |a: f32, b: f32| if a > b { a } else { b };
+            let extent = max(
+                pos[0][lane].abs(),
+                max(pos[1][lane].abs(), pos[2][lane].abs()),
+            );
+            let eps = 1e-4 * (1.0 + extent);
+            seg_end[lane] = if distance[lane].is_finite() {
+                distance[lane] * (1.0 - 1e-4) - eps
             } else {
                 f32::INFINITY
             };
-            shadow.set(
-                lane,
-                &Ray::segment(sp.position + sp.normal * eps, ls.dir, 0.0, tfar),
-            );
-            samples[lane] = Some(ls);
+            for k in 0..3 {
+                origin[k][lane] = pos[k][lane] + nrm[k][lane] * eps;
+            }
         }
-        let active = shadow.active_count();
-        if active == 0 {
+        let lit = lit & hits;
+        if lit == 0 {
             continue;
         }
-        tally.count(RayKind::Shadow, active);
+        shadow.set_segments(lit, &origin, &to_light, &seg_end);
+        tally.count(RayKind::Shadow, lit.count_ones() as usize);
         tally.record(RayKind::Shadow, RayHint::Coherent, |l| {
             shadow.is_active(l).then(|| shadow.ray(l))
         });
         world.scene.occluded16(shadow, RayHint::Coherent);
-        for lane in 0..LANES {
-            if hits & (1 << lane) == 0 {
-                continue;
-            }
-            if let Some(ls) = &samples[lane] {
-                if !shadow.occluded(lane) {
-                    let material = &world.materials[material_of[lane]];
-                    radiance[lane] +=
-                        shade::direct(material, albedo[lane], &points[lane], dirs[lane], ls);
-                }
+        for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
+            if !shadow.occluded(lane) {
+                let ls = LightSample {
+                    dir: Vec3::new(to_light[0][lane], to_light[1][lane], to_light[2][lane]),
+                    distance: distance[lane],
+                    irradiance: Vec3::new(
+                        irradiance[0][lane],
+                        irradiance[1][lane],
+                        irradiance[2][lane],
+                    ),
+                };
+                let material = &world.materials[material_of[lane]];
+                radiance[lane] +=
+                    shade::direct(material, albedo[lane], &points.get(lane), view(lane), &ls);
             }
         }
     }
@@ -266,8 +297,8 @@ pub fn trace_and_shade(
         .get_or_insert_with(|| Box::new((RayPacket16::new(), Scratch::new())));
     mirror.clear();
     for lane in (0..LANES).filter(|&l| reflects(l)) {
-        let sp = &points[lane];
-        let d = dirs[lane];
+        let sp = &points.get(lane);
+        let d = view(lane);
         let r = d - 2.0 * d.dot(sp.normal) * sp.normal;
         let eps = surface_epsilon(sp.position);
         mirror.set(lane, &Ray::new(sp.position + sp.normal * eps, r));

@@ -17,9 +17,10 @@ use glam::{Vec2, Vec3};
 
 use crate::camera::CameraSpec;
 use crate::embree::{
-    self, Device, EmbreeError, Geometry, Hit, Ray, SceneBuilder, Spheres, TriangleMesh,
+    self, Device, EmbreeError, Geometry, Hit, LANES, Ray, RayPacket16, SceneBuilder, Spheres,
+    TriangleMesh,
 };
-use crate::shade::{Light, Material, SurfacePoint};
+use crate::shade::{Light, Material, SurfacePoint, SurfacePoints16};
 
 /// Why a scene could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -248,6 +249,101 @@ impl World {
     /// The material of the surface a hit found.
     pub fn material(&self, hit: &Hit) -> &Material {
         &self.materials[self.material_index(hit)]
+    }
+
+    /// [`World::surface_point`] of every lane of a traced `packet` whose bit is set in `hits`
+    /// (lanes that hit; see [`RayPacket16::hit_mask`]), bit for bit equal to it. The
+    /// arithmetic common to all lanes (positions, normalisation) runs over all 16 lanes at once;
+    /// other lanes of `out` get unspecified values.
+    pub fn surface_points16(&self, packet: &RayPacket16, hits: u32, out: &mut SurfacePoints16) {
+        let (org, dir, t) = (packet.origins(), packet.dirs(), packet.tfars());
+        let ng = packet.geometric_normals();
+        for k in 0..3 {
+            for lane in 0..LANES {
+                out.position[k][lane] = org[k][lane] + dir[k][lane] * t[lane];
+            }
+        }
+        let pos = &out.position;
+        // Per lane, the vector whose normalize_or_zero is the normal (`raw`), unless the lane
+        // already has its normal (`done`: interpolated mesh normals).
+        let mut raw = [[0.0f32; LANES]; 3];
+        let mut done = 0u32;
+        let mut sphere = 0u32;
+        for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+            let hit = packet.hit(lane).expect("lanes in `hits` hit");
+            match self.scene.geometry(hit.geometry) {
+                Geometry::Spheres(s) => {
+                    let c = s.center(hit.prim);
+                    let r = s.radius(hit.prim);
+                    raw[0][lane] = (pos[0][lane] - c.x) / r;
+                    raw[1][lane] = (pos[1][lane] - c.y) / r;
+                    raw[2][lane] = (pos[2][lane] - c.z) / r;
+                    sphere |= 1 << lane;
+                }
+                Geometry::Mesh(m) => {
+                    match m
+                        .shading_normal(hit.prim, hit.u, hit.v)
+                        .filter(|n| *n != Vec3::ZERO)
+                    {
+                        Some(n) => {
+                            for k in 0..3 {
+                                out.normal[k][lane] = n[k];
+                            }
+                            done |= 1 << lane;
+                        }
+                        None => {
+                            for k in 0..3 {
+                                raw[k][lane] = ng[k][lane];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // normalize_or_zero, as glam evaluates it, in every lane.
+        let mut unit = [[0.0f32; LANES]; 3];
+        for lane in 0..LANES {
+            let (x, y, z) = (raw[0][lane], raw[1][lane], raw[2][lane]);
+            let rcp = 1.0 / (x * x + y * y + z * z).sqrt();
+            let ok = rcp.is_finite() && rcp > 0.0;
+            unit[0][lane] = if ok { x * rcp } else { 0.0 };
+            unit[1][lane] = if ok { y * rcp } else { 0.0 };
+            unit[2][lane] = if ok { z * rcp } else { 0.0 };
+        }
+        for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+            let normal = if done & (1 << lane) != 0 {
+                Vec3::new(
+                    out.normal[0][lane],
+                    out.normal[1][lane],
+                    out.normal[2][lane],
+                )
+            } else {
+                Vec3::new(unit[0][lane], unit[1][lane], unit[2][lane])
+            };
+            out.uv[lane] = if sphere & (1 << lane) != 0 {
+                let d = normal;
+                Vec2::new(
+                    0.5 + d.z.atan2(d.x) / TAU,
+                    0.5 + d.y.clamp(-1.0, 1.0).asin() / PI,
+                )
+            } else {
+                let hit = packet.hit(lane).expect("lanes in `hits` hit");
+                let Geometry::Mesh(m) = self.scene.geometry(hit.geometry) else {
+                    unreachable!("non-sphere lanes hit meshes")
+                };
+                m.uv(hit.prim, hit.u, hit.v)
+                    .unwrap_or(Vec2::new(pos[0][lane], pos[2][lane]))
+            };
+            let view = Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
+            let normal = if normal.dot(view) > 0.0 {
+                -normal
+            } else {
+                normal
+            };
+            for k in 0..3 {
+                out.normal[k][lane] = normal[k];
+            }
+        }
     }
 
     /// Position, shading normal (facing the ray) and texture coordinates of a hit.
