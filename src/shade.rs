@@ -55,7 +55,7 @@ impl ImageTexture {
         if !(x.is_finite() && y.is_finite()) {
             return Vec3::ZERO;
         }
-        let (x0, y0) = (x.floor(), y.floor());
+        let (x0, y0) = (floor(x), floor(y));
         let (fx, fy) = (x - x0, y - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
         let top = self.texel(x0, y0).lerp(self.texel(x0 + 1, y0), fx);
@@ -82,9 +82,30 @@ pub enum Texture {
     },
 }
 
+/// `x.floor()`, bit for bit (including -0.0, infinities and NaN), without the libm call that
+/// `f32::floor` compiles to on baseline x86-64 (no SSE4.1 `roundss`); textures floor every
+/// lookup.
+#[inline]
+pub fn floor(x: f32) -> f32 {
+    // From 2^23 on every f32 is an integer (and NaN fails the test, so it is returned too).
+    if x.abs() < 8_388_608.0 {
+        // Truncation toward zero is exact here; copysign keeps floor(-0.0) = -0.0 and makes
+        // truncations of (-1, 0) -0.0, which the correction below turns into -1.
+        let t = ((x as i32) as f32).copysign(x);
+        if t > x { t - 1.0 } else { t }
+    } else {
+        x
+    }
+}
+
+#[inline]
+fn floor2(v: Vec2) -> Vec2 {
+    Vec2::new(floor(v.x), floor(v.y))
+}
+
 /// 2D value noise in [0, 1] from a hashed integer lattice, smoothly interpolated.
 fn value_noise(p: Vec2) -> f32 {
-    let cell = p.floor();
+    let cell = floor2(p);
     let f = p - cell;
     let s = f * f * (Vec2::splat(3.0) - 2.0 * f);
     let corner = |dx: f32, dy: f32| {
@@ -114,9 +135,10 @@ fn fbm(p: Vec2) -> f32 {
 impl Pattern {
     /// The mix between colour a (0) and b (1) at `p` (UV times scale).
     pub fn mix(self, p: Vec2) -> f32 {
-        let fract = p - p.floor();
+        let cell = floor2(p);
+        let fract = p - cell;
         match self {
-            Self::Checker => ((p.x.floor() + p.y.floor()) as i64 & 1) as f32,
+            Self::Checker => ((cell.x + cell.y) as i64 & 1) as f32,
             Self::Stripes => (fract.x < 0.5) as u8 as f32,
             Self::Grid => (fract.x < 0.1 || fract.y < 0.1) as u8 as f32,
             Self::Dots => ((fract - Vec2::splat(0.5)).length() < 0.3) as u8 as f32,
@@ -277,6 +299,48 @@ pub fn direct(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floor_equals_libm_bit_for_bit() {
+        let mut values = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            1.5,
+            -1.5,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            1e-45,
+            -1e-45,
+            0.99999994,
+            -0.99999994,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            -8_388_608.0,
+            16_777_217.0,
+            3e9,
+            -3e9,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ];
+        // Every 97th bit pattern covers all exponents and both signs.
+        values.extend((0..u32::MAX / 97).map(|i| f32::from_bits(i.wrapping_mul(97))));
+        for x in values {
+            let (a, b) = (floor(x), x.floor());
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                "{x:e} ({:#x}): {a:e} vs {b:e}",
+                x.to_bits()
+            );
+        }
+    }
 
     #[test]
     fn checker_alternates_per_cell() {
