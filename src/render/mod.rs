@@ -333,12 +333,15 @@ pub fn render(
         };
         let sites = maps::site_mask(&film.interval, w, h);
         progress.start(settings.mode.name(), h as u64);
-        let rows: Vec<(Vec<Vec3>, Vec<u32>, Tally)> = (0..h)
-            .into_par_iter()
-            .map(|y| {
+        // Rows are shaded in place (each row's colour starts as its pinhole colour); their
+        // tallies are merged in row order, so the ray log does not depend on scheduling.
+        let tallies: Vec<Tally> = film
+            .color
+            .par_chunks_mut(w)
+            .zip(film.samples.par_chunks_mut(w))
+            .enumerate()
+            .map(|(y, (color, samples))| {
                 let mut local = Tally::new(settings.record_rays);
-                let mut color = film.color[y * w..(y + 1) * w].to_vec();
-                let mut samples = vec![0u32; w];
                 let mut scratch = SiteScratch::new();
                 for x in 0..w {
                     let p = y * w + x;
@@ -354,13 +357,11 @@ pub fn render(
                     }
                 }
                 progress.advance(1);
-                (color, samples, local)
+                local
             })
             .collect();
-        for (y, (color, samples, local)) in rows.into_iter().enumerate() {
+        for local in tallies {
             tally.merge(local);
-            film.color[y * w..(y + 1) * w].copy_from_slice(&color);
-            film.samples[y * w..(y + 1) * w].copy_from_slice(&samples);
         }
         interpolate::interpolate(&mut film.color, &film.interval, &sites, w, h);
         stats.sample_sites = sites.iter().filter(|&&s| s).count() as u64;
