@@ -117,6 +117,12 @@ pub struct RenderStats {
     pub seconds: f64,
     /// Time of the pinhole pass alone (included in `seconds`).
     pub pinhole_seconds: f64,
+    /// Time spent building the blur, interval and site maps (included in `seconds`).
+    pub maps_seconds: f64,
+    /// Time spent shading sample sites with lens samples (included in `seconds`).
+    pub sites_seconds: f64,
+    /// Time spent interpolating between sites (included in `seconds`).
+    pub interpolate_seconds: f64,
     pub rays: RayCounts,
     /// Pixels shaded directly (the rest were interpolated).
     pub sample_sites: u64,
@@ -150,7 +156,7 @@ pub struct NoProgress;
 impl Progress for NoProgress {}
 
 /// Pinhole pass: one ray per pixel through the lens centre, 16 pixels (a 4 x 4 block) per
-/// packet. Fills the film's colour, depth and CoC.
+/// packet. Fills the film's colour, depth and CoC, a band of 4 rows per task, in place.
 fn pinhole_pass(
     world: &World,
     camera: &Camera,
@@ -159,16 +165,18 @@ fn pinhole_pass(
     tally: &mut Tally,
     progress: &dyn Progress,
 ) {
+    const BAND: usize = 4;
     let (w, h) = (film.width, film.height);
-    let band_rows = 4;
-    progress.start("pinhole", h.div_ceil(band_rows) as u64);
-    let bands: Vec<(usize, Vec<Vec3>, Vec<f32>, Tally)> = (0..h.div_ceil(band_rows))
-        .into_par_iter()
-        .map(|band| {
-            let y_start = band * band_rows;
-            let rows = band_rows.min(h - y_start);
-            let mut color = vec![Vec3::ZERO; rows * w];
-            let mut depth = vec![f32::INFINITY; rows * w];
+    progress.start("pinhole", h.div_ceil(BAND) as u64);
+    let tallies: Vec<Tally> = film
+        .color
+        .par_chunks_mut(BAND * w)
+        .zip(film.depth.par_chunks_mut(BAND * w))
+        .zip(film.coc.par_chunks_mut(BAND * w))
+        .enumerate()
+        .map(|(band, ((color, depth), coc))| {
+            let y_start = band * BAND;
+            let rows = color.len() / w;
             let mut packet = RayPacket16::new();
             let mut scratch = trace::Scratch::new();
             let mut radiance = [Vec3::ZERO; LANES];
@@ -176,14 +184,14 @@ fn pinhole_pass(
             let mut local = Tally::new(settings.record_rays);
             for x_start in (0..w).step_by(4) {
                 packet.clear();
-                let mut lanes = [(0usize, 0usize); LANES];
+                // Film index of each lane's pixel within the band.
+                let mut lanes = [usize::MAX; LANES];
                 for (lane, slot) in lanes.iter_mut().enumerate() {
-                    let (dx, dy) = (lane % 4, lane / 4);
-                    let (x, y) = (x_start + dx, dy);
+                    let (x, y) = (x_start + lane % 4, lane / 4);
                     if x < w && y < rows {
                         let ray = camera.pinhole_ray(x as f32 + 0.5, (y_start + y) as f32 + 0.5);
                         packet.set(lane, &ray);
-                        *slot = (x, y);
+                        *slot = y * w + x;
                     }
                 }
                 trace::trace_and_shade(
@@ -197,30 +205,26 @@ fn pinhole_pass(
                     &mut scratch,
                     &mut local,
                 );
-                for (lane, &(x, y)) in lanes.iter().enumerate() {
-                    if packet.is_active(lane) {
-                        color[y * w + x] = radiance[lane];
-                        let ray = packet.ray(lane);
-                        depth[y * w + x] = if t_hit[lane].is_finite() {
-                            camera.depth_along_axis(&ray, t_hit[lane])
+                for (lane, &p) in lanes.iter().enumerate() {
+                    if p != usize::MAX {
+                        color[p] = radiance[lane];
+                        depth[p] = if t_hit[lane].is_finite() {
+                            camera.depth_along_axis(&packet.ray(lane), t_hit[lane])
                         } else {
                             f32::INFINITY
                         };
                     }
                 }
             }
+            for (c, &d) in coc.iter_mut().zip(depth.iter()) {
+                *c = camera.coc_px(d);
+            }
             progress.advance(1);
-            (y_start, color, depth, local)
+            local
         })
         .collect();
-    for (y_start, color, depth, local) in bands {
+    for local in tallies {
         tally.merge(local);
-        let at = y_start * w;
-        film.color[at..at + color.len()].copy_from_slice(&color);
-        film.depth[at..at + depth.len()].copy_from_slice(&depth);
-    }
-    for (coc, &depth) in film.coc.iter_mut().zip(&film.depth) {
-        *coc = camera.coc_px(depth);
     }
 }
 
@@ -319,6 +323,7 @@ pub fn render(
         film.samples.fill(1);
         stats.sample_sites = (w * h) as u64;
     } else {
+        let phase = Instant::now();
         let blurred = maps::blurred(&film.coc, w, h);
         film.interval = match settings.mode {
             Mode::Adaptive => maps::interval_map(
@@ -332,6 +337,8 @@ pub fn render(
             _ => vec![1; w * h],
         };
         let sites = maps::site_mask(&film.interval, w, h);
+        stats.maps_seconds = phase.elapsed().as_secs_f64();
+        let phase = Instant::now();
         progress.start(settings.mode.name(), h as u64);
         // Rows are shaded in place (each row's colour starts as its pinhole colour); their
         // tallies are merged in row order, so the ray log does not depend on scheduling.
@@ -363,7 +370,10 @@ pub fn render(
         for local in tallies {
             tally.merge(local);
         }
+        stats.sites_seconds = phase.elapsed().as_secs_f64();
+        let phase = Instant::now();
         interpolate::interpolate(&mut film.color, &film.interval, &sites, w, h);
+        stats.interpolate_seconds = phase.elapsed().as_secs_f64();
         stats.sample_sites = sites.iter().filter(|&&s| s).count() as u64;
         stats.defocused_sites = film.samples.iter().filter(|&&s| s > 1).count() as u64;
     }

@@ -240,9 +240,8 @@ pub fn trace_and_shade(
             let cos = nrm[0][lane] * to_light[0][lane]
                 + nrm[1][lane] * to_light[1][lane]
                 + nrm[2][lane] * to_light[2][lane];
-            // Not `cos > 0`: a NaN cosine counts as lit, as in the per-lane code.
-            let facing_away = cos <= 0.0;
-            lit |= (!facing_away as u32) << lane;
+            // A NaN cosine (a degenerate normal) is unlit: Embree must never see a NaN ray.
+            lit |= ((cos > 0.0) as u32) << lane;
             // surface_epsilon, then the segment towards the light.
             let max = |a: f32, b: f32| if a > b { a } else { b };
             let extent = max(
@@ -262,6 +261,16 @@ pub fn trace_and_shade(
         let lit = lit & hits;
         if lit == 0 {
             continue;
+        }
+        // Unlit lanes (misses among them, whose points are infinite) get a harmless finite
+        // segment: Embree's 16-wide packets on CPUs without AVX-512 run as 8-wide halves whose
+        // input checks assert on NaN rays even in inactive lanes.
+        for lane in (0..LANES).filter(|&l| lit & (1 << l) == 0) {
+            for k in 0..3 {
+                origin[k][lane] = 0.0;
+                to_light[k][lane] = if k == 2 { 1.0 } else { 0.0 };
+            }
+            seg_end[lane] = 0.0;
         }
         shadow.set_segments(lit, &origin, &to_light, &seg_end);
         tally.count(RayKind::Shadow, lit.count_ones() as usize);
