@@ -63,6 +63,12 @@ pub struct BenchRow {
     pub paper_exact: bool,
     /// Median wall time of the repeats.
     pub seconds: f64,
+    /// Where the time goes (medians, each included in `seconds`): the pinhole pass, the blur /
+    /// interval / site maps, shading the sample sites, and interpolation.
+    pub pinhole_seconds: f64,
+    pub maps_seconds: f64,
+    pub sites_seconds: f64,
+    pub interpolate_seconds: f64,
     pub rays: u64,
     pub primary_rays: u64,
     pub shadow_rays: u64,
@@ -271,6 +277,7 @@ pub fn run(
     // Interleave the modes within each repeat so machine noise spreads over all of them.
     let modes = modes();
     let mut times = vec![Vec::new(); modes.len()];
+    let mut phases = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; modes.len()];
     let mut results: Vec<Option<(Film, RenderStats)>> = vec![None; modes.len()];
     for _ in 0..config.repeat {
         for (i, (_, mode, k, exact)) in modes.iter().enumerate() {
@@ -284,6 +291,15 @@ pub fn run(
             };
             let (film, stats) = render::render(world, camera, &settings, progress)?;
             times[i].push(stats.seconds);
+            let phase = [
+                stats.pinhole_seconds,
+                stats.maps_seconds,
+                stats.sites_seconds,
+                stats.interpolate_seconds,
+            ];
+            for (list, t) in phases[i].iter_mut().zip(phase) {
+                list.push(t);
+            }
             results[i].get_or_insert((film, stats));
         }
     }
@@ -320,6 +336,7 @@ pub fn run(
     for (i, (label, mode, k, exact)) in modes.into_iter().enumerate() {
         let (film, stats) = results[i].take().expect("every mode ran at least once");
         let seconds = median(times[i].clone());
+        let [pinhole_s, maps_s, sites_s, interpolate_s] = phases[i].clone().map(median);
         let rgb = film.rgb();
         let vs_ref = |space| metrics::psnr(&rgb, &reference, w, h, space);
         let ssim_ref = |space| metrics::ssim(&rgb, &reference, w, h, space);
@@ -329,6 +346,10 @@ pub fn run(
             interval_factor: k,
             paper_exact: exact,
             seconds,
+            pinhole_seconds: pinhole_s,
+            maps_seconds: maps_s,
+            sites_seconds: sites_s,
+            interpolate_seconds: interpolate_s,
             rays: stats.rays.total(),
             primary_rays: stats.rays.primary,
             shadow_rays: stats.rays.shadow,

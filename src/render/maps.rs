@@ -103,9 +103,11 @@ pub fn blurred(coc: &[f32], width: usize, height: usize) -> Vec<bool> {
     reach.into_iter().map(|r| r >= 0.0).collect()
 }
 
-/// Largest power of two <= v (v >= 1).
+/// Largest power of two <= v, for v >= 1 (an integer's highest bit: no log2 per pixel).
 fn floor_pow2(v: f32) -> u32 {
-    1u32 << (v.max(1.0).log2().floor() as u32).min(31)
+    // `as` saturates, so huge values give the top bit; v < 2^31 is exact.
+    let n = (v.max(1.0) as u32).max(1);
+    1 << (31 - n.leading_zeros())
 }
 
 /// The seed's per-pixel interval: 1 where the pixel is in focus (CoC <= 1 px), else
@@ -155,8 +157,9 @@ pub fn interval_map(
 /// The lattice cell of pixel coordinate `x` at interval `i` in an axis of length `n`:
 /// (lower site, upper site); equal when `x` is itself on the lattice.
 pub fn cell(x: usize, interval: u32, n: usize) -> (usize, usize) {
+    debug_assert!(interval.is_power_of_two());
     let i = interval as usize;
-    let x0 = x / i * i;
+    let x0 = x & !(i - 1);
     if x0 == x {
         (x, x)
     } else {
@@ -230,6 +233,12 @@ mod tests {
         assert_eq!(paper_interval(30.0, 0.4, 64), 8); // 12 -> 8
         assert_eq!(paper_interval(30.0, 0.2, 64), 4); // 6 -> 4
         assert_eq!(paper_interval(1000.0, 0.4, 16), 16);
+        assert_eq!(paper_interval(19.999, 0.4, 64), 4); // 7.9996 -> 4
+        assert_eq!(paper_interval(20.0, 0.4, 64), 8);
+        assert_eq!(paper_interval(f32::INFINITY, 0.4, 64), 64);
+        for v in [1.0f32, 1.5, 2.0, 3.99, 4.0, 1023.0, 1024.0, 1e9] {
+            assert_eq!(floor_pow2(v), 1 << (v.log2().floor() as u32), "{v}");
+        }
     }
 
     #[test]
