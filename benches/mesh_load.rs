@@ -1,5 +1,6 @@
 //! Large meshes: loading a 1-million-triangle OBJ and building its BVH, and what it costs in
-//! memory (the mesh's own buffers against the process's resident-set growth).
+//! memory: the mesh's own buffers against the process's resident set (VmRSS) after each step
+//! and at its peak (VmHWM), which includes the parser's temporary buffers.
 //!
 //! The mesh is a 708 x 707-quad height-field grid (1,001,112 triangles, 501,972 vertices),
 //! written once as OBJ text to a temporary file. Run with `cargo bench --bench mesh_load`.
@@ -76,17 +77,26 @@ fn mesh_stats(desc: &SceneDesc) -> (usize, usize) {
         .fold((0, 0), |(t, b), (t2, b2)| (t + t2, b + b2))
 }
 
+/// Resets the process's peak resident set (VmHWM) to its current size, so the next peak read
+/// is this measurement's (Linux 4.0+; without it VmHWM is the peak since the process began).
+fn reset_peak() -> bool {
+    std::fs::write("/proc/self/clear_refs", "5").is_ok()
+}
+
 /// One measured load + build, with memory, printed before the criterion runs.
 fn report(path: &Path, device: &Device) {
+    let peak_reset = reset_peak();
     let rss0 = status_bytes("VmRSS:").unwrap_or(0);
     let t0 = Instant::now();
     let desc = scene::load(path.to_str().unwrap()).unwrap();
     let load = t0.elapsed();
     let rss_loaded = status_bytes("VmRSS:").unwrap_or(0);
+    let peak_loaded = status_bytes("VmHWM:").unwrap_or(0);
     let t1 = Instant::now();
     let world = World::build(&desc, device).unwrap();
     let build = t1.elapsed();
     let rss_built = status_bytes("VmRSS:").unwrap_or(0);
+    let peak = status_bytes("VmHWM:").unwrap_or(0);
     let (triangles, mesh_bytes) = mesh_stats(&desc);
     let file = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
     eprintln!("mesh_load: {triangles} triangles, OBJ file {}", Bytes(file));
@@ -97,14 +107,31 @@ fn report(path: &Path, device: &Device) {
         (load + build).as_secs_f64()
     );
     eprintln!(
-        "mesh_load: TriangleMesh::heap_bytes {} ({:.1} B/triangle); RSS growth after load {}, \
-         after BVH build {} (Embree's BVH {}); peak RSS {}",
+        "mesh_load: TriangleMesh::heap_bytes {} ({:.1} B/triangle)",
         Bytes(mesh_bytes as u64),
         mesh_bytes as f64 / triangles as f64,
+    );
+    eprintln!(
+        "mesh_load: RSS before {}, after load {} (+{}), after BVH build {} (+{}; Embree's BVH {})",
+        Bytes(rss0),
+        Bytes(rss_loaded),
         Bytes(rss_loaded.saturating_sub(rss0)),
+        Bytes(rss_built),
         Bytes(rss_built.saturating_sub(rss0)),
         Bytes(rss_built.saturating_sub(rss_loaded)),
-        Bytes(status_bytes("VmHWM:").unwrap_or(0)),
+    );
+    eprintln!(
+        "mesh_load: peak RSS (VmHWM{}) during load {} (+{} over before), during load + BVH \
+         build {} (+{})",
+        if peak_reset {
+            ", reset before loading"
+        } else {
+            " since the process began"
+        },
+        Bytes(peak_loaded),
+        Bytes(peak_loaded.saturating_sub(rss0)),
+        Bytes(peak),
+        Bytes(peak.saturating_sub(rss0)),
     );
     drop(world);
     drop(desc);

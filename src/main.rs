@@ -1,5 +1,7 @@
 //! The `dofray` command line.
 
+#![deny(unsafe_code)]
+
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -11,6 +13,7 @@ use dofray::embree::Device;
 use dofray::output;
 use dofray::render::{self, Mode, Progress, RenderSettings};
 use dofray::sampler::LensFilter;
+use dofray::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
 use dofray::scene::{SceneDesc, World, builtin};
 use dofray::shade::Light;
 use glam::Vec3;
@@ -59,22 +62,28 @@ struct SceneArgs {
     /// Random seed of the lens samples; the same seed gives the same image bit for bit.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Aperture radius in scene units (overrides the scene's lens).
-    #[arg(long)]
+    /// Aperture radius in scene units (replaces the scene's lens).
+    #[arg(long, conflicts_with_all = ["f_number", "focal_length", "sensor_width"])]
     aperture_radius: Option<f32>,
-    /// Photographic lens: f-number (with --focal-length and --sensor-width).
+    /// Photographic lens: f-number (replaces the scene's lens). The focal length and sensor
+    /// width come from --focal-length and --sensor-width, else from the scene's photographic
+    /// lens, else 50 mm and 36 mm; the field of view follows from them (replacing the scene's
+    /// vfov when its lens was not photographic).
     #[arg(long)]
     f_number: Option<f32>,
-    /// Photographic lens: focal length in mm (sets the field of view).
-    #[arg(long, default_value_t = 50.0)]
-    focal_length: f32,
-    /// Photographic lens: sensor width in mm.
-    #[arg(long, default_value_t = 36.0)]
-    sensor_width: f32,
-    /// Distance along the view axis that is in focus (overrides the scene's).
+    /// Photographic lens: focal length in mm (sets the field of view). Changes the scene's
+    /// photographic lens; with any other lens it needs --f-number [default: the scene's, else 50].
     #[arg(long)]
+    focal_length: Option<f32>,
+    /// Photographic lens: sensor width in mm (sets the field of view). Changes the scene's
+    /// photographic lens; with any other lens it needs --f-number [default: the scene's, else 36].
+    #[arg(long)]
+    sensor_width: Option<f32>,
+    /// Distance along the view axis that is in focus (overrides the scene's focus).
+    #[arg(long, conflicts_with = "autofocus")]
     focus_distance: Option<f32>,
-    /// Autofocus on the surface seen through pixel X,Y (e.g. 320,240).
+    /// Autofocus on the surface seen through pixel X,Y (e.g. 320,240; overrides the scene's
+    /// focus).
     #[arg(long, value_parser = parse_pixel)]
     autofocus: Option<(u32, u32)>,
     /// Aperture blades for polygonal bokeh (0 = circular).
@@ -279,18 +288,98 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
         *x = scale(*x, old_w, cam.width);
         *y = scale(*y, old_h, cam.height);
     }
+    for (flag, v) in [
+        ("--f-number", a.f_number),
+        ("--focal-length", a.focal_length),
+        ("--sensor-width", a.sensor_width),
+        ("--anamorphic", a.anamorphic),
+    ] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            bail!("{flag} must be a finite number > 0, got {v}");
+        }
+    }
     if let Some(r) = a.aperture_radius {
         if !(r.is_finite() && r >= 0.0) {
             bail!("--aperture-radius must be a finite number >= 0, got {r}");
         }
+        // A photographic lens set the field of view: keep the picture's framing without it.
+        if let LensSpec::Photographic {
+            focal_length_mm,
+            sensor_width_mm,
+            ..
+        } = cam.lens
+        {
+            let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
+            let tan_half_v = tan_half_h * cam.height as f32 / cam.width as f32;
+            cam.vfov_deg = 2.0 * tan_half_v.atan().to_degrees();
+        }
         cam.lens = LensSpec::Aperture { radius: r };
     }
-    if let Some(n) = a.f_number {
-        cam.lens = LensSpec::Photographic {
-            focal_length_mm: a.focal_length,
-            f_number: n,
-            sensor_width_mm: a.sensor_width,
-        };
+    match (a.f_number, &mut cam.lens) {
+        (
+            None,
+            LensSpec::Photographic {
+                focal_length_mm,
+                sensor_width_mm,
+                ..
+            },
+        ) => {
+            *focal_length_mm = a.focal_length.unwrap_or(*focal_length_mm);
+            *sensor_width_mm = a.sensor_width.unwrap_or(*sensor_width_mm);
+        }
+        (None, lens) => {
+            let given = [
+                ("--focal-length", a.focal_length.is_some()),
+                ("--sensor-width", a.sensor_width.is_some()),
+            ];
+            if let Some((flag, _)) = given.iter().find(|(_, set)| *set) {
+                let what = match lens {
+                    LensSpec::Pinhole => "a pinhole (no aperture)",
+                    LensSpec::Aperture { .. } => "given by an aperture radius",
+                    LensSpec::Seed { .. } => "the seed's (sharp_range and spread)",
+                    LensSpec::Photographic { .. } => unreachable!("matched above"),
+                };
+                bail!(
+                    "{flag} applies to a photographic lens, but the scene's lens is {what}; \
+                     give --f-number too to replace it with a photographic lens"
+                );
+            }
+        }
+        (Some(n), lens) => {
+            let (focal, sensor) = match *lens {
+                LensSpec::Photographic {
+                    focal_length_mm,
+                    sensor_width_mm,
+                    ..
+                } => (focal_length_mm, sensor_width_mm),
+                _ => (DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM),
+            };
+            *lens = LensSpec::Photographic {
+                focal_length_mm: a.focal_length.unwrap_or(focal),
+                f_number: n,
+                sensor_width_mm: a.sensor_width.unwrap_or(sensor),
+            };
+        }
+    }
+    if let LensSpec::Photographic {
+        focal_length_mm,
+        sensor_width_mm,
+        ..
+    } = cam.lens
+        && (a.f_number.is_some() || a.focal_length.is_some() || a.sensor_width.is_some())
+    {
+        let tan_half_v =
+            sensor_width_mm / (2.0 * focal_length_mm) * cam.height as f32 / cam.width as f32;
+        let vfov = 2.0 * tan_half_v.atan().to_degrees();
+        if !(vfov > 0.0 && vfov < 180.0) {
+            bail!(
+                "a {focal_length_mm:e} mm lens on a {sensor_width_mm} mm sensor has no usable \
+                 field of view ({vfov} degrees vertically); choose a longer --focal-length or \
+                 a smaller --sensor-width"
+            );
+        }
     }
     if let Some(d) = a.focus_distance {
         if !(d.is_finite() && d > 0.0) {
@@ -302,9 +391,15 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
         cam.focus = Focus::Pixel { x, y };
     }
     if let Some(b) = a.blades {
+        if b == 1 || b == 2 {
+            bail!("--blades must be 0 (a circular aperture) or at least 3, got {b}");
+        }
         cam.aperture.blades = b;
     }
     if let Some(r) = a.blade_rotation {
+        if !r.is_finite() {
+            bail!("--blade-rotation must be a finite angle in degrees, got {r}");
+        }
         cam.aperture.rotation_deg = r;
     }
     if let Some(r) = a.anamorphic {

@@ -114,8 +114,43 @@ fn bad_arguments_are_rejected_with_a_message_and_no_output() {
         (&["--spp", "0"], "--spp"),
         (&["--interval-factor", "0"], "--interval-factor"),
         (&["--interval-factor=-1"], "--interval-factor"),
-        (&["--f-number", "0"], "f_number"),
-        (&["--blades", "2"], "blades"),
+        (
+            &["--f-number", "0"],
+            "--f-number must be a finite number > 0",
+        ),
+        (&["--f-number=-2"], "--f-number must be"),
+        (
+            &["--f-number", "2", "--focal-length", "0"],
+            "--focal-length must be",
+        ),
+        (
+            &["--f-number", "2", "--sensor-width", "nan"],
+            "--sensor-width must be",
+        ),
+        (
+            &["--anamorphic", "0"],
+            "--anamorphic must be a finite number > 0",
+        ),
+        (
+            &["--f-number", "2", "--focal-length", "1e-30"],
+            "no usable field of view",
+        ),
+        (&["--blades", "2"], "--blades must be 0"),
+        (&["--blade-rotation", "inf"], "--blade-rotation must be"),
+        // The paper scene's lens is an aperture radius, not a photographic lens.
+        (
+            &["--focal-length", "85"],
+            "--focal-length applies to a photographic lens",
+        ),
+        (&["--sensor-width", "24"], "give --f-number too"),
+        (
+            &["--autofocus", "1,1", "--focus-distance", "3"],
+            "cannot be used with",
+        ),
+        (
+            &["--aperture-radius", "0.1", "--f-number", "2"],
+            "cannot be used with",
+        ),
         (&["--autofocus", "5000,1"], "autofocus"),
         (&["no-such-scene"], "unknown scene"),
     ];
@@ -169,6 +204,17 @@ fn help_and_scene_list() {
         "--aov-dir",
     ] {
         assert!(text.contains(flag), "help lacks {flag}");
+    }
+    // How the lens flags combine with the scene's lens is documented.
+    for phrase in [
+        "from the scene's photographic\n          lens, else 50 mm and 36 mm",
+        "it needs --f-number",
+    ] {
+        let flat = |t: &str| t.split_whitespace().collect::<Vec<_>>().join(" ");
+        assert!(
+            flat(&text).contains(&flat(phrase)),
+            "help lacks {phrase:?}:\n{text}"
+        );
     }
     let out = dofray(&["scenes"]);
     assert!(String::from_utf8_lossy(&out.stdout).contains("paper"));
@@ -369,4 +415,159 @@ fn lights_from_the_command_line_replace_the_scenes() {
         assert!(!out.status.success(), "{light} accepted");
         assert!(stderr(&out).contains(expected), "{light}: {}", stderr(&out));
     }
+}
+
+/// The JSON summary of a small pinhole-free render of `scene` with `extra` flags.
+fn summary(dir: &std::path::Path, scene: &str, extra: &[&str]) -> serde_json::Value {
+    let png = dir.join("lens.png");
+    let path = repo(scene);
+    let mut args = vec![
+        "render",
+        &path,
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "40",
+        "--spp",
+        "1",
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    let out = dofray(&args);
+    assert!(out.status.success(), "{scene} {extra:?}: {}", stderr(&out));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn lens_flags_keep_what_the_scene_says_unless_replaced() {
+    let dir = scratch("lens");
+    let radius = |v: &serde_json::Value| v["aperture_radius"].as_f64().unwrap();
+    let close = |a: f64, b: f64| (a - b).abs() < 1e-6 * b;
+    // gallery.toml: a 35 mm f/1.4 lens on a 36 mm sensor; radius = focal / (2 N).
+    let scene = radius(&summary(&dir, "scenes/gallery.toml", &[]));
+    assert!(close(scene, 0.035 / 2.8), "{scene}");
+    // --f-number alone keeps the scene's focal length (not 50 mm).
+    let f4 = radius(&summary(&dir, "scenes/gallery.toml", &["--f-number", "4"]));
+    assert!(close(f4, 0.035 / 8.0), "{f4}");
+    // --focal-length alone changes the scene's photographic lens.
+    let f85 = radius(&summary(
+        &dir,
+        "scenes/gallery.toml",
+        &["--focal-length", "85"],
+    ));
+    assert!(close(f85, 0.085 / 2.8), "{f85}");
+    let both = radius(&summary(
+        &dir,
+        "scenes/gallery.toml",
+        &["--f-number", "2", "--focal-length", "50"],
+    ));
+    assert!(close(both, 0.05 / 4.0), "{both}");
+    // On a scene whose lens is not photographic, --f-number brings a 50 mm lens.
+    let vase = radius(&summary(&dir, "scenes/vase.toml", &["--f-number", "2"]));
+    assert!(close(vase, 0.05 / 4.0), "{vase}");
+
+    // --sensor-width alone changes the field of view of a photographic scene: another picture.
+    let picture = |extra: &[&str]| {
+        let png = dir.join("fov.png");
+        let path = repo("scenes/gallery.toml");
+        let mut args = vec![
+            "render",
+            &path,
+            "-o",
+            png.to_str().unwrap(),
+            "--width",
+            "40",
+            "--mode",
+            "pinhole",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        let out = dofray(&args);
+        assert!(out.status.success(), "{extra:?}: {}", stderr(&out));
+        image::open(&png).unwrap().to_rgb8().into_raw()
+    };
+    let wide = picture(&[]);
+    assert_eq!(
+        wide,
+        picture(&["--sensor-width", "36"]),
+        "the scene's own width"
+    );
+    assert_ne!(
+        wide,
+        picture(&["--sensor-width", "18"]),
+        "--sensor-width ignored"
+    );
+    assert_ne!(
+        wide,
+        picture(&["--focal-length", "70"]),
+        "--focal-length ignored"
+    );
+    // Replacing the photographic lens by an aperture radius keeps the field of view it gave.
+    assert_eq!(
+        wide,
+        picture(&["--aperture-radius", "0.01"]),
+        "the framing changed"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn bad_model_files_fail_with_the_file_named_and_no_output() {
+    let dir = scratch("badmodels");
+    let png = dir.join("out.png");
+    let jpg = std::fs::read(repo("scenes/assets/bands.jpg")).unwrap();
+    std::fs::write(dir.join("t.jpg"), &jpg[..jpg.len() * 9 / 10]).unwrap();
+    std::fs::write(
+        dir.join("tex.toml"),
+        "[[textures]]\nname = \"t\"\nimage = \"t.jpg\"\n[[materials]]\nname = \"m\"\n\
+         texture = \"t\"\n[[objects]]\ntype = \"sphere\"\nradius = 1\nmaterial = \"m\"\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("short.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("huge.obj"),
+        "v 3e38 0 0\nv -3e38 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("huge.toml"),
+        "[[objects]]\ntype = \"sphere\"\nradius = 1e38\n",
+    )
+    .unwrap();
+    for (file, expected) in [
+        ("tex.toml", "t.jpg: truncated JPEG"),
+        ("short.obj", "short.obj:5: face with 2 corners"),
+        (
+            "huge.obj",
+            "huge.obj: the scene bounds are too large to frame",
+        ),
+        (
+            "huge.toml",
+            "huge.toml:1:1: `objects[0]`: the scene bounds are too large",
+        ),
+    ] {
+        let input = dir.join(file);
+        let out = dofray(&[
+            "render",
+            input.to_str().unwrap(),
+            "-o",
+            png.to_str().unwrap(),
+            "--width",
+            "32",
+            "--quiet",
+        ]);
+        assert!(!out.status.success(), "{file} accepted");
+        assert!(stderr(&out).contains(expected), "{file}: {}", stderr(&out));
+        assert!(
+            !stderr(&out).contains("panicked"),
+            "{file}: {}",
+            stderr(&out)
+        );
+        assert!(!png.exists(), "{file} left an output file");
+    }
+    std::fs::remove_dir_all(dir).unwrap();
 }

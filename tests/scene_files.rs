@@ -418,6 +418,131 @@ fn a_bare_obj_gets_a_camera_that_frames_it() {
     assert_ne!(centre, corner);
 }
 
+#[test]
+fn coordinates_beyond_what_a_camera_can_frame_name_the_object() {
+    let m = error_of(
+        "huge-sphere",
+        "[[objects]]\ntype = \"sphere\"\nradius = 1e38\n",
+    );
+    assert_names(
+        &m,
+        "scene.toml:1:1",
+        &[
+            "`objects[0]`",
+            "too large to frame",
+            "give `eye` and `look_at`",
+        ],
+    );
+    // The farthest-reaching object is named, not the first.
+    let m = error_of(
+        "huge-second",
+        &format!("{SPHERE}[[objects]]\ntype = \"sphere\"\ncenter = [0, 3e38, 0]\nradius = 1\n"),
+    );
+    assert_names(
+        &m,
+        "scene.toml:4:1",
+        &["`objects[1]`", "too large to frame"],
+    );
+    let m = error_of(
+        "huge-eye",
+        &format!(
+            "[camera]\nlook_at = [0, 0, 0]\n{SPHERE}[[objects]]\ntype = \"sphere\"\nradius = 1e30\n"
+        ),
+    );
+    assert_names(&m, "scene.toml:", &["`objects[1]`", "too large to frame"]);
+    // With a camera given, the same scene loads.
+    let d = load_files(
+        "huge-camera",
+        &[(
+            "scene.toml",
+            b"[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\ntype = \"sphere\"\nradius = 1e38\n",
+        )],
+    )
+    .unwrap();
+    world(&d);
+    d.camera.build(|_| None).unwrap();
+    let m = error_of(
+        "far-apart",
+        &format!("[camera]\neye = [1e20, 0, 0]\nlook_at = [-1e20, 0, 0]\n{SPHERE}"),
+    );
+    assert_names(&m, "scene.toml:3:11", &["camera.look_at", "too far apart"]);
+    // A bare model file.
+    let dir = scratch("huge-obj");
+    std::fs::write(
+        dir.join("big.obj"),
+        "v 3e38 0 0\nv -3e38 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    let m = load(&dir.join("big.obj")).unwrap_err().to_string();
+    assert_names(
+        &m,
+        "big.obj",
+        &["too large to frame", "scale the model down"],
+    );
+    assert!(!m.contains("inf"), "{m}");
+}
+
+#[test]
+fn the_camera_error_points_at_the_camera() {
+    let m = error_of(
+        "same",
+        &format!("[camera]\neye = [0, 1, 5]\nlook_at = [0, 1, 5]\n{SPHERE}"),
+    );
+    assert_names(
+        &m,
+        "scene.toml:3:11",
+        &["camera.look_at", "must differ from `eye`"],
+    );
+    // An eye at the framed look-at point (the bounds' centre) names the eye.
+    let m = error_of("same-eye", &format!("[camera]\neye = [0, 0, 0]\n{SPHERE}"));
+    assert_names(&m, "scene.toml:2:7", &["camera.eye", "must differ"]);
+}
+
+#[test]
+fn scales_out_of_range_say_so() {
+    let m = error_of("scale-big", &format!("{SPHERE}scale = 1e30\n"));
+    assert_names(
+        &m,
+        "scene.toml:4:",
+        &["objects[0].scale", "too large", "overflows"],
+    );
+    assert!(!m.contains("singular"), "{m}");
+    let m = error_of("scale-small", &format!("{SPHERE}scale = 1e-20\n"));
+    assert_names(&m, "scene.toml:4:", &["objects[0].scale", "too small"]);
+}
+
+#[test]
+fn loaded_meshes_hold_no_spare_capacity() {
+    // tobj grows its buffers by doubling: the mesh keeps none of that slack (only Embree's
+    // one element of padding).
+    let d = load(&assets().join("torus.obj")).unwrap();
+    for (m, _) in meshes(&d) {
+        let (v, t) = (m.vertex_count(), m.triangle_count());
+        let attributes = m.normals().map_or(0, |_| v * 12) + m.uvs().map_or(0, |_| v * 8);
+        assert!(m.normals().is_some() && m.uvs().is_some());
+        assert_eq!(m.heap_bytes(), (v + 1) * 12 + (t + 1) * 12 + attributes);
+    }
+    // And a transformed copy (transformed in tobj's buffers) matches the plain one.
+    let toml = format!(
+        "[[objects]]\ntype = \"mesh\"\nfile = \"{}\"\nscale = [3, 2, 1]\nrotate = [0, 90, 0]\n\
+         translate = [0, 1, 0]\n",
+        assets().join("torus.obj").display()
+    );
+    let t = load_files("moved-obj", &[("scene.toml", toml.as_bytes())]).unwrap();
+    let (plain, turned) = (meshes(&d)[0].0, meshes(&t)[0].0);
+    let m = glam::Mat3::from_rotation_y(90f32.to_radians())
+        * glam::Mat3::from_diagonal(Vec3::new(3.0, 2.0, 1.0));
+    let normal_matrix = m.inverse().transpose();
+    for i in (0..plain.vertex_count()).step_by(13) {
+        let p = m * Vec3::from(plain.positions()[i]) + Vec3::Y;
+        assert!((p - Vec3::from(turned.positions()[i])).length() < 1e-5);
+        let n = (normal_matrix * Vec3::from(plain.normals().unwrap()[i])).normalize();
+        assert!((n - Vec3::from(turned.normals().unwrap()[i])).length() < 1e-5);
+    }
+    assert_eq!(plain.indices(), turned.indices());
+    assert_eq!(plain.uvs(), turned.uvs());
+}
+
 // ---------------------------------------------------------------------------------------------
 // Transforms.
 
@@ -940,6 +1065,28 @@ fn malformed_and_truncated_obj_files_name_the_line() {
         "m.obj:3",
         &["scene.toml:3:8", "malformed vertex position"],
     );
+    // The last line without its newline is still named as itself.
+    let m = obj_scene("objnonl", "v 0 0 0\nv 1 0 0\nv 0 1");
+    assert_names(&m, "m.obj:3", &["malformed vertex position"]);
+    let m = obj_scene("objnonl2", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 x");
+    assert_names(&m, "m.obj:5", &["malformed face"]);
+    // A face cut short: tobj drops faces of fewer than 3 corners silently.
+    let m = obj_scene(
+        "objshort",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2\nf 1 2 3\n",
+    );
+    assert_names(
+        &m,
+        "m.obj:5",
+        &["scene.toml:3:8", "face with 2 corners", "at least 3"],
+    );
+    let m = obj_scene("objshort1", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1");
+    assert_names(&m, "m.obj:5", &["face with 1 corner:"]);
+    let m = obj_scene("objshort0", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf\nf 1 2 3\n");
+    assert_names(&m, "m.obj:4", &["face with 0 corners"]);
+    // The earlier of two problems is the one named.
+    let m = obj_scene("objfirst", "v 0 0 0\nv 1 0 0\nf 1 2\nv 0 1 0\nf 1 2 9\n");
+    assert_names(&m, "m.obj:3", &["face with 2 corners"]);
     let m = obj_scene("objface", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n");
     assert_names(&m, "m.obj:4", &["malformed face"]);
     let m = obj_scene("objempty", "# nothing\n");
@@ -1009,6 +1156,37 @@ fn face_indices_out_of_range_are_rejected() {
         "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n",
     );
     assert_names(&m, "m.obj:5", &["texture coordinate index 2"]);
+    // Texture and normal indices in a file that has none (tobj ignores them unchecked).
+    let m = obj_scene("objvt0", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1/5 2 3\n");
+    assert_names(
+        &m,
+        "m.obj:5",
+        &[
+            "scene.toml:3:8",
+            "texture coordinate index 5 is out of range",
+            "0 texture coordinates",
+        ],
+    );
+    let m = obj_scene("objvn0", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1//7 2//7 3//7\n");
+    assert_names(
+        &m,
+        "m.obj:4",
+        &["normal index 7 is out of range", "0 normals"],
+    );
+    let m = obj_scene(
+        "objvn1",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1/2 2/1 3/1\n",
+    );
+    assert_names(&m, "m.obj:5", &["normal index 2 is out of range"]);
+    // In range they load (and a face without them beside one with them is fine).
+    let dir = scratch("objvtok");
+    std::fs::write(
+        dir.join("m.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\nf 1/1/1 2/1/1 3/1/1\n",
+    )
+    .unwrap();
+    let d = load(&dir.join("m.obj")).unwrap();
+    assert_eq!(meshes(&d)[0].0.triangle_count(), 1);
     // glTF indices beyond the vertices.
     let (doc, bin) = tiny_gltf(&[0, 1, 7]);
     let m = load_files(
@@ -1090,18 +1268,23 @@ fn malformed_and_truncated_gltf_files_are_rejected() {
     let dir = scratch("gltfbad");
     let gltf = std::fs::read(assets().join("vase.gltf")).unwrap();
     let glb = std::fs::read(assets().join("vase.glb")).unwrap();
+    let half_glb = format!(
+        "truncated GLB file: its header declares {} bytes, but the file has {}",
+        glb.len(),
+        glb.len() / 2
+    );
     let cases: Vec<(&str, Vec<u8>, &str)> = vec![
         (
             "half.gltf",
             gltf[..gltf.len() / 2].to_vec(),
             "not a valid glTF",
         ),
+        ("half.glb", glb[..glb.len() / 2].to_vec(), &half_glb),
         (
-            "half.glb",
-            glb[..glb.len() / 2].to_vec(),
-            "not a valid glTF",
+            "header.glb",
+            glb[..10].to_vec(),
+            "truncated GLB file: it has 10 bytes, less than the 12-byte GLB header",
         ),
-        ("header.glb", glb[..10].to_vec(), "not a valid glTF"),
         ("empty.gltf", Vec::new(), "not a valid glTF"),
         (
             "nomesh.gltf",
@@ -1160,6 +1343,8 @@ fn unreadable_and_truncated_images_are_rejected() {
         ("pnghalf", &png[..png.len() / 2]),
         ("pnghead", &png[..20]),
         ("jpghalf", &jpg[..jpg.len() / 3]),
+        ("jpg90", &jpg[..jpg.len() * 9 / 10]),
+        ("jpgnoend", &jpg[..jpg.len() - 2]),
         ("notimage", b"GIF89a not really".as_slice()),
         ("emptyimg", b"".as_slice()),
     ] {
@@ -1167,6 +1352,10 @@ fn unreadable_and_truncated_images_are_rejected() {
             .unwrap_err()
             .to_string();
         assert_names(&m, "scene.toml:3:9", &["textures[0].image", "t.png"]);
+        if case.starts_with("jpg") {
+            // A decoder fills a cut JPEG with grey: the cut must be caught before it.
+            assert_names(&m, "t.png", &["truncated JPEG", "end-of-image marker"]);
+        }
     }
     // And a good one loads, sRGB-decoded.
     let d = load_files(

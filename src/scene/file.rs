@@ -305,7 +305,7 @@ struct RawScene {
     ambient: Option<Color>,
     image: Option<RawImage>,
     render: Option<RawRender>,
-    camera: Option<RawCamera>,
+    camera: Option<Spanned<RawCamera>>,
     background: Option<Spanned<RawBackground>>,
     lights: Option<Vec<Spanned<RawLight>>>,
     #[serde(default)]
@@ -333,8 +333,8 @@ struct RawRender {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawCamera {
-    eye: Option<V3>,
-    look_at: Option<V3>,
+    eye: Option<Spanned<V3>>,
+    look_at: Option<Spanned<V3>>,
     up: Option<Spanned<V3>>,
     vfov: Option<Spanned<Fov>>,
     aperture_radius: Option<Spanned<NonNeg>>,
@@ -641,8 +641,9 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
         })
     };
 
-    // Objects.
+    // Objects, and where each came from (a mesh file gives several).
     let mut objects = Vec::new();
+    let mut origins: Vec<(Range<usize>, String)> = Vec::new();
     for (i, o) in raw.objects.into_iter().enumerate() {
         let span = o.span();
         let o = o.into_inner();
@@ -811,6 +812,7 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
                 }
             }
         }
+        origins.resize(objects.len(), (span, key));
     }
     if objects.is_empty() {
         return Err(LoadError::Empty {
@@ -829,7 +831,7 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
         .as_ref()
         .and_then(|i| i.height)
         .map_or(DEFAULT_HEIGHT, |p| p.0);
-    let camera = camera(ctx, raw.camera, width, height, &objects)?;
+    let camera = camera(ctx, raw.camera, width, height, &objects, &origins)?;
 
     // Lights and environment.
     let lights = match raw.lights {
@@ -953,23 +955,50 @@ fn object_transform(
         .or(o.translate.as_ref().map(|t| t.span()))
         .unwrap_or(0..0);
     let t = Transform::from_srt(scale, rotation, translate).ok_or_else(|| {
-        ctx.invalid(
-            span,
-            key.to_string(),
-            "the transform is singular or not finite",
-        )
+        // Scales are finite and > 0 and rotations are orthonormal, so only the scale's
+        // magnitude can make the matrix or its inverse leave the f32 range.
+        let volume = scale.as_dvec3().element_product();
+        let shown = if scale.x == scale.y && scale.x == scale.z {
+            model::short_number(scale.x)
+        } else {
+            model::short_vec(scale)
+        };
+        let det = format!("{volume:.1e}");
+        let why = if volume > f32::MAX as f64 {
+            format!(
+                "the scale {shown} is too large: the transform's determinant ({det}) overflows \
+                 32-bit floats"
+            )
+        } else if volume < f32::MIN_POSITIVE as f64 {
+            format!(
+                "the scale {shown} is too small: the transform's determinant ({det}) underflows \
+                 32-bit floats, so it cannot be inverted (for the normals)"
+            )
+        } else {
+            format!(
+                "the scale {shown} is out of range: the transform or its inverse (for the \
+                 normals) overflows 32-bit floats"
+            )
+        };
+        let key = match &o.scale {
+            Some(_) => format!("{key}.scale"),
+            None => key.to_string(),
+        };
+        ctx.invalid(span, key, why)
     })?;
     Ok(Some((t, scale)))
 }
 
 fn camera(
     ctx: &Ctx,
-    raw: Option<RawCamera>,
+    raw: Option<Spanned<RawCamera>>,
     width: u32,
     height: u32,
     objects: &[Object],
+    origins: &[(Range<usize>, String)],
 ) -> Result<CameraSpec, LoadError> {
-    let raw = raw.unwrap_or(RawCamera {
+    let table_span = raw.as_ref().map_or(0..0, |r| r.span());
+    let raw = raw.map(Spanned::into_inner).unwrap_or(RawCamera {
         eye: None,
         look_at: None,
         up: None,
@@ -989,12 +1018,46 @@ fn camera(
     });
     let vfov_deg = raw.vfov.as_ref().map_or(DEFAULT_VFOV, |v| v.get_ref().0);
     let up = raw.up.as_ref().map_or(Vec3::Y, |u| v3(*u.get_ref()));
-    let (eye, look_at) = match (raw.eye, raw.look_at) {
-        (Some(e), Some(l)) => (v3(e), v3(l)),
+    let spanned = |v: &Spanned<V3>| v3(*v.get_ref());
+    let (eye, look_at) = match (&raw.eye, &raw.look_at) {
+        (Some(e), Some(l)) => (spanned(e), spanned(l)),
         (e, l) => {
             let (lo, hi) = model::bounds(objects).unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
-            let (fe, fl) = model::frame(lo, hi, vfov_deg, width as f32 / height as f32);
-            (e.map_or(fe, v3), l.map_or(fl, v3))
+            let aspect = width as f32 / height as f32;
+            let (fe, fl) = model::frame(lo, hi, vfov_deg, aspect);
+            let framed = match e {
+                None => model::frame_checked(lo, hi, vfov_deg, aspect).map(|_| ()),
+                Some(_) if !fl.is_finite() => Err(format!(
+                    "the scene bounds are too large to aim at: they span {} to {}, and their \
+                     centre is beyond the range of 32-bit floats",
+                    model::short_vec(lo),
+                    model::short_vec(hi)
+                )),
+                Some(_) => Ok(()),
+            };
+            if let Err(message) = framed {
+                // Point at the object reaching farthest from the origin.
+                let reach = |o: &Object| {
+                    let (lo, hi) = model::object_bounds(o);
+                    lo.abs().max(hi.abs()).max_element()
+                };
+                let far = (0..objects.len())
+                    .max_by(|&a, &b| reach(&objects[a]).total_cmp(&reach(&objects[b])))
+                    .unwrap_or(0);
+                let (span, key) = origins.get(far).cloned().unwrap_or((0..0, "camera".into()));
+                return Err(ctx.invalid(
+                    span,
+                    key,
+                    format!(
+                        "{message}; give `eye` and `look_at` in [camera], or make the objects \
+                         smaller"
+                    ),
+                ));
+            }
+            (
+                e.as_ref().map_or(fe, spanned),
+                l.as_ref().map_or(fl, spanned),
+            )
         }
     };
     let camera_span = || {
@@ -1005,14 +1068,22 @@ fn camera(
         .into_iter()
         .flatten()
         .next()
-        .unwrap_or(0..0)
+        .unwrap_or(table_span.clone())
     };
-    if (look_at - eye).length_squared() == 0.0 {
-        return Err(ctx.invalid(
-            camera_span(),
-            "camera.look_at",
-            "`look_at` must differ from `eye`",
-        ));
+    let view = (look_at - eye).length_squared();
+    if view == 0.0 || !view.is_finite() {
+        let (span, key) = match (&raw.look_at, &raw.eye) {
+            (Some(l), _) => (l.span(), "camera.look_at"),
+            (None, Some(e)) => (e.span(), "camera.eye"),
+            (None, None) => (camera_span(), "camera.look_at"),
+        };
+        let message = if view == 0.0 {
+            "`look_at` must differ from `eye`"
+        } else {
+            "`eye` and `look_at` are too far apart: the distance between them is beyond the \
+             range of 32-bit floats"
+        };
+        return Err(ctx.invalid(span, key, message));
     }
     if (look_at - eye).cross(up).length_squared()
         <= 1e-12 * (look_at - eye).length_squared() * up.length_squared()
@@ -1078,9 +1149,15 @@ fn camera(
         }
     } else if let Some(n) = &raw.f_number {
         LensSpec::Photographic {
-            focal_length_mm: raw.focal_length_mm.as_ref().map_or(50.0, |f| f.get_ref().0),
+            focal_length_mm: raw
+                .focal_length_mm
+                .as_ref()
+                .map_or(model::DEFAULT_FOCAL_LENGTH_MM, |f| f.get_ref().0),
             f_number: n.get_ref().0,
-            sensor_width_mm: raw.sensor_width_mm.as_ref().map_or(36.0, |s| s.get_ref().0),
+            sensor_width_mm: raw
+                .sensor_width_mm
+                .as_ref()
+                .map_or(model::DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0),
         }
     } else if let (Some(r), Some(s)) = (&raw.sharp_range, &raw.spread) {
         LensSpec::Seed {

@@ -161,6 +161,66 @@ fn check_accessor(
     }
 }
 
+/// A binary glTF (starting with `glTF`) must be as long as its header and chunks declare:
+/// a shorter one is a truncated file, said so with both sizes.
+fn check_glb_length(path: &Path, bytes: &[u8]) -> Result<(), LoadError> {
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    let word = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]) as u64)
+    };
+    let Some(declared) = word(8) else {
+        return Err(gltf_error(
+            path,
+            format!(
+                "truncated GLB file: it has {} bytes, less than the 12-byte GLB header",
+                bytes.len()
+            ),
+        ));
+    };
+    let size = bytes.len() as u64;
+    if size < declared {
+        return Err(gltf_error(
+            path,
+            format!(
+                "truncated GLB file: its header declares {declared} bytes, but the file has \
+                 {size} ({} missing)",
+                declared - size
+            ),
+        ));
+    }
+    // Each chunk: length, type, data; the chunks must fit in the declared length.
+    let mut at = 12u64;
+    let mut index = 0;
+    while at < declared {
+        let (Some(length), Some(kind)) = (word(at as usize), word(at as usize + 4)) else {
+            break;
+        };
+        let end = at + 8 + length;
+        if at + 8 > declared || end > declared {
+            let name = match kind {
+                0x4E4F_534A => "JSON",
+                0x004E_4942 => "BIN",
+                _ => "unknown",
+            };
+            return Err(gltf_error(
+                path,
+                format!(
+                    "truncated or corrupt GLB file: chunk {index} ({name}) declares {length} \
+                     bytes at offset {}, past the {declared} bytes the header declares",
+                    at + 8
+                ),
+            ));
+        }
+        at = end;
+        index += 1;
+    }
+    Ok(())
+}
+
 struct Loader<'a> {
     path: &'a Path,
     base: PathBuf,
@@ -187,6 +247,7 @@ pub fn load(
     textures: &mut TextureCache,
 ) -> Result<Model, LoadError> {
     let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+    check_glb_length(path, &bytes)?;
     let invalid = |e: &dyn std::fmt::Display| {
         gltf_error(
             path,

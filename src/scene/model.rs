@@ -143,26 +143,68 @@ pub fn mesh(
     Ok(m)
 }
 
-/// Bounds of a set of objects, if any has extent.
-pub fn bounds(objects: &[Object]) -> Option<(Vec3, Vec3)> {
-    let mut lo = Vec3::splat(f32::INFINITY);
-    let mut hi = Vec3::splat(f32::NEG_INFINITY);
-    for o in objects {
-        match o {
-            Object::Sphere { center, radius, .. } => {
-                lo = lo.min(*center - *radius);
-                hi = hi.max(*center + *radius);
-            }
-            Object::Mesh { mesh, .. } => {
-                for p in mesh.positions() {
-                    let p = Vec3::from(*p);
-                    lo = lo.min(p);
-                    hi = hi.max(p);
-                }
-            }
-        }
+/// Bounds of one object. They are infinite when the object reaches beyond the f32 range
+/// (a sphere whose centre plus radius overflows).
+pub fn object_bounds(o: &Object) -> (Vec3, Vec3) {
+    match o {
+        Object::Sphere { center, radius, .. } => (*center - *radius, *center + *radius),
+        Object::Mesh { mesh, .. } => mesh.positions().iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(Vec3::from(*p)), hi.max(Vec3::from(*p))),
+        ),
     }
-    (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+}
+
+/// Bounds of a set of objects (`None` if there are none). They are infinite when an object
+/// reaches beyond the f32 range.
+pub fn bounds(objects: &[Object]) -> Option<(Vec3, Vec3)> {
+    let (lo, hi) = objects.iter().map(object_bounds).fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), (a, b)| (lo.min(a), hi.max(b)),
+    );
+    lo.cmple(hi).all().then_some((lo, hi))
+}
+
+/// A number for messages: plain when moderate (`2.5`), in exponent form when huge or tiny
+/// (`3e38`).
+pub fn short_number(v: f32) -> String {
+    let a = v.abs();
+    if a != 0.0 && a.is_finite() && !(1e-4..1e7).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// A point for messages: `[3e38, 0, 1.5]`.
+pub fn short_vec(v: Vec3) -> String {
+    let [x, y, z] = v.to_array().map(short_number);
+    format!("[{x}, {y}, {z}]")
+}
+
+/// [`frame`], or why bounds `(lo, hi)` cannot be framed: the camera distance they need (or
+/// the bounds themselves) overflow f32, so no camera built from them could be finite.
+pub fn frame_checked(
+    lo: Vec3,
+    hi: Vec3,
+    vfov_deg: f32,
+    aspect: f32,
+) -> Result<(Vec3, Vec3), String> {
+    let (eye, look_at) = frame(lo, hi, vfov_deg, aspect);
+    let ok = eye.is_finite()
+        && look_at.is_finite()
+        && (look_at - eye).length_squared().is_finite()
+        && (look_at - eye).length_squared() > 0.0;
+    if ok {
+        Ok((eye, look_at))
+    } else {
+        Err(format!(
+            "the scene bounds are too large to frame: they span {} to {}, and a camera far \
+             enough away to see them all would be beyond the range of 32-bit floats",
+            short_vec(lo),
+            short_vec(hi)
+        ))
+    }
 }
 
 /// An eye position that frames bounds `(lo, hi)` from the front-right-above (+Z is the front,
@@ -201,6 +243,10 @@ pub const DEFAULT_WIDTH: u32 = 640;
 pub const DEFAULT_HEIGHT: u32 = 480;
 /// Default vertical field of view, degrees.
 pub const DEFAULT_VFOV: f32 = 40.0;
+/// Focal length of a photographic lens that does not give one, millimetres.
+pub const DEFAULT_FOCAL_LENGTH_MM: f32 = 50.0;
+/// Sensor width of a photographic lens that does not give one, millimetres (full frame).
+pub const DEFAULT_SENSOR_WIDTH_MM: f32 = 36.0;
 /// Default aperture radius for a bare model, as a fraction of its bounds' diagonal.
 pub const MODEL_APERTURE_FRACTION: f32 = 0.02;
 
@@ -227,6 +273,31 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
     let (lo, hi) = bounds(&objects).ok_or_else(|| LoadError::Empty {
         path: path.to_path_buf(),
     })?;
+    let too_large = |message: String| LoadError::Geometry {
+        at: Location::file(path),
+        message: format!("{message}; scale the model down (a scene file can, with `scale`)"),
+    };
+    match model.camera {
+        None => {
+            frame_checked(
+                lo,
+                hi,
+                DEFAULT_VFOV,
+                DEFAULT_WIDTH as f32 / DEFAULT_HEIGHT as f32,
+            )
+            .map_err(too_large)?;
+        }
+        // The aperture and focus come from the bounds' size and centre.
+        Some(_) if !(hi - lo).length().is_finite() => {
+            return Err(too_large(format!(
+                "the scene bounds are too large: they span {} to {}, beyond the range of \
+                 32-bit floats",
+                short_vec(lo),
+                short_vec(hi)
+            )));
+        }
+        Some(_) => {}
+    }
     let center = (lo + hi) * 0.5;
     let diagonal = (hi - lo).length().max(1e-3);
 

@@ -26,8 +26,10 @@ pub fn decode(bytes: &[u8], srgb: bool, wrap: Wrap) -> Result<ImageTexture, Stri
     let reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| e.to_string())?;
-    if reader.format().is_none() {
-        return Err("not a PNG or JPEG image (unrecognised format)".into());
+    match reader.format() {
+        None => return Err("not a PNG or JPEG image (unrecognised format)".into()),
+        Some(image::ImageFormat::Jpeg) => check_jpeg_complete(bytes)?,
+        Some(_) => {}
     }
     let img = reader.decode().map_err(|e| format!("cannot decode: {e}"))?;
     let (width, height) = (img.width() as usize, img.height() as usize);
@@ -75,6 +77,80 @@ pub fn decode(bytes: &[u8], srgb: bool, wrap: Wrap) -> Result<ImageTexture, Stri
         texels,
         wrap,
     })
+}
+
+/// Checks that a JPEG runs whole from its start-of-image marker to its end-of-image marker
+/// (FF D9). JPEG decoders fill the missing part of a truncated file with grey instead of
+/// failing, so the marker segments and the compressed data between them are walked here.
+pub fn check_jpeg_complete(b: &[u8]) -> Result<(), String> {
+    let truncated = |what: String| {
+        Err(format!(
+            "truncated JPEG: the file ends after {} bytes, {what}, before the end-of-image \
+             marker (FF D9)",
+            b.len()
+        ))
+    };
+    if !b.starts_with(&[0xFF, 0xD8]) {
+        return Ok(()); // Not a JPEG stream: the decoder says what it is not.
+    }
+    let mut i = 2;
+    loop {
+        // The next marker: FF (possibly repeated as fill), then its code. Stray bytes before
+        // it are skipped, as decoders do.
+        let Some(ff) = b[i..].iter().position(|&x| x == 0xFF) else {
+            return truncated("between two segments".into());
+        };
+        i += ff;
+        while i < b.len() && b[i] == 0xFF {
+            i += 1;
+        }
+        let Some(&marker) = b.get(i) else {
+            return truncated("inside a marker".into());
+        };
+        let at = i - 1;
+        i += 1;
+        match marker {
+            0xD9 => return Ok(()),
+            // Markers without a segment: TEM, restart markers, and a stuffed 00.
+            0x00 | 0x01 | 0xD0..=0xD7 => continue,
+            _ => {}
+        }
+        let Some(len) = b
+            .get(i..i + 2)
+            .map(|l| u16::from_be_bytes([l[0], l[1]]) as usize)
+        else {
+            return truncated(format!(
+                "inside the header of segment FF {marker:02X} at byte {at}"
+            ));
+        };
+        if i + len > b.len() {
+            return truncated(format!(
+                "inside segment FF {marker:02X} at byte {at}, which declares {len} bytes"
+            ));
+        }
+        i += len.max(2);
+        if marker == 0xDA {
+            // A scan: compressed data up to the next marker that is not a stuffed 00 or a
+            // restart marker.
+            loop {
+                let Some(ff) = b[i..].iter().position(|&x| x == 0xFF) else {
+                    return truncated("inside the compressed image data".into());
+                };
+                let mut j = i + ff + 1;
+                while j < b.len() && b[j] == 0xFF {
+                    j += 1;
+                }
+                match b.get(j) {
+                    None => return truncated("inside the compressed image data".into()),
+                    Some(0x00 | 0xD0..=0xD7) => i = j + 1,
+                    Some(_) => {
+                        i = j - 1;
+                        break;
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// Decoded textures by (file, sRGB, wrap), so a file used by many materials is decoded once.
@@ -128,5 +204,29 @@ mod tests {
         assert!((raw.texels[0].y - 128.0 / 255.0).abs() < 1e-6);
         assert!(decode(&png[..png.len() / 2], true, Wrap::Clamp).is_err());
         assert!(decode(b"not an image", true, Wrap::Clamp).is_err());
+    }
+
+    #[test]
+    fn every_truncation_of_a_jpeg_is_caught() {
+        let img = image::RgbImage::from_fn(40, 24, |x, y| {
+            image::Rgb([(x * 6) as u8, (y * 10) as u8, ((x ^ y) * 5) as u8])
+        });
+        let mut jpg = Vec::new();
+        img.write_to(&mut Cursor::new(&mut jpg), image::ImageFormat::Jpeg)
+            .unwrap();
+        assert_eq!(check_jpeg_complete(&jpg), Ok(()));
+        assert!(decode(&jpg, true, Wrap::Clamp).is_ok());
+        // Bytes after the end-of-image marker are allowed (some cameras append data).
+        let mut trailing = jpg.clone();
+        trailing.extend([0, 0, 0x12]);
+        assert_eq!(check_jpeg_complete(&trailing), Ok(()));
+        for cut in 3..jpg.len() {
+            let e = decode(&jpg[..cut], true, Wrap::Clamp).unwrap_err();
+            assert!(e.contains("truncated JPEG"), "cut at {cut}: {e}");
+            assert!(
+                e.contains(&format!("after {cut} bytes")),
+                "cut at {cut}: {e}"
+            );
+        }
     }
 }
