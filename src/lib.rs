@@ -6,9 +6,12 @@
 //!
 //! Data flows one way: [`scene::SceneDesc`] -> [`scene::World`] (Embree geometry, materials)
 //! -> [`camera::Camera`] -> [`render::render`] -> [`render::Film`] -> [`output`].
+#![deny(unsafe_code)]
 
 pub mod bench;
 pub mod camera;
+// The only module with FFI; its unsafe blocks are documented (clippy::undocumented_unsafe_blocks).
+#[allow(unsafe_code)]
 pub mod embree;
 pub mod limits;
 pub mod metrics;

@@ -1,8 +1,8 @@
 //! The safe Embree layer: analytic hits, packets versus single rays, threads, and bad input.
 
 use dofray::embree::{
-    Device, EmbreeError, Geometry, GeometryId, LANES, Ray, RayHint, RayPacket16, Scene,
-    SceneBuilder, ShadowPacket16, Spheres, TriangleMesh,
+    Device, EMBREE_MAJOR, EmbreeError, ErrorCode, Geometry, GeometryId, Hit, LANES, Ray, RayHint,
+    RayPacket16, Scene, SceneBuilder, ShadowPacket16, Spheres, TriangleMesh,
 };
 use glam::Vec3;
 use rayon::prelude::*;
@@ -159,6 +159,10 @@ fn mesh_normals_and_uvs_interpolate() {
     assert_eq!(mesh.face_normal(0).normalize(), Vec3::Z);
 }
 
+/// Through the public API: an inactive lane's ray (including `tfar`, which a hit would shorten)
+/// is left as it was, although tracing it would hit. (`embree::scene`'s unit tests check that no
+/// hit field of an inactive lane is written either; `hit()` cannot show that, as it returns
+/// `None` for inactive lanes whatever they hold.)
 #[test]
 fn partial_mask_leaves_inactive_lanes_untouched() {
     let scene = mixed_scene();
@@ -173,50 +177,99 @@ fn partial_mask_leaves_inactive_lanes_untouched() {
     }
     assert_eq!(packet.active_count(), 11);
     scene.intersect16(&mut packet, RayHint::Coherent);
-    let mut hits = 0;
+    let (mut hits, mut inactive_would_hit) = (0, 0);
     for (lane, ray) in rays.iter().enumerate() {
         if lane % 3 == 1 {
             assert_eq!(packet.ray(lane), *ray, "inactive lane {lane} was written");
-            assert!(packet.hit(lane).is_none());
-        } else if packet.hit(lane).is_some() {
-            hits += 1;
+            assert!(!packet.is_active(lane) && packet.hit(lane).is_none());
+            if scene.intersect1(ray).is_some() {
+                inactive_would_hit += 1;
+            }
+        } else {
+            assert_eq!(
+                packet.hit(lane).is_some(),
+                scene.intersect1(ray).is_some(),
+                "active lane {lane}"
+            );
+            if packet.hit(lane).is_some() {
+                hits += 1;
+            }
         }
     }
     assert!(hits > 0, "the active lanes should hit something");
+    assert!(
+        inactive_would_hit > 0,
+        "some inactive lane's ray must hit, or leaving its tfar alone proves nothing"
+    );
+}
+
+/// The packet and single-ray paths must report the same hit: distance, ids, barycentrics and
+/// geometric normal (up to float rounding).
+fn assert_same_hit(single: &Hit, wide: &Hit, what: &str) {
+    assert_eq!(
+        (single.geometry, single.prim),
+        (wide.geometry, wide.prim),
+        "{what}"
+    );
+    let close = |a: f32, b: f32, scale: f32| (a - b).abs() <= 1e-4 * scale.max(1.0);
+    assert!(
+        close(single.t, wide.t, single.t),
+        "{what}: t {single:?} vs {wide:?}"
+    );
+    assert!(
+        close(single.u, wide.u, 1.0) && close(single.v, wide.v, 1.0),
+        "{what}: u, v {single:?} vs {wide:?}"
+    );
+    let scale = single.ng.length();
+    assert!(
+        scale > 0.0 && (single.ng - wide.ng).length() <= 1e-4 * scale,
+        "{what}: Ng {single:?} vs {wide:?}"
+    );
 }
 
 #[test]
 fn intersect16_agrees_with_intersect1_and_occluded16() {
     let scene = mixed_scene();
-    let mut rng = Rng(12345);
-    let mut packet = RayPacket16::new();
-    let mut shadow = ShadowPacket16::new();
-    let (mut hits, mut misses) = (0, 0);
-    for _ in 0..64 {
-        let rays: Vec<Ray> = (0..LANES).map(|_| rng.ray()).collect();
-        for (lane, ray) in rays.iter().enumerate() {
-            packet.set(lane, ray);
-            shadow.set(lane, ray);
-        }
-        scene.intersect16(&mut packet, RayHint::Incoherent);
-        scene.occluded16(&mut shadow, RayHint::Incoherent);
-        for (lane, ray) in rays.iter().enumerate() {
-            let single = scene.intersect1(ray);
-            let wide = packet.hit(lane);
-            match (single, wide) {
-                (Some(s), Some(w)) => {
-                    hits += 1;
-                    assert_eq!((s.geometry, s.prim), (w.geometry, w.prim));
-                    assert!((s.t - w.t).abs() <= 1e-4 * s.t.max(1.0), "{s:?} vs {w:?}");
-                }
-                (None, None) => misses += 1,
-                other => panic!("lane {lane}: single and packet disagree: {other:?}"),
+    for hint in [RayHint::Coherent, RayHint::Incoherent] {
+        let mut rng = Rng(12345);
+        let mut packet = RayPacket16::new();
+        let mut shadow = ShadowPacket16::new();
+        let (mut hits, mut misses, mut triangle_hits) = (0, 0, 0);
+        for _ in 0..64 {
+            let rays: Vec<Ray> = (0..LANES).map(|_| rng.ray()).collect();
+            for (lane, ray) in rays.iter().enumerate() {
+                packet.set(lane, ray);
+                shadow.set(lane, ray);
             }
-            assert_eq!(shadow.occluded(lane), wide.is_some(), "lane {lane}");
-            assert_eq!(scene.occluded1(ray), wide.is_some(), "lane {lane}");
+            scene.intersect16(&mut packet, hint);
+            scene.occluded16(&mut shadow, hint);
+            for (lane, ray) in rays.iter().enumerate() {
+                let single = scene.intersect1(ray);
+                let wide = packet.hit(lane);
+                match (single, wide) {
+                    (Some(s), Some(w)) => {
+                        hits += 1;
+                        if matches!(scene.geometry(s.geometry), Geometry::Mesh(_)) {
+                            triangle_hits += 1;
+                        }
+                        assert_same_hit(&s, &w, &format!("{hint:?} lane {lane}"));
+                    }
+                    (None, None) => misses += 1,
+                    other => panic!("{hint:?} lane {lane}: single and packet disagree: {other:?}"),
+                }
+                assert_eq!(
+                    shadow.occluded(lane),
+                    wide.is_some(),
+                    "{hint:?} lane {lane}"
+                );
+                assert_eq!(scene.occluded1(ray), wide.is_some(), "{hint:?} lane {lane}");
+            }
         }
+        assert!(
+            hits > 100 && misses > 20 && triangle_hits > 20 && hits - triangle_hits > 20,
+            "{hint:?}: {hits} hits ({triangle_hits} on triangles), {misses} misses"
+        );
     }
-    assert!(hits > 100 && misses > 20, "{hits} hits, {misses} misses");
 }
 
 #[test]
@@ -269,9 +322,22 @@ fn bounds_cover_the_geometry() {
 
 #[test]
 fn invalid_device_config_is_an_error() {
-    let err = Device::with_config("threads=notanumber,nonsense_option=3").unwrap_err();
-    assert!(matches!(err, EmbreeError::Embree { .. }), "{err}");
-    assert!(Device::with_config("bad\0config").is_err());
+    // Embree ignores options it does not know (`nonsense_option=3` makes a device) but fails
+    // rtcNewDevice on a malformed value, with RTC_ERROR_UNKNOWN on both Embree 3 and 4.
+    let err = Device::with_config("threads=notanumber").unwrap_err();
+    let EmbreeError::Embree { code, message } = &err else {
+        panic!("expected Embree's own error, got {err}");
+    };
+    assert_eq!(*code, ErrorCode::Unknown, "{err}");
+    assert!(message.contains("threads=notanumber"), "{message:?}");
+    if EMBREE_MAJOR >= 4 {
+        // Embree 4 says why (rtcGetDeviceLastErrorMessage); Embree 3 gives only the code.
+        assert!(message.contains("integer expected"), "{message:?}");
+    }
+    assert!(matches!(
+        Device::with_config("bad\0config"),
+        Err(EmbreeError::InvalidConfig { .. })
+    ));
     assert!(Device::with_config("verbose=0").is_ok());
 }
 

@@ -6,15 +6,21 @@
 #
 # Usage: benches/cpp/run.sh [ROUNDS] [REPS]
 #   ROUNDS  alternating runs of each program (default 5); REPS timed passes per mode and run (default 15).
-# Honours EMBREE_DIR (an install prefix with include/ and lib/) as build.rs does.
-# Nothing is downloaded; the C++ is built with g++ into target/.
+# Honours EMBREE_DIR (an install prefix with include/ and lib/) as build.rs does, and
+# CARGO_TARGET_DIR (relative to the repository root, as cargo takes it when run from there).
+# Nothing is downloaded; the C++ is built with g++ into the target directory.
+# Both sides are compiled for x86-64-v3 (AVX2 + FMA): .cargo/config.toml sets target-cpu for
+# Rust, -march=$CXX_MARCH (default x86-64-v3) for C++; override both together.
 set -euo pipefail
 
 cd "$(dirname "$0")/../.."
 ROUNDS=${1:-5}
 REPS=${2:-15}
-OUT=target/packet_loop_cpp
-mkdir -p target
+TARGET_DIR=${CARGO_TARGET_DIR:-target}
+CXX_MARCH=${CXX_MARCH:-x86-64-v3}
+OUT=$TARGET_DIR/packet_loop_cpp
+RUST=$TARGET_DIR/release/examples/packet_loop
+mkdir -p "$TARGET_DIR"
 
 # Same search order as build.rs: EMBREE_DIR, then system Embree 4, then Embree 3.
 cxxflags=()
@@ -42,14 +48,14 @@ else
     }
 fi
 
-echo "== building C++ baseline against Embree $major"
+echo "== building C++ baseline against Embree $major (-march=$CXX_MARCH) into $OUT"
+# -march matches Rust's target-cpu, so neither side gets wider vectors than the other.
 # -ffp-contract=off: no FMA contraction, so the C++ generates the same rays bit for bit as Rust.
-g++ -std=c++17 -O3 -march=native -ffp-contract=off -Wall -Wextra \
+g++ -std=c++17 -O3 -march="$CXX_MARCH" -ffp-contract=off -Wall -Wextra \
     -DEMBREE_MAJOR="$major" "${cxxflags[@]}" \
     benches/cpp/packet_loop.cpp -o "$OUT" "${ldflags[@]}" -lembree"$major"
-echo "== building Rust example"
+echo "== building Rust example into $RUST"
 cargo build --release --quiet --example packet_loop
-RUST=target/release/examples/packet_loop
 
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT
@@ -74,6 +80,7 @@ for mode in intersect16 intersect1; do
         declare "med_${lang}=$(while read -r l; do field median_mrays "$l"; done <<<"$lines" | median)"
     done
     ratio=$(awk -v r="$med_rust" -v c="$med_cpp" 'BEGIN { printf "%.3f", r / c }')
+    declare "ratio_${mode}=$ratio"
     printf '%-12s C++ %8.3f Mrays/s   Rust %8.3f Mrays/s   Rust/C++ %s\n' "$mode" "$med_cpp" "$med_rust" "$ratio"
     if [[ "$sum_cpp" == "$sum_rust" && $(wc -l <<<"$sum_cpp") == 1 ]]; then
         echo "             checksum match: rays_hash hits sum_t = $sum_cpp"
@@ -89,6 +96,18 @@ for lang in cpp rust; do
         awk '{ for (i = 1; i <= NF; i++) { split($i, kv, "="); f[kv[1]] = kv[2] }
                if (f["mode"] == "intersect16") p = f["median_mrays"]; else print p / f["median_mrays"] }' | median)"
 done
-printf 'intersect16 / 16 x intersect1 (median of per-run ratios):   C++ %.2fx   Rust %.2fx\n' \
-    "$speedup_cpp" "$speedup_rust"
+
+echo
+echo "== result"
+printf 'Rust / C++ throughput (1.000 = parity, below 1 = Rust slower):\n'
+printf '    intersect16        %s\n' "$ratio_intersect16"
+printf '    16 x intersect1    %s\n' "$ratio_intersect1"
+printf 'intersect16 speed-up over 16 x intersect1 (median of per-run ratios):\n'
+printf '    C++                %.2fx\n' "$speedup_cpp"
+printf '    Rust               %.2fx\n' "$speedup_rust"
+if ((status == 0)); then
+    echo "checksums: C++ and Rust traced identical hits"
+else
+    echo "checksums: MISMATCH (see above); the timings compare different work"
+fi
 exit $status

@@ -1,8 +1,10 @@
 //! The Embree device and the typed errors it reports.
 
+use std::collections::HashMap;
 use std::ffi::{CStr, CString, c_char, c_void};
 use std::fmt;
 use std::sync::{Arc, Mutex};
+use std::thread::{self, ThreadId};
 
 use super::sys;
 
@@ -63,8 +65,18 @@ pub enum EmbreeError {
 
 pub type Result<T, E = EmbreeError> = std::result::Result<T, E>;
 
-/// The first error Embree reported through the callback since it was last taken.
-type ErrorSlot = Mutex<Option<(ErrorCode, String)>>;
+/// Per thread, the first error Embree reported through the callback since that thread last
+/// took it.
+///
+/// Embree calls the error callback on the thread whose API call failed (errors inside its own
+/// build tasks are re-raised in the thread that called `rtcCommitScene`), and keeps the sticky
+/// code behind `rtcGetDeviceError` per thread too. Keying by thread keeps the error of one
+/// thread's scene build from being reported by another thread building a scene on the same
+/// device at the same time. An entry is left behind only by a thread that got an error and
+/// never checked, which every wrapper call does. (Were Embree ever to call the callback from a
+/// worker thread instead, that error would be filed under the worker and not reach the caller;
+/// Embree 3.13 and 4.3 do not.)
+type ErrorSlot = Mutex<HashMap<ThreadId, (ErrorCode, String)>>;
 
 struct DeviceInner {
     raw: sys::RTCDevice,
@@ -87,6 +99,9 @@ impl Drop for DeviceInner {
 }
 
 /// An Embree device. Cheap to clone; scenes keep their device alive.
+///
+/// Several threads may build scenes on one device at once: errors are recorded per thread, as
+/// Embree itself records them, so each builder sees only the errors of its own calls.
 #[derive(Clone)]
 pub struct Device(Arc<DeviceInner>);
 
@@ -113,8 +128,10 @@ unsafe extern "C" fn error_callback(
         };
         // SAFETY: user is the ErrorSlot boxed in DeviceInner, alive as long as the device.
         let slot = unsafe { &*(user as *const ErrorSlot) };
-        if let Ok(mut first) = slot.lock() {
-            first.get_or_insert((ErrorCode::from_raw(code), text));
+        if let Ok(mut errors) = slot.lock() {
+            errors
+                .entry(thread::current().id())
+                .or_insert((ErrorCode::from_raw(code), text));
         }
     });
 }
@@ -126,6 +143,10 @@ impl Device {
     }
 
     /// A device with an Embree configuration string such as `"threads=2,verbose=0"`.
+    ///
+    /// A config Embree rejects (say `threads=notanumber`; Embree ignores unknown options) is an
+    /// [`EmbreeError::Embree`] with Embree's code. Its message quotes Embree's reason on Embree 4;
+    /// Embree 3 gives a failed `rtcNewDevice` no text, only the code.
     pub fn with_config(config: &str) -> Result<Self> {
         let c_config = CString::new(config).map_err(|_| EmbreeError::InvalidConfig {
             config: config.to_string(),
@@ -134,14 +155,22 @@ impl Device {
         // SAFETY: c_config is a valid NUL-terminated string for the duration of the call.
         let raw = unsafe { sys::rtcNewDevice(c_config.as_ptr()) };
         if raw.is_null() {
-            // SAFETY: rtcGetDeviceError accepts NULL and returns the error of the failed rtcNewDevice.
+            // SAFETY: rtcGetDeviceError accepts NULL and returns (and clears) this thread's error,
+            // which the failed rtcNewDevice set.
             let code = unsafe { sys::rtcGetDeviceError(std::ptr::null_mut()) };
+            let message = match super::version::new_device_error_message() {
+                Some(reason) => format!("rtcNewDevice rejected the config {config:?}: {reason}"),
+                None => format!(
+                    "rtcNewDevice rejected the config {config:?} (Embree {} gives no reason)",
+                    super::version::EMBREE_MAJOR
+                ),
+            };
             return Err(EmbreeError::Embree {
                 code: ErrorCode::from_raw(code),
-                message: format!("rtcNewDevice rejected the config {config:?}"),
+                message,
             });
         }
-        let errors: Box<ErrorSlot> = Box::new(Mutex::new(None));
+        let errors: Box<ErrorSlot> = Box::new(Mutex::new(HashMap::new()));
         let user = &*errors as *const ErrorSlot as *mut c_void;
         // SAFETY: raw is a live device; the callback never unwinds and `user` stays valid until
         // rtcReleaseDevice in Drop, after which Embree no longer calls it.
@@ -153,10 +182,17 @@ impl Device {
         self.0.raw
     }
 
-    /// Turns any error Embree reported since the last check into an `Err`.
+    /// Turns any error Embree reported to this thread since its last check into an `Err`.
+    /// Errors of other threads' calls on the same device stay with those threads.
     pub(super) fn check(&self, what: &str) -> Result<()> {
-        let reported = self.0.errors.lock().ok().and_then(|mut slot| slot.take());
-        // SAFETY: raw is a live device. This also clears Embree's own sticky error code.
+        let reported = self
+            .0
+            .errors
+            .lock()
+            .ok()
+            .and_then(|mut errors| errors.remove(&thread::current().id()));
+        // SAFETY: raw is a live device. This also clears Embree's own sticky error code, which
+        // Embree keeps per thread.
         let code = unsafe { sys::rtcGetDeviceError(self.0.raw) };
         match reported {
             Some((code, message)) => Err(EmbreeError::Embree {
@@ -169,5 +205,80 @@ impl Device {
             }),
             None => Ok(()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Barrier;
+
+    use super::*;
+
+    /// Makes Embree report an error to the calling thread: an unknown geometry type.
+    fn provoke_error(device: &Device) {
+        // SAFETY: live device; Embree rejects the type, returns NULL and creates nothing.
+        let geom = unsafe { sys::rtcNewGeometry(device.raw(), 9999) };
+        assert!(geom.is_null());
+    }
+
+    #[test]
+    fn errors_are_reported_to_the_thread_whose_call_failed() {
+        let device = Device::new().unwrap();
+        let barrier = Barrier::new(2);
+        thread::scope(|s| {
+            let failing = s.spawn(|| {
+                provoke_error(&device);
+                barrier.wait(); // the error is recorded
+                barrier.wait(); // the other thread has checked
+                device.check("bad rtcNewGeometry")
+            });
+            barrier.wait();
+            let other = device.check("another thread's call");
+            barrier.wait();
+            assert!(other.is_ok(), "got the other thread's error: {other:?}");
+            match failing.join().unwrap() {
+                Err(EmbreeError::Embree { code, message }) => {
+                    assert_eq!(code, ErrorCode::Unknown, "{message}");
+                    assert!(message.contains("invalid geometry type"), "{message:?}");
+                }
+                other => panic!("the failing thread should see its error: {other:?}"),
+            }
+        });
+        assert!(device.0.errors.lock().unwrap().is_empty());
+    }
+
+    #[test]
+    fn only_the_first_error_since_the_last_check_is_kept() {
+        let device = Device::new().unwrap();
+        provoke_error(&device);
+        let data = [0u32; 16];
+        // SAFETY: live device; Embree rejects the misaligned buffer (RTC_ERROR_INVALID_OPERATION)
+        // before keeping the pointer, and the geometry is released once.
+        unsafe {
+            let geom = sys::rtcNewGeometry(device.raw(), sys::RTC_GEOMETRY_TYPE_TRIANGLE);
+            sys::rtcSetSharedGeometryBuffer(
+                geom,
+                sys::RTC_BUFFER_TYPE_VERTEX,
+                0,
+                sys::RTC_FORMAT_FLOAT3,
+                data.as_ptr().cast::<u8>().add(1).cast(),
+                0,
+                12,
+                3,
+            );
+            sys::rtcReleaseGeometry(geom);
+        }
+        let err = device.check("two bad calls").unwrap_err();
+        assert!(
+            matches!(
+                &err,
+                EmbreeError::Embree {
+                    code: ErrorCode::Unknown,
+                    ..
+                }
+            ),
+            "{err}"
+        );
+        assert!(device.check("next").is_ok());
     }
 }

@@ -156,6 +156,9 @@ impl TriangleMesh {
 
     /// Interpolated, normalised shading normal at barycentrics (u, v) of triangle `prim`,
     /// or `None` when the mesh has no normals.
+    ///
+    /// # Panics
+    /// When `prim` is not a triangle of this mesh.
     pub fn shading_normal(&self, prim: u32, u: f32, v: f32) -> Option<Vec3> {
         let normals = self.normals.as_ref()?;
         let [a, b, c] = self.corners(normals, prim).map(Vec3::from);
@@ -163,6 +166,9 @@ impl TriangleMesh {
     }
 
     /// Interpolated texture coordinate, or `None` when the mesh has no UVs.
+    ///
+    /// # Panics
+    /// When `prim` is not a triangle of this mesh.
     pub fn uv(&self, prim: u32, u: f32, v: f32) -> Option<Vec2> {
         let uvs = self.uvs.as_ref()?;
         let [a, b, c] = self.corners(uvs, prim).map(Vec2::from);
@@ -170,6 +176,9 @@ impl TriangleMesh {
     }
 
     /// The geometric normal of triangle `prim` (unnormalised winding order a, b, c).
+    ///
+    /// # Panics
+    /// When `prim` is not a triangle of this mesh.
     pub fn face_normal(&self, prim: u32) -> Vec3 {
         let [a, b, c] = self.corners(&self.positions, prim).map(Vec3::from);
         (b - a).cross(c - a)
@@ -213,11 +222,19 @@ impl Spheres {
         self.data.is_empty()
     }
 
+    /// Centre of sphere `prim`.
+    ///
+    /// # Panics
+    /// When `prim` is not a sphere of this set.
     pub fn center(&self, prim: u32) -> Vec3 {
         let [x, y, z, _] = self.data[prim as usize];
         Vec3::new(x, y, z)
     }
 
+    /// Radius of sphere `prim`.
+    ///
+    /// # Panics
+    /// When `prim` is not a sphere of this set.
     pub fn radius(&self, prim: u32) -> f32 {
         self.data[prim as usize][3]
     }

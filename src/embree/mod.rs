@@ -4,6 +4,10 @@
 //! immutable, `Send + Sync`, and traces single rays or 16-wide packets ([`RayPacket16`],
 //! [`ShadowPacket16`]). Geometry data is validated before Embree sees it; Embree's errors come
 //! back as [`EmbreeError`].
+//!
+//! The crate root denies `unsafe` everywhere else; here every `unsafe` block states why it is
+//! sound in a `SAFETY:` comment.
+#![warn(clippy::undocumented_unsafe_blocks)]
 
 mod device;
 mod geometry;

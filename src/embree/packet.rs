@@ -70,6 +70,17 @@ pub enum RayHint {
 #[derive(Clone, Copy)]
 pub(super) struct Mask16(pub(super) [i32; LANES]);
 
+// rtcIntersect16 / rtcOccluded16 require the mask and the packets to be 64-byte aligned (the
+// bindgen types carry the header's alignment). Checked at compile time, so an Embree header or
+// bindgen change that lost it cannot turn into unaligned AVX-512 loads.
+const _: () = assert!(
+    std::mem::align_of::<Mask16>() == 64
+        && std::mem::size_of::<Mask16>() == 64
+        && std::mem::align_of::<sys::RTCRayHit16>() == 64
+        && std::mem::align_of::<sys::RTCRay16>() == 64
+        && std::mem::align_of::<sys::RTCHit16>() == 64
+);
+
 fn init_ray(raw: &mut sys::RTCRay16, lane: usize, ray: &Ray) {
     raw.org_x[lane] = ray.origin.x;
     raw.org_y[lane] = ray.origin.y;
@@ -123,6 +134,9 @@ impl RayPacket16 {
     }
 
     /// Activates `lane` with `ray` and no hit.
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn set(&mut self, lane: usize, ray: &Ray) {
         init_ray(&mut self.rayhit.ray, lane, ray);
         let hit = &mut self.rayhit.hit;
@@ -137,6 +151,7 @@ impl RayPacket16 {
     /// Fills every lane from structure-of-arrays origins and directions (x, y, z components)
     /// with `tnear` 0, no far limit and no hit, and activates lanes `0..active` (the others
     /// are inactive; their data is ignored). Equal to `clear` then `set` of each active lane.
+    /// An `active` above 16 activates every lane.
     pub fn set_lanes(
         &mut self,
         active: usize,
@@ -202,10 +217,17 @@ impl RayPacket16 {
     }
 
     /// Deactivates one lane; Embree will neither read nor write it.
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn set_inactive(&mut self, lane: usize) {
         self.valid.0[lane] = 0;
     }
 
+    /// Whether `lane` will be traced.
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn is_active(&self, lane: usize) -> bool {
         self.valid.0[lane] != 0
     }
@@ -216,11 +238,17 @@ impl RayPacket16 {
     }
 
     /// The ray in `lane` (after tracing, `tfar` is the hit distance when it hit).
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn ray(&self, lane: usize) -> Ray {
         read_ray(&self.rayhit.ray, lane)
     }
 
     /// The hit in `lane`, or `None` when the lane is inactive or its ray missed.
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn hit(&self, lane: usize) -> Option<Hit> {
         let h = &self.rayhit.hit;
         if !self.is_active(lane) || h.geomID[lane] == sys::RTC_INVALID_GEOMETRY_ID {
@@ -251,6 +279,7 @@ impl Default for ShadowPacket16 {
 }
 
 impl ShadowPacket16 {
+    /// A packet with every lane inactive.
     pub fn new() -> Self {
         Self {
             rays: sys::RTCRay16::default(),
@@ -258,10 +287,15 @@ impl ShadowPacket16 {
         }
     }
 
+    /// Deactivates every lane (their data is left as it was).
     pub fn clear(&mut self) {
         self.valid.0 = [0; LANES];
     }
 
+    /// Activates `lane` with the shadow ray `ray`.
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn set(&mut self, lane: usize, ray: &Ray) {
         init_ray(&mut self.rays, lane, ray);
         self.valid.0[lane] = -1;
@@ -293,19 +327,39 @@ impl ShadowPacket16 {
         self.valid.0 = std::array::from_fn(|lane| -(((active >> lane) & 1) as i32));
     }
 
+    /// Deactivates one lane; Embree will neither read nor write it.
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
+    pub fn set_inactive(&mut self, lane: usize) {
+        self.valid.0[lane] = 0;
+    }
+
+    /// Whether `lane` will be traced.
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn is_active(&self, lane: usize) -> bool {
         self.valid.0[lane] != 0
     }
 
+    /// Number of active lanes.
     pub fn active_count(&self) -> usize {
         self.valid.0.iter().filter(|&&v| v != 0).count()
     }
 
+    /// The shadow ray in `lane` (after tracing, `tfar` is -inf when it was blocked).
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn ray(&self, lane: usize) -> Ray {
         read_ray(&self.rays, lane)
     }
 
     /// True when the active ray in `lane` is blocked (Embree sets its `tfar` to -inf).
+    ///
+    /// # Panics
+    /// When `lane >= LANES` (16).
     pub fn occluded(&self, lane: usize) -> bool {
         self.is_active(lane) && self.rays.tfar[lane] == f32::NEG_INFINITY
     }

@@ -215,6 +215,9 @@ impl Scene {
     }
 
     /// The Rust-side data of a geometry a hit refers to.
+    ///
+    /// # Panics
+    /// When `id` is not a geometry of this scene (ids come from its hits or its builder).
     pub fn geometry(&self, id: GeometryId) -> &Geometry {
         &self.geometries[id.0 as usize]
     }
@@ -261,7 +264,7 @@ impl Scene {
         // aligned by their types, and Embree only touches active lanes.
         unsafe {
             version::intersect16(
-                &packet.valid.0,
+                &packet.valid,
                 self.handle.0,
                 &mut packet.rayhit,
                 hint == RayHint::Coherent,
@@ -274,7 +277,7 @@ impl Scene {
         // SAFETY: as in intersect16.
         unsafe {
             version::occluded16(
-                &packet.valid.0,
+                &packet.valid,
                 self.handle.0,
                 &mut packet.rays,
                 hint == RayHint::Coherent,
@@ -297,5 +300,196 @@ fn raw_ray(ray: &Ray) -> sys::RTCRay {
         mask: u32::MAX,
         id: 0,
         flags: 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::embree::{ErrorCode, LANES};
+
+    /// A 20 x 20 quad at z = 2 (geometry 0) and a sphere behind it (geometry 1).
+    fn quad_scene(device: &Device) -> Scene {
+        let mut b = SceneBuilder::new(device).unwrap();
+        let quad = TriangleMesh::new(
+            vec![
+                [-10.0, -10.0, 2.0],
+                [10.0, -10.0, 2.0],
+                [10.0, 10.0, 2.0],
+                [-10.0, 10.0, 2.0],
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+        .unwrap();
+        b.add_mesh(quad).unwrap();
+        b.add_spheres(Spheres::new([(Vec3::new(0.0, 0.0, 6.0), 1.0)]).unwrap())
+            .unwrap();
+        b.commit().unwrap()
+    }
+
+    /// Lane `lane`'s ray: from z = 0 straight at the quad, every lane at its own point.
+    fn lane_ray(lane: usize) -> Ray {
+        let x = (lane % 4) as f32 - 1.5;
+        let y = (lane / 4) as f32 - 1.5;
+        Ray::new(Vec3::new(x, y, 0.0), Vec3::new(0.05 * x, 0.05 * y, 1.0))
+    }
+
+    const INACTIVE: [usize; 5] = [1, 4, 7, 10, 15];
+
+    /// Writes recognisable values into every hit field and `tfar` of `lane`.
+    fn fill_sentinels(raw: &mut sys::RTCRayHit16, lane: usize) {
+        let h = &mut raw.hit;
+        h.geomID[lane] = 0xDEAD_0000 + lane as u32;
+        h.primID[lane] = 0xBEEF_0000 + lane as u32;
+        for level in h.instID.iter_mut() {
+            level[lane] = 0xCAFE_0000 + lane as u32;
+        }
+        h.u[lane] = -7.25;
+        h.v[lane] = -8.5;
+        h.Ng_x[lane] = 1.0e30;
+        h.Ng_y[lane] = -1.0e-30;
+        h.Ng_z[lane] = f32::MIN_POSITIVE;
+        raw.ray.tfar[lane] = 12345.5;
+    }
+
+    /// The bits of everything Embree could write in `lane`.
+    fn lane_bits(raw: &sys::RTCRayHit16, lane: usize) -> Vec<u32> {
+        let h = &raw.hit;
+        let mut bits = vec![h.geomID[lane], h.primID[lane]];
+        bits.extend(h.instID.iter().map(|level| level[lane]));
+        bits.extend(
+            [
+                h.u[lane],
+                h.v[lane],
+                h.Ng_x[lane],
+                h.Ng_y[lane],
+                h.Ng_z[lane],
+                raw.ray.tfar[lane],
+            ]
+            .map(f32::to_bits),
+        );
+        bits
+    }
+
+    #[test]
+    fn intersect16_writes_no_field_of_an_inactive_lane() {
+        let device = Device::new().unwrap();
+        let scene = quad_scene(&device);
+        for hint in [RayHint::Coherent, RayHint::Incoherent] {
+            let mut packet = RayPacket16::new();
+            for lane in 0..LANES {
+                packet.set(lane, &lane_ray(lane));
+            }
+            for lane in INACTIVE {
+                packet.set_inactive(lane);
+                fill_sentinels(&mut packet.rayhit, lane);
+                // Tracing this lane would write every field above: its ray hits the quad.
+                let would = scene.intersect1(&packet.ray(lane));
+                assert!(
+                    would.is_some_and(|h| h.geometry == GeometryId(0) && (h.t - 2.0).abs() < 0.1),
+                    "{hint:?} lane {lane}: {would:?}"
+                );
+            }
+            let before: Vec<_> = INACTIVE
+                .iter()
+                .map(|&lane| lane_bits(&packet.rayhit, lane))
+                .collect();
+
+            scene.intersect16(&mut packet, hint);
+
+            for (&lane, before) in INACTIVE.iter().zip(&before) {
+                assert_eq!(
+                    lane_bits(&packet.rayhit, lane),
+                    *before,
+                    "{hint:?}: inactive lane {lane} was written"
+                );
+            }
+            for lane in (0..LANES).filter(|l| !INACTIVE.contains(l)) {
+                let hit = packet.hit(lane);
+                assert!(
+                    hit.is_some_and(|h| h.geometry == GeometryId(0) && (h.t - 2.0).abs() < 0.1),
+                    "{hint:?}: active lane {lane} should hit the quad: {hit:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn occluded16_writes_no_field_of_an_inactive_lane() {
+        let device = Device::new().unwrap();
+        let scene = quad_scene(&device);
+        for hint in [RayHint::Coherent, RayHint::Incoherent] {
+            let mut packet = ShadowPacket16::new();
+            for lane in 0..LANES {
+                packet.set(lane, &lane_ray(lane));
+            }
+            for lane in INACTIVE {
+                packet.set_inactive(lane);
+                packet.rays.tfar[lane] = 12345.5;
+                assert!(scene.occluded1(&packet.ray(lane)), "lane {lane} is blocked");
+            }
+            scene.occluded16(&mut packet, hint);
+            for lane in 0..LANES {
+                if INACTIVE.contains(&lane) {
+                    assert_eq!(packet.rays.tfar[lane], 12345.5, "{hint:?}: lane {lane}");
+                    assert!(!packet.occluded(lane));
+                } else {
+                    assert!(packet.occluded(lane), "{hint:?}: lane {lane}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn embree_error_from_a_call_becomes_a_typed_error_with_embrees_message() {
+        let device = Device::new().unwrap();
+        let mut b = SceneBuilder::new(&device).unwrap();
+        b.add_spheres(Spheres::new([(Vec3::ZERO, 1.0)]).unwrap())
+            .unwrap();
+
+        // Attaching a second geometry under the id the spheres already have is an invalid
+        // operation; Embree reports it only through the error callback.
+        // SAFETY: live device and scene; the new geometry is released once, and Embree refuses
+        // to attach it, so the scene never references it.
+        unsafe {
+            let geom = sys::rtcNewGeometry(device.raw(), sys::RTC_GEOMETRY_TYPE_TRIANGLE);
+            assert!(!geom.is_null());
+            sys::rtcAttachGeometryByID(b.handle.0, geom, 0);
+            sys::rtcReleaseGeometry(geom);
+        }
+        match device.check("attaching twice") {
+            Err(EmbreeError::Embree { code, message }) => {
+                assert_eq!(code, ErrorCode::InvalidOperation, "{message}");
+                assert!(
+                    message.starts_with("attaching twice: ") && message.contains("geometry ID"),
+                    "Embree's own text should follow the call: {message:?}"
+                );
+            }
+            other => panic!("expected Embree's InvalidOperation, got {other:?}"),
+        }
+        assert!(device.check("after").is_ok(), "the error is reported once");
+
+        // Through the wrapper's own path: an unknown geometry type fails in rtcNewGeometry.
+        let err = b
+            .attach(
+                Geometry::Spheres(Spheres::new([(Vec3::ONE, 1.0)]).unwrap()),
+                9999,
+                |_| panic!("no buffers are set when rtcNewGeometry fails"),
+            )
+            .unwrap_err();
+        match err {
+            EmbreeError::Embree { code, message } => {
+                assert_eq!(code, ErrorCode::Unknown, "{message}");
+                assert!(
+                    message.starts_with("rtcNewGeometry: ") && message.contains("geometry type"),
+                    "{message:?}"
+                );
+            }
+            other => panic!("expected an Embree error, got {other}"),
+        }
+        // Neither error leaks into later calls: the builder still works.
+        let scene = b.commit().unwrap();
+        assert_eq!(scene.geometries().len(), 1);
+        assert!(scene.occluded1(&Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::Z)));
     }
 }
