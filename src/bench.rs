@@ -106,7 +106,8 @@ pub struct BenchReport {
     /// Rays per second of the intersect-only replay of exactly the rays dense traces.
     pub intersect_only_mrays_per_s: f64,
     pub intersect_only_seconds: f64,
-    /// Dense's rays/s as a fraction of the intersect-only rate.
+    /// Dense's rays/s as a fraction of the intersect-only rate: the median over repeats of the
+    /// ratio within each repeat.
     pub dense_vs_intersect_only: f64,
     pub rows: Vec<BenchRow>,
 }
@@ -274,11 +275,27 @@ pub fn run(
     let (reference, reference_cached, reference_seconds) =
         reference(desc, world, camera, config, progress)?;
 
-    // Interleave the modes within each repeat so machine noise spreads over all of them.
+    // Intersect-only: replay exactly the packets dense traces, without shading or sampling.
+    let recording = RenderSettings {
+        mode: Mode::Dense,
+        spp: config.spp,
+        seed: config.seed,
+        record_rays: true,
+        ..Default::default()
+    };
+    let (_, recorded) = render::render(world, camera, &recording, progress)?;
+    let log = recorded.ray_log.unwrap_or_default();
+
+    // Interleave the modes and the replay within each repeat, so machine noise (these are
+    // shared machines) spreads over all of them, and compare dense with the replay of the same
+    // repeat.
     let modes = modes();
     let mut times = vec![Vec::new(); modes.len()];
     let mut phases = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; modes.len()];
     let mut results: Vec<Option<(Film, RenderStats)>> = vec![None; modes.len()];
+    let mut replay_times = Vec::new();
+    let mut dense_vs_replay = Vec::new();
+    let mut replayed = 0;
     for _ in 0..config.repeat {
         for (i, (_, mode, k, exact)) in modes.iter().enumerate() {
             let settings = RenderSettings {
@@ -302,24 +319,13 @@ pub fn run(
             }
             results[i].get_or_insert((film, stats));
         }
-    }
-
-    // Intersect-only: replay exactly the packets dense traced, without shading or sampling.
-    let recording = RenderSettings {
-        mode: Mode::Dense,
-        spp: config.spp,
-        seed: config.seed,
-        record_rays: true,
-        ..Default::default()
-    };
-    let (_, recorded) = render::render(world, camera, &recording, progress)?;
-    let log = recorded.ray_log.unwrap_or_default();
-    let mut replay_times = Vec::new();
-    let mut replayed = 0;
-    for _ in 0..config.repeat {
         let start = Instant::now();
         replayed = render::replay(&world.scene, &log);
-        replay_times.push(start.elapsed().as_secs_f64());
+        let replay_seconds = start.elapsed().as_secs_f64();
+        replay_times.push(replay_seconds);
+        // Same rays, so the ratio of rates is the inverse ratio of times.
+        let dense_seconds = *times[1].last().expect("dense ran this repeat");
+        dense_vs_replay.push(replay_seconds / dense_seconds);
     }
     drop(log);
     let intersect_only_seconds = median(replay_times);
@@ -367,7 +373,6 @@ pub fn run(
         });
         films.push((label, film));
     }
-    let dense_mrays = rows[1].mrays_per_s;
     Ok((
         BenchReport {
             scene: desc.name.clone(),
@@ -381,7 +386,7 @@ pub fn run(
             reference_seconds,
             intersect_only_mrays_per_s,
             intersect_only_seconds,
-            dense_vs_intersect_only: dense_mrays / intersect_only_mrays_per_s,
+            dense_vs_intersect_only: median(dense_vs_replay),
             rows,
         },
         BenchImages { films, reference },

@@ -506,6 +506,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "seed": settings.seed,
             "seconds": stats.seconds,
             "pinhole_seconds": stats.pinhole_seconds,
+            "maps_seconds": stats.maps_seconds,
+            "sites_seconds": stats.sites_seconds,
+            "interpolate_seconds": stats.interpolate_seconds,
             "rays": stats.rays.total(),
             "primary_rays": stats.rays.primary,
             "shadow_rays": stats.rays.shadow,
@@ -622,6 +625,21 @@ fn print_table(r: &bench::BenchReport) {
         r.intersect_only_mrays_per_s,
         100.0 * r.dense_vs_intersect_only
     );
+    println!("where the time goes (ms): pinhole pass + maps + sample sites + interpolation");
+    for row in r
+        .rows
+        .iter()
+        .filter(|row| row.mode != render::Mode::Pinhole)
+    {
+        println!(
+            "  {:<20} {:>7.1} + {:>5.1} + {:>7.1} + {:>5.1}",
+            row.label,
+            row.pinhole_seconds * 1e3,
+            row.maps_seconds * 1e3,
+            row.sites_seconds * 1e3,
+            row.interpolate_seconds * 1e3
+        );
+    }
     println!("PSNR/SSIM in sRGB (what a viewer sees); \"inf\" = identical images.");
 }
 

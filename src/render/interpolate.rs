@@ -14,6 +14,9 @@ pub fn interpolate(
     width: usize,
     height: usize,
 ) {
+    if sites.iter().all(|&s| s) {
+        return; // nothing to fill (dense)
+    }
     let snapshot: Vec<Vec3> = color.to_vec();
     color
         .par_chunks_mut(width)

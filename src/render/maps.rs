@@ -171,6 +171,10 @@ pub fn cell(x: usize, interval: u32, n: usize) -> (usize, usize) {
 /// with interval 1 is its own site). Interpolated pixels therefore only read traced sites, at
 /// every boundary between layers.
 pub fn site_mask(interval: &[u32], width: usize, height: usize) -> Vec<bool> {
+    if interval.iter().all(|&i| i == 1) {
+        // Dense, or nothing defocused: every pixel is its own site.
+        return vec![true; interval.len()];
+    }
     let mut sites = vec![false; interval.len()];
     for y in 0..height {
         for x in 0..width {
