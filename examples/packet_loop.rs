@@ -14,18 +14,9 @@ mod paper_rays;
 use std::hint::black_box;
 use std::time::Instant;
 
+use dofray::bench::median;
 use dofray::embree::{Device, EMBREE_MAJOR, RayHint};
 use paper_rays::{Checksum, paper_rays, paper_scene, rays_hash, trace_packets, trace_single};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
 
 fn main() {
     let mut args = std::env::args().skip(1);
