@@ -131,7 +131,8 @@ struct RenderArgs {
     /// Weighting of lens samples over the aperture.
     #[arg(long, value_enum, default_value_t = LensFilter::Box)]
     filter: LensFilter,
-    /// Also write the depth map and interval map as PNG pictures into this directory.
+    /// Also write the depth map and interval map as PNG pictures into this directory (created
+    /// if missing).
     #[arg(long)]
     aov_dir: Option<PathBuf>,
     /// Print a JSON summary on stdout.
@@ -464,9 +465,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     };
     output::check_writable(&a.output)?;
     if let Some(dir) = &a.aov_dir {
-        if !dir.is_dir() {
-            bail!("--aov-dir {} is not a directory", dir.display());
-        }
+        // Created up front (like `bench --out`), so a bad path fails before rendering.
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create --aov-dir directory {}", dir.display()))?;
     }
     let Prepared {
         desc,

@@ -67,6 +67,35 @@ fn renders_png_and_exr_with_a_json_summary() {
     let img = image::open(&png).unwrap();
     assert_eq!((img.width(), img.height()), (80, 60));
     assert!(dir.join("depth.png").is_file() && dir.join("interval.png").is_file());
+    // The phases of the render add up to no more than its time.
+    let phases: f64 = [
+        "pinhole_seconds",
+        "maps_seconds",
+        "sites_seconds",
+        "interpolate_seconds",
+    ]
+    .iter()
+    .map(|k| {
+        json[*k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("missing {k} in {json}"))
+    })
+    .sum();
+    assert!(phases > 0.0 && phases <= json["seconds"].as_f64().unwrap());
+    // A missing --aov-dir is created.
+    let nested = dir.join("new").join("aovs");
+    let out = dofray(&[
+        "render",
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "40",
+        "--quiet",
+        "--aov-dir",
+        nested.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(nested.join("depth.png").is_file() && nested.join("interval.png").is_file());
 
     let exr = dir.join("out.exr");
     let out = dofray(&[
