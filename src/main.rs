@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use dofray::bench::{self, BenchConfig};
-use dofray::camera::{Camera, Focus, LensSpec};
+use dofray::camera::{Camera, CameraSpec, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::output;
 use dofray::render::{self, Mode, Progress, RenderSettings};
@@ -79,6 +79,15 @@ struct SceneArgs {
     /// photographic lens; with any other lens it needs --f-number [default: the scene's, else 36].
     #[arg(long)]
     sensor_width: Option<f32>,
+    /// The seed's lens: depths within this distance (scene units) in front of and behind the
+    /// focus stay nearly sharp (replaces the scene's lens; needs --spread). The aperture is
+    /// chosen so the blur at the range's ends is --spread pixels across and grows from there.
+    #[arg(long, requires = "spread", conflicts_with_all = ["aperture_radius", "f_number", "focal_length", "sensor_width"])]
+    sharp_range: Option<f32>,
+    /// The seed's lens: blur diameter in pixels at the ends of --sharp-range (how fast blur
+    /// spreads outside it; needs --sharp-range).
+    #[arg(long, requires = "sharp_range")]
+    spread: Option<f32>,
     /// Distance along the view axis that is in focus (overrides the scene's focus).
     #[arg(long, conflicts_with = "autofocus")]
     focus_distance: Option<f32>,
@@ -257,6 +266,21 @@ impl Progress for Bar {
 }
 
 /// Applies command-line overrides of size and lens to the scene's camera.
+/// A photographic lens sets the field of view; when another lens replaces it, keep the
+/// picture's framing by turning that field of view into the camera's vfov.
+fn keep_framing_without_photographic_lens(cam: &mut CameraSpec) {
+    if let LensSpec::Photographic {
+        focal_length_mm,
+        sensor_width_mm,
+        ..
+    } = cam.lens
+    {
+        let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
+        let tan_half_v = tan_half_h * cam.height as f32 / cam.width as f32;
+        cam.vfov_deg = 2.0 * tan_half_v.atan().to_degrees();
+    }
+}
+
 fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     let cam = &mut desc.camera;
     for (name, v) in [("--width", a.width), ("--height", a.height)] {
@@ -305,18 +329,21 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
         if !(r.is_finite() && r >= 0.0) {
             bail!("--aperture-radius must be a finite number >= 0, got {r}");
         }
-        // A photographic lens set the field of view: keep the picture's framing without it.
-        if let LensSpec::Photographic {
-            focal_length_mm,
-            sensor_width_mm,
-            ..
-        } = cam.lens
-        {
-            let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
-            let tan_half_v = tan_half_h * cam.height as f32 / cam.width as f32;
-            cam.vfov_deg = 2.0 * tan_half_v.atan().to_degrees();
-        }
+        keep_framing_without_photographic_lens(cam);
         cam.lens = LensSpec::Aperture { radius: r };
+    }
+    if let (Some(sharp_range), Some(spread)) = (a.sharp_range, a.spread) {
+        if !(sharp_range.is_finite() && sharp_range > 0.0) {
+            bail!("--sharp-range must be a finite number > 0, got {sharp_range}");
+        }
+        if !(spread.is_finite() && spread >= 0.0) {
+            bail!("--spread must be a finite number >= 0, got {spread}");
+        }
+        keep_framing_without_photographic_lens(cam);
+        cam.lens = LensSpec::Seed {
+            sharp_range,
+            spread,
+        };
     }
     match (a.f_number, &mut cam.lens) {
         (

@@ -600,3 +600,55 @@ fn bad_model_files_fail_with_the_file_named_and_no_output() {
     }
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// The seed's lens from the command line: the aperture follows from the sharp range and the
+/// spread (`R = spread P^2 / (2 k range)`, k the pixels per unit at unit distance), and the two
+/// flags only make sense together.
+#[test]
+fn seed_lens_flags_derive_the_aperture() {
+    let dir = scratch("seedlens");
+    let png = dir.join("seed.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "-o", png.to_str().unwrap(), "--width", "160"];
+        args.extend_from_slice(&["--mode", "pinhole", "--json", "--quiet"]);
+        args.extend_from_slice(extra);
+        dofray(&args)
+    };
+    let out = render(&["--sharp-range", "1", "--spread", "2"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let p = json["focus_distance"].as_f64().unwrap();
+    let k = 120.0 / (2.0 * 20f64.to_radians().tan()); // 160x120, vfov 40 degrees
+    let want = 2.0 * p * p / (2.0 * k * 1.0);
+    let got = json["aperture_radius"].as_f64().unwrap();
+    assert!(
+        (got - want).abs() < 1e-3 * want,
+        "aperture {got}, want {want}"
+    );
+    std::fs::remove_file(&png).unwrap();
+
+    for (extra, message) in [
+        (&["--sharp-range", "1"][..], "--spread"),
+        (
+            &["--sharp-range", "0", "--spread", "2"][..],
+            "--sharp-range must be",
+        ),
+        (
+            &["--sharp-range", "1", "--spread", "-1"][..],
+            "unexpected argument",
+        ),
+        (
+            &["--sharp-range", "1", "--spread", "2", "--f-number", "2"][..],
+            "cannot be used",
+        ),
+    ] {
+        let out = render(extra);
+        assert!(!out.status.success(), "{extra:?} was accepted");
+        assert!(
+            stderr(&out).contains(message),
+            "{extra:?}: {}",
+            stderr(&out)
+        );
+        assert!(!png.exists(), "{extra:?} left an output file");
+    }
+}
