@@ -96,6 +96,26 @@ fn init_ray(raw: &mut sys::RTCRay16, lane: usize, ray: &Ray) {
     raw.flags[lane] = 0;
 }
 
+/// Gives every inactive lane of a bulk-filled packet a harmless finite ray (origin 0,
+/// direction +z, an empty segment), whatever the caller's arrays held there. Without AVX-512,
+/// Embree runs 16-wide queries as 8- or 4-wide pieces whose input checks assert on non-finite
+/// rays in inactive lanes too (callers fill all lanes, and unused ones may hold NaN).
+fn idle_inactive_lanes(raw: &mut sys::RTCRay16, valid: &Mask16) {
+    let idle = valid.0.map(|v| v == 0);
+    let keep = |x: &mut [f32; LANES], idle_value: f32| {
+        for (x, &idle) in x.iter_mut().zip(&idle) {
+            *x = if idle { idle_value } else { *x };
+        }
+    };
+    keep(&mut raw.org_x, 0.0);
+    keep(&mut raw.org_y, 0.0);
+    keep(&mut raw.org_z, 0.0);
+    keep(&mut raw.dir_x, 0.0);
+    keep(&mut raw.dir_y, 0.0);
+    keep(&mut raw.dir_z, 1.0);
+    keep(&mut raw.tfar, 0.0);
+}
+
 fn read_ray(raw: &sys::RTCRay16, lane: usize) -> Ray {
     Ray {
         origin: Vec3::new(raw.org_x[lane], raw.org_y[lane], raw.org_z[lane]),
@@ -150,7 +170,8 @@ impl RayPacket16 {
 
     /// Fills every lane from structure-of-arrays origins and directions (x, y, z components)
     /// with `tnear` 0, no far limit and no hit, and activates lanes `0..active` (the others
-    /// are inactive; their data is ignored). Equal to `clear` then `set` of each active lane.
+    /// are inactive and get an idle finite ray, whatever `origin` and `dir` hold there). Equal
+    /// to `clear` then `set` of each active lane.
     /// An `active` above 16 activates every lane.
     pub fn set_lanes(
         &mut self,
@@ -178,6 +199,7 @@ impl RayPacket16 {
             *level = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
         }
         self.valid.0 = std::array::from_fn(|lane| if lane < active { -1 } else { 0 });
+        idle_inactive_lanes(raw, &self.valid);
     }
 
     /// Ray origins of all lanes as structure of arrays (x, y, z).
@@ -302,8 +324,9 @@ impl ShadowPacket16 {
     }
 
     /// Fills every lane with the segment from `origin` along `dir` for `t` in `[0, tfar]`
-    /// (structure of arrays) and activates the lanes whose bit is set in `active`. Equal to
-    /// `clear` then `set` of each active lane.
+    /// (structure of arrays) and activates the lanes whose bit is set in `active`; the others
+    /// get an idle finite ray, whatever the arrays hold there (NaN included). Equal to `clear`
+    /// then `set` of each active lane.
     pub fn set_segments(
         &mut self,
         active: u32,
@@ -325,6 +348,7 @@ impl ShadowPacket16 {
         raw.id = std::array::from_fn(|lane| lane as u32);
         raw.flags = [0; LANES];
         self.valid.0 = std::array::from_fn(|lane| -(((active >> lane) & 1) as i32));
+        idle_inactive_lanes(raw, &self.valid);
     }
 
     /// Deactivates one lane; Embree will neither read nor write it.

@@ -262,16 +262,8 @@ pub fn trace_and_shade(
         if lit == 0 {
             continue;
         }
-        // Unlit lanes (misses among them, whose points are infinite) get a harmless finite
-        // segment: Embree's 16-wide packets on CPUs without AVX-512 run as 8-wide halves whose
-        // input checks assert on NaN rays even in inactive lanes.
-        for lane in (0..LANES).filter(|&l| lit & (1 << l) == 0) {
-            for k in 0..3 {
-                origin[k][lane] = 0.0;
-                to_light[k][lane] = if k == 2 { 1.0 } else { 0.0 };
-            }
-            seg_end[lane] = 0.0;
-        }
+        // Unlit lanes (misses among them, whose points are infinite) are inactive: the packet
+        // replaces their NaN with an idle ray.
         shadow.set_segments(lit, &origin, &to_light, &seg_end);
         tally.count(RayKind::Shadow, lit.count_ones() as usize);
         tally.record(RayKind::Shadow, RayHint::Coherent, |l| {
