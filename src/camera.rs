@@ -136,6 +136,23 @@ pub struct Camera {
 }
 
 impl CameraSpec {
+    /// The vertical field of view in degrees: a photographic lens's, from its focal length and
+    /// sensor width at this image's aspect, else `vfov_deg`. (Not validated; `build` checks it.)
+    pub fn effective_vfov_deg(&self) -> f32 {
+        match self.lens {
+            LensSpec::Photographic {
+                focal_length_mm,
+                sensor_width_mm,
+                ..
+            } => {
+                let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
+                let tan_half_v = tan_half_h * self.height as f32 / self.width as f32;
+                2.0 * tan_half_v.atan().to_degrees()
+            }
+            _ => self.vfov_deg,
+        }
+    }
+
     /// Validates the spec and builds the camera. `depth_of` answers autofocus queries: given a
     /// pinhole ray it returns the view-axis depth of the surface it hits (None for a miss).
     pub fn build(&self, depth_of: impl FnOnce(&Ray) -> Option<f32>) -> Result<Camera, CameraError> {
@@ -178,7 +195,6 @@ impl CameraSpec {
         )?;
         positive("anamorphic ratio", a.anamorphic)?;
 
-        let mut vfov_deg = self.vfov_deg;
         if let LensSpec::Photographic {
             focal_length_mm,
             sensor_width_mm,
@@ -187,10 +203,8 @@ impl CameraSpec {
         {
             positive("focal_length_mm", focal_length_mm)?;
             positive("sensor_width_mm", sensor_width_mm)?;
-            let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
-            let tan_half_v = tan_half_h * self.height as f32 / self.width as f32;
-            vfov_deg = 2.0 * tan_half_v.atan().to_degrees();
         }
+        let vfov_deg = self.effective_vfov_deg();
         check(
             vfov_deg.is_finite() && vfov_deg > 0.0 && vfov_deg < 180.0,
             "vfov_deg",

@@ -265,22 +265,13 @@ impl Progress for Bar {
     }
 }
 
-/// Applies command-line overrides of size and lens to the scene's camera.
 /// A photographic lens sets the field of view; when another lens replaces it, keep the
 /// picture's framing by turning that field of view into the camera's vfov.
 fn keep_framing_without_photographic_lens(cam: &mut CameraSpec) {
-    if let LensSpec::Photographic {
-        focal_length_mm,
-        sensor_width_mm,
-        ..
-    } = cam.lens
-    {
-        let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
-        let tan_half_v = tan_half_h * cam.height as f32 / cam.width as f32;
-        cam.vfov_deg = 2.0 * tan_half_v.atan().to_degrees();
-    }
+    cam.vfov_deg = cam.effective_vfov_deg();
 }
 
+/// Applies command-line overrides of size and lens to the scene's camera.
 fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     let cam = &mut desc.camera;
     for (name, v) in [("--width", a.width), ("--height", a.height)] {
@@ -398,9 +389,7 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     } = cam.lens
         && (a.f_number.is_some() || a.focal_length.is_some() || a.sensor_width.is_some())
     {
-        let tan_half_v =
-            sensor_width_mm / (2.0 * focal_length_mm) * cam.height as f32 / cam.width as f32;
-        let vfov = 2.0 * tan_half_v.atan().to_degrees();
+        let vfov = cam.effective_vfov_deg();
         if !(vfov > 0.0 && vfov < 180.0) {
             bail!(
                 "a {focal_length_mm:e} mm lens on a {sensor_width_mm} mm sensor has no usable \
