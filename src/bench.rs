@@ -294,9 +294,9 @@ pub fn run(
     // shared machines) spreads over all of them, and compare dense with the replay of the same
     // repeat.
     let modes = modes();
-    let mut times = vec![Vec::new(); modes.len()];
-    let mut phases = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; modes.len()];
-    let mut results: Vec<Option<(Film, RenderStats)>> = vec![None; modes.len()];
+    // Per mode: the stats of every repeat, and the image of the first.
+    let mut runs: Vec<Vec<RenderStats>> = vec![Vec::new(); modes.len()];
+    let mut images: Vec<Option<Film>> = vec![None; modes.len()];
     let mut replay_times = Vec::new();
     let mut dense_vs_replay = Vec::new();
     let mut replayed = 0;
@@ -311,42 +311,34 @@ pub fn run(
                 ..Default::default()
             };
             let (film, stats) = render::render(world, camera, &settings, progress)?;
-            times[i].push(stats.seconds);
-            let phase = [
-                stats.pinhole_seconds,
-                stats.maps_seconds,
-                stats.sites_seconds,
-                stats.interpolate_seconds,
-            ];
-            for (list, t) in phases[i].iter_mut().zip(phase) {
-                list.push(t);
-            }
-            results[i].get_or_insert((film, stats));
+            runs[i].push(stats);
+            images[i].get_or_insert(film);
         }
         let start = Instant::now();
         replayed = render::replay(&world.scene, &log);
         let replay_seconds = start.elapsed().as_secs_f64();
         replay_times.push(replay_seconds);
         // Same rays, so the ratio of rates is the inverse ratio of times.
-        let dense_seconds = *times[1].last().expect("dense ran this repeat");
-        dense_vs_replay.push(replay_seconds / dense_seconds);
+        let dense = runs[1].last().expect("dense ran this repeat");
+        dense_vs_replay.push(replay_seconds / dense.seconds);
     }
     drop(log);
     let intersect_only_seconds = median(replay_times);
     let intersect_only_mrays_per_s = replayed as f64 / intersect_only_seconds / 1e6;
 
-    let pinhole_seconds = median(times[0].clone());
-    let dense_seconds = median(times[1].clone());
-    let dense_rgb = results[1]
-        .as_ref()
-        .map(|(f, _)| f.rgb())
-        .unwrap_or_default();
+    // The median over repeats of one figure of one mode.
+    let median_of =
+        |i: usize, figure: fn(&RenderStats) -> f64| median(runs[i].iter().map(figure).collect());
+    let pinhole_seconds = median_of(0, |s| s.seconds);
+    let dense_seconds = median_of(1, |s| s.seconds);
+    let dense_rgb = images[1].as_ref().map(Film::rgb).unwrap_or_default();
     let mut rows = Vec::new();
     let mut films = Vec::new();
     for (i, (label, mode, k, exact)) in modes.into_iter().enumerate() {
-        let (film, stats) = results[i].take().expect("every mode ran at least once");
-        let seconds = median(times[i].clone());
-        let [pinhole_s, maps_s, sites_s, interpolate_s] = phases[i].clone().map(median);
+        let film = images[i].take().expect("every mode ran at least once");
+        // Ray and site counts are the same in every repeat.
+        let stats = &runs[i][0];
+        let seconds = median_of(i, |s| s.seconds);
         let rgb = film.rgb();
         let vs_ref = |space| metrics::psnr(&rgb, &reference, w, h, space);
         let ssim_ref = |space| metrics::ssim(&rgb, &reference, w, h, space);
@@ -356,10 +348,10 @@ pub fn run(
             interval_factor: k,
             paper_exact: exact,
             seconds,
-            pinhole_seconds: pinhole_s,
-            maps_seconds: maps_s,
-            sites_seconds: sites_s,
-            interpolate_seconds: interpolate_s,
+            pinhole_seconds: median_of(i, |s| s.pinhole_seconds),
+            maps_seconds: median_of(i, |s| s.maps_seconds),
+            sites_seconds: median_of(i, |s| s.sites_seconds),
+            interpolate_seconds: median_of(i, |s| s.interpolate_seconds),
             rays: stats.rays.total(),
             primary_rays: stats.rays.primary,
             shadow_rays: stats.rays.shadow,
