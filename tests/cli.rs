@@ -446,9 +446,9 @@ fn lights_from_the_command_line_replace_the_scenes() {
     }
 }
 
-/// The JSON summary of a small pinhole-free render of `scene` with `extra` flags.
-fn summary(dir: &std::path::Path, scene: &str, extra: &[&str]) -> serde_json::Value {
-    let png = dir.join("lens.png");
+/// Renders the repository's `scene` 40 pixels wide to `png` with `flags`, which must succeed;
+/// returns what it printed.
+fn render_small(png: &std::path::Path, scene: &str, flags: &[&[&str]]) -> Vec<u8> {
     let path = repo(scene);
     let mut args = vec![
         "render",
@@ -457,14 +457,21 @@ fn summary(dir: &std::path::Path, scene: &str, extra: &[&str]) -> serde_json::Va
         png.to_str().unwrap(),
         "--width",
         "40",
-        "--spp",
-        "1",
-        "--json",
     ];
-    args.extend_from_slice(extra);
+    args.extend(flags.iter().flat_map(|f| f.iter().copied()));
     let out = dofray(&args);
-    assert!(out.status.success(), "{scene} {extra:?}: {}", stderr(&out));
-    serde_json::from_slice(&out.stdout).unwrap()
+    assert!(out.status.success(), "{scene} {flags:?}: {}", stderr(&out));
+    out.stdout
+}
+
+/// The JSON summary of a small one-sample render of `scene` with `extra` flags.
+fn summary(dir: &std::path::Path, scene: &str, extra: &[&str]) -> serde_json::Value {
+    let out = render_small(
+        &dir.join("lens.png"),
+        scene,
+        &[&["--spp", "1", "--json"], extra],
+    );
+    serde_json::from_slice(&out).unwrap()
 }
 
 #[test]
@@ -498,21 +505,8 @@ fn lens_flags_keep_what_the_scene_says_unless_replaced() {
     // --sensor-width alone changes the field of view of a photographic scene: another picture.
     let picture = |extra: &[&str]| {
         let png = dir.join("fov.png");
-        let path = repo("scenes/gallery.toml");
-        let mut args = vec![
-            "render",
-            &path,
-            "-o",
-            png.to_str().unwrap(),
-            "--width",
-            "40",
-            "--mode",
-            "pinhole",
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        let out = dofray(&args);
-        assert!(out.status.success(), "{extra:?}: {}", stderr(&out));
+        let flags: &[&[&str]] = &[&["--mode", "pinhole", "--quiet"], extra];
+        render_small(&png, "scenes/gallery.toml", flags);
         image::open(&png).unwrap().to_rgb8().into_raw()
     };
     let wide = picture(&[]);
