@@ -8,7 +8,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use dofray::bench::{self, BenchConfig};
-use dofray::camera::{Camera, CameraSpec, Focus, LensSpec};
+use dofray::camera::{Camera, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::output;
 use dofray::render::{self, Mode, Progress, RenderSettings};
@@ -265,12 +265,6 @@ impl Progress for Bar {
     }
 }
 
-/// A photographic lens sets the field of view; when another lens replaces it, keep the
-/// picture's framing by turning that field of view into the camera's vfov.
-fn keep_framing_without_photographic_lens(cam: &mut CameraSpec) {
-    cam.vfov_deg = cam.effective_vfov_deg();
-}
-
 /// Applies command-line overrides of size and lens to the scene's camera.
 fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     let cam = &mut desc.camera;
@@ -320,7 +314,8 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
         if !(r.is_finite() && r >= 0.0) {
             bail!("--aperture-radius must be a finite number >= 0, got {r}");
         }
-        keep_framing_without_photographic_lens(cam);
+        // A photographic lens set the field of view: keep the framing it gave.
+        cam.vfov_deg = cam.effective_vfov_deg();
         cam.lens = LensSpec::Aperture { radius: r };
     }
     if let (Some(sharp_range), Some(spread)) = (a.sharp_range, a.spread) {
@@ -330,7 +325,8 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
         if !(spread.is_finite() && spread >= 0.0) {
             bail!("--spread must be a finite number >= 0, got {spread}");
         }
-        keep_framing_without_photographic_lens(cam);
+        // A photographic lens set the field of view: keep the framing it gave.
+        cam.vfov_deg = cam.effective_vfov_deg();
         cam.lens = LensSpec::Seed {
             sharp_range,
             spread,
