@@ -77,6 +77,21 @@ pub fn parse_meminfo(text: &str) -> Option<u64> {
 
 /// Refuses an image size whose render buffers would exceed the available memory
 /// (`MemAvailable`, else [`FALLBACK_LIMIT_BYTES`]).
+/// The number of threads this process has now (Linux: `Threads:` in `/proc/self/status`), or
+/// `None` where that cannot be read. With `--threads N` that is at most 2N: N render workers,
+/// and Embree's BVH builders (the main thread and N - 1 workers, idle while the render runs).
+pub fn process_threads() -> Option<usize> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    status
+        .lines()
+        .find_map(|line| line.strip_prefix("Threads:"))
+        .and_then(|n| n.trim().parse().ok())
+}
+
+/// The most worker threads `--threads` accepts: far more than any machine's cores, few enough
+/// that a typo cannot ask the system for thousands of threads.
+pub const MAX_THREADS: usize = 1024;
+
 pub fn check_image_memory(width: u32, height: u32) -> Result<(), MemoryError> {
     match available_memory() {
         Some(available) => check_image_memory_against(width, height, available, true),

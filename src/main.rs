@@ -56,9 +56,11 @@ struct SceneArgs {
     /// Image height in pixels (default: the scene's; width follows the aspect if not given).
     #[arg(long)]
     height: Option<u32>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
-    threads: Option<usize>,
+    /// Worker threads, 1 to 1024 (default: all cores). Bounds Embree's BVH build threads too
+    /// (the main thread and N - 1 workers, never running while the render does), so at most N
+    /// threads compute at any time.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=dofray::limits::MAX_THREADS as i64))]
+    threads: Option<u16>,
     /// Random seed of the lens samples; the same seed gives the same image bit for bit.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -442,11 +444,17 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
     let mut desc = dofray::scene::load(&a.scene)?;
     apply_overrides(&mut desc, a)?;
     dofray::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
+    let threads = a.threads.map(usize::from);
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(a.threads.unwrap_or(0))
+        .num_threads(threads.unwrap_or(0))
         .build()
         .context("cannot start worker threads")?;
-    let device = Device::new().context("cannot create the Embree device")?;
+    // Embree's own thread pool (BVH builds) gets the same bound as rayon's.
+    let device = match threads {
+        Some(n) => Device::with_threads(n),
+        None => Device::new(),
+    }
+    .context("cannot create the Embree device")?;
     let world =
         World::build(&desc, &device).with_context(|| format!("invalid scene {}", desc.name))?;
     let forward = (desc.camera.look_at - desc.camera.eye).normalize_or_zero();
@@ -531,6 +539,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "mrays_per_s": stats.mrays_per_s(),
             "aperture_radius": json_f32(camera.aperture_radius),
             "focus_distance": json_f32(camera.focus_distance),
+            "threads": pool.current_num_threads(),
+            "process_threads": dofray::limits::process_threads(),
+            "embree": embree_json(&world.scene),
         });
         println!("{summary}");
     } else if !a.quiet {
@@ -547,6 +558,17 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Which Embree ran the render and how: version, device configuration, packet lanes per call.
+fn embree_json(scene: &dofray::embree::Scene) -> serde_json::Value {
+    let device = scene.device();
+    serde_json::json!({
+        "version": device.embree_version(),
+        "config": device.config(),
+        "native_packet_width": device.native_packet_width(),
+        "lanes_per_call": scene.lanes_per_call(),
+    })
 }
 
 fn default_cache_dir() -> PathBuf {

@@ -646,3 +646,39 @@ fn seed_lens_flags_derive_the_aperture() {
         assert!(!png.exists(), "{extra:?} left an output file");
     }
 }
+
+/// `--threads N` bounds every thread of the process, Embree's BVH builders included (they
+/// used to start one per core whatever `--threads` said), and `DOFRAY_EMBREE_CONFIG` pins
+/// Embree's kernels for a run.
+#[test]
+fn threads_bound_embree_too_and_the_environment_configures_embree() {
+    let dir = scratch("threads");
+    let png = dir.join("t.png");
+    for n in [1u64, 2] {
+        let json = summary(&dir, "scenes/gallery.toml", &["--threads", &n.to_string()]);
+        assert_eq!(json["threads"], n);
+        assert_eq!(json["embree"]["config"], format!("threads={n}"));
+        // n render workers; Embree's builder pool is the main thread plus n - 1 workers and
+        // never runs at the same time as the render: at most n threads compute at once.
+        let process = json["process_threads"]
+            .as_u64()
+            .expect("Linux reports threads");
+        assert!(process <= 2 * n, "--threads {n}: {process} threads in all");
+    }
+    for bad in ["0", "5000", "x"] {
+        let out = dofray(&["render", "-o", png.to_str().unwrap(), "--threads", bad]);
+        assert!(!out.status.success() && stderr(&out).contains("--threads"));
+        assert!(!png.exists());
+    }
+    let out = Command::new(env!("CARGO_BIN_EXE_dofray"))
+        .args(["render", "--width", "40", "--spp", "1", "--json", "-o"])
+        .arg(&png)
+        .env("DOFRAY_EMBREE_CONFIG", "isa=sse4.2")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["embree"]["config"], "isa=sse4.2");
+    assert_eq!(json["embree"]["native_packet_width"], 4);
+    assert_eq!(json["embree"]["lanes_per_call"], 16);
+}

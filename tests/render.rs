@@ -1,7 +1,7 @@
 //! The renderer end to end: the seed's method against dense distributed ray tracing.
 
 use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
-use dofray::embree::Device;
+use dofray::embree::{Device, PacketWidth, limited_isas};
 use dofray::metrics::{Space, psnr};
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, render};
 use dofray::scene::{Background, Object, SceneDesc, World, builtin};
@@ -315,12 +315,14 @@ fn mirror_reflects_one_bounce() {
     assert_eq!(stats.rays.secondary, 0);
 }
 
-/// Embree traces 16-wide packets natively only with AVX-512; on other CPUs it splits them into
-/// 8- or 4-wide pieces whose input checks also look at inactive lanes (and abort on NaN rays
-/// there). Restricting the device's ISA runs those paths on any machine: each must render the
-/// same image as the native one, up to floating-point differences between Embree's kernels.
+/// Embree traces 16-wide packets natively only with AVX-512; on other CPUs `rtcIntersect16`
+/// goes through a ray-stream fallback whose 8- or 4-wide kernels also look at inactive lanes
+/// (and abort on NaN rays there). Restricting the device's ISA runs those paths on any
+/// machine: each must render the same image as the native one, up to floating-point
+/// differences between Embree's kernels, and on one device every packet width (16 through the
+/// fallback, or split into native 8- or 4-wide calls) must render exactly the same image.
 #[test]
-fn every_embree_isa_renders_the_same_image() {
+fn every_embree_isa_and_packet_width_renders_the_same_image() {
     let mut desc = builtin::paper();
     desc.camera.width = 80;
     desc.camera.height = 60;
@@ -330,13 +332,20 @@ fn every_embree_isa_renders_the_same_image() {
         seed: 5,
         ..Default::default()
     };
-    let native = World::build(&desc, &Device::new().unwrap()).unwrap();
-    for isa in ["sse4.2", "avx", "avx2"] {
-        let device = Device::with_config(&format!("isa={isa}")).unwrap();
-        let world = World::build(&desc, &device).unwrap();
+    let native = World::build(&desc, &Device::with_config("").unwrap()).unwrap();
+    let mut isas = vec!["native"];
+    isas.extend(limited_isas());
+    for isa in isas {
+        let config = if isa == "native" {
+            String::new()
+        } else {
+            format!("isa={isa}")
+        };
+        let mut world = World::build(&desc, &Device::with_config(&config).unwrap()).unwrap();
         for mode in [Mode::Pinhole, Mode::Dense, Mode::Adaptive] {
             let (want, want_stats) =
                 render(&native, &camera, &settings(mode), &NoProgress).unwrap();
+            world.scene.set_packet_width(PacketWidth::Auto);
             let (got, got_stats) = render(&world, &camera, &settings(mode), &NoProgress).unwrap();
             let q = psnr(&got.rgb(), &want.rgb(), 80, 60, Space::Srgb).unwrap();
             assert!(
@@ -348,6 +357,19 @@ fn every_embree_isa_renders_the_same_image() {
                 a.abs_diff(b) * 1000 <= b,
                 "isa {isa}, {mode:?}: {a} vs {b} rays"
             );
+            for width in [PacketWidth::X16, PacketWidth::X8, PacketWidth::X4] {
+                world.scene.set_packet_width(width);
+                let (same, same_stats) =
+                    render(&world, &camera, &settings(mode), &NoProgress).unwrap();
+                assert!(
+                    same.color == got.color && same.depth == got.depth,
+                    "isa {isa}, {mode:?}: {width:?} differs from the native width"
+                );
+                assert_eq!(
+                    same_stats.rays, got_stats.rays,
+                    "isa {isa}, {mode:?}, {width:?}"
+                );
+            }
         }
     }
 }

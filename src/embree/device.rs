@@ -80,6 +80,7 @@ type ErrorSlot = Mutex<HashMap<ThreadId, (ErrorCode, String)>>;
 
 struct DeviceInner {
     raw: sys::RTCDevice,
+    config: String,
     /// Boxed so its address, handed to Embree as the callback's user pointer, never moves.
     errors: Box<ErrorSlot>,
 }
@@ -136,10 +137,89 @@ unsafe extern "C" fn error_callback(
     });
 }
 
+/// The environment variable whose value [`Device::new`] passes to Embree as its device
+/// configuration, for example `isa=avx2` to pin Embree's kernels for a whole run, or
+/// `threads=4`.
+pub const CONFIG_ENV: &str = "DOFRAY_EMBREE_CONFIG";
+
+/// The Embree configuration from [`CONFIG_ENV`] (empty when it is unset or not UTF-8).
+pub fn env_config() -> String {
+    std::env::var(CONFIG_ENV).unwrap_or_default()
+}
+
+/// The `isa=` values (Embree's device configuration) that limit Embree to an instruction set
+/// this CPU supports and that is narrower than its widest: `sse4.2`, `avx`, `avx2`, in that
+/// order. A device without an `isa=` limit uses the widest (AVX-512 where the CPU has it), so
+/// these plus an unlimited device exercise every kernel family Embree can run here.
+pub fn limited_isas() -> Vec<&'static str> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let has = [
+            ("sse4.2", std::arch::is_x86_feature_detected!("sse4.2")),
+            ("avx", std::arch::is_x86_feature_detected!("avx")),
+            (
+                "avx2",
+                std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma"),
+            ),
+        ];
+        has.iter()
+            .take_while(|(_, ok)| *ok)
+            .map(|(isa, _)| *isa)
+            .collect()
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        Vec::new()
+    }
+}
+
 impl Device {
-    /// A device with Embree's default configuration.
+    /// A device configured from the environment: the value of `DOFRAY_EMBREE_CONFIG` (see
+    /// [`CONFIG_ENV`]), else Embree's defaults.
     pub fn new() -> Result<Self> {
-        Self::with_config("")
+        Self::with_config(&env_config())
+    }
+
+    /// A device configured from the environment (as [`Device::new`]) whose thread pool, used
+    /// to build BVHs, has at most `threads` threads (Embree's `threads=` option).
+    pub fn with_threads(threads: usize) -> Result<Self> {
+        let env = env_config();
+        let sep = if env.trim().is_empty() { "" } else { "," };
+        Self::with_config(&format!("{env}{sep}threads={threads}"))
+    }
+
+    /// The widest ray packet Embree's kernels on this device trace natively (16 with
+    /// AVX-512, 8 with AVX or AVX2, 4 with SSE), or 1 when it has no packet kernels. Narrower
+    /// than the CPU's widest when the device's `isa=` limits it.
+    pub fn native_packet_width(&self) -> u32 {
+        let supported = |property| {
+            // SAFETY: live device; querying a device property has no other effect.
+            unsafe { sys::rtcGetDeviceProperty(self.0.raw, property) != 0 }
+        };
+        if supported(sys::RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED) {
+            16
+        } else if supported(sys::RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED) {
+            8
+        } else if supported(sys::RTC_DEVICE_PROPERTY_NATIVE_RAY4_SUPPORTED) {
+            4
+        } else {
+            1
+        }
+    }
+
+    /// Embree's version as `major.minor.patch`.
+    pub fn embree_version(&self) -> String {
+        let get = |property| {
+            // SAFETY: live device; querying a device property has no other effect.
+            unsafe { sys::rtcGetDeviceProperty(self.0.raw, property) }
+        };
+        format!(
+            "{}.{}.{}",
+            get(sys::RTC_DEVICE_PROPERTY_VERSION_MAJOR),
+            get(sys::RTC_DEVICE_PROPERTY_VERSION_MINOR),
+            get(sys::RTC_DEVICE_PROPERTY_VERSION_PATCH)
+        )
     }
 
     /// A device with an Embree configuration string such as `"threads=2,verbose=0"`.
@@ -175,7 +255,16 @@ impl Device {
         // SAFETY: raw is a live device; the callback never unwinds and `user` stays valid until
         // rtcReleaseDevice in Drop, after which Embree no longer calls it.
         unsafe { sys::rtcSetDeviceErrorFunction(raw, Some(error_callback), user) };
-        Ok(Device(Arc::new(DeviceInner { raw, errors })))
+        Ok(Device(Arc::new(DeviceInner {
+            raw,
+            config: config.to_string(),
+            errors,
+        })))
+    }
+
+    /// The configuration string the device was created with.
+    pub fn config(&self) -> &str {
+        &self.0.config
     }
 
     pub(super) fn raw(&self) -> sys::RTCDevice {

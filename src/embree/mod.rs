@@ -16,8 +16,8 @@ mod scene;
 mod sys;
 mod version;
 
-pub use device::{Device, EmbreeError, ErrorCode, Result};
+pub use device::{CONFIG_ENV, Device, EmbreeError, ErrorCode, Result, env_config, limited_isas};
 pub use geometry::{Geometry, GeometryId, Spheres, TriangleMesh};
 pub use packet::{Hit, LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
-pub use scene::{BuildQuality, Scene, SceneBuilder};
+pub use scene::{BuildQuality, PacketWidth, Scene, SceneBuilder};
 pub use version::EMBREE_MAJOR;

@@ -96,25 +96,160 @@ fn init_ray(raw: &mut sys::RTCRay16, lane: usize, ray: &Ray) {
     raw.flags[lane] = 0;
 }
 
-/// Gives every inactive lane of a bulk-filled packet a harmless finite ray (origin 0,
-/// direction +z, an empty segment), whatever the caller's arrays held there. Without AVX-512,
-/// Embree runs 16-wide queries as 8- or 4-wide pieces whose input checks assert on non-finite
-/// rays in inactive lanes too (callers fill all lanes, and unused ones may hold NaN).
-fn idle_inactive_lanes(raw: &mut sys::RTCRay16, valid: &Mask16) {
-    let idle = valid.0.map(|v| v == 0);
-    let keep = |x: &mut [f32; LANES], idle_value: f32| {
-        for (x, &idle) in x.iter_mut().zip(&idle) {
-            *x = if idle { idle_value } else { *x };
+/// The ray every inactive lane holds: finite, with an empty segment (`tnear` 1 > `tfar` 0).
+///
+/// Embree has two conventions for an inactive lane, and a lane must be inactive under both:
+/// its native 16-wide kernels (AVX-512) skip lanes whose valid-mask entry is 0, but on CPUs
+/// without them `rtcIntersect16` / `rtcOccluded16` hand the packet to Embree's ray-stream
+/// fallback, which ignores the mask and traces every lane with `tnear <= tfar`. Its 8- and
+/// 4-wide kernels also assert that every ray they are given is finite. This is the one place
+/// that makes a lane inactive; every path that deactivates lanes goes through it.
+fn idle_lanes(raw: &mut sys::RTCRay16, idle: u32) {
+    let put = |x: &mut [f32; LANES], value: f32| {
+        for (lane, x) in x.iter_mut().enumerate() {
+            if idle & (1 << lane) != 0 {
+                *x = value;
+            }
         }
     };
-    keep(&mut raw.org_x, 0.0);
-    keep(&mut raw.org_y, 0.0);
-    keep(&mut raw.org_z, 0.0);
-    keep(&mut raw.dir_x, 0.0);
-    keep(&mut raw.dir_y, 0.0);
-    keep(&mut raw.dir_z, 1.0);
-    keep(&mut raw.tfar, 0.0);
+    put(&mut raw.org_x, 0.0);
+    put(&mut raw.org_y, 0.0);
+    put(&mut raw.org_z, 0.0);
+    put(&mut raw.dir_x, 0.0);
+    put(&mut raw.dir_y, 0.0);
+    put(&mut raw.dir_z, 1.0);
+    put(&mut raw.tnear, 1.0);
+    put(&mut raw.tfar, 0.0);
 }
+
+/// Bit `i` set: lane `i` of `valid` is active.
+fn active_bits(valid: &Mask16) -> u32 {
+    let mut bits = 0;
+    for (lane, &v) in valid.0.iter().enumerate() {
+        bits |= ((v != 0) as u32) << lane;
+    }
+    bits
+}
+
+/// Embree's 8- and 4-wide lane masks, aligned as rtcIntersect8/4 require.
+#[repr(C, align(32))]
+#[derive(Clone, Copy, Default)]
+pub(super) struct Mask8(pub(super) [i32; 8]);
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Default)]
+pub(super) struct Mask4(pub(super) [i32; 4]);
+
+const _: () = assert!(
+    std::mem::align_of::<Mask8>() == 32
+        && std::mem::align_of::<sys::RTCRayHit8>() == 32
+        && std::mem::align_of::<sys::RTCRay8>() == 32
+        && std::mem::align_of::<Mask4>() == 16
+        && std::mem::align_of::<sys::RTCRayHit4>() == 16
+        && std::mem::align_of::<sys::RTCRay4>() == 16
+);
+
+/// Copies lanes `offset..offset + N` of a 16-wide ray into an N-wide one.
+macro_rules! copy_ray_part {
+    ($dst:expr, $src:expr, $offset:expr, $n:expr) => {{
+        let (dst, src, o) = ($dst, $src, $offset);
+        dst.org_x.copy_from_slice(&src.org_x[o..o + $n]);
+        dst.org_y.copy_from_slice(&src.org_y[o..o + $n]);
+        dst.org_z.copy_from_slice(&src.org_z[o..o + $n]);
+        dst.dir_x.copy_from_slice(&src.dir_x[o..o + $n]);
+        dst.dir_y.copy_from_slice(&src.dir_y[o..o + $n]);
+        dst.dir_z.copy_from_slice(&src.dir_z[o..o + $n]);
+        dst.tnear.copy_from_slice(&src.tnear[o..o + $n]);
+        dst.tfar.copy_from_slice(&src.tfar[o..o + $n]);
+        dst.time.copy_from_slice(&src.time[o..o + $n]);
+        dst.mask.copy_from_slice(&src.mask[o..o + $n]);
+        dst.id.copy_from_slice(&src.id[o..o + $n]);
+        dst.flags.copy_from_slice(&src.flags[o..o + $n]);
+    }};
+}
+
+/// Generates `RayPacket16::for_each_part*` and `ShadowPacket16::for_each_part*` for one
+/// narrower Embree packet width: the packet is handed to `query` in pieces of `$n` lanes
+/// (pieces without an active lane are skipped), and what Embree wrote to the active lanes
+/// (`tfar` and the hit) is copied back. Inactive lanes are neither copied back nor traced.
+macro_rules! narrow_parts {
+    ($n:literal, $hit_fn:ident, $shadow_fn:ident, $Mask:ident, $RayHit:ident, $Ray:ident) => {
+        impl RayPacket16 {
+            pub(super) fn $hit_fn(&mut self, mut query: impl FnMut(&$Mask, &mut sys::$RayHit)) {
+                let active = active_bits(&self.valid);
+                let mut part = sys::$RayHit::default();
+                for offset in (0..LANES).step_by($n) {
+                    let lanes = (active >> offset) & ((1 << $n) - 1);
+                    if lanes == 0 {
+                        continue;
+                    }
+                    let mut valid = $Mask::default();
+                    valid.0.copy_from_slice(&self.valid.0[offset..offset + $n]);
+                    copy_ray_part!(&mut part.ray, &self.rayhit.ray, offset, $n);
+                    for i in 0..$n {
+                        part.hit.geomID[i] = sys::RTC_INVALID_GEOMETRY_ID;
+                        part.hit.primID[i] = sys::RTC_INVALID_GEOMETRY_ID;
+                        for level in part.hit.instID.iter_mut() {
+                            level[i] = sys::RTC_INVALID_GEOMETRY_ID;
+                        }
+                    }
+                    query(&valid, &mut part);
+                    let (ray, hit) = (&mut self.rayhit.ray, &mut self.rayhit.hit);
+                    for i in (0..$n).filter(|i| lanes & (1 << i) != 0) {
+                        let lane = offset + i;
+                        ray.tfar[lane] = part.ray.tfar[i];
+                        hit.Ng_x[lane] = part.hit.Ng_x[i];
+                        hit.Ng_y[lane] = part.hit.Ng_y[i];
+                        hit.Ng_z[lane] = part.hit.Ng_z[i];
+                        hit.u[lane] = part.hit.u[i];
+                        hit.v[lane] = part.hit.v[i];
+                        hit.primID[lane] = part.hit.primID[i];
+                        hit.geomID[lane] = part.hit.geomID[i];
+                        for (level, from) in hit.instID.iter_mut().zip(&part.hit.instID) {
+                            level[lane] = from[i];
+                        }
+                    }
+                }
+            }
+        }
+
+        impl ShadowPacket16 {
+            pub(super) fn $shadow_fn(&mut self, mut query: impl FnMut(&$Mask, &mut sys::$Ray)) {
+                let active = active_bits(&self.valid);
+                let mut part = sys::$Ray::default();
+                for offset in (0..LANES).step_by($n) {
+                    let lanes = (active >> offset) & ((1 << $n) - 1);
+                    if lanes == 0 {
+                        continue;
+                    }
+                    let mut valid = $Mask::default();
+                    valid.0.copy_from_slice(&self.valid.0[offset..offset + $n]);
+                    copy_ray_part!(&mut part, &self.rays, offset, $n);
+                    query(&valid, &mut part);
+                    for i in (0..$n).filter(|i| lanes & (1 << i) != 0) {
+                        self.rays.tfar[offset + i] = part.tfar[i];
+                    }
+                }
+            }
+        }
+    };
+}
+
+narrow_parts!(
+    8,
+    for_each_part8,
+    for_each_part8,
+    Mask8,
+    RTCRayHit8,
+    RTCRay8
+);
+narrow_parts!(
+    4,
+    for_each_part4,
+    for_each_part4,
+    Mask4,
+    RTCRayHit4,
+    RTCRay4
+);
 
 fn read_ray(raw: &sys::RTCRay16, lane: usize) -> Ray {
     Ray {
@@ -142,15 +277,18 @@ impl Default for RayPacket16 {
 impl RayPacket16 {
     /// A packet with every lane inactive.
     pub fn new() -> Self {
-        Self {
+        let mut packet = Self {
             rayhit: sys::RTCRayHit16::default(),
             valid: Mask16([0; LANES]),
-        }
+        };
+        packet.clear();
+        packet
     }
 
-    /// Deactivates every lane (their data is left as it was).
+    /// Deactivates every lane (each gets the idle ray; hits are left as they were).
     pub fn clear(&mut self) {
         self.valid.0 = [0; LANES];
+        idle_lanes(&mut self.rayhit.ray, u32::MAX);
     }
 
     /// Activates `lane` with `ray` and no hit.
@@ -199,7 +337,7 @@ impl RayPacket16 {
             *level = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
         }
         self.valid.0 = std::array::from_fn(|lane| if lane < active { -1 } else { 0 });
-        idle_inactive_lanes(raw, &self.valid);
+        idle_lanes(raw, !active_bits(&self.valid));
     }
 
     /// Ray origins of all lanes as structure of arrays (x, y, z).
@@ -238,12 +376,14 @@ impl RayPacket16 {
         mask
     }
 
-    /// Deactivates one lane; Embree will neither read nor write it.
+    /// Deactivates one lane: it gets the idle ray, and no Embree call writes its hit.
     ///
     /// # Panics
     /// When `lane >= LANES` (16).
     pub fn set_inactive(&mut self, lane: usize) {
+        assert!(lane < LANES, "lane {lane} out of range");
         self.valid.0[lane] = 0;
+        idle_lanes(&mut self.rayhit.ray, 1 << lane);
     }
 
     /// Whether `lane` will be traced.
@@ -303,15 +443,18 @@ impl Default for ShadowPacket16 {
 impl ShadowPacket16 {
     /// A packet with every lane inactive.
     pub fn new() -> Self {
-        Self {
+        let mut packet = Self {
             rays: sys::RTCRay16::default(),
             valid: Mask16([0; LANES]),
-        }
+        };
+        packet.clear();
+        packet
     }
 
-    /// Deactivates every lane (their data is left as it was).
+    /// Deactivates every lane (each gets the idle ray).
     pub fn clear(&mut self) {
         self.valid.0 = [0; LANES];
+        idle_lanes(&mut self.rays, u32::MAX);
     }
 
     /// Activates `lane` with the shadow ray `ray`.
@@ -348,15 +491,17 @@ impl ShadowPacket16 {
         raw.id = std::array::from_fn(|lane| lane as u32);
         raw.flags = [0; LANES];
         self.valid.0 = std::array::from_fn(|lane| -(((active >> lane) & 1) as i32));
-        idle_inactive_lanes(raw, &self.valid);
+        idle_lanes(raw, !active);
     }
 
-    /// Deactivates one lane; Embree will neither read nor write it.
+    /// Deactivates one lane: it gets the idle ray, and no Embree call writes it.
     ///
     /// # Panics
     /// When `lane >= LANES` (16).
     pub fn set_inactive(&mut self, lane: usize) {
+        assert!(lane < LANES, "lane {lane} out of range");
         self.valid.0[lane] = 0;
+        idle_lanes(&mut self.rays, 1 << lane);
     }
 
     /// Whether `lane` will be traced.

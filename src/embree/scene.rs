@@ -26,6 +26,35 @@ impl BuildQuality {
     }
 }
 
+/// How a 16-ray packet is handed to Embree.
+///
+/// Embree traces 16-wide packets natively only with AVX-512. Elsewhere `rtcIntersect16`
+/// goes through its ray-stream fallback; `X8` and `X4` instead split the packet into
+/// native 8- or 4-wide calls (pieces without an active lane are skipped). Every width traces
+/// the same rays and finds the same hits; only the speed differs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PacketWidth {
+    /// The fastest measured on the device's ISA. That is one 16-wide call everywhere: with
+    /// AVX2 the ray-stream fallback traced the paper scene's coherent lens rays as fast as two
+    /// native 8-wide calls and its shadow rays faster (`cargo bench --bench packets`, README).
+    #[default]
+    Auto,
+    X16,
+    X8,
+    X4,
+}
+
+impl PacketWidth {
+    /// The lanes per Embree call.
+    pub fn lanes(self) -> u32 {
+        match self {
+            Self::Auto | Self::X16 => 16,
+            Self::X8 => 8,
+            Self::X4 => 4,
+        }
+    }
+}
+
 /// Owns one reference to an RTCScene.
 struct SceneHandle(sys::RTCScene);
 
@@ -180,6 +209,7 @@ impl SceneBuilder {
         unsafe { sys::rtcGetSceneBounds(self.handle.0, &mut bounds) };
         self.device.check("rtcGetSceneBounds")?;
         Ok(Scene {
+            lanes_per_call: PacketWidth::Auto.lanes(),
             handle: self.handle,
             geometries: self.geometries,
             device: self.device,
@@ -196,9 +226,11 @@ pub struct Scene {
     // Field order is drop order: the scene handle goes before the buffers it shares.
     handle: SceneHandle,
     geometries: Vec<Geometry>,
-    #[allow(dead_code)] // kept alive: the scene's error callback user pointer lives in it
+    /// Kept alive: the scene's error callback user pointer lives in it.
     device: Device,
     bounds: (Vec3, Vec3),
+    /// 16, 8 or 4: the lanes per Embree call a 16-ray packet is traced with.
+    lanes_per_call: u32,
 }
 
 // SAFETY: a committed RTCScene is immutable and Embree documents rtcIntersect*/rtcOccluded* on it
@@ -258,30 +290,58 @@ impl Scene {
         raw.tfar == f32::NEG_INFINITY
     }
 
-    /// Traces the active lanes of a packet; inactive lanes are neither read nor written.
+    /// The device the scene was built on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The lanes per Embree call (16, 8 or 4) this scene traces its 16-ray packets with.
+    pub fn lanes_per_call(&self) -> u32 {
+        self.lanes_per_call
+    }
+
+    /// Chooses how 16-ray packets are handed to Embree (a new scene uses
+    /// [`PacketWidth::Auto`], the device's native width). Images do not depend on it.
+    pub fn set_packet_width(&mut self, width: PacketWidth) {
+        self.lanes_per_call = width.lanes();
+    }
+
+    /// Traces the active lanes of a packet; the hits of inactive lanes are not written.
     pub fn intersect16(&self, packet: &mut RayPacket16, hint: RayHint) {
-        // SAFETY: committed scene alive for &self; the packet's RTCRayHit16 and mask are 64-byte
-        // aligned by their types, and Embree only touches active lanes.
-        unsafe {
-            version::intersect16(
-                &packet.valid,
-                self.handle.0,
-                &mut packet.rayhit,
-                hint == RayHint::Coherent,
-            )
+        let (scene, coherent) = (self.handle.0, hint == RayHint::Coherent);
+        match self.lanes_per_call {
+            16 => {
+                // SAFETY: the scene is committed and alive for &self; the mask and packet are
+                // 64-byte aligned by their types.
+                unsafe { version::intersect16(&packet.valid, scene, &mut packet.rayhit, coherent) }
+            }
+            8 => packet.for_each_part8(|valid, part| {
+                // SAFETY: as above, with 32-byte aligned 8-wide types.
+                unsafe { version::intersect8(valid, scene, part, coherent) }
+            }),
+            _ => packet.for_each_part4(|valid, part| {
+                // SAFETY: as above, with 16-byte aligned 4-wide types.
+                unsafe { version::intersect4(valid, scene, part, coherent) }
+            }),
         }
     }
 
     /// Tests the active lanes of a shadow packet for occlusion.
     pub fn occluded16(&self, packet: &mut ShadowPacket16, hint: RayHint) {
-        // SAFETY: as in intersect16.
-        unsafe {
-            version::occluded16(
-                &packet.valid,
-                self.handle.0,
-                &mut packet.rays,
-                hint == RayHint::Coherent,
-            )
+        let (scene, coherent) = (self.handle.0, hint == RayHint::Coherent);
+        match self.lanes_per_call {
+            16 => {
+                // SAFETY: as in intersect16.
+                unsafe { version::occluded16(&packet.valid, scene, &mut packet.rays, coherent) }
+            }
+            8 => packet.for_each_part8(|valid, part| {
+                // SAFETY: as in intersect16.
+                unsafe { version::occluded8(valid, scene, part, coherent) }
+            }),
+            _ => packet.for_each_part4(|valid, part| {
+                // SAFETY: as in intersect16.
+                unsafe { version::occluded4(valid, scene, part, coherent) }
+            }),
         }
     }
 }
@@ -336,7 +396,28 @@ mod tests {
 
     const INACTIVE: [usize; 5] = [1, 4, 7, 10, 15];
 
-    /// Writes recognisable values into every hit field and `tfar` of `lane`.
+    /// A native device and one limited to each narrower ISA this CPU has, each scene traced
+    /// with every packet width: every kernel path Embree can take on this machine.
+    fn every_path() -> Vec<(String, Scene)> {
+        let mut devices = vec![("native".to_string(), Device::with_config("").unwrap())];
+        for isa in crate::embree::limited_isas() {
+            devices.push((
+                isa.into(),
+                Device::with_config(&format!("isa={isa}")).unwrap(),
+            ));
+        }
+        let mut paths = Vec::new();
+        for (isa, device) in devices {
+            for width in [PacketWidth::X16, PacketWidth::X8, PacketWidth::X4] {
+                let mut scene = quad_scene(&device);
+                scene.set_packet_width(width);
+                paths.push((format!("isa {isa}, {width:?}"), scene));
+            }
+        }
+        paths
+    }
+
+    /// Writes recognisable values into every hit field of `lane`.
     fn fill_sentinels(raw: &mut sys::RTCRayHit16, lane: usize) {
         let h = &mut raw.hit;
         h.geomID[lane] = 0xDEAD_0000 + lane as u32;
@@ -349,7 +430,6 @@ mod tests {
         h.Ng_x[lane] = 1.0e30;
         h.Ng_y[lane] = -1.0e-30;
         h.Ng_z[lane] = f32::MIN_POSITIVE;
-        raw.ray.tfar[lane] = 12345.5;
     }
 
     /// The bits of everything Embree could write in `lane`.
@@ -371,73 +451,113 @@ mod tests {
         bits
     }
 
+    /// A caller fills every lane with a ray that hits, then deactivates some. On every path
+    /// (Embree's ray-stream fallback for 16-wide calls without AVX-512 ignores the valid mask
+    /// and traces any lane with tnear <= tfar) the deactivated lanes must not be written.
     #[test]
     fn intersect16_writes_no_field_of_an_inactive_lane() {
-        let device = Device::new().unwrap();
-        let scene = quad_scene(&device);
-        for hint in [RayHint::Coherent, RayHint::Incoherent] {
-            let mut packet = RayPacket16::new();
-            for lane in 0..LANES {
-                packet.set(lane, &lane_ray(lane));
-            }
-            for lane in INACTIVE {
-                packet.set_inactive(lane);
-                fill_sentinels(&mut packet.rayhit, lane);
-                // Tracing this lane would write every field above: its ray hits the quad.
-                let would = scene.intersect1(&packet.ray(lane));
-                assert!(
-                    would.is_some_and(|h| h.geometry == GeometryId(0) && (h.t - 2.0).abs() < 0.1),
-                    "{hint:?} lane {lane}: {would:?}"
-                );
-            }
-            let before: Vec<_> = INACTIVE
-                .iter()
-                .map(|&lane| lane_bits(&packet.rayhit, lane))
-                .collect();
+        for (path, scene) in every_path() {
+            for hint in [RayHint::Coherent, RayHint::Incoherent] {
+                let mut packet = RayPacket16::new();
+                for lane in 0..LANES {
+                    packet.set(lane, &lane_ray(lane));
+                    // Tracing this lane would write every field: its ray hits the quad.
+                    let would = scene.intersect1(&lane_ray(lane));
+                    assert!(
+                        would.is_some_and(|h| h.geometry == GeometryId(0)),
+                        "{path}, {hint:?} lane {lane}: {would:?}"
+                    );
+                }
+                for lane in INACTIVE {
+                    fill_sentinels(&mut packet.rayhit, lane);
+                    packet.set_inactive(lane);
+                    let idle = packet.ray(lane);
+                    assert!(
+                        idle.tnear > idle.tfar && idle.origin.is_finite() && idle.dir.is_finite(),
+                        "{idle:?}"
+                    );
+                }
+                let before: Vec<_> = INACTIVE
+                    .iter()
+                    .map(|&lane| lane_bits(&packet.rayhit, lane))
+                    .collect();
 
-            scene.intersect16(&mut packet, hint);
+                scene.intersect16(&mut packet, hint);
 
-            for (&lane, before) in INACTIVE.iter().zip(&before) {
-                assert_eq!(
-                    lane_bits(&packet.rayhit, lane),
-                    *before,
-                    "{hint:?}: inactive lane {lane} was written"
-                );
-            }
-            for lane in (0..LANES).filter(|l| !INACTIVE.contains(l)) {
-                let hit = packet.hit(lane);
-                assert!(
-                    hit.is_some_and(|h| h.geometry == GeometryId(0) && (h.t - 2.0).abs() < 0.1),
-                    "{hint:?}: active lane {lane} should hit the quad: {hit:?}"
-                );
+                for (&lane, before) in INACTIVE.iter().zip(&before) {
+                    assert_eq!(
+                        lane_bits(&packet.rayhit, lane),
+                        *before,
+                        "{path}, {hint:?}: inactive lane {lane} was written"
+                    );
+                    assert_eq!(packet.hit(lane), None);
+                }
+                for lane in (0..LANES).filter(|l| !INACTIVE.contains(l)) {
+                    // (The triangle may differ: some rays hit the quad's diagonal.)
+                    let (wide, single) = (packet.hit(lane), scene.intersect1(&lane_ray(lane)));
+                    assert!(
+                        matches!((wide, single), (Some(w), Some(s))
+                            if w.geometry == s.geometry && (w.t - s.t).abs() < 1e-5),
+                        "{path}, {hint:?}: active lane {lane}: {wide:?} vs {single:?}"
+                    );
+                }
             }
         }
     }
 
     #[test]
     fn occluded16_writes_no_field_of_an_inactive_lane() {
-        let device = Device::new().unwrap();
-        let scene = quad_scene(&device);
-        for hint in [RayHint::Coherent, RayHint::Incoherent] {
-            let mut packet = ShadowPacket16::new();
-            for lane in 0..LANES {
-                packet.set(lane, &lane_ray(lane));
-            }
-            for lane in INACTIVE {
-                packet.set_inactive(lane);
-                packet.rays.tfar[lane] = 12345.5;
-                assert!(scene.occluded1(&packet.ray(lane)), "lane {lane} is blocked");
-            }
-            scene.occluded16(&mut packet, hint);
-            for lane in 0..LANES {
-                if INACTIVE.contains(&lane) {
-                    assert_eq!(packet.rays.tfar[lane], 12345.5, "{hint:?}: lane {lane}");
-                    assert!(!packet.occluded(lane));
-                } else {
-                    assert!(packet.occluded(lane), "{hint:?}: lane {lane}");
+        for (path, scene) in every_path() {
+            for hint in [RayHint::Coherent, RayHint::Incoherent] {
+                let mut packet = ShadowPacket16::new();
+                for lane in 0..LANES {
+                    packet.set(lane, &lane_ray(lane));
+                    assert!(scene.occluded1(&lane_ray(lane)), "lane {lane} is blocked");
+                }
+                for lane in INACTIVE {
+                    packet.set_inactive(lane);
+                }
+                let idle: Vec<_> = INACTIVE.iter().map(|&lane| packet.ray(lane)).collect();
+                scene.occluded16(&mut packet, hint);
+                for lane in 0..LANES {
+                    if let Some(i) = INACTIVE.iter().position(|&l| l == lane) {
+                        assert_eq!(packet.ray(lane), idle[i], "{path}, {hint:?}: lane {lane}");
+                        assert!(!packet.occluded(lane));
+                    } else {
+                        assert!(packet.occluded(lane), "{path}, {hint:?}: lane {lane}");
+                    }
                 }
             }
         }
+    }
+
+    /// Lanes that are never activated (a fresh packet, `clear`, bulk fills) are idle too.
+    #[test]
+    fn every_way_of_deactivating_a_lane_leaves_an_empty_finite_segment() {
+        let empty = |ray: Ray| {
+            ray.tnear > ray.tfar
+                && ray.origin.is_finite()
+                && ray.dir.is_finite()
+                && ray.tnear.is_finite()
+        };
+        let mut packet = RayPacket16::new();
+        assert!((0..LANES).all(|l| empty(packet.ray(l))));
+        packet.set(3, &lane_ray(3));
+        packet.clear();
+        assert!((0..LANES).all(|l| empty(packet.ray(l))));
+        let nan = [[f32::NAN; LANES]; 3];
+        packet.set_lanes(5, &nan, &nan);
+        assert!((5..LANES).all(|l| empty(packet.ray(l))));
+        let mut shadow = ShadowPacket16::new();
+        assert!((0..LANES).all(|l| empty(shadow.ray(l))));
+        shadow.set_segments(0b101, &nan, &nan, &[f32::NAN; LANES]);
+        assert!(
+            (0..LANES)
+                .filter(|l| ![0, 2].contains(l))
+                .all(|l| empty(shadow.ray(l)))
+        );
+        shadow.clear();
+        assert!((0..LANES).all(|l| empty(shadow.ray(l))));
     }
 
     #[test]

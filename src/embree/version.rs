@@ -7,7 +7,7 @@
 //! which is the only way to learn why `rtcNewDevice` failed; Embree 3 has no such call.
 //! Everything else dofray uses has the same name and layout in both versions.
 
-use super::packet::Mask16;
+use super::packet::{Mask4, Mask8, Mask16};
 use super::sys;
 
 /// Embree's major version this build links against.
@@ -126,52 +126,64 @@ pub(super) unsafe fn occluded1(scene: sys::RTCScene, ray: &mut sys::RTCRay, cohe
     }
 }
 
-/// # Safety
-/// `scene` must be a live, committed Embree scene. (`valid` and `rayhit` are 64-byte aligned
-/// by their types, as rtcIntersect16 requires.)
-pub(super) unsafe fn intersect16(
-    valid: &Mask16,
-    scene: sys::RTCScene,
-    rayhit: &mut sys::RTCRayHit16,
-    coherent: bool,
-) {
-    #[cfg(embree3)]
-    {
-        let mut ctx = context(coherent);
-        // SAFETY: the caller guarantees a committed scene; the mask and packet types are 64-byte
-        // aligned and Embree reads 16 lanes of each.
-        unsafe { sys::rtcIntersect16(valid.0.as_ptr(), scene, &mut ctx, rayhit) }
-    }
-    #[cfg(embree4)]
-    {
-        let mut args = intersect_args(coherent);
-        // SAFETY: the caller guarantees a committed scene; the mask and packet types are 64-byte
-        // aligned and Embree reads 16 lanes of each.
-        unsafe { sys::rtcIntersect16(valid.0.as_ptr(), scene, rayhit, &mut args) }
-    }
+/// Generates one packet query (`rtcIntersect{4,8,16}` / `rtcOccluded{4,8,16}`) over both
+/// Embree versions' signatures.
+macro_rules! packet_query {
+    ($name:ident, $rtc:ident, $Mask:ty, $Data:ty, $args:ident) => {
+        /// # Safety
+        /// `scene` must be a live, committed Embree scene. (The mask and the packet are aligned
+        /// by their types as Embree requires for this width.)
+        pub(super) unsafe fn $name(
+            valid: &$Mask,
+            scene: sys::RTCScene,
+            data: &mut $Data,
+            coherent: bool,
+        ) {
+            #[cfg(embree3)]
+            {
+                let mut ctx = context(coherent);
+                // SAFETY: the caller guarantees a committed scene; the mask and packet types
+                // are aligned for this width, and Embree reads exactly that many lanes of each.
+                unsafe { sys::$rtc(valid.0.as_ptr(), scene, &mut ctx, data) }
+            }
+            #[cfg(embree4)]
+            {
+                let mut args = $args(coherent);
+                // SAFETY: the caller guarantees a committed scene; the mask and packet types
+                // are aligned for this width, and Embree reads exactly that many lanes of each.
+                unsafe { sys::$rtc(valid.0.as_ptr(), scene, data, &mut args) }
+            }
+        }
+    };
 }
 
-/// # Safety
-/// `scene` must be a live, committed Embree scene. (`valid` and `ray` are 64-byte aligned by
-/// their types, as rtcOccluded16 requires.)
-pub(super) unsafe fn occluded16(
-    valid: &Mask16,
-    scene: sys::RTCScene,
-    ray: &mut sys::RTCRay16,
-    coherent: bool,
-) {
-    #[cfg(embree3)]
-    {
-        let mut ctx = context(coherent);
-        // SAFETY: the caller guarantees a committed scene; the mask and packet types are 64-byte
-        // aligned and Embree reads 16 lanes of each.
-        unsafe { sys::rtcOccluded16(valid.0.as_ptr(), scene, &mut ctx, ray) }
-    }
-    #[cfg(embree4)]
-    {
-        let mut args = occluded_args(coherent);
-        // SAFETY: the caller guarantees a committed scene; the mask and packet types are 64-byte
-        // aligned and Embree reads 16 lanes of each.
-        unsafe { sys::rtcOccluded16(valid.0.as_ptr(), scene, ray, &mut args) }
-    }
-}
+packet_query!(
+    intersect16,
+    rtcIntersect16,
+    Mask16,
+    sys::RTCRayHit16,
+    intersect_args
+);
+packet_query!(
+    intersect8,
+    rtcIntersect8,
+    Mask8,
+    sys::RTCRayHit8,
+    intersect_args
+);
+packet_query!(
+    intersect4,
+    rtcIntersect4,
+    Mask4,
+    sys::RTCRayHit4,
+    intersect_args
+);
+packet_query!(
+    occluded16,
+    rtcOccluded16,
+    Mask16,
+    sys::RTCRay16,
+    occluded_args
+);
+packet_query!(occluded8, rtcOccluded8, Mask8, sys::RTCRay8, occluded_args);
+packet_query!(occluded4, rtcOccluded4, Mask4, sys::RTCRay4, occluded_args);
