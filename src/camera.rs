@@ -349,26 +349,35 @@ impl Camera {
         Ray::new(origin, (focus_point - origin).normalize())
     }
 
-    /// [`Camera::lens_ray_through`] for 16 lens positions at once (x and y coordinates), bit for
-    /// bit equal to it lane by lane; writes origins and unit directions as structure of arrays
-    /// (x, y, z components), the layout of a ray packet.
+    /// [`Camera::lens_ray`] for 16 samples at once, each with its own film position
+    /// (`px`, `py`) and lens position (`lens_x`, `lens_y`), bit for bit equal to it lane by
+    /// lane; writes origins and unit directions as structure of arrays (x, y, z components),
+    /// the layout of a ray packet.
     pub fn lens_rays16(
         &self,
-        focus_point: Vec3,
-        lens_x: &[f32; 16],
-        lens_y: &[f32; 16],
+        (px, py): (&[f32; 16], &[f32; 16]),
+        (lens_x, lens_y): (&[f32; 16], &[f32; 16]),
         origin: &mut [[f32; 16]; 3],
         dir: &mut [[f32; 16]; 3],
     ) {
         let (eye, right, up, r) = (self.eye, self.right, self.up, self.aperture_radius);
+        let (fwd, fd) = (self.forward, self.focus_distance);
+        let aspect = self.width as f32 / self.height as f32;
+        let (w, h, tan) = (self.width as f32, self.height as f32, self.tan_half_vfov);
         for lane in 0..16 {
+            // Written out as glam evaluates film_dir, focus_point,
+            // `eye + (right * lx + up * ly) * r` and `(focus - origin).normalize()`
+            // (v * (1 / sqrt(x*x + y*y + z*z))).
+            let sx = (2.0 * px[lane] / w - 1.0) * tan * aspect;
+            let sy = (1.0 - 2.0 * py[lane] / h) * tan;
+            let fx = eye.x + (fwd.x + right.x * sx + up.x * sy) * fd;
+            let fy = eye.y + (fwd.y + right.y * sx + up.y * sy) * fd;
+            let fz = eye.z + (fwd.z + right.z * sx + up.z * sy) * fd;
             let (lx, ly) = (lens_x[lane], lens_y[lane]);
-            // Written out as glam evaluates `eye + (right * lx + up * ly) * r` and
-            // `(focus - origin).normalize()` (v * (1 / sqrt(x*x + y*y + z*z))).
             let ox = eye.x + (right.x * lx + up.x * ly) * r;
             let oy = eye.y + (right.y * lx + up.y * ly) * r;
             let oz = eye.z + (right.z * lx + up.z * ly) * r;
-            let (dx, dy, dz) = (focus_point.x - ox, focus_point.y - oy, focus_point.z - oz);
+            let (dx, dy, dz) = (fx - ox, fy - oy, fz - oz);
             let recip = 1.0 / (dx * dx + dy * dy + dz * dz).sqrt();
             origin[0][lane] = ox;
             origin[1][lane] = oy;
@@ -529,13 +538,14 @@ mod tests {
         let cam = spec(LensSpec::Aperture { radius: 0.3 })
             .build(no_autofocus)
             .unwrap();
-        let focus = cam.focus_point(100.5, 50.5);
+        let px: [f32; 16] = std::array::from_fn(|i| 100.5 + (i as f32 * 0.13).sin());
+        let py: [f32; 16] = std::array::from_fn(|i| 50.5 - (i as f32 * 0.29).cos());
         let lx: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.37).sin());
         let ly: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.61).cos() * 1.3);
         let (mut origin, mut dir) = ([[0.0; 16]; 3], [[0.0; 16]; 3]);
-        cam.lens_rays16(focus, &lx, &ly, &mut origin, &mut dir);
+        cam.lens_rays16((&px, &py), (&lx, &ly), &mut origin, &mut dir);
         for lane in 0..16 {
-            let r = cam.lens_ray_through(focus, Vec2::new(lx[lane], ly[lane]));
+            let r = cam.lens_ray(px[lane], py[lane], Vec2::new(lx[lane], ly[lane]));
             for k in 0..3 {
                 assert_eq!(origin[k][lane].to_bits(), r.origin[k].to_bits());
                 assert_eq!(dir[k][lane].to_bits(), r.dir[k].to_bits());

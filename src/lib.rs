@@ -13,6 +13,7 @@ pub mod camera;
 // The only module with FFI; its unsafe blocks are documented (clippy::undocumented_unsafe_blocks).
 #[allow(unsafe_code)]
 pub mod embree;
+pub mod filter;
 pub mod limits;
 pub mod metrics;
 pub mod output;

@@ -10,6 +10,7 @@ use clap::{Args, Parser, Subcommand};
 use dofray::bench::{self, BenchConfig};
 use dofray::camera::{Camera, Focus, LensSpec};
 use dofray::embree::Device;
+use dofray::filter::{PixelFilter, PixelFilterKind};
 use dofray::output;
 use dofray::render::{self, Mode, Progress, RenderSettings};
 use dofray::sampler::LensFilter;
@@ -127,10 +128,22 @@ struct RenderArgs {
     /// tracing); adaptive: the seed's sparse sample sites with interpolation.
     #[arg(long, value_enum, default_value_t = Mode::Adaptive)]
     mode: Mode,
-    /// Lens samples per defocused sample site (16 fill one ray packet)
-    /// [default: the scene's, else 16].
+    /// Samples per sample site that blur reaches, each a point in pixel x lens (16 fill one
+    /// ray packet), 1 to 65536 [default: the scene's, else 16].
     #[arg(long)]
     spp: Option<u32>,
+    /// Anti-aliasing: samples per in-focus sample site, and per pixel in pinhole mode, each a
+    /// point in pixel x lens, 1 to 65536 [default: the scene's, else 4].
+    #[arg(long)]
+    aa: Option<u32>,
+    /// The pixel filter that sample positions are drawn from: blackman-harris (smooth and
+    /// sharp), gaussian (softer), or box (each pixel's own square, at width 1).
+    #[arg(long, value_enum, default_value_t = PixelFilterKind::BlackmanHarris)]
+    pixel_filter: PixelFilterKind,
+    /// Full width of the pixel filter in pixels, up to 16 [default: 3 for blackman-harris and
+    /// gaussian, 1 for box].
+    #[arg(long)]
+    pixel_filter_width: Option<f32>,
     /// Sample interval as a fraction of the CoC diameter in defocused regions (the seed's k;
     /// 0.4 is fast, 0.2 is near-identical to dense) [default: the scene's, else 0.4].
     #[arg(long, short = 'k')]
@@ -139,7 +152,8 @@ struct RenderArgs {
     /// interpolates across an in-focus edge.
     #[arg(long)]
     paper_exact: bool,
-    /// Weighting of lens samples over the aperture.
+    /// Weighting of lens samples over the aperture (the filter over the CoC; box is a real
+    /// lens's evenly bright bokeh).
     #[arg(long, value_enum, default_value_t = LensFilter::Box)]
     filter: LensFilter,
     /// Also write the depth map and interval map as PNG pictures into this directory (created
@@ -496,6 +510,11 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         pool,
     } = prepare(&a.scene)?;
     settings.spp = a.spp.or(desc.spp).unwrap_or(16);
+    settings.aa = a.aa.or(desc.aa).unwrap_or(4);
+    settings.pixel_filter = PixelFilter::new(a.pixel_filter);
+    if let Some(width) = a.pixel_filter_width {
+        settings.pixel_filter.width = width;
+    }
     settings.interval_factor = a.interval_factor.or(desc.interval_factor).unwrap_or(0.4);
     settings
         .validate()
@@ -522,6 +541,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "width": film.width,
             "height": film.height,
             "spp": settings.spp,
+            "aa": settings.aa,
+            "pixel_filter": settings.pixel_filter.kind,
+            "pixel_filter_width": json_f32(settings.pixel_filter.width),
             "interval_factor": json_f32(settings.interval_factor),
             "paper_exact": a.paper_exact,
             "seed": settings.seed,
@@ -747,7 +769,22 @@ fn json_f32(v: f32) -> f64 {
 /// Render-setting errors worded for the command line (flag names, not field names).
 fn cli_message(e: &render::RenderError) -> String {
     match e {
-        render::RenderError::ZeroSpp => "--spp must be at least 1".into(),
+        render::RenderError::BadSpp(n) => {
+            format!(
+                "--spp must be 1 to {}, got {n}",
+                render::RenderSettings::MAX_SAMPLES
+            )
+        }
+        render::RenderError::BadAa(n) => {
+            format!(
+                "--aa must be 1 to {}, got {n}",
+                render::RenderSettings::MAX_SAMPLES
+            )
+        }
+        render::RenderError::BadPixelFilterWidth(w) => format!(
+            "--pixel-filter-width must be a number in (0, {}], got {w}",
+            dofray::filter::PixelFilter::MAX_WIDTH
+        ),
         render::RenderError::BadIntervalFactor(k) => {
             format!("--interval-factor must be a finite number > 0, got {k}")
         }

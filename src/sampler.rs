@@ -1,11 +1,16 @@
-//! Lens (aperture) samples: Owen-scrambled Sobol points, deterministic from
-//! (seed, pixel, sample index), mapped area-preservingly onto the aperture shape.
+//! Samples of pixel x lens: Owen-scrambled 4D Sobol points, deterministic from
+//! (seed, pixel, sample index); the lens pair is mapped area-preservingly onto the aperture.
 //!
-//! The first two Sobol dimensions form a (0,2)-sequence: any power-of-two prefix of 16 points
-//! is stratified in every 2^a x 2^b elementary interval of area 1/16, so one 16-sample packet
-//! covers the aperture evenly. Each pixel scrambles the sequence with its own hash-derived seed
-//! (Burley 2020, "Practical Hash-based Owen Scrambling"), so neighbouring pixels' patterns are
-//! uncorrelated and no image depends on thread count or tile order.
+//! Dimensions 0 and 1 (the lens position) form a (0,2)-sequence: any power-of-two prefix of 16
+//! points is stratified in every 2^a x 2^b elementary interval of area 1/16, so one 16-sample
+//! packet covers the aperture evenly. Dimensions 2 and 3 (the position within the pixel, which
+//! the pixel filter warps) are Sobol dimensions 3 and 4 of Joe and Kuo's direction numbers, so
+//! the four together are jointly stratified: every coordinate of 16 points in 16 strata, the
+//! pixel pair a (0,2)-sequence like the lens pair, and the pixel's x stratified against both
+//! lens coordinates (4 x 4). Each pixel scrambles every
+//! dimension with its own hash-derived seed (Burley 2020, "Practical Hash-based Owen
+//! Scrambling"), so neighbouring pixels' patterns are uncorrelated and no image depends on
+//! thread count or tile order.
 
 use std::f32::consts::{FRAC_PI_4, TAU};
 
@@ -39,6 +44,62 @@ const fn sobol1(mut i: u32) -> u32 {
     }
     r
 }
+
+/// Direction numbers of a Sobol dimension from its primitive polynomial (degree `s`, inner
+/// coefficients `a`) and initial values `m` (Bratley and Fox's recurrence, as in Joe and Kuo's
+/// tables): point `i` is the XOR of `v[k]` over the set bits `k` of `i`.
+const fn directions(s: usize, a: u32, m: [u32; 3]) -> [u32; 32] {
+    let mut v = [0u32; 32];
+    let mut k = 0;
+    while k < 32 {
+        if k < s {
+            v[k] = m[k] << (31 - k);
+        } else {
+            let mut x = v[k - s] ^ (v[k - s] >> s);
+            let mut j = 1;
+            while j < s {
+                if (a >> (s - 1 - j)) & 1 != 0 {
+                    x ^= v[k - j];
+                }
+                j += 1;
+            }
+            v[k] = x;
+        }
+        k += 1;
+    }
+    v
+}
+
+/// Joe and Kuo's dimensions 3 (x^2 + x + 1; m = 1, 3) and 4 (x^3 + x + 1; m = 1, 3, 1).
+const SOBOL2_DIRECTIONS: [u32; 32] = directions(2, 1, [1, 3, 0]);
+const SOBOL3_DIRECTIONS: [u32; 32] = directions(3, 1, [1, 3, 1]);
+
+const fn sobol_with(directions: &[u32; 32], mut i: u32) -> u32 {
+    let mut r = 0;
+    let mut k = 0;
+    while i != 0 {
+        if i & 1 != 0 {
+            r ^= directions[k];
+        }
+        i >>= 1;
+        k += 1;
+    }
+    r
+}
+
+/// `sobol_with(directions, i)` bit-reversed for i in 0..16 (see [`SOBOL1_LOW_REVERSED`]).
+const fn low_reversed(directions: &[u32; 32]) -> [u32; 16] {
+    let mut t = [0u32; 16];
+    let mut i = 0;
+    while i < 16 {
+        t[i] = sobol_with(directions, i as u32).reverse_bits();
+        i += 1;
+    }
+    t
+}
+
+const SOBOL2_LOW_REVERSED: [u32; 16] = low_reversed(&SOBOL2_DIRECTIONS);
+const SOBOL3_LOW_REVERSED: [u32; 16] = low_reversed(&SOBOL3_DIRECTIONS);
 
 /// `sobol1(i)` bit-reversed for i in 0..16. Sobol dimensions are linear over GF(2) in the
 /// bits of the index, so `sobol1(base | i) == sobol1(base) ^ sobol1(i)` when base's low four
@@ -78,29 +139,74 @@ fn to_unit(x: u32) -> f32 {
     ((x >> 8) as i32) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
-/// The sample stream of one pixel: point `i` of an Owen-scrambled 2D Sobol sequence.
+/// The sample stream of one pixel: point `i` of an Owen-scrambled 4D Sobol sequence, whose
+/// dimensions 0 and 1 place the sample on the lens and 2 and 3 within the pixel.
 #[derive(Debug, Clone, Copy)]
 pub struct PixelSampler {
     seed_x: u32,
     seed_y: u32,
+    seed_px: u32,
+    seed_py: u32,
 }
 
 impl PixelSampler {
     /// The stream for pixel `pixel` (any unique index, e.g. `y * width + x`) of image seed `seed`.
     pub fn new(seed: u64, pixel: u64) -> Self {
         let h = hash64(hash64(seed) ^ pixel);
+        let h2 = hash64(h);
         Self {
             seed_x: h as u32,
             seed_y: (h >> 32) as u32,
+            seed_px: h2 as u32,
+            seed_py: (h2 >> 32) as u32,
         }
     }
 
-    /// Sample `i` in [0, 1)^2.
+    /// The lens coordinates of sample `i`, in [0, 1)^2.
     pub fn get(&self, i: u32) -> Vec2 {
         Vec2::new(
             to_unit(owen_scramble(sobol0(i), self.seed_x)),
             to_unit(owen_scramble(sobol1(i), self.seed_y)),
         )
+    }
+
+    /// The pixel coordinates of sample `i`, in [0, 1)^2 (Sobol dimensions 2 and 3).
+    pub fn get_pixel(&self, i: u32) -> Vec2 {
+        Vec2::new(
+            to_unit(owen_scramble(
+                sobol_with(&SOBOL2_DIRECTIONS, i),
+                self.seed_px,
+            )),
+            to_unit(owen_scramble(
+                sobol_with(&SOBOL3_DIRECTIONS, i),
+                self.seed_py,
+            )),
+        )
+    }
+
+    /// [`PixelSampler::get_pixel`] of samples `first .. first + 16` as structure of arrays,
+    /// bit for bit; `first` must be a multiple of 16 (other values fall back to `get_pixel`).
+    pub fn get_pixel16(&self, first: u32) -> ([f32; BATCH], [f32; BATCH]) {
+        let mut u = [0.0f32; BATCH];
+        let mut v = [0.0f32; BATCH];
+        if first % BATCH as u32 != 0 {
+            for lane in 0..BATCH {
+                let p = self.get_pixel(first.wrapping_add(lane as u32));
+                (u[lane], v[lane]) = (p.x, p.y);
+            }
+            return (u, v);
+        }
+        // Sobol points are linear in the index bits: the high part once, the low 4 bits from
+        // tables, all bit-reversed as the scramble wants them.
+        let high_x = sobol_with(&SOBOL2_DIRECTIONS, first).reverse_bits();
+        let high_y = sobol_with(&SOBOL3_DIRECTIONS, first).reverse_bits();
+        for lane in 0..BATCH {
+            let x = laine_karras(high_x ^ SOBOL2_LOW_REVERSED[lane], self.seed_px);
+            let y = laine_karras(high_y ^ SOBOL3_LOW_REVERSED[lane], self.seed_py);
+            u[lane] = to_unit(x.reverse_bits());
+            v[lane] = to_unit(y.reverse_bits());
+        }
+        (u, v)
     }
 
     /// Samples `first .. first + 16` as structure of arrays (x coordinates, y coordinates),
@@ -286,6 +392,63 @@ mod tests {
         }
     }
 
+    /// The direction-number recurrence reproduces the hand-written second dimension, and the
+    /// generated dimensions have Joe and Kuo's first points.
+    #[test]
+    fn generated_directions_match_known_sobol_points() {
+        let pascal = directions(1, 0, [1, 0, 0]);
+        for i in 0..4096 {
+            assert_eq!(sobol_with(&pascal, i), sobol1(i), "index {i}");
+        }
+        // Points 1..4 worked out by hand from the direction numbers: dimension 3 has
+        // v = .1, .11, .011 (binary), dimension 4 has v = .1, .11, .001.
+        let unit = |x: u32| x as f64 / 2f64.powi(32);
+        let d3: Vec<f64> = (1..5)
+            .map(|i| unit(sobol_with(&SOBOL2_DIRECTIONS, i)))
+            .collect();
+        let d4: Vec<f64> = (1..5)
+            .map(|i| unit(sobol_with(&SOBOL3_DIRECTIONS, i)))
+            .collect();
+        assert_eq!(d3, [0.5, 0.75, 0.25, 0.375]);
+        assert_eq!(d4, [0.5, 0.75, 0.25, 0.125]);
+    }
+
+    /// 16 samples of pixel x lens: every coordinate alone in 16 strata, the pixel pair (like
+    /// the lens pair) in every elementary interval of 16, and both lens coordinates against
+    /// the pixel's x in a 4 x 4 grid. (No choice among Joe and Kuo's first eight dimensions
+    /// also stratifies the pixel's y against both lens coordinates while keeping the pixel
+    /// pair a (0,2)-sequence.)
+    #[test]
+    fn sixteen_samples_are_jointly_stratified_over_pixel_and_lens() {
+        for pixel in 0..50u64 {
+            let s = PixelSampler::new(3, pixel);
+            let pts: Vec<[f32; 4]> = (0..16)
+                .map(|i| {
+                    let (l, p) = (s.get(i), s.get_pixel(i));
+                    [l.x, l.y, p.x, p.y]
+                })
+                .collect();
+            let strata = |a: usize, na: u32, b: usize, nb: u32| {
+                let mut seen = vec![0; (na * nb) as usize];
+                for p in &pts {
+                    let ca = (p[a] * na as f32) as u32;
+                    let cb = (p[b] * nb as f32) as u32;
+                    seen[(cb * na + ca) as usize] += 1;
+                }
+                seen.iter().all(|&c| c == 1)
+            };
+            for d in 0..4 {
+                assert!(strata(d, 16, d, 1), "pixel {pixel}, dimension {d}");
+            }
+            for (cols, rows) in [(16u32, 1u32), (8, 2), (4, 4), (2, 8), (1, 16)] {
+                assert!(strata(2, cols, 3, rows), "pixel {pixel}: {cols}x{rows}");
+            }
+            for (a, b) in [(0, 2), (1, 2)] {
+                assert!(strata(a, 4, b, 4), "pixel {pixel}: dimensions {a}, {b}");
+            }
+        }
+    }
+
     #[test]
     fn samples_are_deterministic_and_differ_between_pixels() {
         let a = PixelSampler::new(1, 42);
@@ -315,10 +478,16 @@ mod tests {
             let s = PixelSampler::new(3, pixel * 7919);
             for first in [0u32, 16, 32, 48, 1024, 4096 + 32, 7, u32::MAX - 15] {
                 let (u, v) = s.get16(first);
+                let (pu, pv) = s.get_pixel16(first);
                 for lane in 0..BATCH {
                     let p = s.get(first.wrapping_add(lane as u32));
                     assert_eq!(
                         (u[lane].to_bits(), v[lane].to_bits()),
+                        (p.x.to_bits(), p.y.to_bits())
+                    );
+                    let p = s.get_pixel(first.wrapping_add(lane as u32));
+                    assert_eq!(
+                        (pu[lane].to_bits(), pv[lane].to_bits()),
                         (p.x.to_bits(), p.y.to_bits())
                     );
                 }

@@ -175,6 +175,7 @@ fn rendered_blur_disc_matches_coc_px() {
         ambient: Vec3::ONE,
         background: Background::uniform(Vec3::ZERO),
         spp: None,
+        aa: None,
         interval_factor: None,
     };
     let (world, camera) = setup(&desc);
@@ -289,6 +290,7 @@ fn mirror_reflects_one_bounce() {
         ambient: Vec3::ONE,
         background: Background::uniform(Vec3::new(0.0, 0.0, 1.0)),
         spp: None,
+        aa: None,
         interval_factor: None,
     };
     let (world, camera) = setup(&desc);
@@ -309,7 +311,8 @@ fn mirror_reflects_one_bounce() {
         "{}",
         film.color[0]
     );
-    assert_eq!(stats.rays.secondary, 32 * 32);
+    // Every one of a pixel's `aa` samples reflects once.
+    assert_eq!(stats.rays.secondary, u64::from(pinhole(1).aa) * 32 * 32);
     let (film, stats) = render(&world, &camera, &pinhole(0), &NoProgress).unwrap();
     assert_eq!(film.color[16 * 32 + 16], Vec3::ZERO);
     assert_eq!(stats.rays.secondary, 0);

@@ -1,31 +1,38 @@
 //! Render modes. All three share the same two primitives, "trace and shade a packet"
-//! ([`trace::trace_and_shade`]) and "shade one sample site" ([`shade_site`]); they differ only in
-//! where the sample sites are:
+//! ([`trace::trace_and_shade`]) and "shade sample sites, each with its own number of samples of
+//! pixel x lens" ([`site::SiteShader`]); they differ only in where the sites are and how many
+//! samples each takes:
 //!
-//! - `pinhole`: one ray per pixel through the lens centre. It yields the depth and CoC maps
-//!   and is the first pass of the other two modes.
+//! - `pinhole`: every pixel is a site; `aa` samples of the pixel filter through the lens
+//!   centre (no depth of field).
 //! - `dense` (Cook's distributed ray tracing): every pixel is a site.
 //! - `adaptive` (the seed's method): sites on power-of-two lattices whose spacing follows the
 //!   CoC; the pixels between them are interpolated.
 //!
-//! A site whose pixel is reached by blur (see [`maps::blurred`]) traces `spp` lens samples
-//! as 16-wide packets; other sites reuse their pinhole sample.
+//! Every mode starts with the depth pass: one ray per pixel through the pixel centre and the
+//! lens centre, intersected only, for the depth and CoC maps. In dense and adaptive mode a site
+//! that blur reaches (see [`maps::blurred`]) takes `spp` samples, any other site `aa`. Both are
+//! full samples of pixel x lens, so the depth pass (which misses whatever is smaller than a
+//! pixel) only moves effort: every site's expected value is the filtered, lens-integrated
+//! radiance that dense converges to, and adaptive's one approximation is the interpolation.
 
 pub mod film;
 pub mod interpolate;
 pub mod maps;
+pub mod site;
 pub mod trace;
 
 use std::time::Instant;
 
-use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::embree::{LANES, RayHint, RayPacket16};
-use crate::sampler::{LensFilter, PixelSampler, aperture_points16};
+use crate::embree::{LANES, RayPacket16};
+use crate::filter::PixelFilter;
+use crate::sampler::LensFilter;
 use crate::scene::World;
 pub use film::Film;
+pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 
 /// Where sample sites are placed.
@@ -53,8 +60,12 @@ impl Mode {
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
     pub mode: Mode,
-    /// Lens samples per defocused sample site (16 fill one packet).
+    /// Samples (of pixel x lens) per sample site that blur reaches (16 fill one packet).
     pub spp: u32,
+    /// Samples per in-focus site, and per pixel in pinhole mode: the anti-aliasing samples.
+    pub aa: u32,
+    /// The pixel (reconstruction) filter the samples' film positions are drawn from.
+    pub pixel_filter: PixelFilter,
     /// The seed's k: sample interval = k x CoC in defocused regions.
     pub interval_factor: f32,
     /// Use the seed's plain per-pixel interval rule instead of the conservative one.
@@ -74,6 +85,8 @@ impl Default for RenderSettings {
         Self {
             mode: Mode::Adaptive,
             spp: 16,
+            aa: 4,
+            pixel_filter: PixelFilter::default(),
             interval_factor: 0.4,
             paper_exact: false,
             max_interval: 64,
@@ -88,8 +101,12 @@ impl Default for RenderSettings {
 /// Why a render could not start.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RenderError {
-    #[error("spp must be at least 1")]
-    ZeroSpp,
+    #[error("spp must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
+    BadSpp(u32),
+    #[error("aa must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
+    BadAa(u32),
+    #[error("the pixel filter width must be a number in (0, {max}] pixels, got {0}", max = PixelFilter::MAX_WIDTH)]
+    BadPixelFilterWidth(f32),
     #[error("interval factor must be a finite number > 0, got {0}")]
     BadIntervalFactor(f32),
     #[error("max interval must be a power of two >= 1, got {0}")]
@@ -97,9 +114,19 @@ pub enum RenderError {
 }
 
 impl RenderSettings {
+    /// The most samples per site `spp` and `aa` accept (2^16: far beyond convergence for
+    /// any image, few enough that a typo cannot start a render of days).
+    pub const MAX_SAMPLES: u32 = 1 << 16;
+
     pub fn validate(&self) -> Result<(), RenderError> {
-        if self.spp == 0 {
-            return Err(RenderError::ZeroSpp);
+        if self.spp == 0 || self.spp > Self::MAX_SAMPLES {
+            return Err(RenderError::BadSpp(self.spp));
+        }
+        if self.aa == 0 || self.aa > Self::MAX_SAMPLES {
+            return Err(RenderError::BadAa(self.aa));
+        }
+        if !self.pixel_filter.is_valid() {
+            return Err(RenderError::BadPixelFilterWidth(self.pixel_filter.width));
         }
         if !(self.interval_factor.is_finite() && self.interval_factor > 0.0) {
             return Err(RenderError::BadIntervalFactor(self.interval_factor));
@@ -115,18 +142,19 @@ impl RenderSettings {
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct RenderStats {
     pub seconds: f64,
-    /// Time of the pinhole pass alone (included in `seconds`).
+    /// Time of the depth pass (one pinhole ray per pixel for the depth and CoC maps) alone
+    /// (included in `seconds`).
     pub pinhole_seconds: f64,
     /// Time spent building the blur, interval and site maps (included in `seconds`).
     pub maps_seconds: f64,
-    /// Time spent shading sample sites with lens samples (included in `seconds`).
+    /// Time spent shading sample sites (included in `seconds`).
     pub sites_seconds: f64,
     /// Time spent interpolating between sites (included in `seconds`).
     pub interpolate_seconds: f64,
     pub rays: RayCounts,
     /// Pixels shaded directly (the rest were interpolated).
     pub sample_sites: u64,
-    /// Sites that traced `spp` lens samples (the rest reused the pinhole sample).
+    /// Sites that blur reaches, which took `spp` samples (the others took `aa`).
     pub defocused_sites: u64,
     /// Every packet traced, in a deterministic order, when `record_rays` was set.
     #[serde(skip)]
@@ -155,9 +183,10 @@ pub trait Progress: Sync {
 pub struct NoProgress;
 impl Progress for NoProgress {}
 
-/// Pinhole pass: one ray per pixel through the lens centre, 16 pixels (a 4 x 4 block) per
-/// packet. Fills the film's colour, depth and CoC, a band of 4 rows per task, in place.
-fn pinhole_pass(
+/// Depth pass: one ray per pixel through the pixel centre and the lens centre, 16 pixels (a
+/// 4 x 4 block) per packet, intersected only. Fills the film's depth and CoC, a band of 4 rows
+/// per task, in place.
+fn depth_pass(
     world: &World,
     camera: &Camera,
     settings: &RenderSettings,
@@ -167,19 +196,16 @@ fn pinhole_pass(
 ) {
     const BAND: usize = 4;
     let (w, h) = (film.width, film.height);
-    progress.start("pinhole", h.div_ceil(BAND) as u64);
+    progress.start("depth", h.div_ceil(BAND) as u64);
     let tallies: Vec<Tally> = film
-        .color
+        .depth
         .par_chunks_mut(BAND * w)
-        .zip(film.depth.par_chunks_mut(BAND * w))
         .zip(film.coc.par_chunks_mut(BAND * w))
         .enumerate()
-        .map(|(band, ((color, depth), coc))| {
+        .map(|(band, (depth, coc))| {
             let y_start = band * BAND;
-            let rows = color.len() / w;
+            let rows = depth.len() / w;
             let mut packet = RayPacket16::new();
-            let mut scratch = trace::Scratch::new();
-            let mut radiance = [Vec3::ZERO; LANES];
             let mut t_hit = [0.0f32; LANES];
             let mut local = Tally::new(settings.record_rays);
             for x_start in (0..w).step_by(4) {
@@ -194,20 +220,9 @@ fn pinhole_pass(
                         *slot = y * w + x;
                     }
                 }
-                trace::trace_and_shade(
-                    world,
-                    &mut packet,
-                    RayKind::Primary,
-                    RayHint::Coherent,
-                    &mut radiance,
-                    &mut t_hit,
-                    settings.bounces,
-                    &mut scratch,
-                    &mut local,
-                );
+                trace::trace_depth(world, &mut packet, &mut t_hit, &mut local);
                 for (lane, &p) in lanes.iter().enumerate() {
                     if p != usize::MAX {
-                        color[p] = radiance[lane];
                         depth[p] = if t_hit[lane].is_finite() {
                             camera.depth_along_axis(&packet.ray(lane), t_hit[lane])
                         } else {
@@ -228,78 +243,6 @@ fn pinhole_pass(
     }
 }
 
-/// Per-thread scratch space for [`shade_site`]: a packet for the lens samples and
-/// [`trace_and_shade`](trace::trace_and_shade)'s own.
-#[derive(Default)]
-pub struct SiteScratch {
-    packet: RayPacket16,
-    trace: trace::Scratch,
-}
-
-impl SiteScratch {
-    pub fn new() -> Self {
-        Self::default()
-    }
-}
-
-/// Shades one sample site with `spp` lens samples traced as 16-wide packets, weighted by the
-/// lens filter. Deterministic in (seed, pixel, sample index); `scratch` only saves building
-/// packets per site (its contents on entry do not matter).
-pub fn shade_site(
-    world: &World,
-    camera: &Camera,
-    settings: &RenderSettings,
-    (x, y): (usize, usize),
-    scratch: &mut SiteScratch,
-    tally: &mut Tally,
-) -> Vec3 {
-    let SiteScratch { packet, trace } = scratch;
-    let sampler = PixelSampler::new(settings.seed, (y * camera.width as usize + x) as u64);
-    let focus = camera.focus_point(x as f32 + 0.5, y as f32 + 0.5);
-    let mut radiance = [Vec3::ZERO; LANES];
-    let mut t_hit = [0.0f32; LANES];
-    let mut origin = [[0.0f32; LANES]; 3];
-    let mut dir = [[0.0f32; LANES]; 3];
-    let mut sum = Vec3::ZERO;
-    let mut weight_sum = 0.0f32;
-    let mut index = 0;
-    while index < settings.spp {
-        let n = (settings.spp - index).min(LANES as u32) as usize;
-        // All 16 lanes are computed (lanes past `n` are simply not traced).
-        let (u, v) = sampler.get16(index);
-        let (lens_x, lens_y) = aperture_points16(&u, &v, &camera.aperture);
-        camera.lens_rays16(focus, &lens_x, &lens_y, &mut origin, &mut dir);
-        packet.set_lanes(n, &origin, &dir);
-        trace::trace_and_shade(
-            world,
-            packet,
-            RayKind::Primary,
-            RayHint::Coherent,
-            &mut radiance,
-            &mut t_hit,
-            settings.bounces,
-            trace,
-            tally,
-        );
-        if settings.filter == LensFilter::Box {
-            // Every weight is 1 (and c * 1 == c exactly).
-            for c in &radiance[..n] {
-                sum += *c;
-                weight_sum += 1.0;
-            }
-        } else {
-            for lane in 0..n {
-                let lens = Vec2::new(lens_x[lane], lens_y[lane]);
-                let w = settings.filter.weight(lens, camera.aperture.anamorphic);
-                sum += radiance[lane] * w;
-                weight_sum += w;
-            }
-        }
-        index += n as u32;
-    }
-    sum / weight_sum
-}
-
 /// Renders `world` through `camera`. The result is bit-identical for any thread count.
 pub fn render(
     world: &World,
@@ -312,71 +255,86 @@ pub fn render(
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut film = Film::new(w, h);
     let mut tally = Tally::new(settings.record_rays);
-    pinhole_pass(world, camera, settings, &mut film, &mut tally, progress);
-    let pinhole_seconds = start.elapsed().as_secs_f64();
+    depth_pass(world, camera, settings, &mut film, &mut tally, progress);
     let mut stats = RenderStats {
-        pinhole_seconds,
+        pinhole_seconds: start.elapsed().as_secs_f64(),
         ..Default::default()
     };
 
-    if settings.mode == Mode::Pinhole {
-        film.samples.fill(1);
-        stats.sample_sites = (w * h) as u64;
-    } else {
-        let phase = Instant::now();
-        let blurred = maps::blurred(&film.coc, w, h);
-        film.interval = match settings.mode {
-            Mode::Adaptive => maps::interval_map(
-                &film.coc,
-                w,
-                h,
-                settings.interval_factor,
-                settings.paper_exact,
-                settings.max_interval,
-            ),
-            _ => vec![1; w * h],
-        };
-        let sites = maps::site_mask(&film.interval, w, h);
-        stats.maps_seconds = phase.elapsed().as_secs_f64();
-        let phase = Instant::now();
-        progress.start(settings.mode.name(), h as u64);
-        // Rows are shaded in place (each row's colour starts as its pinhole colour); their
-        // tallies are merged in row order, so the ray log does not depend on scheduling.
-        let tallies: Vec<Tally> = film
-            .color
-            .par_chunks_mut(w)
-            .zip(film.samples.par_chunks_mut(w))
-            .enumerate()
-            .map(|(y, (color, samples))| {
-                let mut local = Tally::new(settings.record_rays);
-                let mut scratch = SiteScratch::new();
-                for x in 0..w {
-                    let p = y * w + x;
-                    if !sites[p] {
-                        continue;
-                    }
-                    if blurred[p] {
-                        color[x] =
-                            shade_site(world, camera, settings, (x, y), &mut scratch, &mut local);
-                        samples[x] = settings.spp;
-                    } else {
-                        samples[x] = 1;
-                    }
+    // Samples per pixel: 0 where the pixel will be interpolated.
+    let phase = Instant::now();
+    let mut sites = None;
+    film.samples = match settings.mode {
+        Mode::Pinhole => vec![settings.aa; w * h],
+        Mode::Dense | Mode::Adaptive => {
+            let blurred = maps::blurred(&film.coc, w, h);
+            let per_site = |p: usize| {
+                if blurred[p] {
+                    settings.spp
+                } else {
+                    settings.aa
                 }
-                progress.advance(1);
-                local
-            })
-            .collect();
-        for local in tallies {
-            tally.merge(local);
+            };
+            let samples: Vec<u32> = if settings.mode == Mode::Dense {
+                (0..w * h).map(per_site).collect()
+            } else {
+                film.interval = maps::interval_map(
+                    &film.coc,
+                    w,
+                    h,
+                    settings.interval_factor,
+                    settings.paper_exact,
+                    settings.max_interval,
+                );
+                let mask = maps::site_mask(&film.interval, w, h);
+                let samples = (0..w * h)
+                    .map(|p| if mask[p] { per_site(p) } else { 0 })
+                    .collect();
+                sites = Some(mask);
+                samples
+            };
+            stats.defocused_sites =
+                (0..w * h).filter(|&p| blurred[p] && samples[p] > 0).count() as u64;
+            samples
         }
-        stats.sites_seconds = phase.elapsed().as_secs_f64();
-        let phase = Instant::now();
-        interpolate::interpolate(&mut film.color, &film.interval, &sites, w, h);
-        stats.interpolate_seconds = phase.elapsed().as_secs_f64();
-        stats.sample_sites = sites.iter().filter(|&&s| s).count() as u64;
-        stats.defocused_sites = film.samples.iter().filter(|&&s| s > 1).count() as u64;
+    };
+    stats.maps_seconds = phase.elapsed().as_secs_f64();
+
+    let phase = Instant::now();
+    let pixel_filter = settings.pixel_filter.sampler();
+    let shader = SiteShader {
+        world,
+        camera,
+        settings,
+        pixel_filter: &pixel_filter,
+        lens: settings.mode != Mode::Pinhole,
+    };
+    progress.start(settings.mode.name(), h as u64);
+    // Rows are shaded in place; their tallies are merged in row order, so the ray log does not
+    // depend on scheduling.
+    let tallies: Vec<Tally> = film
+        .color
+        .par_chunks_mut(w)
+        .zip(film.samples.par_chunks(w))
+        .enumerate()
+        .map_init(SiteScratch::new, |scratch, (y, (color, samples))| {
+            let mut local = Tally::new(settings.record_rays);
+            shader.shade_row(y, samples, color, scratch, &mut local);
+            progress.advance(1);
+            local
+        })
+        .collect();
+    for local in tallies {
+        tally.merge(local);
     }
+    stats.sites_seconds = phase.elapsed().as_secs_f64();
+
+    let phase = Instant::now();
+    if let Some(sites) = &sites {
+        interpolate::interpolate(&mut film.color, &film.interval, sites, w, h);
+    }
+    stats.interpolate_seconds = phase.elapsed().as_secs_f64();
+    stats.sample_sites = film.samples.iter().filter(|&&n| n > 0).count() as u64;
     progress.finish();
     stats.rays = tally.counts;
     stats.ray_log = tally.log;

@@ -323,3 +323,28 @@ pub fn trace_and_shade(
         }
     }
 }
+
+/// Traces the active lanes of `packet` (primary rays) for their hit distance alone, without
+/// shading: `t_hit` gets the distance, infinite for misses (inactive lanes are left as they
+/// were). The depth pass's primitive.
+pub fn trace_depth(
+    world: &World,
+    packet: &mut RayPacket16,
+    t_hit: &mut [f32; LANES],
+    tally: &mut Tally,
+) {
+    tally.count(RayKind::Primary, packet.active_count());
+    tally.record(RayKind::Primary, RayHint::Coherent, |l| {
+        packet.is_active(l).then(|| packet.ray(l))
+    });
+    world.scene.intersect16(packet, RayHint::Coherent);
+    let hits = packet.hit_mask();
+    let tfar = packet.tfars();
+    for lane in (0..LANES).filter(|&l| packet.is_active(l)) {
+        t_hit[lane] = if hits & (1 << lane) != 0 {
+            tfar[lane]
+        } else {
+            f32::INFINITY
+        };
+    }
+}

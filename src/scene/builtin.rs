@@ -117,6 +117,7 @@ pub fn paper() -> SceneDesc {
             zenith: Vec3::new(0.3, 0.45, 0.8),
         },
         spp: None,
+        aa: None,
         interval_factor: None,
     }
 }

@@ -327,6 +327,7 @@ struct RawImage {
 #[serde(deny_unknown_fields)]
 struct RawRender {
     spp: Option<AtLeastOne>,
+    aa: Option<AtLeastOne>,
     interval_factor: Option<Positive>,
 }
 
@@ -864,6 +865,7 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
     };
     let render = raw.render.unwrap_or(RawRender {
         spp: None,
+        aa: None,
         interval_factor: None,
     });
     let name = raw.name.unwrap_or_else(|| {
@@ -880,6 +882,7 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
         ambient: raw.ambient.map_or(Vec3::splat(0.1), |c| c.0),
         background,
         spp: render.spp.map(|s| s.0),
+        aa: render.aa.map(|s| s.0),
         interval_factor: render.interval_factor.map(|k| k.0),
     })
 }

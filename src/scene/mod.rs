@@ -93,8 +93,10 @@ pub struct SceneDesc {
     pub lights: Vec<Light>,
     pub ambient: Vec3,
     pub background: Background,
-    /// Lens samples per defocused site the scene asks for (the command line may override it).
+    /// Samples per defocused site the scene asks for (the command line may override it).
     pub spp: Option<u32>,
+    /// Samples per in-focus site (anti-aliasing) the scene asks for (likewise).
+    pub aa: Option<u32>,
     /// The seed's interval factor k the scene asks for (the command line may override it).
     pub interval_factor: Option<f32>,
 }

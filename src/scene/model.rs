@@ -354,6 +354,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         ambient: Vec3::splat(0.15),
         background: default_background(),
         spp: None,
+        aa: None,
         interval_factor: None,
     })
 }
