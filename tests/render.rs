@@ -91,7 +91,7 @@ fn adaptive_matches_dense_where_in_focus_and_costs_a_fraction() {
 #[test]
 fn images_are_identical_for_any_thread_count() {
     let (world, camera) = paper(96, 72);
-    for mode in [Mode::Dense, Mode::Adaptive] {
+    for mode in [Mode::Pinhole, Mode::Dense, Mode::Adaptive] {
         let (one, s1) = run(&world, &camera, mode, 0.4, 16, 1);
         let (two, s2) = run(&world, &camera, mode, 0.4, 16, 2);
         let bits = |f: &Film| {
