@@ -15,8 +15,10 @@ use crate::scene::{SceneDesc, World};
 /// What to measure.
 #[derive(Debug, Clone)]
 pub struct BenchConfig {
-    /// Lens samples per defocused site for every mode.
+    /// Samples per site that blur reaches, for every mode.
     pub spp: u32,
+    /// Samples per in-focus site (and per pixel in pinhole mode), for every mode.
+    pub aa: u32,
     /// Timed repeats of each mode; the median is reported.
     pub repeat: usize,
     /// Lens samples per pixel of the converged reference (dense).
@@ -30,6 +32,7 @@ impl Default for BenchConfig {
     fn default() -> Self {
         Self {
             spp: 16,
+            aa: 4,
             repeat: 3,
             reference_spp: 1024,
             seed: 0,
@@ -97,6 +100,7 @@ pub struct BenchReport {
     pub width: usize,
     pub height: usize,
     pub spp: u32,
+    pub aa: u32,
     pub repeat: usize,
     pub threads: usize,
     pub reference_spp: u32,
@@ -165,12 +169,14 @@ pub fn reference_key(desc: &SceneDesc, camera: &Camera, settings: &RenderSetting
     let mut h = Fnv(0xcbf2_9ce4_8422_2325);
     let _ = write!(
         h,
-        "{}|{desc:?}|{camera:?}|{}|{}|{:?}|{}",
+        "{}|{desc:?}|{camera:?}|{}|{}|{}|{:?}|{}|{:?}",
         env!("CARGO_PKG_VERSION"),
         settings.spp,
+        settings.aa,
         settings.seed,
         settings.filter,
-        settings.bounces
+        settings.bounces,
+        settings.pixel_filter
     );
     // The name becomes part of a file name: keep it to characters every file system accepts.
     let name: String = desc
@@ -242,9 +248,11 @@ fn reference(
     config: &BenchConfig,
     progress: &dyn Progress,
 ) -> Result<(Vec<[f32; 3]>, bool, f64), BenchError> {
+    // Every pixel converges: in-focus ones take as many samples as defocused ones.
     let settings = RenderSettings {
         mode: Mode::Dense,
         spp: config.reference_spp,
+        aa: config.reference_spp,
         seed: crate::sampler::hash64(config.seed ^ 0x5eed_5eed),
         ..Default::default()
     };
@@ -283,6 +291,7 @@ pub fn run(
     let recording = RenderSettings {
         mode: Mode::Dense,
         spp: config.spp,
+        aa: config.aa,
         seed: config.seed,
         record_rays: true,
         ..Default::default()
@@ -305,6 +314,7 @@ pub fn run(
             let settings = RenderSettings {
                 mode: *mode,
                 spp: config.spp,
+                aa: config.aa,
                 interval_factor: k.unwrap_or(0.4),
                 paper_exact: *exact,
                 seed: config.seed,
@@ -375,6 +385,7 @@ pub fn run(
             width: w,
             height: h,
             spp: config.spp,
+            aa: config.aa,
             repeat: config.repeat,
             threads: rayon::current_num_threads(),
             reference_spp: config.reference_spp,

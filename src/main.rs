@@ -172,13 +172,18 @@ struct RenderArgs {
 struct BenchArgs {
     #[command(flatten)]
     scene: SceneArgs,
-    /// Lens samples per defocused sample site in every mode [default: the scene's, else 16].
+    /// Samples per sample site that blur reaches, in every mode [default: the scene's, else
+    /// 16].
     #[arg(long)]
     spp: Option<u32>,
+    /// Samples per in-focus sample site (and per pixel in pinhole mode), in every mode
+    /// [default: the scene's, else 4].
+    #[arg(long)]
+    aa: Option<u32>,
     /// Timed repeats of each mode; medians are reported.
     #[arg(long, default_value_t = 3)]
     repeat: usize,
-    /// Lens samples per pixel of the converged reference image.
+    /// Samples per pixel of the converged reference image (dense, in focus or not).
     #[arg(long, default_value_t = 1024)]
     reference_spp: u32,
     /// Where the reference is cached between runs [default: $XDG_CACHE_HOME/dofray or
@@ -609,13 +614,21 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
     let p = prepare(&a.scene)?;
     let config = BenchConfig {
         spp: a.spp.or(p.desc.spp).unwrap_or(16),
+        aa: a.aa.or(p.desc.aa).unwrap_or(4),
         repeat: a.repeat,
         reference_spp: a.reference_spp,
         seed: a.scene.seed,
         cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
     };
-    if config.spp == 0 || config.reference_spp == 0 {
-        bail!("--spp and --reference-spp must be at least 1");
+    let max = RenderSettings::MAX_SAMPLES;
+    for (flag, n) in [
+        ("--spp", config.spp),
+        ("--aa", config.aa),
+        ("--reference-spp", config.reference_spp),
+    ] {
+        if n == 0 || n > max {
+            bail!("{flag} must be 1 to {max}, got {n}");
+        }
     }
     if config.repeat == 0 {
         bail!("--repeat must be at least 1");
@@ -637,11 +650,12 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
 
 fn print_table(r: &bench::BenchReport) {
     println!(
-        "dofray bench: scene {}, {}x{}, {} spp, median of {} runs, {} threads; reference {} spp{}",
+        "dofray bench: scene {}, {}x{}, {} spp, {} aa, median of {} runs, {} threads; reference {} spp{}",
         r.scene,
         r.width,
         r.height,
         r.spp,
+        r.aa,
         r.repeat,
         r.threads,
         r.reference_spp,
