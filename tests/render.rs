@@ -1,7 +1,7 @@
 //! The renderer end to end: the seed's method against dense distributed ray tracing.
 
 use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
-use dofray::embree::{Device, PacketWidth, limited_isas};
+use dofray::embree::{Device, EMBREE_MAJOR, PacketWidth, limited_isas};
 use dofray::metrics::{Space, psnr};
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, render};
 use dofray::scene::{Background, Object, SceneDesc, World, builtin};
@@ -364,10 +364,29 @@ fn every_embree_isa_and_packet_width_renders_the_same_image() {
                 world.scene.set_packet_width(width);
                 let (same, same_stats) =
                     render(&world, &camera, &settings(mode), &NoProgress).unwrap();
-                assert!(
-                    same.color == got.color && same.depth == got.depth,
-                    "isa {isa}, {mode:?}: {width:?} differs from the native width"
-                );
+                // Embree 3's kernels of every width give bit-identical hits; Embree 4.3's 8-
+                // and 4-wide kernels differ from its 16-wide path in the last bits of the hit
+                // distance (found by scripts/embree4-check.sh).
+                if EMBREE_MAJOR == 3 {
+                    assert!(
+                        same.color == got.color && same.depth == got.depth,
+                        "isa {isa}, {mode:?}: {width:?} differs from the native width"
+                    );
+                } else {
+                    let close = |a: f32, b: f32| a == b || (a - b).abs() <= 1e-5 * a.abs().max(1.0);
+                    assert!(
+                        same.depth
+                            .iter()
+                            .zip(&got.depth)
+                            .all(|(a, b)| close(*a, *b))
+                            && same
+                                .color
+                                .iter()
+                                .zip(&got.color)
+                                .all(|(a, b)| { (0..3).all(|k| close(a[k], b[k])) }),
+                        "isa {isa}, {mode:?}: {width:?} differs from the native width"
+                    );
+                }
                 assert_eq!(
                     same_stats.rays, got_stats.rays,
                     "isa {isa}, {mode:?}, {width:?}"
