@@ -9,8 +9,8 @@
 //! samples a site gets, which changes noise, never what is estimated.
 //!
 //! Samples are packed in row order: a site with 16 or more samples fills whole packets of its
-//! own (the coherent lens rays of one pixel); sites with fewer share packets with their
-//! neighbours. The packing depends only on the row, so images are bit-identical for any
+//! own (the coherent lens rays of one pixel) as long as it starts on a packet boundary; sites
+//! with fewer share packets with their neighbours. The packing depends only on the row, so images are bit-identical for any
 //! thread count.
 
 use glam::{Vec2, Vec3};
@@ -20,7 +20,7 @@ use super::trace::{self, RayKind, Tally};
 use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::FilterSampler;
-use crate::sampler::{LensFilter, PixelSampler, aperture_point, aperture_points16};
+use crate::sampler::{LensFilter, PixelSampler, aperture_points16};
 use crate::scene::World;
 
 /// What every site of a render shares.
@@ -84,17 +84,29 @@ impl SiteShader<'_> {
                 continue;
             }
             let sampler = PixelSampler::new(self.settings.seed, (y * width + x) as u64);
-            let mut i = 0;
-            while i < n {
-                if scratch.batch.len == 0 && i % LANES as u32 == 0 && n - i >= LANES as u32 {
-                    self.fill_packet(&sampler, (x, y), i, &mut scratch.batch);
-                    i += LANES as u32;
-                } else {
-                    self.push_sample(&sampler, (x, y), i, &mut scratch.batch);
-                    i += 1;
+            // Samples are made 16 at a time (batched, bit for bit the single-sample values)
+            // and queued; a pixel with 16 or more fills whole packets of its own.
+            for first in (0..n).step_by(LANES) {
+                let chunk = self.chunk(&sampler, (x, y), first);
+                let count = (n - first).min(LANES as u32) as usize;
+                if count == LANES {
+                    // A whole packet of one pixel's coherent rays: traced at once, while any
+                    // queued samples of smaller sites wait for more company.
+                    self.trace_batch(&chunk, scratch, tally);
+                    continue;
                 }
-                if scratch.batch.len == LANES {
-                    self.flush(scratch, tally);
+                for lane in 0..count {
+                    let b = &mut scratch.batch;
+                    let slot = b.len;
+                    b.film_x[slot] = chunk.film_x[lane];
+                    b.film_y[slot] = chunk.film_y[lane];
+                    b.lens_x[slot] = chunk.lens_x[lane];
+                    b.lens_y[slot] = chunk.lens_y[lane];
+                    b.pixel[slot] = x;
+                    b.len += 1;
+                    if b.len == LANES {
+                        self.flush(scratch, tally);
+                    }
                 }
             }
         }
@@ -108,57 +120,43 @@ impl SiteShader<'_> {
         }
     }
 
-    /// The film position of a sample of pixel (x, y) from its pixel coordinates in [0, 1)^2.
-    fn film(&self, (x, y): (usize, usize), u: f32, v: f32) -> (f32, f32) {
-        let f = self.pixel_filter;
-        (x as f32 + 0.5 + f.offset(u), y as f32 + 0.5 + f.offset(v))
-    }
-
-    /// Samples `first .. first + 16` of one pixel as a whole packet (the batched path: bit for
-    /// bit what `push_sample` gives each of them).
-    fn fill_packet(
-        &self,
-        sampler: &PixelSampler,
-        pixel: (usize, usize),
-        first: u32,
-        b: &mut Batch,
-    ) {
+    /// Samples `first .. first + 16` of pixel (x, y): film positions drawn from the pixel
+    /// filter around the pixel centre and lens positions on the aperture (all at its centre
+    /// for a pinhole camera).
+    fn chunk(&self, sampler: &PixelSampler, (x, y): (usize, usize), first: u32) -> Batch {
         let (u, v) = sampler.get16(first);
         let (pu, pv) = sampler.get_pixel16(first);
-        (b.lens_x, b.lens_y) = if self.lens {
+        let (lens_x, lens_y) = if self.lens {
             aperture_points16(&u, &v, &self.camera.aperture)
         } else {
             ([0.0; LANES], [0.0; LANES])
         };
-        for lane in 0..LANES {
-            (b.film_x[lane], b.film_y[lane]) = self.film(pixel, pu[lane], pv[lane]);
+        let f = self.pixel_filter;
+        let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+        Batch {
+            len: LANES,
+            pixel: [x; LANES],
+            film_x: pu.map(|u| cx + f.offset(u)),
+            film_y: pv.map(|v| cy + f.offset(v)),
+            lens_x,
+            lens_y,
         }
-        b.pixel = [pixel.0; LANES];
-        b.len = LANES;
     }
 
-    fn push_sample(&self, sampler: &PixelSampler, pixel: (usize, usize), i: u32, b: &mut Batch) {
-        let lane = b.len;
-        let lens = if self.lens {
-            aperture_point(sampler.get(i), &self.camera.aperture)
-        } else {
-            Vec2::ZERO
-        };
-        let p = sampler.get_pixel(i);
-        (b.lens_x[lane], b.lens_y[lane]) = (lens.x, lens.y);
-        (b.film_x[lane], b.film_y[lane]) = self.film(pixel, p.x, p.y);
-        b.pixel[lane] = pixel.0;
-        b.len += 1;
-    }
-
-    /// Traces and shades the batch, adding each sample to its pixel's weighted sum.
+    /// Traces the queued samples and empties the queue.
     fn flush(&self, scratch: &mut SiteScratch, tally: &mut Tally) {
+        let batch = std::mem::take(&mut scratch.batch);
+        self.trace_batch(&batch, scratch, tally);
+    }
+
+    /// Traces and shades a batch, adding each sample to its pixel's weighted sum.
+    fn trace_batch(&self, b: &Batch, scratch: &mut SiteScratch, tally: &mut Tally) {
         let SiteScratch {
             packet,
             trace,
-            batch: b,
             sums,
             weights,
+            ..
         } = scratch;
         let mut origin = [[0.0f32; LANES]; 3];
         let mut dir = [[0.0f32; LANES]; 3];
@@ -194,6 +192,5 @@ impl SiteShader<'_> {
             sums[b.pixel[lane]] += radiance[lane] * w;
             weights[b.pixel[lane]] += w;
         }
-        b.len = 0;
     }
 }
