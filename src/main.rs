@@ -696,7 +696,7 @@ fn print_table(r: &bench::BenchReport) {
         r.intersect_only_mrays_per_s,
         100.0 * r.dense_vs_intersect_only
     );
-    println!("where the time goes (ms): pinhole pass + maps + sample sites + interpolation");
+    println!("where the time goes (ms): depth pass + maps + sample sites + interpolation");
     for row in r
         .rows
         .iter()
