@@ -151,20 +151,20 @@ fn tilted_checker_edges_are_antialiased_in_every_mode() {
     assert!(between >= edges, "{between} vs {edges}");
 }
 
-/// A bright sphere whose pinhole image is 1.2 px across, 8 units in front of an in-focus wall,
+/// A bright sphere whose pinhole image is 0.6 px across, 8 units in front of an in-focus wall,
 /// blurred into a disc of about 24 px. Whether it sits on a pixel centre (where the depth pass
 /// sees it) or on a pixel corner (where every depth-pass ray misses it), it adds its own
 /// energy to the image: its radiance minus the wall's, times its projected area.
 #[test]
 fn a_defocused_sphere_smaller_than_a_pixel_adds_its_energy_wherever_it_sits() {
     let size = 40u32;
-    let (depth, radius) = (2.0f32, 0.0161f32);
+    let (depth, radius) = (2.0f32, 0.00805f32);
     let (bright, wall_albedo) = (40.0f32, 0.5f32);
     // Pixels per unit at unit distance: the film's half-height over tan(vfov / 2).
     let k = (size as f32 / 2.0) / 15f32.to_radians().tan();
     // The sphere's projected radius in pixels (its angular radius seen from the eye).
     let r_px = k * (radius / depth).asin().tan();
-    assert!(r_px * 2.0 < 1.25 && r_px * 2.0 > 1.15, "{r_px}");
+    assert!(r_px * 2.0 < 0.62 && r_px * 2.0 > 0.58, "{r_px}");
     let expected = (bright - wall_albedo) as f64 * std::f64::consts::PI * (r_px as f64).powi(2);
     let wall_energy = wall_albedo as f64 * (size * size) as f64;
 
@@ -198,8 +198,8 @@ fn a_defocused_sphere_smaller_than_a_pixel_adds_its_energy_wherever_it_sits() {
                 &desc,
                 &RenderSettings {
                     mode,
-                    spp: 1024,
-                    aa: 1024,
+                    spp: 4096,
+                    aa: 4096,
                     ..Default::default()
                 },
             );
