@@ -4,6 +4,7 @@
 use glam::{Vec2, Vec3};
 
 use crate::embree::Ray;
+use crate::limits::MAX_COORDINATE;
 
 /// Why a camera specification was rejected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -44,6 +45,16 @@ fn check(
 
 fn positive(name: &'static str, v: f32) -> Result<(), CameraError> {
     check(v.is_finite() && v > 0.0, name, "a finite number > 0", v)
+}
+
+/// A point whose every coordinate is within [`MAX_COORDINATE`] of the origin.
+fn in_range(name: &'static str, v: Vec3) -> Result<(), CameraError> {
+    check(
+        v.is_finite() && v.abs().max_element() <= MAX_COORDINATE,
+        name,
+        "finite coordinates within 1e15 of the origin",
+        format!("{v:?}"),
+    )
 }
 
 /// How the lens aperture is specified. All three map to one thin lens of some aperture radius.
@@ -130,8 +141,11 @@ pub struct Camera {
     pub tan_half_vfov: f32,
     /// Aperture radius in scene units (0 = pinhole).
     pub aperture_radius: f32,
-    /// Distance of the plane in focus along the view axis.
+    /// Distance of the plane in focus along the view axis (may be infinite).
     pub focus_distance: f32,
+    /// 1 / `focus_distance` (0 when focused at infinity): lens rays are computed from it, so a
+    /// huge focus distance behaves like infinity instead of overflowing.
+    pub inv_focus_distance: f32,
     pub aperture: ApertureShape,
 }
 
@@ -158,13 +172,14 @@ impl CameraSpec {
     pub fn build(&self, depth_of: impl FnOnce(&Ray) -> Option<f32>) -> Result<Camera, CameraError> {
         check(self.width > 0, "width", "at least 1 pixel", self.width)?;
         check(self.height > 0, "height", "at least 1 pixel", self.height)?;
-        for (name, v) in [
-            ("eye", self.eye),
-            ("look_at", self.look_at),
-            ("up", self.up),
-        ] {
-            check(v.is_finite(), name, "finite coordinates", format!("{v:?}"))?;
-        }
+        in_range("eye", self.eye)?;
+        in_range("look_at", self.look_at)?;
+        check(
+            self.up.is_finite(),
+            "up",
+            "finite coordinates",
+            format!("{:?}", self.up),
+        )?;
         let forward = (self.look_at - self.eye).normalize_or_zero();
         check(
             forward != Vec3::ZERO,
@@ -193,7 +208,12 @@ impl CameraSpec {
             "a finite angle",
             a.rotation_deg,
         )?;
-        positive("anamorphic ratio", a.anamorphic)?;
+        check(
+            a.anamorphic.is_finite() && a.anamorphic > 0.0 && (1e-3..=1e3).contains(&a.anamorphic),
+            "anamorphic ratio",
+            "a number from 0.001 to 1000",
+            a.anamorphic,
+        )?;
 
         if let LensSpec::Photographic {
             focal_length_mm,
@@ -222,17 +242,13 @@ impl CameraSpec {
             tan_half_vfov: (vfov_deg.to_radians() * 0.5).tan(),
             aperture_radius: 0.0,
             focus_distance: 1.0,
+            inv_focus_distance: 1.0,
             aperture: self.aperture,
         };
         camera.focus_distance = match self.focus {
             Focus::Distance(d) => d,
             Focus::Point(p) => {
-                check(
-                    p.is_finite(),
-                    "focus point",
-                    "finite coordinates",
-                    format!("{p:?}"),
-                )?;
+                in_range("focus point", p)?;
                 (p - self.eye).dot(forward)
             }
             Focus::Pixel { x, y } => {
@@ -248,7 +264,15 @@ impl CameraSpec {
                 depth_of(&ray).ok_or(CameraError::FocusPixelMisses { x, y })?
             }
         };
-        positive("focus distance", camera.focus_distance)?;
+        // Infinity is a focus distance (the lens focused at infinity); so is any huge number,
+        // which behaves like it (the lens rays use 1 / distance).
+        check(
+            camera.focus_distance > 0.0,
+            "focus distance",
+            "a number > 0 (or inf)",
+            camera.focus_distance,
+        )?;
+        camera.inv_focus_distance = 1.0 / camera.focus_distance;
         camera.aperture_radius = match self.lens {
             LensSpec::Pinhole => 0.0,
             LensSpec::Aperture { radius } => {
@@ -283,6 +307,18 @@ impl CameraSpec {
                 spread * p * p / (2.0 * camera.pixels_per_unit() * sharp_range)
             }
         };
+        // Every lens ray starts within the aperture's extent of the eye: keep it in range
+        // (a derived aperture too: a tiny f-number or sharp range gives a huge one).
+        let extent = camera.aperture_extent();
+        check(
+            extent.is_finite() && self.eye.abs().max_element() + extent <= MAX_COORDINATE,
+            "aperture radius",
+            "finite, and small enough that the lens stays within 1e15 of the origin (check the f-number, sharp range, spread and anamorphic ratio)",
+            format!(
+                "{:e} ({extent:e} with the anamorphic ratio)",
+                camera.aperture_radius
+            ),
+        )?;
         Ok(camera)
     }
 }
@@ -307,13 +343,10 @@ impl Camera {
     /// sensor converted to pixels (see the tests).
     pub fn coc_px(&self, depth: f32) -> f32 {
         let a = 2.0 * self.aperture_extent();
-        let p = self.focus_distance;
         let k = self.pixels_per_unit();
-        if depth.is_infinite() {
-            return a * k / p;
-        }
-        let d = depth.max(1e-6);
-        a * k * (d - p).abs() / (d * p)
+        // |D - P| / (D P) = |1/P - 1/D|, which also holds for P or D infinite.
+        let inv_d = 1.0 / depth.max(1e-6);
+        a * k * (self.inv_focus_distance - inv_d).abs()
     }
 
     /// Unnormalised direction from the eye through film position (px, py) in pixels
@@ -332,21 +365,19 @@ impl Camera {
 
     /// The ray from lens position `lens` (in the aperture's unit shape, see
     /// [`crate::sampler::aperture_point`]) through the point on the plane in focus that film
-    /// position (px, py) images.
+    /// position (px, py) images ([`Camera::focus_point`]). Computed as the direction
+    /// `film_dir - offset / focus_distance` (the direction to the focus point divided by the
+    /// focus distance), so a lens focused at infinity gives parallel rays.
     pub fn lens_ray(&self, px: f32, py: f32, lens: Vec2) -> Ray {
-        self.lens_ray_through(self.focus_point(px, py), lens)
+        let offset = (self.right * lens.x + self.up * lens.y) * self.aperture_radius;
+        let dir = self.film_dir(px, py) - offset * self.inv_focus_distance;
+        Ray::new(self.eye + offset, dir.normalize())
     }
 
     /// The point on the plane in focus that film position (px, py) images: every lens ray of
-    /// that pixel passes through it.
+    /// that pixel passes through it (infinitely far when focused at infinity).
     pub fn focus_point(&self, px: f32, py: f32) -> Vec3 {
         self.eye + self.film_dir(px, py) * self.focus_distance
-    }
-
-    /// The ray from lens position `lens` through `focus_point` (see [`Camera::focus_point`]).
-    pub fn lens_ray_through(&self, focus_point: Vec3, lens: Vec2) -> Ray {
-        let origin = self.eye + (self.right * lens.x + self.up * lens.y) * self.aperture_radius;
-        Ray::new(origin, (focus_point - origin).normalize())
     }
 
     /// [`Camera::lens_ray`] for 16 samples at once, each with its own film position
@@ -361,23 +392,22 @@ impl Camera {
         dir: &mut [[f32; 16]; 3],
     ) {
         let (eye, right, up, r) = (self.eye, self.right, self.up, self.aperture_radius);
-        let (fwd, fd) = (self.forward, self.focus_distance);
+        let (fwd, inv_fd) = (self.forward, self.inv_focus_distance);
         let aspect = self.width as f32 / self.height as f32;
         let (w, h, tan) = (self.width as f32, self.height as f32, self.tan_half_vfov);
         for lane in 0..16 {
-            // Written out as glam evaluates film_dir, focus_point,
-            // `eye + (right * lx + up * ly) * r` and `(focus - origin).normalize()`
-            // (v * (1 / sqrt(x*x + y*y + z*z))).
+            // Written out as glam evaluates film_dir, `(right * lx + up * ly) * r`,
+            // `film_dir - offset * inv_fd` and `.normalize()` (v * (1 / sqrt(x*x + y*y + z*z))).
             let sx = (2.0 * px[lane] / w - 1.0) * tan * aspect;
             let sy = (1.0 - 2.0 * py[lane] / h) * tan;
-            let fx = eye.x + (fwd.x + right.x * sx + up.x * sy) * fd;
-            let fy = eye.y + (fwd.y + right.y * sx + up.y * sy) * fd;
-            let fz = eye.z + (fwd.z + right.z * sx + up.z * sy) * fd;
             let (lx, ly) = (lens_x[lane], lens_y[lane]);
-            let ox = eye.x + (right.x * lx + up.x * ly) * r;
-            let oy = eye.y + (right.y * lx + up.y * ly) * r;
-            let oz = eye.z + (right.z * lx + up.z * ly) * r;
-            let (dx, dy, dz) = (fx - ox, fy - oy, fz - oz);
+            let offx = (right.x * lx + up.x * ly) * r;
+            let offy = (right.y * lx + up.y * ly) * r;
+            let offz = (right.z * lx + up.z * ly) * r;
+            let dx = (fwd.x + right.x * sx + up.x * sy) - offx * inv_fd;
+            let dy = (fwd.y + right.y * sx + up.y * sy) - offy * inv_fd;
+            let dz = (fwd.z + right.z * sx + up.z * sy) - offz * inv_fd;
+            let (ox, oy, oz) = (eye.x + offx, eye.y + offy, eye.z + offz);
             let recip = 1.0 / (dx * dx + dy * dy + dz * dz).sqrt();
             origin[0][lane] = ox;
             origin[1][lane] = oy;

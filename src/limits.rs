@@ -88,6 +88,12 @@ pub fn process_threads() -> Option<usize> {
         .and_then(|n| n.trim().parse().ok())
 }
 
+/// The largest coordinate magnitude accepted anywhere in a scene (camera, lens, geometry after
+/// its transform, lights), in scene units. Every ray dofray makes then starts within a few times
+/// this of the origin, far inside the range Embree accepts (about 1.8e19), and f32 positions
+/// this large are already 1e8 apart, so nothing meaningful is lost.
+pub const MAX_COORDINATE: f32 = 1e15;
+
 /// The most worker threads `--threads` accepts: far more than any machine's cores, few enough
 /// that a typo cannot ask the system for thousands of threads.
 pub const MAX_THREADS: usize = 1024;

@@ -91,7 +91,8 @@ struct SceneArgs {
     /// spreads outside it; needs --sharp-range).
     #[arg(long, requires = "sharp_range")]
     spread: Option<f32>,
-    /// Distance along the view axis that is in focus (overrides the scene's focus).
+    /// Distance along the view axis that is in focus (overrides the scene's focus); `inf`
+    /// focuses at infinity (any huge distance behaves the same).
     #[arg(long, conflicts_with = "autofocus")]
     focus_distance: Option<f32>,
     /// Autofocus on the surface seen through pixel X,Y (e.g. 320,240; overrides the scene's
@@ -416,8 +417,8 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
         }
     }
     if let Some(d) = a.focus_distance {
-        if !(d.is_finite() && d > 0.0) {
-            bail!("--focus-distance must be a finite number > 0, got {d}");
+        if d.is_nan() || d <= 0.0 {
+            bail!("--focus-distance must be a number > 0 (or inf), got {d}");
         }
         cam.focus = Focus::Distance(d);
     }

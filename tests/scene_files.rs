@@ -450,7 +450,8 @@ fn coordinates_beyond_what_a_camera_can_frame_name_the_object() {
         ),
     );
     assert_names(&m, "scene.toml:", &["`objects[1]`", "too large to frame"]);
-    // With a camera given, the same scene loads.
+    // With a camera given, the same scene loads, but is beyond the range every ray must stay
+    // in: the renderer refuses it by name instead of letting Embree abort.
     let d = load_files(
         "huge-camera",
         &[(
@@ -459,7 +460,11 @@ fn coordinates_beyond_what_a_camera_can_frame_name_the_object() {
         )],
     )
     .unwrap();
-    world(&d);
+    let err = World::build(&d, &Device::new().unwrap())
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(err.contains("object 0") && err.contains("1e15"), "{err}");
     d.camera.build(|_| None).unwrap();
     let m = error_of(
         "far-apart",

@@ -81,6 +81,42 @@ const _: () = assert!(
         && std::mem::align_of::<sys::RTCHit16>() == 64
 );
 
+/// Embree's bound on ray origin and direction components (`FLT_LARGE`); its ray checks
+/// (asserted in Debian's build, a process abort) reject anything larger, NaN or infinite.
+const EMBREE_LARGE: f32 = 1.844e18;
+
+/// Whether Embree accepts the ray: origin and direction components finite and within
+/// [`EMBREE_LARGE`], `tnear` and `tfar` not NaN.
+fn embree_accepts(origin: [f32; 3], dir: [f32; 3], tnear: f32, tfar: f32) -> bool {
+    let small = |x: f32| x.abs() <= EMBREE_LARGE;
+    origin.iter().chain(&dir).all(|&x| small(x)) && !tnear.is_nan() && !tfar.is_nan()
+}
+
+impl Ray {
+    /// Whether Embree can trace this ray (see [`RayPacket16::set`]).
+    pub fn is_traceable(&self) -> bool {
+        embree_accepts(
+            self.origin.to_array(),
+            self.dir.to_array(),
+            self.tnear,
+            self.tfar,
+        )
+    }
+}
+
+/// The lanes (bit per lane) among `lanes` whose rays Embree accepts.
+fn traceable_lanes(raw: &sys::RTCRay16, lanes: u32) -> u32 {
+    let mut ok = 0;
+    for lane in (0..LANES).filter(|&l| lanes & (1 << l) != 0) {
+        let origin = [raw.org_x[lane], raw.org_y[lane], raw.org_z[lane]];
+        let dir = [raw.dir_x[lane], raw.dir_y[lane], raw.dir_z[lane]];
+        if embree_accepts(origin, dir, raw.tnear[lane], raw.tfar[lane]) {
+            ok |= 1 << lane;
+        }
+    }
+    ok
+}
+
 fn init_ray(raw: &mut sys::RTCRay16, lane: usize, ray: &Ray) {
     raw.org_x[lane] = ray.origin.x;
     raw.org_y[lane] = ray.origin.y;
@@ -291,11 +327,17 @@ impl RayPacket16 {
         idle_lanes(&mut self.rayhit.ray, u32::MAX);
     }
 
-    /// Activates `lane` with `ray` and no hit.
+    /// Activates `lane` with `ray` and no hit, and returns true; a ray Embree cannot trace
+    /// (non-finite, or beyond its range: see [`Ray::is_traceable`]) leaves the lane inactive
+    /// and returns false, so no input can abort Embree.
     ///
     /// # Panics
     /// When `lane >= LANES` (16).
-    pub fn set(&mut self, lane: usize, ray: &Ray) {
+    pub fn set(&mut self, lane: usize, ray: &Ray) -> bool {
+        if !ray.is_traceable() {
+            self.set_inactive(lane);
+            return false;
+        }
         init_ray(&mut self.rayhit.ray, lane, ray);
         let hit = &mut self.rayhit.hit;
         hit.geomID[lane] = sys::RTC_INVALID_GEOMETRY_ID;
@@ -304,13 +346,14 @@ impl RayPacket16 {
             level[lane] = sys::RTC_INVALID_GEOMETRY_ID;
         }
         self.valid.0[lane] = -1;
+        true
     }
 
     /// Fills every lane from structure-of-arrays origins and directions (x, y, z components)
     /// with `tnear` 0, no far limit and no hit, and activates lanes `0..active` (the others
     /// are inactive and get an idle finite ray, whatever `origin` and `dir` hold there). Equal
-    /// to `clear` then `set` of each active lane.
-    /// An `active` above 16 activates every lane.
+    /// to `clear` then `set` of each active lane: a lane whose ray Embree cannot trace stays
+    /// inactive ([`RayPacket16::is_active`] tells). An `active` above 16 activates every lane.
     pub fn set_lanes(
         &mut self,
         active: usize,
@@ -336,8 +379,14 @@ impl RayPacket16 {
         for level in hit.instID.iter_mut() {
             *level = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
         }
-        self.valid.0 = std::array::from_fn(|lane| if lane < active { -1 } else { 0 });
-        idle_lanes(raw, !active_bits(&self.valid));
+        let wanted = if active >= LANES {
+            u32::MAX
+        } else {
+            (1u32 << active) - 1
+        };
+        let ok = traceable_lanes(raw, wanted);
+        self.valid.0 = std::array::from_fn(|lane| -(((ok >> lane) & 1) as i32));
+        idle_lanes(raw, !ok);
     }
 
     /// Ray origins of all lanes as structure of arrays (x, y, z).
@@ -457,19 +506,25 @@ impl ShadowPacket16 {
         idle_lanes(&mut self.rays, u32::MAX);
     }
 
-    /// Activates `lane` with the shadow ray `ray`.
+    /// Activates `lane` with the shadow ray `ray` and returns true; a ray Embree cannot trace
+    /// leaves the lane inactive and returns false (see [`RayPacket16::set`]).
     ///
     /// # Panics
     /// When `lane >= LANES` (16).
-    pub fn set(&mut self, lane: usize, ray: &Ray) {
+    pub fn set(&mut self, lane: usize, ray: &Ray) -> bool {
+        if !ray.is_traceable() {
+            self.set_inactive(lane);
+            return false;
+        }
         init_ray(&mut self.rays, lane, ray);
         self.valid.0[lane] = -1;
+        true
     }
 
     /// Fills every lane with the segment from `origin` along `dir` for `t` in `[0, tfar]`
     /// (structure of arrays) and activates the lanes whose bit is set in `active`; the others
     /// get an idle finite ray, whatever the arrays hold there (NaN included). Equal to `clear`
-    /// then `set` of each active lane.
+    /// then `set` of each active lane (an untraceable ray leaves its lane inactive).
     pub fn set_segments(
         &mut self,
         active: u32,
@@ -490,8 +545,9 @@ impl ShadowPacket16 {
         raw.mask = [u32::MAX; LANES];
         raw.id = std::array::from_fn(|lane| lane as u32);
         raw.flags = [0; LANES];
-        self.valid.0 = std::array::from_fn(|lane| -(((active >> lane) & 1) as i32));
-        idle_lanes(raw, !active);
+        let ok = traceable_lanes(raw, active);
+        self.valid.0 = std::array::from_fn(|lane| -(((ok >> lane) & 1) as i32));
+        idle_lanes(raw, !ok);
     }
 
     /// Deactivates one lane: it gets the idle ray, and no Embree call writes it.

@@ -258,8 +258,12 @@ impl Scene {
         &self.geometries
     }
 
-    /// Nearest hit of one ray.
+    /// Nearest hit of one ray (`None` too for a ray Embree cannot trace: see
+    /// [`Ray::is_traceable`]).
     pub fn intersect1(&self, ray: &Ray) -> Option<Hit> {
+        if !ray.is_traceable() {
+            return None;
+        }
         let mut rayhit = sys::RTCRayHit {
             ray: raw_ray(ray),
             hit: sys::RTCHit {
@@ -282,8 +286,12 @@ impl Scene {
         })
     }
 
-    /// True when anything blocks the ray within `[tnear, tfar]`.
+    /// True when anything blocks the ray within `[tnear, tfar]` (false for a ray Embree cannot
+    /// trace).
     pub fn occluded1(&self, ray: &Ray) -> bool {
+        if !ray.is_traceable() {
+            return false;
+        }
         let mut raw = raw_ray(ray);
         // SAFETY: the scene is committed and alive for &self; raw is a valid RTCRay.
         unsafe { version::occluded1(self.handle.0, &mut raw, false) };

@@ -111,6 +111,12 @@ pub enum RenderError {
     BadIntervalFactor(f32),
     #[error("max interval must be a power of two >= 1, got {0}")]
     BadMaxInterval(u32),
+    /// The last line of defence: input checks should make this impossible.
+    #[error(
+        "the render produced {count} pixels that are not finite numbers (the first at x = {x}, \
+         y = {y}); no image was written. Scene values beyond dofray's documented ranges cause this"
+    )]
+    NonFinite { count: usize, x: usize, y: usize },
 }
 
 impl RenderSettings {
@@ -334,6 +340,14 @@ pub fn render(
         interpolate::interpolate(&mut film.color, &film.interval, sites, w, h);
     }
     stats.interpolate_seconds = phase.elapsed().as_secs_f64();
+    let bad = |c: &glam::Vec3| !c.is_finite();
+    if let Some(first) = film.color.iter().position(bad) {
+        return Err(RenderError::NonFinite {
+            count: film.color.iter().filter(|c| bad(c)).count(),
+            x: first % w,
+            y: first / w,
+        });
+    }
     stats.sample_sites = film.samples.iter().filter(|&&n| n > 0).count() as u64;
     progress.finish();
     stats.rays = tally.counts;

@@ -114,11 +114,15 @@ pub fn replay(scene: &crate::embree::Scene, packets: &[RecordedPacket]) -> u64 {
                 let lanes = (0..LANES).filter(|l| rec.active & (1 << l) != 0);
                 if rec.kind == RayKind::Shadow {
                     shadow.clear();
-                    lanes.for_each(|l| shadow.set(l, &rec.rays[l]));
+                    lanes.for_each(|l| {
+                        shadow.set(l, &rec.rays[l]);
+                    });
                     scene.occluded16(&mut shadow, rec.hint);
                 } else {
                     packet.clear();
-                    lanes.for_each(|l| packet.set(l, &rec.rays[l]));
+                    lanes.for_each(|l| {
+                        packet.set(l, &rec.rays[l]);
+                    });
                     scene.intersect16(&mut packet, rec.hint);
                 }
                 rays += rec.active.count_ones() as u64;

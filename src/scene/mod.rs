@@ -20,7 +20,8 @@ use crate::embree::{
     self, Device, EmbreeError, Geometry, Hit, LANES, Ray, RayPacket16, SceneBuilder, Spheres,
     TriangleMesh,
 };
-use crate::shade::{Light, Material, SurfacePoint, SurfacePoints16};
+use crate::limits::MAX_COORDINATE;
+use crate::shade::{Light, Material, SurfacePoint, SurfacePoints16, Texture};
 
 /// Why a scene could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -153,6 +154,140 @@ fn finite_vec(what: impl Fn() -> String, v: Vec3) -> Result<(), SceneError> {
     }
 }
 
+/// The largest colour, albedo or specular value a scene may give (and pattern scale, and
+/// Blinn-Phong exponent): far beyond any real material, small enough that no sum of shading
+/// terms can overflow f32.
+pub const MAX_MATERIAL_VALUE: f32 = 1e6;
+/// The largest light intensity (point) or irradiance (directional).
+pub const MAX_LIGHT_VALUE: f32 = 1e12;
+
+fn check_value(
+    what: impl Fn() -> String,
+    ok: bool,
+    expected: &'static str,
+) -> Result<(), SceneError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(SceneError::Invalid {
+            what: what(),
+            expected,
+        })
+    }
+}
+
+fn colour_ok(c: Vec3, max: f32) -> bool {
+    c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= max
+}
+
+fn point_ok(p: Vec3) -> bool {
+    p.is_finite() && p.abs().max_element() <= MAX_COORDINATE
+}
+
+/// Every number that reaches the renderer is finite and in a range that keeps every ray
+/// within what Embree accepts and every shading term finite (see [`MAX_COORDINATE`],
+/// [`MAX_MATERIAL_VALUE`], [`MAX_LIGHT_VALUE`]).
+fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
+    const COLOUR: &str = "finite and from 0 to 1e6";
+    for (i, m) in desc.materials.iter().enumerate() {
+        match &m.diffuse {
+            Texture::Constant(c) => check_value(
+                || format!("material {i}'s colour"),
+                colour_ok(*c, MAX_MATERIAL_VALUE),
+                COLOUR,
+            )?,
+            Texture::Procedural { a, b, scale, .. } => {
+                check_value(
+                    || format!("material {i}'s pattern colours"),
+                    colour_ok(*a, MAX_MATERIAL_VALUE) && colour_ok(*b, MAX_MATERIAL_VALUE),
+                    COLOUR,
+                )?;
+                check_value(
+                    || format!("material {i}'s pattern scale"),
+                    scale.is_finite() && scale.abs() <= MAX_MATERIAL_VALUE,
+                    "finite and at most 1e6 in magnitude",
+                )?;
+            }
+            Texture::Image { tint, .. } => check_value(
+                || format!("material {i}'s texture tint"),
+                colour_ok(*tint, MAX_MATERIAL_VALUE),
+                COLOUR,
+            )?,
+        }
+        check_value(
+            || format!("material {i}'s specular"),
+            colour_ok(m.specular, MAX_MATERIAL_VALUE),
+            COLOUR,
+        )?;
+        check_value(
+            || format!("material {i}'s shininess"),
+            m.shininess.is_finite() && (0.0..=MAX_MATERIAL_VALUE).contains(&m.shininess),
+            "finite and from 0 to 1e6",
+        )?;
+        check_value(
+            || format!("material {i}'s mirror"),
+            (0.0..=1.0).contains(&m.mirror),
+            "from 0 to 1",
+        )?;
+    }
+    for (i, light) in desc.lights.iter().enumerate() {
+        let (place, power, place_ok) = match *light {
+            Light::Point {
+                position,
+                intensity,
+            } => (position, intensity, point_ok(position)),
+            Light::Directional {
+                direction,
+                irradiance,
+            } => (
+                direction,
+                irradiance,
+                direction.is_finite() && direction.length_squared() > 0.0,
+            ),
+        };
+        check_value(
+            || format!("light {i}'s position or direction ({place:?})"),
+            place_ok,
+            "a position within 1e15 of the origin, or a non-zero direction",
+        )?;
+        check_value(
+            || format!("light {i}'s intensity"),
+            colour_ok(power, MAX_LIGHT_VALUE),
+            "finite and from 0 to 1e12",
+        )?;
+    }
+    check_value(
+        || "ambient".into(),
+        colour_ok(desc.ambient, MAX_MATERIAL_VALUE),
+        COLOUR,
+    )?;
+    check_value(
+        || "background".into(),
+        colour_ok(desc.background.horizon, MAX_MATERIAL_VALUE)
+            && colour_ok(desc.background.zenith, MAX_MATERIAL_VALUE),
+        COLOUR,
+    )?;
+    for (i, object) in desc.objects.iter().enumerate() {
+        let extent = match object {
+            Object::Sphere { center, radius, .. } => center
+                .is_finite()
+                .then(|| center.abs().max_element() + radius.abs()),
+            Object::Mesh { mesh, .. } => Some(
+                mesh.positions()
+                    .iter()
+                    .map(|p| Vec3::from(*p).abs().max_element())
+                    .fold(0.0, f32::max),
+            ),
+        };
+        check_value(
+            || format!("object {i}'s geometry"),
+            extent.is_some_and(|e| e <= MAX_COORDINATE),
+            "within 1e15 of the origin (after its transform)",
+        )?;
+    }
+    Ok(())
+}
+
 impl World {
     /// Validates the description and builds the Embree scene (the BVH) from it.
     pub fn build(desc: &SceneDesc, device: &Device) -> Result<World, SceneError> {
@@ -186,6 +321,7 @@ impl World {
             finite_vec(|| format!("light {i}"), b)?;
         }
         finite_vec(|| "ambient".into(), desc.ambient)?;
+        check_ranges(desc)?;
 
         let mut builder = SceneBuilder::new(device)?;
         let mut geometry_materials = Vec::new();

@@ -1,0 +1,246 @@
+//! Extreme numbers never abort the process or produce a silent NaN image: every value that
+//! reaches the renderer is checked against a documented range, Embree never sees a ray it
+//! cannot take, and focus at infinity is a real setting.
+
+use std::process::Command;
+
+use dofray::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
+use dofray::embree::{Device, Ray, RayPacket16, ShadowPacket16, TriangleMesh};
+use dofray::render::{Mode, NoProgress, RenderSettings, render};
+use dofray::scene::{Background, MeshMaterials, Object, SceneDesc, World, builtin};
+use dofray::shade::{Material, Pattern, Texture};
+use glam::Vec3;
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("dofray-hostile-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The flags that used to abort inside Embree (SIGABRT, exit 134): each is now a
+/// one-line error naming the aperture, exit 1, and no image.
+#[test]
+fn huge_derived_apertures_are_refused_by_name() {
+    let dir = scratch("aperture");
+    let png = dir.join("out.png");
+    for flags in [
+        &["--aperture-radius", "1e20"][..],
+        &["--f-number", "1e-20"],
+        &["--sharp-range", "1e-20", "--spread", "100"],
+        &["--aperture-radius", "0.1", "--anamorphic", "1e20"],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_dofray"))
+            .args(["render", "--width", "32", "-o"])
+            .arg(&png)
+            .args(flags)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{flags:?}: {err}");
+        assert!(
+            err.contains("aperture radius") || err.contains("anamorphic"),
+            "{flags:?}: {err}"
+        );
+        assert!(!png.exists(), "{flags:?}");
+    }
+}
+
+fn ground_scene() -> SceneDesc {
+    let mut desc = builtin::paper();
+    desc.camera.width = 48;
+    desc.camera.height = 36;
+    desc
+}
+
+fn render_film(desc: &SceneDesc) -> Vec<Vec3> {
+    let world = World::build(desc, &Device::new().unwrap()).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    let settings = RenderSettings {
+        mode: Mode::Adaptive,
+        ..Default::default()
+    };
+    render(&world, &camera, &settings, &NoProgress)
+        .unwrap()
+        .0
+        .color
+}
+
+/// `--focus-distance 1e30` used to overflow the lens rays (only sky rendered). A huge focus
+/// distance now renders exactly as focus at infinity, which shows the ground.
+#[test]
+fn focus_at_infinity_and_huge_focus_distances_render_the_scene() {
+    let mut desc = ground_scene();
+    desc.camera.focus = Focus::Distance(f32::INFINITY);
+    let at_infinity = render_film(&desc);
+    desc.camera.focus = Focus::Distance(1e30);
+    let huge = render_film(&desc);
+    assert_eq!(at_infinity, huge);
+    assert!(huge.iter().all(|c| c.is_finite()));
+    // The bottom row sees the checkered ground, not the sky's blue.
+    let bottom = &huge[35 * 48..];
+    assert!(
+        bottom.iter().any(|c| c.z < c.x + 0.05),
+        "{:?}",
+        &bottom[..4]
+    );
+    // The CoC at infinity is 0 when focused there.
+    desc.camera.focus = Focus::Distance(f32::INFINITY);
+    let camera = desc.camera.build(|_| None).unwrap();
+    assert_eq!(camera.coc_px(f32::INFINITY), 0.0);
+    assert!(camera.coc_px(10.0) > 0.0);
+}
+
+fn wall_scene(z: f32, material: Material) -> SceneDesc {
+    let quad = TriangleMesh::new(
+        vec![
+            [-1.0, -1.0, z],
+            [1.0, -1.0, z],
+            [1.0, 1.0, z],
+            [-1.0, 1.0, z],
+        ],
+        vec![[0, 2, 1], [0, 3, 2]],
+    )
+    .unwrap();
+    SceneDesc {
+        name: "wall".into(),
+        camera: CameraSpec {
+            eye: Vec3::ZERO,
+            look_at: Vec3::Z,
+            up: Vec3::Y,
+            vfov_deg: 30.0,
+            width: 16,
+            height: 16,
+            lens: LensSpec::Aperture { radius: 0.01 },
+            focus: Focus::Distance(5.0),
+            aperture: ApertureShape::default(),
+        },
+        materials: vec![material],
+        objects: vec![Object::Mesh {
+            mesh: quad,
+            materials: MeshMaterials::One(0),
+        }],
+        lights: vec![],
+        ambient: Vec3::ONE,
+        background: Background::uniform(Vec3::ZERO),
+        spp: None,
+        aa: None,
+        interval_factor: None,
+    }
+}
+
+/// A triangle at z = 1e16 used to give a 100% NaN image; a pattern scale or specular of 3e38
+/// gave NaN or infinite pixels. Each is now refused by name before rendering.
+#[test]
+fn out_of_range_geometry_and_materials_are_refused_by_name() {
+    let device = Device::new().unwrap();
+    let refused = |desc: SceneDesc, names: &[&str]| {
+        let err = World::build(&desc, &device)
+            .err()
+            .expect("refused")
+            .to_string();
+        for n in names {
+            assert!(err.contains(n), "{err} lacks {n}");
+        }
+    };
+    refused(
+        wall_scene(1e16, Material::diffuse(Vec3::ONE)),
+        &["object 0", "1e15"],
+    );
+    refused(
+        wall_scene(
+            5.0,
+            Material {
+                diffuse: Texture::Procedural {
+                    pattern: Pattern::Checker,
+                    a: Vec3::ZERO,
+                    b: Vec3::ONE,
+                    scale: 3e38,
+                },
+                ..Material::diffuse(Vec3::ONE)
+            },
+        ),
+        &["material 0", "scale"],
+    );
+    refused(
+        wall_scene(
+            5.0,
+            Material {
+                specular: Vec3::splat(3e38),
+                ..Material::diffuse(Vec3::ONE)
+            },
+        ),
+        &["material 0", "specular"],
+    );
+    // The eye too far out (Embree takes origins up to about 1.8e19; the docs allow 1e15).
+    let mut desc = wall_scene(5.0, Material::diffuse(Vec3::ONE));
+    desc.camera.eye = Vec3::new(0.0, 0.0, -2e18);
+    let err = desc.camera.build(|_| None).unwrap_err().to_string();
+    assert!(err.contains("eye") && err.contains("1e15"), "{err}");
+}
+
+/// A mirror 1e13 away (within range): the reflection rays start there and the image is finite.
+#[test]
+fn a_far_mirror_renders_a_finite_image() {
+    let mut desc = wall_scene(
+        1e13,
+        Material {
+            mirror: 1.0,
+            ..Material::diffuse(Vec3::splat(0.5))
+        },
+    );
+    // Scale the quad so it fills the view at that distance.
+    if let Object::Mesh { mesh, .. } = &mut desc.objects[0] {
+        let p = mesh
+            .positions()
+            .iter()
+            .map(|p| [p[0] * 1e13, p[1] * 1e13, p[2]])
+            .collect();
+        *mesh = TriangleMesh::new(p, mesh.indices().to_vec()).unwrap();
+    }
+    desc.camera.focus = Focus::Distance(1e13);
+    let film = render_film(&desc);
+    assert!(film.iter().all(|c| c.is_finite()));
+}
+
+/// The last guard, in the Embree layer itself: a ray Embree cannot take (NaN, infinite, or
+/// beyond its 1.8e19 range) never reaches it, whatever a caller builds.
+#[test]
+fn rays_embree_cannot_take_never_reach_it() {
+    let bad = [
+        Ray::new(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::Z),
+        Ray::new(Vec3::new(0.0, 0.0, 1e19), Vec3::Z),
+        Ray::new(Vec3::ZERO, Vec3::new(0.0, f32::INFINITY, 1.0)),
+        Ray::segment(Vec3::ZERO, Vec3::Z, f32::NAN, 1.0),
+    ];
+    let good = Ray::new(Vec3::ZERO, Vec3::Z);
+    let scene = World::build(
+        &wall_scene(5.0, Material::diffuse(Vec3::ONE)),
+        &Device::new().unwrap(),
+    )
+    .unwrap()
+    .scene;
+    let mut packet = RayPacket16::new();
+    let mut shadow = ShadowPacket16::new();
+    for (lane, ray) in bad.iter().enumerate() {
+        assert!(!ray.is_traceable());
+        assert!(!packet.set(lane, ray) && !packet.is_active(lane));
+        assert!(!shadow.set(lane, ray) && !shadow.is_active(lane));
+        assert_eq!(scene.intersect1(ray), None);
+        assert!(!scene.occluded1(ray));
+    }
+    assert!(packet.set(5, &good) && shadow.set(5, &good));
+    scene.intersect16(&mut packet, dofray::embree::RayHint::Coherent);
+    scene.occluded16(&mut shadow, dofray::embree::RayHint::Coherent);
+    assert!(packet.hit(5).is_some() && shadow.occluded(5));
+    // Bulk fills drop such lanes too.
+    let mut origin = [[0.0f32; 16]; 3];
+    let mut dir = [[0.0f32; 16]; 3];
+    dir[2] = [1.0; 16];
+    origin[0][3] = f32::NAN;
+    origin[1][7] = 1e30;
+    packet.set_lanes(16, &origin, &dir);
+    assert_eq!(packet.active_count(), 14);
+    scene.intersect16(&mut packet, dofray::embree::RayHint::Incoherent);
+    assert!(packet.hit(0).is_some() && packet.hit(3).is_none() && packet.hit(7).is_none());
+}
