@@ -462,6 +462,8 @@ struct Prepared {
 
 fn prepare(a: &SceneArgs) -> Result<Prepared> {
     let mut desc = dofray::scene::load(&a.scene)?;
+    // The scene's own autofocus pixel and size, for messages after --width/--height moved it.
+    let scene_focus = (desc.camera.focus, desc.camera.width, desc.camera.height);
     apply_overrides(&mut desc, a)?;
     dofray::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
     let threads = a.threads.map(usize::from);
@@ -485,6 +487,18 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
                 .scene
                 .intersect1(ray)
                 .map(|hit| (ray.at(hit.t) - ray.origin).dot(forward))
+        })
+        .map_err(|e| match (e, scene_focus) {
+            (
+                dofray::camera::CameraError::FocusPixelMisses { x, y },
+                (Focus::Pixel { x: x0, y: y0 }, w0, h0),
+            ) if (x, y) != (x0, y0) => anyhow::anyhow!(
+                "the scene's autofocus pixel ({x0}, {y0}) of its {w0}x{h0} image (({x}, {y}) at \
+                 {}x{}) sees no surface to focus on",
+                desc.camera.width,
+                desc.camera.height
+            ),
+            (e, _) => anyhow::Error::new(e),
         })
         .context("invalid camera")?;
     Ok(Prepared {

@@ -244,3 +244,29 @@ fn rays_embree_cannot_take_never_reach_it() {
     scene.intersect16(&mut packet, dofray::embree::RayHint::Incoherent);
     assert!(packet.hit(0).is_some() && packet.hit(3).is_none() && packet.hit(7).is_none());
 }
+
+/// An autofocus pixel that sees no surface is reported as the scene file gives it, with the
+/// pixel it became at the size the command line asked for.
+#[test]
+fn a_missed_autofocus_pixel_is_named_as_the_file_gives_it() {
+    let dir = scratch("autofocus");
+    let scene = dir.join("sky.toml");
+    std::fs::write(
+        &scene,
+        "[image]\nwidth = 100\nheight = 100\n[camera]\neye = [0, 0, 0]\nlook_at = [0, 0, 1]\n\
+         focus_pixel = [50, 2]\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 5]\nradius = 1\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_dofray"))
+        .args(["render", "--width", "40", "-o"])
+        .arg(dir.join("out.png"))
+        .arg(&scene)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("(50, 2) of its 100x100 image") && err.contains("(20, 1) at 40x40"),
+        "{err}"
+    );
+}
