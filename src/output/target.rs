@@ -137,10 +137,10 @@ pub fn check_render_outputs(
     output: &Path,
     aov_dir: Option<&Path>,
 ) -> Result<ImageFormat, OutputError> {
-    let format = super::check_writable(output)?;
     let Some(dir) = aov_dir else {
-        return Ok(format);
+        return super::check_writable(output);
     };
+    ImageFormat::from_path(output)?;
     for name in [AOV_DEPTH, AOV_INTERVAL] {
         let aov = dir.join(name);
         if same_file(output, &aov)? {
@@ -154,6 +154,8 @@ pub fn check_render_outputs(
         path: dir.to_path_buf(),
         source,
     })?;
+    // After creating the directory, which may be the image's too.
+    let format = super::check_writable(output)?;
     for name in [AOV_DEPTH, AOV_INTERVAL] {
         super::check_writable(&dir.join(name))?;
     }
