@@ -111,6 +111,7 @@ impl ImageFormat {
 pub fn check_writable(path: &Path) -> Result<ImageFormat, OutputError> {
     let format = ImageFormat::from_path(path)?;
     let resolved = target::check_target(path)?;
+    // A probe: created, then removed again when it drops at the end of the statement.
     TempFile::create(&resolved).map_err(|source| OutputError::Io {
         path: path.to_path_buf(),
         source,

@@ -110,7 +110,10 @@ fn sigint_during_a_large_exr_write_removes_the_temporary_file() {
         if let Some(status) = child.try_wait().unwrap() {
             panic!("dofray exited ({status}) before its temporary file was seen");
         }
-        assert!(start.elapsed() < Duration::from_secs(30), "no write started");
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no write started"
+        );
         std::thread::sleep(Duration::from_millis(2));
     }
     send("-INT", &child);
@@ -144,7 +147,10 @@ fn sigterm_during_a_render_exits_143_and_leaves_nothing() {
     ]);
     // Well past start-up (handlers are installed first thing), long before the render ends.
     std::thread::sleep(Duration::from_millis(400));
-    assert!(child.try_wait().unwrap().is_none(), "the render ended early");
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the render ended early"
+    );
     send("-TERM", &child);
     let status = wait_bounded(&mut child, Duration::from_secs(10));
     let err = stderr_of(child);
@@ -180,7 +186,10 @@ fn read_only_targets_are_refused_before_rendering() {
     let o = render_tiny(&out, &[]);
     assert!(!o.status.success());
     let err = stderr(&o);
-    assert!(err.contains("read-only") && err.contains("keep.png"), "{err}");
+    assert!(
+        err.contains("read-only") && err.contains("keep.png"),
+        "{err}"
+    );
     assert_eq!(std::fs::read(&out).unwrap(), b"old");
     let mode = std::fs::metadata(&out).unwrap().permissions().mode();
     assert_eq!(mode & 0o777, 0o444);
@@ -219,7 +228,12 @@ fn symlinks_are_written_through_to_their_target() {
     symlink("real/target.png", &link).unwrap();
     let o = render_tiny(&link, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
     assert_eq!(image::open(real.join("target.png")).unwrap().width(), 16);
     assert_eq!(entries(&real), vec!["target.png".to_owned()]);
 
@@ -263,7 +277,10 @@ fn the_image_and_its_aov_pictures_never_overwrite_one_another() {
         let cases = [
             aov.join("depth.png"),
             aov.join("interval.png"),
-            dir.join("x").join("..").join(aov.file_name().unwrap()).join("./depth.png"),
+            dir.join("x")
+                .join("..")
+                .join(aov.file_name().unwrap())
+                .join("./depth.png"),
         ];
         for out in &cases {
             let o = render_tiny(out, &["--aov-dir", s(&aov)]);
