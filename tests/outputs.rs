@@ -89,7 +89,8 @@ fn sigint_during_a_large_exr_write_removes_the_temporary_file() {
     let dir = scratch("sigint-write");
     let out = dir.join("big.exr");
     // A pinhole render of 1200x900 takes well under a second; its EXR takes about as long to
-    // encode and write. The temporary file appears when the write starts.
+    // encode and write. The temporary file is being written once it holds bytes (the empty
+    // one the up-front writability probe makes and removes at once does not count).
     let mut child = spawn(&[
         "render",
         "-o",
@@ -104,7 +105,11 @@ fn sigint_during_a_large_exr_write_removes_the_temporary_file() {
     ]);
     let start = Instant::now();
     loop {
-        if entries(&dir).iter().any(|n| n.starts_with(".big.exr.tmp")) {
+        let writing = entries(&dir).iter().any(|n| {
+            n.starts_with(".big.exr.tmp")
+                && std::fs::metadata(dir.join(n)).is_ok_and(|m| m.len() > 0)
+        });
+        if writing {
             break;
         }
         if let Some(status) = child.try_wait().unwrap() {
