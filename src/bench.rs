@@ -4,11 +4,13 @@
 //! shows how much of dense's time is the renderer's own work.
 
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
+use crate::output::TempFile;
 use crate::render::{self, Film, Mode, Progress, RenderSettings, RenderStats};
 use crate::scene::{SceneDesc, World};
 
@@ -54,6 +56,17 @@ pub enum BenchError {
     Cache {
         path: PathBuf,
         error: std::io::Error,
+    },
+    /// The cache directory cannot be created or written: found before anything is rendered.
+    #[error(
+        "cannot use {} as the reference cache directory (--cache-dir): {source}; expected a \
+         directory dofray can create and write",
+        dir.display()
+    )]
+    CacheDir {
+        dir: PathBuf,
+        #[source]
+        source: std::io::Error,
     },
 }
 
@@ -236,12 +249,23 @@ fn write_reference(
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)?;
     }
-    let tmp = path.with_extension(format!("tmp-{}", std::process::id()));
-    std::fs::write(&tmp, &bytes)
-        .and_then(|_| std::fs::rename(&tmp, path))
-        .inspect_err(|_| {
-            let _ = std::fs::remove_file(&tmp);
-        })
+    // A registered temporary file: removed on error and by SIGINT / SIGTERM.
+    let mut tmp = TempFile::create(path)?;
+    tmp.file().write_all(&bytes)?;
+    tmp.persist()
+}
+
+/// Creates the cache directory if needed and checks that a file can be created in it, so an
+/// unusable `--cache-dir` fails before the reference is rendered, not after.
+pub fn check_cache_dir(dir: &Path) -> Result<(), BenchError> {
+    let err = |source| BenchError::CacheDir {
+        dir: dir.to_path_buf(),
+        source,
+    };
+    std::fs::create_dir_all(dir).map_err(err)?;
+    // Created and removed again (on drop).
+    TempFile::create(&dir.join("probe.ref")).map_err(err)?;
+    Ok(())
 }
 
 /// The converged reference: dense with `reference_spp` samples and a seed of its own (so its
@@ -287,6 +311,9 @@ pub fn run(
 ) -> Result<(BenchReport, BenchImages), BenchError> {
     if config.repeat == 0 {
         return Err(BenchError::ZeroRepeat);
+    }
+    if let Some(dir) = &config.cache_dir {
+        check_cache_dir(dir)?;
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
     let (reference, reference_cached, reference_seconds) =
@@ -421,6 +448,22 @@ mod tests {
         std::fs::write(&path, b"DOFREF01garbage").unwrap();
         assert_eq!(read_reference(&path, 2, 1), None);
         std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn cache_dir_is_created_and_checked() {
+        let base = std::env::temp_dir().join(format!("dofray-bench-dir-{}", std::process::id()));
+        let dir = base.join("a").join("b");
+        check_cache_dir(&dir).unwrap();
+        assert!(dir.is_dir());
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "probe removed");
+        // A directory under a regular file can never be created.
+        let file = base.join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let err = check_cache_dir(&file.join("cache")).unwrap_err();
+        assert!(matches!(err, BenchError::CacheDir { .. }), "{err:?}");
+        assert!(err.to_string().contains("file/cache"), "{err}");
+        std::fs::remove_dir_all(base).unwrap();
     }
 
     #[test]

@@ -78,8 +78,9 @@ pub fn parse_meminfo(text: &str) -> Option<u64> {
 /// Refuses an image size whose render buffers would exceed the available memory
 /// (`MemAvailable`, else [`FALLBACK_LIMIT_BYTES`]).
 /// The number of threads this process has now (Linux: `Threads:` in `/proc/self/status`), or
-/// `None` where that cannot be read. With `--threads N` that is at most 2N: N render workers,
-/// and Embree's BVH builders (the main thread and N - 1 workers, idle while the render runs).
+/// `None` where that cannot be read. With `--threads N` that is at most 2N + 1: N render
+/// workers, Embree's BVH builders (the main thread and N - 1 workers, idle while the render
+/// runs) and the command line's signal listener (which only waits, see `output::atomic`).
 pub fn process_threads() -> Option<usize> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     status

@@ -517,12 +517,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         filter: a.filter,
         ..Default::default()
     };
-    output::check_writable(&a.output)?;
-    if let Some(dir) = &a.aov_dir {
-        // Created up front (like `bench --out`), so a bad path fails before rendering.
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create --aov-dir directory {}", dir.display()))?;
-    }
+    output::clean_up_on_signals()?;
+    // Image and AOV targets checked, --aov-dir created, before rendering.
+    output::check_render_outputs(&a.output, a.aov_dir.as_deref())?;
     let Prepared {
         desc,
         world,
@@ -545,9 +542,10 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     output::write_film(&a.output, &film)?;
     if let Some(dir) = &a.aov_dir {
         let (w, h) = (film.width, film.height);
-        output::write_png_rgb(&dir.join("depth.png"), w, h, &output::depth_picture(&film))?;
+        let depth = output::depth_picture(&film);
+        output::write_png_rgb(&dir.join(output::AOV_DEPTH), w, h, &depth)?;
         output::write_png_rgb(
-            &dir.join("interval.png"),
+            &dir.join(output::AOV_INTERVAL),
             w,
             h,
             &output::interval_picture(&film),
@@ -622,6 +620,7 @@ fn default_cache_dir() -> PathBuf {
 }
 
 fn run_bench(a: &BenchArgs) -> Result<()> {
+    output::clean_up_on_signals()?;
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --out directory {}", dir.display()))?;

@@ -10,20 +10,27 @@
 //!
 //! Every writer is atomic: it writes a hidden temporary file next to the target and renames it
 //! over the target only once everything has been written, removing the temporary file on any
-//! error, so a failed or interrupted write never leaves a partial image behind.
+//! error, so a failed or interrupted write never leaves a partial image behind; with
+//! [`clean_up_on_signals`] installed, SIGINT, SIGTERM and SIGHUP remove it too ([`atomic`]).
+//! Targets are checked first ([`target`]): symbolic links are written through to the file
+//! they name, and read-only files, directories and devices are refused.
 //!
 //! The picture helpers ([`depth_picture`], [`interval_picture`], [`heat_picture`]) return
 //! *linear* RGB buffers for [`write_png_rgb`]; their colours are chosen in display (sRGB)
 //! space and linearised, so the PNG shows exactly the intended grey ramps and palettes.
 
-use std::fs::{File, OpenOptions};
+pub mod atomic;
+pub mod target;
+
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::Vec3;
 
 use crate::render::film::Film;
+use atomic::write_atomic;
+pub use atomic::{TempFile, clean_up_on_signals};
+pub use target::{AOV_DEPTH, AOV_INTERVAL, check_render_outputs, resolve_target, same_file};
 
 /// Why an image could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -44,6 +51,31 @@ pub enum OutputError {
     /// The image has no pixels (zero width or height).
     #[error("cannot write an image with no pixels")]
     EmptyImage,
+    /// The target exists and has no write permission bit: it is never replaced.
+    #[error(
+        "{} is read-only (no write permission bit{}): refusing to replace it; make it \
+         writable (chmod u+w) or write elsewhere",
+        path.display(),
+        if path == target { String::new() } else { format!(", link to {}", target.display()) }
+    )]
+    ReadOnly { path: PathBuf, target: PathBuf },
+    /// The target exists but is not a regular file (a device, a socket, a FIFO).
+    #[error("{} is not a regular file ({}): refusing to replace it", path.display(), target.display())]
+    NotAFile { path: PathBuf, target: PathBuf },
+    /// Following the target's symbolic links never ends.
+    #[error("{}: too many levels of symbolic links", path.display())]
+    SymlinkLoop { path: PathBuf },
+    /// Two outputs of one run are the same file, so one would overwrite the other.
+    #[error(
+        "the output image {} and the AOV picture {} are the same file: one would overwrite \
+         the other; choose another -o or --aov-dir",
+        first.display(),
+        second.display()
+    )]
+    Collision { first: PathBuf, second: PathBuf },
+    /// The signal handlers that remove temporary files could not be installed.
+    #[error("cannot install the SIGINT/SIGTERM handlers")]
+    Signals(#[source] std::io::Error),
 }
 
 /// The file formats [`write_film`] writes.
@@ -72,31 +104,18 @@ impl ImageFormat {
     }
 }
 
-/// Checks up front that `path` has a known extension and that its directory exists and is
-/// writable (by creating and removing a temporary file there), so the CLI can fail before a
-/// long render rather than after it.
+/// Checks up front that `path` has a known extension, that what it names may be replaced (see
+/// [`target`]: links followed, read-only files, directories and devices refused) and that its
+/// directory is writable (by creating and removing a temporary file there), so the CLI can
+/// fail before a long render rather than after it.
 pub fn check_writable(path: &Path) -> Result<ImageFormat, OutputError> {
     let format = ImageFormat::from_path(path)?;
-    let io_err = |source| OutputError::Io {
+    let resolved = target::check_target(path)?;
+    // A probe: created, then removed again when it drops at the end of the statement.
+    TempFile::create(&resolved).map_err(|source| OutputError::Io {
         path: path.to_path_buf(),
         source,
-    };
-    if path.is_dir() {
-        return Err(io_err(std::io::Error::new(
-            std::io::ErrorKind::IsADirectory,
-            "the output path is a directory",
-        )));
-    }
-    let dir = parent_dir(path);
-    if !dir.is_dir() {
-        return Err(io_err(std::io::Error::new(
-            std::io::ErrorKind::NotFound,
-            format!("directory {} does not exist", dir.display()),
-        )));
-    }
-    let (tmp, file) = create_temp(path).map_err(io_err)?;
-    drop(file);
-    std::fs::remove_file(&tmp).map_err(io_err)?;
+    })?;
     Ok(format)
 }
 
@@ -134,7 +153,8 @@ pub fn write_png_rgb(
         .iter()
         .flat_map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
         .collect();
-    write_atomic(path, |file| {
+    let resolved = target::check_target(path)?;
+    write_atomic(path, &resolved, |file| {
         let mut out = BufWriter::new(file);
         image::codecs::png::PngEncoder::new(&mut out)
             .write_image(&bytes, w, h, image::ExtendedColorType::Rgb8)
@@ -282,7 +302,8 @@ fn write_exr(path: &Path, film: &Film) -> Result<(), OutputError> {
         AnyChannels::sort(channels),
     );
     let image = Image::from_layer(layer);
-    write_atomic(path, |file| {
+    let resolved = target::check_target(path)?;
+    write_atomic(path, &resolved, |file| {
         image
             .write()
             .to_unbuffered(&mut *file)
@@ -341,53 +362,10 @@ fn encode_or_io(path: &Path, e: image::ImageError) -> OutputError {
     }
 }
 
-/// The directory `path` would be written into ("." for a bare file name).
-fn parent_dir(path: &Path) -> &Path {
-    match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    }
-}
-
-/// Creates a fresh hidden temporary file next to `path`: `.{name}.tmp-{pid}-{n}`.
-fn create_temp(path: &Path) -> std::io::Result<(PathBuf, File)> {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "output".to_owned());
-    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let tmp = parent_dir(path).join(format!(".{name}.tmp-{}-{n}", std::process::id()));
-    let file = OpenOptions::new().write(true).create_new(true).open(&tmp)?;
-    Ok((tmp, file))
-}
-
-/// Runs `write` on a temporary file next to `path`, then syncs it and renames it over `path`.
-/// On any error the temporary file is removed and `path` is left untouched.
-fn write_atomic(
-    path: &Path,
-    write: impl FnOnce(&mut File) -> Result<(), OutputError>,
-) -> Result<(), OutputError> {
-    let io_err = |source| OutputError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let (tmp, mut file) = create_temp(path).map_err(io_err)?;
-    let result = write(&mut file)
-        .and_then(|()| file.sync_all().map_err(io_err))
-        .and_then(|()| {
-            drop(file);
-            std::fs::rename(&tmp, path).map_err(io_err)
-        });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::atomic::{AtomicU64, Ordering};
 
     /// A unique scratch directory under the system temp dir, removed on drop.
     struct Scratch(PathBuf);
@@ -638,7 +616,7 @@ mod tests {
         // A failure inside the writer removes the temp file and keeps the previous target.
         let target = dir.0.join("keep.png");
         std::fs::write(&target, b"old").unwrap();
-        let err = write_atomic(&target, |file| {
+        let err = write_atomic(&target, &target, |file| {
             file.write_all(b"partial").unwrap();
             Err(OutputError::Encode {
                 path: target.clone(),

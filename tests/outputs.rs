@@ -1,0 +1,353 @@
+//! What `dofray` writes, and what it never loses or clobbers: signals during a render or a
+//! write leave no temporary file, read-only targets are refused, symbolic links are written
+//! through, a render and its AOV pictures never overwrite one another, and `bench` checks its
+//! cache directory before rendering.
+//!
+//! `DOFRAY_TEST_BIN` runs these tests against another build of the binary (for example an
+//! older one, to see them fail).
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn bin() -> PathBuf {
+    std::env::var_os("DOFRAY_TEST_BIN")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_BIN_EXE_dofray")))
+}
+
+fn dofray(args: &[&str]) -> Output {
+    Command::new(bin()).args(args).output().expect("run dofray")
+}
+
+/// A fresh, empty scratch directory for one test.
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dofray-outputs-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The names in `dir`, hidden ones included, sorted.
+fn entries(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Waits at most `limit` for `child` to exit; kills it and fails the test if it does not.
+fn wait_bounded(child: &mut Child, limit: Duration) -> ExitStatus {
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("dofray did not exit within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+fn send(signal: &str, child: &Child) {
+    let ok = Command::new("kill")
+        .args([signal, &child.id().to_string()])
+        .status()
+        .expect("run kill")
+        .success();
+    assert!(ok, "kill {signal} failed");
+}
+
+fn spawn(args: &[&str]) -> Child {
+    Command::new(bin())
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start dofray")
+}
+
+fn stderr_of(child: Child) -> String {
+    String::from_utf8_lossy(&child.wait_with_output().unwrap().stderr).into_owned()
+}
+
+#[test]
+fn sigint_during_a_large_exr_write_removes_the_temporary_file() {
+    let dir = scratch("sigint-write");
+    let out = dir.join("big.exr");
+    // A pinhole render of 1200x900 takes well under a second; its EXR takes about as long to
+    // encode and write. The temporary file is being written once it holds bytes (the empty
+    // one the up-front writability probe makes and removes at once does not count).
+    let mut child = spawn(&[
+        "render",
+        "-o",
+        s(&out),
+        "--width",
+        "1200",
+        "--mode",
+        "pinhole",
+        "--aa",
+        "1",
+        "--quiet",
+    ]);
+    let start = Instant::now();
+    loop {
+        let writing = entries(&dir).iter().any(|n| {
+            n.starts_with(".big.exr.tmp")
+                && std::fs::metadata(dir.join(n)).is_ok_and(|m| m.len() > 0)
+        });
+        if writing {
+            break;
+        }
+        if let Some(status) = child.try_wait().unwrap() {
+            panic!("dofray exited ({status}) before its temporary file was seen");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no write started"
+        );
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    send("-INT", &child);
+    let status = wait_bounded(&mut child, Duration::from_secs(10));
+    let err = stderr_of(child);
+    assert!(entries(&dir).is_empty(), "left behind: {:?}", entries(&dir));
+    assert_eq!(status.code(), Some(130), "{status}: {err}");
+    assert!(err.contains("interrupted by SIGINT"), "{err}");
+}
+
+#[test]
+fn sigterm_during_a_render_exits_143_and_leaves_nothing() {
+    let dir = scratch("sigterm-render");
+    let out = dir.join("r.exr");
+    let aov = dir.join("aov");
+    let mut child = spawn(&[
+        "render",
+        "-o",
+        s(&out),
+        "--width",
+        "640",
+        "--mode",
+        "dense",
+        "--spp",
+        "4096",
+        "--aa",
+        "4096",
+        "--aov-dir",
+        s(&aov),
+        "--quiet",
+    ]);
+    // Well past start-up (handlers are installed first thing), long before the render ends.
+    std::thread::sleep(Duration::from_millis(400));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the render ended early"
+    );
+    send("-TERM", &child);
+    let status = wait_bounded(&mut child, Duration::from_secs(10));
+    let err = stderr_of(child);
+    assert_eq!(status.code(), Some(143), "{status}: {err}");
+    assert!(err.contains("interrupted by SIGTERM"), "{err}");
+    assert_eq!(entries(&dir), vec!["aov".to_owned()]);
+    assert!(entries(&aov).is_empty(), "{:?}", entries(&aov));
+}
+
+/// A tiny render to `out` with extra flags.
+fn render_tiny(out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["render", "-o", s(out), "--width", "16", "--quiet"];
+    args.extend_from_slice(extra);
+    dofray(&args)
+}
+
+#[cfg(unix)]
+fn set_mode(path: &Path, mode: u32) {
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode)).unwrap();
+}
+
+#[cfg(unix)]
+#[test]
+fn read_only_targets_are_refused_before_rendering() {
+    use std::os::unix::fs::PermissionsExt;
+
+    let dir = scratch("read-only");
+    let out = dir.join("keep.png");
+    std::fs::write(&out, b"old").unwrap();
+    // No write bit at all: refused even for root, whom permission bits do not stop.
+    set_mode(&out, 0o444);
+    let o = render_tiny(&out, &[]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(
+        err.contains("read-only") && err.contains("keep.png"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), b"old");
+    let mode = std::fs::metadata(&out).unwrap().permissions().mode();
+    assert_eq!(mode & 0o777, 0o444);
+    assert_eq!(entries(&dir), vec!["keep.png".to_owned()]);
+
+    // A read-only AOV picture is refused too, before the image is rendered or written.
+    let aov = dir.join("aov");
+    std::fs::create_dir(&aov).unwrap();
+    std::fs::write(aov.join("interval.png"), b"old").unwrap();
+    set_mode(&aov.join("interval.png"), 0o400);
+    let img = dir.join("new.png");
+    let o = render_tiny(&img, &["--aov-dir", s(&aov)]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("interval.png"), "{}", stderr(&o));
+    assert!(!img.exists());
+    assert_eq!(entries(&aov), vec!["interval.png".to_owned()]);
+
+    // One write bit is enough.
+    set_mode(&out, 0o644);
+    let o = render_tiny(&out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(image::open(&out).unwrap().width(), 16);
+}
+
+#[cfg(unix)]
+#[test]
+fn symlinks_are_written_through_to_their_target() {
+    use std::os::unix::fs::symlink;
+
+    let dir = scratch("symlink");
+    let real = dir.join("real");
+    std::fs::create_dir(&real).unwrap();
+    std::fs::write(real.join("target.png"), b"old").unwrap();
+    // A relative link, resolved against its own directory.
+    let link = dir.join("link.png");
+    symlink("real/target.png", &link).unwrap();
+    let o = render_tiny(&link, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(image::open(real.join("target.png")).unwrap().width(), 16);
+    assert_eq!(entries(&real), vec!["target.png".to_owned()]);
+
+    // A chain of links to an EXR, and a dangling link, which creates the file it names.
+    let chain = dir.join("chain.exr");
+    symlink(real.join("chained.exr"), dir.join("middle.exr")).unwrap();
+    symlink("middle.exr", &chain).unwrap();
+    let o = render_tiny(&chain, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(real.join("chained.exr").is_file());
+    for name in ["chain.exr", "middle.exr"] {
+        let meta = std::fs::symlink_metadata(dir.join(name)).unwrap();
+        assert!(meta.file_type().is_symlink(), "{name}");
+    }
+
+    // A link to a read-only file is refused like the file itself; a loop is an error.
+    set_mode(&real.join("target.png"), 0o444);
+    let o = render_tiny(&link, &[]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("read-only"), "{}", stderr(&o));
+    symlink("loop-b.png", dir.join("loop-a.png")).unwrap();
+    symlink("loop-a.png", dir.join("loop-b.png")).unwrap();
+    let o = render_tiny(&dir.join("loop-a.png"), &[]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("symbolic links"), "{}", stderr(&o));
+    assert_eq!(
+        entries(&real),
+        vec!["chained.exr".to_owned(), "target.png".to_owned()]
+    );
+}
+
+#[test]
+fn the_image_and_its_aov_pictures_never_overwrite_one_another() {
+    let dir = scratch("collide");
+    // Refused whether the AOV directory exists or not (then it is not created either).
+    for existing in [true, false] {
+        let aov = dir.join(if existing { "aov" } else { "new" });
+        if existing {
+            std::fs::create_dir(&aov).unwrap();
+        }
+        let cases = [
+            aov.join("depth.png"),
+            aov.join("interval.png"),
+            dir.join("x")
+                .join("..")
+                .join(aov.file_name().unwrap())
+                .join("./depth.png"),
+        ];
+        for out in &cases {
+            let o = render_tiny(out, &["--aov-dir", s(&aov)]);
+            assert!(!o.status.success(), "{}", out.display());
+            let err = stderr(&o);
+            assert!(err.contains("same file"), "{err}");
+            let name = out.file_name().unwrap().to_str().unwrap();
+            assert!(
+                err.contains(&format!("{}", out.display()))
+                    && err.contains(&format!("{}", aov.join(name).display())),
+                "names both: {err}"
+            );
+            assert_eq!(entries(&dir), ["aov"], "nothing created");
+            assert!(entries(&dir.join("aov")).is_empty());
+        }
+    }
+    let aov = dir.join("aov");
+    // Through a symbolic link to the AOV directory.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(&aov, dir.join("alias")).unwrap();
+        let out = dir.join("alias").join("depth.png");
+        let o = render_tiny(&out, &["--aov-dir", s(&aov)]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("same file"), "{}", stderr(&o));
+        assert!(entries(&aov).is_empty());
+    }
+    // Distinct names in the same directory are fine, even one that does not exist yet.
+    let o = render_tiny(&aov.join("image.png"), &["--aov-dir", s(&aov)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(entries(&aov), ["depth.png", "image.png", "interval.png"]);
+    let fresh = dir.join("fresh");
+    let o = render_tiny(&fresh.join("image.png"), &["--aov-dir", s(&fresh)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(entries(&fresh), ["depth.png", "image.png", "interval.png"]);
+}
+
+#[test]
+fn bench_checks_its_cache_directory_before_rendering() {
+    let dir = scratch("bench-cache");
+    let file = dir.join("file");
+    std::fs::write(&file, b"x").unwrap();
+    let cache = file.join("cache");
+    // A reference this large would take minutes: the error must come first.
+    let mut child = spawn(&[
+        "bench",
+        "--width",
+        "64",
+        "--repeat",
+        "1",
+        "--reference-spp",
+        "65536",
+        "--cache-dir",
+        s(&cache),
+        "--quiet",
+    ]);
+    let status = wait_bounded(&mut child, Duration::from_secs(15));
+    let err = stderr_of(child);
+    assert!(!status.success());
+    assert!(
+        err.contains(s(&cache)) && err.contains("--cache-dir"),
+        "names the directory: {err}"
+    );
+    assert_eq!(entries(&dir), vec!["file".to_owned()]);
+}
