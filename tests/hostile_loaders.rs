@@ -292,3 +292,167 @@ fn input_files_are_read_up_to_a_limit() {
         .to_string();
     assert_contains(&e, &["scene.toml", "input limit"]);
 }
+
+// ---------------------------------------------------------------------------------------------
+// 2. Wrong acceptance and poor messages.
+
+#[test]
+fn obj_indices_that_would_wrap_around_or_are_zero_name_their_line() {
+    let dir = scratch("obj-indices");
+    let obj = dir.join("m.obj");
+    let cases = [
+        (
+            "vn 0 0 1\nf 1//1 2//6148914691236517207 3//1\n",
+            "normal index 6148914691236517207",
+        ),
+        ("vn 0 0 1\nf 1//0 2//1 3//1\n", "normal index 0"),
+        ("vt 0 0\nf 1/1 2/0 3/1\n", "texture coordinate index 0"),
+        ("f 1 0 3\n", "vertex index 0"),
+        ("vt 0 0\nf 1/1 2/-2 3/1\n", "texture coordinate index -2"),
+        ("f 1 2 99999999999999999999\n", "malformed face"),
+    ];
+    for (tail, what) in cases {
+        std::fs::write(&obj, format!("{TRIANGLE}{tail}")).unwrap();
+        let e = error(&obj);
+        let line = 4 + tail.matches('\n').count() - 1;
+        assert_contains(&e, &[&format!("m.obj:{line}:"), what]);
+    }
+    // Relative (negative) indices within range are fine.
+    std::fs::write(&obj, format!("{TRIANGLE}vn 0 0 1\nf -3//-1 -2//1 -1//1\n")).unwrap();
+    assert!(load(&obj).is_ok());
+}
+
+#[test]
+fn scene_image_sizes_beyond_memory_name_the_file_and_key() {
+    let dir = scratch("image-size");
+    let path = dir.join("scene.toml");
+    let sphere = "[[objects]]\ntype = \"sphere\"\nradius = 1\n";
+    std::fs::write(
+        &path,
+        format!("[image]\nwidth = 4294967295\nheight = 4294967295\n{sphere}"),
+    )
+    .unwrap();
+    let e = error(&path);
+    assert_contains(
+        &e,
+        &[
+            "scene.toml:2:",
+            "image.width",
+            "4294967295x4294967295",
+            "1.2 ZiB",
+        ],
+    );
+    std::fs::write(
+        &path,
+        format!("[image]\nwidth = 10\nheight = 4000000000\n{sphere}"),
+    )
+    .unwrap();
+    assert_contains(&error(&path), &["scene.toml:3:", "image.height"]);
+}
+
+#[test]
+fn control_characters_in_file_names_and_uris_are_escaped() {
+    let dir = scratch("escapes");
+    let scene = dir.join("scene.toml");
+    std::fs::write(
+        &scene,
+        "[[objects]]\ntype = \"mesh\"\nfile = \"evil\\u001b]0;pwned\\u0007\\n.obj\"\n",
+    )
+    .unwrap();
+    let e = error(&scene);
+    assert!(
+        !e.contains('\u{1b}') && !e.contains('\u{7}') && !e.contains('\n'),
+        "{e:?}"
+    );
+    assert_contains(&e, &["evil\\u{1b}]0;pwned\\u{7}\\n.obj"]);
+    // A glTF buffer URI and an MTL texture name.
+    let gltf = gltf_with_nodes(r#"[{"mesh":0}]"#, "[0]");
+    let start = gltf.find("data:").unwrap();
+    let end = start + gltf[start..].find('"').unwrap();
+    let gltf = format!("{}x\\u001b[2J.bin{}", &gltf[..start], &gltf[end..]);
+    std::fs::write(dir.join("m.gltf"), gltf).unwrap();
+    let e = error(&dir.join("m.gltf"));
+    assert!(!e.contains('\u{1b}'), "{e:?}");
+    assert_contains(&e, &["x\\u{1b}[2J.bin"]);
+    std::fs::write(
+        dir.join("m.mtl"),
+        "newmtl a\u{1b}b\nmap_Kd t\u{1b}[1m.png\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("m.obj"),
+        format!("mtllib m.mtl\n{TRIANGLE}usemtl a\u{1b}b\nf 1 2 3\n"),
+    )
+    .unwrap();
+    let e = error(&dir.join("m.obj"));
+    assert!(!e.contains('\u{1b}'), "{e:?}");
+    assert_contains(&e, &["t\\u{1b}[1m.png"]);
+}
+
+// ---------------------------------------------------------------------------------------------
+// 3. Files outside the model's folder.
+
+#[test]
+fn references_outside_the_model_folder_are_refused_unless_allowed() {
+    let root = scratch("outside");
+    let dir = root.join("model");
+    std::fs::create_dir_all(dir.join("sub")).unwrap();
+    std::fs::write(root.join("out.mtl"), "newmtl a\nKd 1 0 0\n").unwrap();
+    std::fs::write(dir.join("sub/in.mtl"), "newmtl a\nKd 1 0 0\n").unwrap();
+    let obj = dir.join("m.obj");
+    let allow = LoadOptions {
+        allow_outside_paths: true,
+        ..LoadOptions::default()
+    };
+    // An MTL library by `..` and by an absolute path.
+    std::fs::write(
+        &obj,
+        format!("mtllib ../out.mtl\n{TRIANGLE}usemtl a\nf 1 2 3\n"),
+    )
+    .unwrap();
+    assert_contains(
+        &error(&obj),
+        &[
+            "m.obj:1",
+            "`../out.mtl`",
+            "outside",
+            "--allow-outside-paths",
+        ],
+    );
+    assert!(load_with(&obj, &allow).is_ok());
+    let abs = root.join("out.mtl");
+    std::fs::write(
+        &obj,
+        format!("mtllib {}\n{TRIANGLE}f 1 2 3\n", abs.display()),
+    )
+    .unwrap();
+    assert_contains(&error(&obj), &["outside"]);
+    assert!(load_with(&obj, &allow).is_ok());
+    // Inside the folder, `..` back into it is fine.
+    std::fs::write(
+        &obj,
+        format!("mtllib sub/../sub/in.mtl\n{TRIANGLE}f 1 2 3\n"),
+    )
+    .unwrap();
+    assert!(load(&obj).is_ok());
+    // A texture of an MTL, and a glTF buffer.
+    std::fs::write(dir.join("sub/in.mtl"), "newmtl a\nmap_Kd ../../t.png\n").unwrap();
+    std::fs::write(
+        &obj,
+        format!("mtllib sub/in.mtl\n{TRIANGLE}usemtl a\nf 1 2 3\n"),
+    )
+    .unwrap();
+    assert_contains(&error(&obj), &["in.mtl", "`../../t.png`", "outside"]);
+    let gltf = gltf_with_nodes(r#"[{"mesh":0}]"#, "[0]");
+    let start = gltf.find("data:").unwrap();
+    let end = start + gltf[start..].find('"').unwrap();
+    std::fs::write(
+        dir.join("m.gltf"),
+        format!("{}/etc/passwd{}", &gltf[..start], &gltf[end..]),
+    )
+    .unwrap();
+    assert_contains(
+        &error(&dir.join("m.gltf")),
+        &["m.gltf", "`/etc/passwd`", "outside"],
+    );
+}

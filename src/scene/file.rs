@@ -320,8 +320,8 @@ struct RawScene {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawImage {
-    width: Option<Pixels>,
-    height: Option<Pixels>,
+    width: Option<Spanned<Pixels>>,
+    height: Option<Spanned<Pixels>>,
 }
 
 #[derive(Deserialize)]
@@ -828,16 +828,25 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
     }
 
     // Image, camera and lens.
-    let width = raw
-        .image
-        .as_ref()
-        .and_then(|i| i.width)
-        .map_or(DEFAULT_WIDTH, |p| p.0);
-    let height = raw
-        .image
-        .as_ref()
-        .and_then(|i| i.height)
-        .map_or(DEFAULT_HEIGHT, |p| p.0);
+    let image = raw.image.as_ref();
+    let width = image
+        .and_then(|i| i.width.as_ref())
+        .map_or(DEFAULT_WIDTH, |p| p.get_ref().0);
+    let height = image
+        .and_then(|i| i.height.as_ref())
+        .map_or(DEFAULT_HEIGHT, |p| p.get_ref().0);
+    // An image whose render buffers cannot fit is refused here, naming the key that asks for
+    // it (the larger side's; the command line's --width/--height cannot rescue such a file).
+    if let Err(e) = crate::limits::check_image_memory(width, height) {
+        let (key, span) = match image.map(|i| (&i.width, &i.height)) {
+            Some((Some(w), h)) if h.as_ref().is_none_or(|h| w.get_ref().0 >= h.get_ref().0) => {
+                ("image.width", w.span())
+            }
+            Some((_, Some(h))) => ("image.height", h.span()),
+            _ => ("image", 0..0),
+        };
+        return Err(ctx.invalid(span, key, e.to_string()));
+    }
     let camera = camera(ctx, raw.camera, width, height, &objects, &origins)?;
 
     // Lights and environment.

@@ -368,11 +368,26 @@ pub fn load(
             libraries.borrow_mut().push(loaded);
             ret
         })
-    })?;
+    });
     let found = reader.scan.finish();
     let line = current_line(&line);
     drop(reader);
     input.finish()?;
+    // tobj's index arithmetic overflows on huge indices (a panic in checked builds): name the
+    // face instead.
+    let result = match result {
+        Ok(r) => r,
+        Err(panic) => {
+            return Err(found
+                .suspect_indices()
+                .then(|| find_bad_face(path, &options))
+                .flatten()
+                .map_or(panic, |(line, message)| LoadError::Obj {
+                    at: Location::line(path, line),
+                    message,
+                }));
+        }
+    };
     // A failed material library is reported first (tobj carries on without it).
     let mut loaded = Vec::new();
     for lib in libraries.into_inner() {
