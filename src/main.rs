@@ -115,6 +115,10 @@ struct SceneArgs {
     /// Ambient light level (replaces the scene's).
     #[arg(long)]
     ambient: Option<f32>,
+    /// Let a model read MTL libraries, textures and buffers outside its folder (absolute
+    /// paths, `..` leading out of it); refused by default.
+    #[arg(long)]
+    allow_outside_paths: bool,
 }
 
 #[derive(Args)]
@@ -460,7 +464,11 @@ struct Prepared {
 }
 
 fn prepare(a: &SceneArgs) -> Result<Prepared> {
-    let mut desc = dofray::scene::load(&a.scene)?;
+    let options = dofray::scene::LoadOptions {
+        allow_outside_paths: a.allow_outside_paths,
+        ..Default::default()
+    };
+    let mut desc = dofray::scene::load_with(&a.scene, &options)?;
     apply_overrides(&mut desc, a)?;
     dofray::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
     let threads = a.threads.map(usize::from);

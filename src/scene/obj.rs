@@ -371,7 +371,6 @@ pub fn load(
     });
     let found = reader.scan.finish();
     let line = current_line(&line);
-    drop(reader);
     input.finish()?;
     // tobj's index arithmetic overflows on huge indices (a panic in checked builds): name the
     // face instead.
