@@ -22,8 +22,9 @@ pub const FALLBACK_LIMIT_BYTES: u64 = 16 << 30;
 pub struct MemoryError {
     pub width: u32,
     pub height: u32,
-    /// Estimated bytes the render buffers need.
-    pub needed: u64,
+    /// Estimated bytes the render buffers need (128-bit: exact for every u32 size, never
+    /// saturated).
+    pub needed: u128,
     /// Bytes available (MemAvailable), or the fallback cap.
     pub available: u64,
     /// Whether `available` was read from the system (false: the fallback cap).
@@ -32,19 +33,20 @@ pub struct MemoryError {
 
 /// A byte count for people: "1.5 GiB".
 #[derive(Debug, Clone, Copy)]
-pub struct Bytes(pub u64);
+pub struct Bytes<T = u64>(pub T);
 
-impl fmt::Display for Bytes {
+impl<T: Copy + Into<u128>> fmt::Display for Bytes<T> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        const UNITS: [&str; 6] = ["B", "KiB", "MiB", "GiB", "TiB", "PiB"];
-        let mut v = self.0 as f64;
+        const UNITS: [&str; 9] = ["B", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB", "ZiB", "YiB"];
+        let bytes: u128 = self.0.into();
+        let mut v = bytes as f64;
         let mut unit = 0;
         while v >= 1024.0 && unit + 1 < UNITS.len() {
             v /= 1024.0;
             unit += 1;
         }
         if unit == 0 {
-            write!(f, "{} B", self.0)
+            write!(f, "{bytes} B")
         } else {
             write!(f, "{v:.1} {}", UNITS[unit])
         }
@@ -52,8 +54,8 @@ impl fmt::Display for Bytes {
 }
 
 /// Estimated bytes the render buffers of a `width` x `height` image need.
-pub fn image_memory_bytes(width: u32, height: u32) -> u64 {
-    (width as u64 * height as u64).saturating_mul(BYTES_PER_PIXEL)
+pub fn image_memory_bytes(width: u32, height: u32) -> u128 {
+    width as u128 * height as u128 * BYTES_PER_PIXEL as u128
 }
 
 /// `MemAvailable` from `/proc/meminfo`, in bytes, if it can be read.
@@ -114,7 +116,7 @@ pub fn check_image_memory_against(
     measured: bool,
 ) -> Result<(), MemoryError> {
     let needed = image_memory_bytes(width, height);
-    if needed > available {
+    if needed > available as u128 {
         Err(MemoryError {
             width,
             height,
@@ -143,19 +145,22 @@ mod tests {
     fn sizes_beyond_the_budget_are_refused_with_the_need() {
         assert!(check_image_memory_against(640, 480, 1 << 30, true).is_ok());
         let e = check_image_memory_against(100_000, 100_000, 1 << 30, true).unwrap_err();
-        assert_eq!(e.needed, 100_000 * 100_000 * BYTES_PER_PIXEL);
+        assert_eq!(e.needed, 100_000 * 100_000 * BYTES_PER_PIXEL as u128);
         let msg = e.to_string();
         assert!(
             msg.contains("100000x100000") && msg.contains("745.1 GiB"),
             "{msg}"
         );
         assert!(msg.contains("1.0 GiB"), "{msg}");
-        assert_eq!(Bytes(512).to_string(), "512 B");
+        assert_eq!(Bytes(512u64).to_string(), "512 B");
     }
 
     #[test]
     fn the_real_check_accepts_small_and_refuses_absurd_sizes() {
         assert!(check_image_memory(64, 48).is_ok());
-        assert!(check_image_memory(u32::MAX, u32::MAX).is_err());
+        let e = check_image_memory(u32::MAX, u32::MAX).unwrap_err();
+        // 4294967295^2 x 80 bytes = 1.47e21 bytes = 1.2 ZiB, more than u64 holds: not saturated.
+        assert_eq!(e.needed, 1_475_739_525_209_569_362_000);
+        assert!(e.to_string().contains("1.2 ZiB"), "{e}");
     }
 }

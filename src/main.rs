@@ -116,6 +116,10 @@ struct SceneArgs {
     /// Ambient light level (replaces the scene's).
     #[arg(long)]
     ambient: Option<f32>,
+    /// Let a model read MTL libraries, textures and buffers outside its folder (absolute
+    /// paths, `..` leading out of it); refused by default.
+    #[arg(long)]
+    allow_outside_paths: bool,
 }
 
 #[derive(Args)]
@@ -461,7 +465,11 @@ struct Prepared {
 }
 
 fn prepare(a: &SceneArgs) -> Result<Prepared> {
-    let mut desc = dofray::scene::load(&a.scene)?;
+    let options = dofray::scene::LoadOptions {
+        allow_outside_paths: a.allow_outside_paths,
+        ..Default::default()
+    };
+    let mut desc = dofray::scene::load_with(&a.scene, &options)?;
     // The scene's own autofocus pixel and size, for messages after --width/--height moved it.
     let scene_focus = (desc.camera.focus, desc.camera.width, desc.camera.height);
     apply_overrides(&mut desc, a)?;

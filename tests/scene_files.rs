@@ -1385,7 +1385,7 @@ fn invalid_utf8_in_a_scene_names_the_line() {
 fn image_sizes_beyond_memory_are_refused_with_the_need() {
     assert!(check_image_memory(640, 480).is_ok());
     let e = check_image_memory(200_000, 200_000).unwrap_err();
-    assert_eq!(e.needed, 200_000u64 * 200_000 * BYTES_PER_PIXEL);
+    assert_eq!(e.needed, 200_000u128 * 200_000 * BYTES_PER_PIXEL as u128);
     let m = e.to_string();
     assert!(m.contains("200000x200000") && m.contains("TiB"), "{m}");
     let e = check_image_memory_against(4000, 3000, 100 << 20, true).unwrap_err();

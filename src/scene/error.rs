@@ -4,6 +4,8 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::limits::Bytes;
+
 /// Where in an input file something went wrong.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Location {
@@ -53,9 +55,32 @@ impl Location {
     }
 }
 
+/// A file name or URI as shown in messages: control characters (terminal escape sequences,
+/// newlines, ...) are escaped (`\u{1b}`), so bytes from a file name or URI never reach the
+/// user's terminal raw. Every path and URI in an error goes through this.
+pub struct Shown<'a>(pub &'a str);
+
+/// [`Shown`] for a path (non-UTF-8 bytes shown as U+FFFD).
+pub fn shown(path: &Path) -> String {
+    Shown(&path.to_string_lossy()).to_string()
+}
+
+impl fmt::Display for Shown<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for c in self.0.chars() {
+            if c.is_control() {
+                write!(f, "{}", c.escape_default())?;
+            } else {
+                write!(f, "{c}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}", self.path.display())?;
+        write!(f, "{}", shown(&self.path))?;
         if let Some(line) = self.line {
             write!(f, ":{line}")?;
             if let Some(column) = self.column {
@@ -63,7 +88,7 @@ impl fmt::Display for Location {
             }
         }
         if let Some(key) = &self.key {
-            write!(f, ": `{key}`")?;
+            write!(f, ": `{}`", Shown(key))?;
         }
         Ok(())
     }
@@ -79,7 +104,7 @@ pub enum LoadError {
     )]
     UnknownScene { name: String, builtins: String },
     /// A file could not be opened or read.
-    #[error("{}: cannot read: {error}", path.display())]
+    #[error("{}: cannot read: {error}", shown(path))]
     Io {
         path: PathBuf,
         error: std::io::Error,
@@ -107,14 +132,38 @@ pub enum LoadError {
     #[error("{at}: {message}")]
     Gltf { at: Location, message: String },
     /// An image that could not be decoded.
-    #[error("{}: {message}", path.display())]
+    #[error("{}: {message}", shown(path))]
     Image { path: PathBuf, message: String },
     /// Mesh data that cannot be traced (non-finite coordinates, face indices out of range, ...).
     #[error("{at}: {message}")]
     Geometry { at: Location, message: String },
     /// A scene without anything to see.
-    #[error("{}: the scene has no objects (expected at least one [[objects]] entry or a mesh with triangles)", path.display())]
+    #[error(
+        "{}: the scene has no objects (expected at least one [[objects]] entry or a mesh with triangles)",
+        shown(path)
+    )]
     Empty { path: PathBuf },
+    /// An input that is not a regular file (a device, FIFO, socket or directory).
+    #[error("{}: cannot read: it is {kind}, expected a regular file", shown(path))]
+    NotAFile { path: PathBuf, kind: &'static str },
+    /// An input file longer than `LoadOptions::max_input_bytes`.
+    #[error(
+        "{}: the file is larger than the input limit of {} ({limit} bytes; raise \
+         LoadOptions::max_input_bytes for larger files)",
+        shown(path), Bytes(*limit)
+    )]
+    TooLarge { path: PathBuf, limit: u64 },
+    /// A model refers to a file outside its folder (absolute, or `..` leading out of it).
+    #[error(
+        "{at}: `{}` is outside the model's folder (absolute paths and `..` leading out of \
+         the folder are refused; allow them with --allow-outside-paths or \
+         LoadOptions::allow_outside_paths)",
+        Shown(name)
+    )]
+    OutsidePath { at: Location, name: String },
+    /// A resource limit: an expansion or an allocation larger than `LoadOptions` allow.
+    #[error("{at}: {message}")]
+    Limit { at: Location, message: String },
 }
 
 impl LoadError {
@@ -270,6 +319,14 @@ pub fn key_path(src: &str, offset: usize) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn control_characters_in_names_are_escaped() {
+        let e = LoadError::io(Path::new("a\x1b[31mred\n.obj"), std::io::Error::other("x"));
+        let m = e.to_string();
+        assert!(!m.contains('\x1b') && !m.contains('\n'), "{m}");
+        assert!(m.contains("a\\u{1b}[31mred\\n.obj"), "{m}");
+    }
 
     #[test]
     fn offsets_become_lines_columns_and_keys() {

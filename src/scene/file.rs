@@ -15,7 +15,8 @@ use serde::Deserialize;
 use serde::de::{self, Deserializer, SeqAccess, Unexpected, Visitor};
 use toml::Spanned;
 
-use super::error::{LoadError, Location};
+use super::error::{LoadError, Location, shown};
+use super::input::{self, LoadOptions};
 use super::model::{
     self, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, Transform, default_background,
     default_light, default_material, euler_xyz_deg,
@@ -319,8 +320,8 @@ struct RawScene {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawImage {
-    width: Option<Pixels>,
-    height: Option<Pixels>,
+    width: Option<Spanned<Pixels>>,
+    height: Option<Spanned<Pixels>>,
 }
 
 #[derive(Deserialize)]
@@ -472,8 +473,8 @@ enum TextureDef {
 }
 
 /// Loads a TOML scene file.
-pub fn load(path: &Path) -> Result<SceneDesc, LoadError> {
-    let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+pub fn load(path: &Path, options: &LoadOptions) -> Result<SceneDesc, LoadError> {
+    let bytes = input::read(path, options)?;
     let src = String::from_utf8(bytes).map_err(|e| {
         let (line, column) = super::error::line_column(
             &String::from_utf8_lossy(e.as_bytes()),
@@ -488,12 +489,17 @@ pub fn load(path: &Path) -> Result<SceneDesc, LoadError> {
             message: "invalid UTF-8 (a TOML file must be UTF-8 text)".into(),
         }
     })?;
-    parse(&src, path)
+    parse_with(&src, path, options)
 }
 
 /// Parses a TOML scene from `src`; `path` names it in errors, and relative file names in it
 /// resolve against `path`'s directory.
 pub fn parse(src: &str, path: &Path) -> Result<SceneDesc, LoadError> {
+    parse_with(src, path, &LoadOptions::default())
+}
+
+/// [`parse`] with explicit limits and path policy for the files the scene refers to.
+pub fn parse_with(src: &str, path: &Path, options: &LoadOptions) -> Result<SceneDesc, LoadError> {
     let raw: RawScene = toml::from_str(src).map_err(|e| {
         let at = match e.span() {
             Some(span) => Location::at_offset(path, src, span.start),
@@ -509,11 +515,11 @@ pub fn parse(src: &str, path: &Path) -> Result<SceneDesc, LoadError> {
         src,
         dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
     };
-    build(&ctx, raw)
+    build(&ctx, raw, options)
 }
 
-fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
-    let mut cache = TextureCache::default();
+fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, LoadError> {
+    let mut cache = TextureCache::new(*options);
 
     // Textures by name.
     let mut textures: HashMap<String, TextureDef> = HashMap::new();
@@ -822,16 +828,25 @@ fn build(ctx: &Ctx, raw: RawScene) -> Result<SceneDesc, LoadError> {
     }
 
     // Image, camera and lens.
-    let width = raw
-        .image
-        .as_ref()
-        .and_then(|i| i.width)
-        .map_or(DEFAULT_WIDTH, |p| p.0);
-    let height = raw
-        .image
-        .as_ref()
-        .and_then(|i| i.height)
-        .map_or(DEFAULT_HEIGHT, |p| p.0);
+    let image = raw.image.as_ref();
+    let width = image
+        .and_then(|i| i.width.as_ref())
+        .map_or(DEFAULT_WIDTH, |p| p.get_ref().0);
+    let height = image
+        .and_then(|i| i.height.as_ref())
+        .map_or(DEFAULT_HEIGHT, |p| p.get_ref().0);
+    // An image whose render buffers cannot fit is refused here, naming the key that asks for
+    // it (the larger side's; the command line's --width/--height cannot rescue such a file).
+    if let Err(e) = crate::limits::check_image_memory(width, height) {
+        let (key, span) = match image.map(|i| (&i.width, &i.height)) {
+            Some((Some(w), h)) if h.as_ref().is_none_or(|h| w.get_ref().0 >= h.get_ref().0) => {
+                ("image.width", w.span())
+            }
+            Some((_, Some(h))) => ("image.height", h.span()),
+            _ => ("image", 0..0),
+        };
+        return Err(ctx.invalid(span, key, e.to_string()));
+    }
     let camera = camera(ctx, raw.camera, width, height, &objects, &origins)?;
 
     // Lights and environment.
@@ -1306,7 +1321,7 @@ pub fn load_model(
         Some("obj") => super::obj::load(path, transform, textures),
         Some("gltf" | "glb") => super::gltf::load(path, transform, textures),
         _ => Err(LoadError::UnknownScene {
-            name: path.display().to_string(),
+            name: shown(path),
             builtins: String::new(),
         }),
     }

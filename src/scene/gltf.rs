@@ -18,6 +18,7 @@ use ::gltf::texture::WrappingMode;
 use glam::{Affine3A, Mat4, Vec3};
 
 use super::error::{LoadError, Location};
+use super::input::{self, LoadOptions};
 use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh};
 use super::texture::{TextureCache, decode};
 use crate::shade::{ImageTexture, Material, Texture, Wrap};
@@ -84,8 +85,15 @@ fn percent_decode(uri: &str) -> Vec<u8> {
     out
 }
 
-/// The bytes a URI names: a base64 `data:` URI, or a file relative to the model.
-fn read_uri(path: &Path, base: &Path, uri: &str, what: &'static str) -> Result<Vec<u8>, LoadError> {
+/// The bytes a URI names: a base64 `data:` URI, or a file relative to the model (by the path
+/// policy of [`input::reference`]).
+fn read_uri(
+    path: &Path,
+    base: &Path,
+    uri: &str,
+    what: &'static str,
+    options: &LoadOptions,
+) -> Result<Vec<u8>, LoadError> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, data) = rest.split_once(";base64,").ok_or_else(|| {
             gltf_error(path, format!("{what}: only base64 data URIs are supported"))
@@ -107,8 +115,9 @@ fn read_uri(path: &Path, base: &Path, uri: &str, what: &'static str) -> Result<V
     }
     let decoded = String::from_utf8(percent_decode(uri))
         .map_err(|_| gltf_error(path, format!("{what}: URI {uri:?} is not UTF-8")))?;
-    let file = base.join(decoded);
-    std::fs::read(&file).map_err(|e| LoadError::io(&file, e).referenced(Location::file(path), what))
+    let at = Location::file(path);
+    let file = input::reference(base, Path::new(""), &decoded, options, &at)?;
+    input::read(&file, options).map_err(|e| e.referenced(at, what))
 }
 
 /// Checks that reading `accessor` cannot go out of its buffer or hit a type the reader does
@@ -232,13 +241,127 @@ struct Loader<'a> {
     material_map: HashMap<usize, usize>,
     meshes: Vec<ModelMesh>,
     camera: Option<ModelCamera>,
-    visits: usize,
+    visits: u64,
+    options: LoadOptions,
 }
 
-/// Nodes visited at most (a guard against node graphs that reuse subtrees exponentially).
-const MAX_NODE_VISITS: usize = 1 << 20;
-/// Deepest node nesting followed (a guard against cycles).
+/// Deepest node nesting followed.
 const MAX_DEPTH: usize = 256;
+
+/// Triangles a primitive declares (from its index or position count), without reading data.
+fn declared_triangles(prim: &::gltf::Primitive) -> u64 {
+    let count = prim
+        .indices()
+        .or_else(|| prim.get(&::gltf::Semantic::Positions))
+        .map_or(0, |a| a.count() as u64);
+    match prim.mode() {
+        Mode::Triangles => count / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => count.saturating_sub(2),
+        _ => 0,
+    }
+}
+
+/// Counts what walking the node trees under `roots` would build, before anything is built:
+/// node instances and triangles, each node counted once per path that reaches it (a node used
+/// as a child twice is instanced twice). Cycles are an error; the counts saturate, and beyond
+/// the limits of `options` the file is refused with them.
+fn check_expansion(
+    path: &Path,
+    document: &::gltf::Document,
+    roots: &[::gltf::Node],
+    options: &LoadOptions,
+) -> Result<(), LoadError> {
+    let nodes: Vec<::gltf::Node> = document.nodes().collect();
+    let own: Vec<u64> = nodes
+        .iter()
+        .map(|n| {
+            n.mesh().map_or(0, |m| {
+                m.primitives()
+                    .map(|p| declared_triangles(&p))
+                    .fold(0u64, u64::saturating_add)
+            })
+        })
+        .collect();
+    // Per node: (instances, triangles) of its subtree, once known. Iterative depth-first
+    // search, so a long chain cannot overflow the stack.
+    let mut done: Vec<Option<(u64, u64)>> = vec![None; nodes.len()];
+    let mut on_stack = vec![false; nodes.len()];
+    for start in 0..nodes.len() {
+        if done[start].is_some() {
+            continue;
+        }
+        let mut stack: Vec<(usize, Vec<usize>, usize)> = Vec::new();
+        let children = |i: usize| nodes[i].children().map(|c| c.index()).collect::<Vec<_>>();
+        stack.push((start, children(start), 0));
+        on_stack[start] = true;
+        while let Some((node, kids, next)) = stack.last_mut() {
+            if let Some(&child) = kids.get(*next) {
+                *next += 1;
+                if on_stack[child] {
+                    return Err(gltf_error(
+                        path,
+                        format!(
+                            "node {node} lists node {child} as a child, but node {child} is \
+                             node {node} or one of its ancestors: the node graph has a cycle \
+                             (expected a tree)"
+                        ),
+                    ));
+                }
+                if done[child].is_none() {
+                    on_stack[child] = true;
+                    let grandchildren = children(child);
+                    stack.push((child, grandchildren, 0));
+                }
+                continue;
+            }
+            let node = *node;
+            let (mut instances, mut triangles) = (1u64, own[node]);
+            for &c in kids.iter() {
+                let (i, t) = done[c].expect("children finish first");
+                instances = instances.saturating_add(i);
+                triangles = triangles.saturating_add(t);
+            }
+            done[node] = Some((instances, triangles));
+            on_stack[node] = false;
+            stack.pop();
+        }
+    }
+    let (instances, triangles) = roots.iter().fold((0u64, 0u64), |(i, t), r| {
+        let (ri, rt) = done[r.index()].unwrap_or((0, 0));
+        (i.saturating_add(ri), t.saturating_add(rt))
+    });
+    let count = |n: u64| {
+        if n == u64::MAX {
+            format!("{n} or more")
+        } else {
+            n.to_string()
+        }
+    };
+    let limit = |message: String| LoadError::Limit {
+        at: Location::file(path),
+        message,
+    };
+    if triangles > options.max_instanced_triangles {
+        return Err(limit(format!(
+            "the node tree instances {} triangles ({} node instances; a node used as a child \
+             several times is counted each time), more than the limit of {} (raise \
+             LoadOptions::max_instanced_triangles for larger scenes)",
+            count(triangles),
+            count(instances),
+            options.max_instanced_triangles
+        )));
+    }
+    if instances > options.max_node_instances {
+        return Err(limit(format!(
+            "the node tree expands to {} node instances (a node used as a child several times \
+             is counted each time), more than the limit of {} (raise \
+             LoadOptions::max_node_instances for larger scenes)",
+            count(instances),
+            options.max_node_instances
+        )));
+    }
+    Ok(())
+}
 
 /// Loads a `.gltf` or `.glb` file, applying `transform` on top of its node transforms.
 pub fn load(
@@ -246,7 +369,8 @@ pub fn load(
     transform: &Transform,
     textures: &mut TextureCache,
 ) -> Result<Model, LoadError> {
-    let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+    let options = *textures.options();
+    let bytes = input::read(path, &options)?;
     check_glb_length(path, &bytes)?;
     let invalid = |e: &dyn std::fmt::Display| {
         gltf_error(
@@ -291,7 +415,7 @@ pub fn load(
                     ),
                 )
             })?,
-            ::gltf::buffer::Source::Uri(uri) => read_uri(path, &base, uri, "buffer")?,
+            ::gltf::buffer::Source::Uri(uri) => read_uri(path, &base, uri, "buffer", &options)?,
         };
         if data.len() < buffer.length() {
             return Err(gltf_error(
@@ -318,6 +442,7 @@ pub fn load(
         meshes: Vec::new(),
         camera: None,
         visits: 0,
+        options,
     };
     let roots: Vec<::gltf::Node> = match document
         .default_scene()
@@ -335,6 +460,7 @@ pub fn load(
             document.nodes().filter(|n| !child[n.index()]).collect()
         }
     };
+    check_expansion(path, &document, &roots, &options)?;
     for root in roots {
         let walked = catch_unwind(AssertUnwindSafe(|| loader.node(&root, transform, 0)))
             .map_err(|_| gltf_error(path, "malformed file (reading its data failed)"))?;
@@ -358,10 +484,13 @@ impl Loader<'_> {
         depth: usize,
     ) -> Result<(), LoadError> {
         self.visits += 1;
-        if depth > MAX_DEPTH || self.visits > MAX_NODE_VISITS {
+        if depth > MAX_DEPTH || self.visits > self.options.max_node_instances {
             return Err(gltf_error(
                 self.path,
-                format!("node {}: the node tree is cyclic or too deep", node.index()),
+                format!(
+                    "node {}: the node tree is nested more than {MAX_DEPTH} levels deep",
+                    node.index()
+                ),
             ));
         }
         let local = Mat4::from_cols_array_2d(&node.transform().matrix());
@@ -617,7 +746,7 @@ impl Loader<'_> {
                     .ok_or_else(|| {
                         gltf_error(self.path, format!("{what}: buffer view out of range"))
                     })?;
-                let t = decode(bytes, true, wrap)
+                let t = decode(bytes, true, wrap, self.options.max_texture_bytes)
                     .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
                 Arc::new(t)
             }
@@ -627,14 +756,16 @@ impl Loader<'_> {
                 let decoded = String::from_utf8(percent_decode(uri)).map_err(|_| {
                     gltf_error(self.path, format!("{what}: URI {uri:?} is not UTF-8"))
                 })?;
-                let file = self.base.join(decoded);
+                let at = Location::file(self.path);
+                let file =
+                    input::reference(&self.base, Path::new(""), &decoded, &self.options, &at)?;
                 self.textures
                     .file(&file, true, wrap)
                     .map_err(|e| e.referenced(Location::file(self.path), "texture"))?
             }
             ::gltf::image::Source::Uri { uri, .. } => {
-                let bytes = read_uri(self.path, &self.base, uri, "image")?;
-                let t = decode(&bytes, true, wrap)
+                let bytes = read_uri(self.path, &self.base, uri, "image", &self.options)?;
+                let t = decode(&bytes, true, wrap, self.options.max_texture_bytes)
                     .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
                 Arc::new(t)
             }

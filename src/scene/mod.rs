@@ -5,11 +5,13 @@ pub mod builtin;
 pub mod error;
 pub mod file;
 pub mod gltf;
+pub mod input;
 pub mod model;
 pub mod obj;
 pub mod texture;
 
 pub use error::{LoadError, Location};
+pub use input::LoadOptions;
 
 use std::f32::consts::{PI, TAU};
 
@@ -105,13 +107,19 @@ pub struct SceneDesc {
 /// Loads a scene: a built-in scene by name (see [`builtin::BUILTIN`]), a `.toml` scene file
 /// (`docs/scene-format.md`), or a `.obj`, `.gltf` or `.glb` model, which gets the glTF camera if
 /// it has one (else a view framing its bounds), a small aperture focused on the bounds' centre,
-/// a key light and the default sky.
+/// a key light and the default sky. Files are read with the default [`LoadOptions`] (limits
+/// and path policy); see [`load_with`].
 pub fn load(path_or_name: &str) -> Result<SceneDesc, LoadError> {
+    load_with(path_or_name, &LoadOptions::default())
+}
+
+/// [`load`] with explicit limits and path policy.
+pub fn load_with(path_or_name: &str, options: &LoadOptions) -> Result<SceneDesc, LoadError> {
     let path = std::path::Path::new(path_or_name);
     match file::extension(path).as_deref() {
-        Some("toml") => file::load(path),
+        Some("toml") => file::load(path, options),
         Some("obj" | "gltf" | "glb") => {
-            let mut textures = texture::TextureCache::default();
+            let mut textures = texture::TextureCache::new(*options);
             let model = file::load_model(path, &model::Transform::IDENTITY, &mut textures)?;
             model::model_scene(path, model)
         }

@@ -6,14 +6,14 @@
 //! reflection) makes the surface a mirror of strength `max(Ks)`.
 
 use std::cell::{Cell, RefCell};
-use std::fs::File;
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, Read};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
 use super::error::{LoadError, Location};
+use super::input::{self, LoadOptions};
 use super::model::{Model, ModelMesh, Transform, mesh};
 use super::texture::TextureCache;
 use crate::shade::{Material, Texture, Wrap};
@@ -35,6 +35,7 @@ struct Scanner<'a> {
     /// Bytes of an unfinished line were consumed: the last line may lack its newline.
     partial: bool,
     lex: Lex,
+    number: Number,
     found: Findings,
 }
 
@@ -76,6 +77,30 @@ struct Findings {
     /// unchecked when the file has no texture coordinates (normals).
     face_vt: bool,
     face_vn: bool,
+    v_lines: usize,
+    /// The largest positive face index of each kind (vertex, texture coordinate, normal),
+    /// saturating. tobj multiplies indices unchecked, so a huge one wraps around to a wrong
+    /// element instead of failing: the file is re-checked when one exceeds its element count.
+    max_index: [u64; 3],
+    /// Some face index is 0 (invalid: indices start at 1), or negative (relative; checked
+    /// against the elements before its face on a re-check).
+    zero_or_negative: bool,
+}
+
+impl Findings {
+    /// Whether some face index may be out of range (see [`find_bad_face`]).
+    fn suspect_indices(&self) -> bool {
+        let counts = [self.v_lines, self.vt_lines, self.vn_lines];
+        self.zero_or_negative || (0..3).any(|k| self.max_index[k] > counts[k] as u64)
+    }
+}
+
+/// The number being lexed in a face corner's field.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Number {
+    value: u64,
+    negative: bool,
+    digits: bool,
 }
 
 impl<'a, R> LineCounter<'a, R> {
@@ -86,6 +111,7 @@ impl<'a, R> LineCounter<'a, R> {
             newlines: 0,
             partial: false,
             lex: Lex::LineStart,
+            number: Number::default(),
             found: Findings::default(),
         };
         Self { inner, scan }
@@ -93,7 +119,29 @@ impl<'a, R> LineCounter<'a, R> {
 }
 
 impl Scanner<'_> {
+    /// The end of field `field` (0: vertex, 1: texture coordinate, 2: normal) of a corner.
+    fn end_field(&mut self, field: u8) {
+        let n = std::mem::take(&mut self.number);
+        if !n.digits || field > 2 {
+            return;
+        }
+        if n.negative || n.value == 0 {
+            self.found.zero_or_negative = true;
+        } else {
+            let max = &mut self.found.max_index[field as usize];
+            *max = (*max).max(n.value);
+        }
+    }
+
     fn end_line(&mut self) {
+        if let Lex::Face {
+            field,
+            in_corner: true,
+            ..
+        } = self.lex
+        {
+            self.end_field(field);
+        }
         let corners = match self.lex {
             Lex::Keyword(Keyword::F) => Some(0),
             Lex::Face { corners, .. } => Some(corners),
@@ -136,15 +184,28 @@ impl Scanner<'_> {
                     match k {
                         Keyword::Vt => self.found.vt_lines += 1,
                         Keyword::Vn => self.found.vn_lines += 1,
+                        Keyword::V => self.found.v_lines += 1,
                         _ => {}
                     }
                     Lex::Rest
                 }
-                (Lex::Face { corners, .. }, true) => Lex::Face {
-                    corners,
-                    field: 0,
-                    in_corner: false,
-                },
+                (
+                    Lex::Face {
+                        corners,
+                        field,
+                        in_corner,
+                    },
+                    true,
+                ) => {
+                    if in_corner {
+                        self.end_field(field);
+                    }
+                    Lex::Face {
+                        corners,
+                        field: 0,
+                        in_corner: false,
+                    }
+                }
                 (
                     Lex::Face {
                         corners,
@@ -159,8 +220,19 @@ impl Scanner<'_> {
                         (corners + 1, 0)
                     };
                     let field = if b == b'/' {
+                        self.end_field(field);
                         field.saturating_add(1)
                     } else {
+                        match b {
+                            b'-' => self.number.negative = true,
+                            b'0'..=b'9' => {
+                                let n = &mut self.number;
+                                n.digits = true;
+                                n.value =
+                                    n.value.saturating_mul(10).saturating_add((b - b'0') as u64);
+                            }
+                            _ => {}
+                        }
                         match field {
                             1 => self.found.face_vt = true,
                             2 => self.found.face_vn = true,
@@ -239,21 +311,6 @@ fn describe(e: tobj::LoadError) -> String {
     }
 }
 
-fn open<'a>(
-    path: &Path,
-    line: &'a Cell<usize>,
-) -> Result<LineCounter<'a, BufReader<File>>, LoadError> {
-    let file = File::open(path).map_err(|e| LoadError::io(path, e))?;
-    if file.metadata().is_ok_and(|m| m.is_dir()) {
-        let e = std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory");
-        return Err(LoadError::io(path, e));
-    }
-    Ok(LineCounter::new(
-        BufReader::with_capacity(1 << 16, file),
-        line,
-    ))
-}
-
 /// Runs a third-party parser, turning a panic inside it into an error.
 fn guarded<T>(path: &Path, f: impl FnOnce() -> T) -> Result<T, LoadError> {
     catch_unwind(AssertUnwindSafe(f)).map_err(|_| LoadError::Obj {
@@ -271,22 +328,32 @@ pub fn load(
     transform: &Transform,
     textures: &mut TextureCache,
 ) -> Result<Model, LoadError> {
+    let options = *textures.options();
     let line = Cell::new(0);
-    let mut reader = open(path, &line)?;
+    let mut input = input::open(path, &options)?;
+    let mut reader = LineCounter::new(input.reader(), &line);
     let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
     // MTL libraries: tobj asks for them by name; remember which file each material came from
     // (texture paths are relative to it) and any failure, with its line.
     let libraries: RefCell<Vec<MtlResult>> = RefCell::new(Vec::new());
-    let options = tobj::LoadOptions {
+    let tobj_options = tobj::LoadOptions {
         triangulate: true,
         single_index: true,
         ignore_points: true,
         ignore_lines: true,
     };
     let result = guarded(path, || {
-        tobj::load_obj_buf(&mut reader, &options, |mtl| {
-            let full = dir.join(mtl);
-            let loaded = load_mtl(&full).map_err(|e| (e, current_line(&line)));
+        tobj::load_obj_buf(&mut reader, &tobj_options, |mtl| {
+            let at = Location::line(path, current_line(&line));
+            let loaded = mtl
+                .to_str()
+                .ok_or_else(|| LoadError::Obj {
+                    at: at.clone(),
+                    message: "the MTL file name is not UTF-8".into(),
+                })
+                .and_then(|name| input::reference(&dir, Path::new(""), name, &options, &at))
+                .and_then(|full| load_mtl(&full, &options))
+                .map_err(|e| (e, current_line(&line)));
             let ret = match &loaded {
                 Ok((mats, _)) => {
                     let map = mats
@@ -301,15 +368,31 @@ pub fn load(
             libraries.borrow_mut().push(loaded);
             ret
         })
-    })?;
+    });
     let found = reader.scan.finish();
     let line = current_line(&line);
-    drop(reader);
+    input.finish()?;
+    // tobj's index arithmetic overflows on huge indices (a panic in checked builds): name the
+    // face instead.
+    let result = match result {
+        Ok(r) => r,
+        Err(panic) => {
+            return Err(found
+                .suspect_indices()
+                .then(|| find_bad_face(path, &options))
+                .flatten()
+                .map_or(panic, |(line, message)| LoadError::Obj {
+                    at: Location::line(path, line),
+                    message,
+                }));
+        }
+    };
     // A failed material library is reported first (tobj carries on without it).
     let mut loaded = Vec::new();
     for lib in libraries.into_inner() {
         match lib {
             Ok(lib) => loaded.push(lib),
+            Err((e @ LoadError::OutsidePath { .. }, _)) => return Err(e),
             Err((e, line)) => {
                 return Err(e.referenced(Location::line(path, line), "material library"));
             }
@@ -334,7 +417,7 @@ pub fn load(
             | tobj::LoadError::FaceTexCoordOutOfBounds
             | tobj::LoadError::FaceNormalOutOfBounds),
         ) => {
-            problems.push(find_bad_face(path).unwrap_or_else(|| (line, describe(e))));
+            problems.push(find_bad_face(path, &options).unwrap_or_else(|| (line, describe(e))));
             None
         }
         Err(e) => {
@@ -343,8 +426,11 @@ pub fn load(
         }
         Ok((models, _)) => {
             // tobj ignores texture and normal indices unchecked when the file has none.
-            if (found.face_vt && found.vt_lines == 0) || (found.face_vn && found.vn_lines == 0) {
-                problems.extend(find_bad_face(path));
+            if (found.face_vt && found.vt_lines == 0)
+                || (found.face_vn && found.vn_lines == 0)
+                || found.suspect_indices()
+            {
+                problems.extend(find_bad_face(path, &options));
             }
             Some(models)
         }
@@ -360,9 +446,11 @@ pub fn load(
     // tobj numbers materials across libraries in load order; so do we.
     let mut materials = Vec::new();
     for (mats, mtl_path) in loaded {
-        let mtl_dir = mtl_path.parent().unwrap_or(Path::new("")).to_path_buf();
+        // Textures resolve relative to the MTL file, and must stay in the OBJ's folder.
+        let mtl_dir = mtl_path.parent().unwrap_or(Path::new(""));
+        let mtl_dir = mtl_dir.strip_prefix(&dir).unwrap_or(mtl_dir).to_path_buf();
         for m in mats {
-            let material = convert_material(&m, &mtl_path, &mtl_dir, textures)?;
+            let material = convert_material(&m, &mtl_path, (&dir, &mtl_dir), textures)?;
             materials.push((m.name.clone(), material));
         }
     }
@@ -392,6 +480,10 @@ pub fn load(
         }
         let p = into_arrays::<f32, 3>(positions, 1);
         let mut t = into_arrays::<u32, 3>(indices, 1);
+        drop_degenerate_and_repeated(&mut t);
+        if t.is_empty() {
+            continue;
+        }
         if transform.mirrors {
             for tri in &mut t {
                 tri.swap(1, 2);
@@ -445,10 +537,32 @@ fn into_arrays<T: Copy, const N: usize>(v: Vec<T>, spare: usize) -> Vec<[T; N]> 
     out
 }
 
+/// Removes triangles with a repeated corner (no area) and repeats of a triangle (the same
+/// corners in the same winding): coincident triangles add nothing to the image, but a BVH
+/// cannot separate them, so every ray near them would test them all. A fan over a face that
+/// repeats its corners (`f 1 2 3 1 2 3 ...`) is made of nothing else. Linear (one hash set).
+fn drop_degenerate_and_repeated(t: &mut Vec<[u32; 3]>) {
+    let mut seen = std::collections::HashSet::with_capacity(t.len().min(1 << 20));
+    t.retain(|&[a, b, c]| {
+        if a == b || b == c || a == c {
+            return false;
+        }
+        // The rotation starting at the smallest index names the triangle and its winding.
+        let key = if a < b && a < c {
+            [a, b, c]
+        } else if b < c {
+            [b, c, a]
+        } else {
+            [c, a, b]
+        };
+        seen.insert(key)
+    });
+}
+
 /// The first face of an OBJ file whose vertex, texture or normal index is out of range, and
 /// what is wrong with it. Indices are 1-based; negative ones count back from the latest element.
-fn find_bad_face(path: &Path) -> Option<(usize, String)> {
-    let text = std::fs::read(path).ok()?;
+fn find_bad_face(path: &Path, options: &LoadOptions) -> Option<(usize, String)> {
+    let text = input::read(path, options).ok()?;
     let text = String::from_utf8_lossy(&text);
     let totals = text.lines().fold([0usize; 3], |mut t, l| {
         match l.split_whitespace().next() {
@@ -475,7 +589,14 @@ fn find_bad_face(path: &Path) -> Option<(usize, String)> {
                             continue;
                         }
                         let Ok(idx) = idx.parse::<i64>() else {
-                            continue;
+                            return Some((
+                                i + 1,
+                                format!(
+                                    "face {} index {:?} is not a valid index (expected a \
+                                     whole number, 1-based; negative counts back)",
+                                    names[k], idx
+                                ),
+                            ));
                         };
                         let ok = if idx > 0 {
                             idx as u64 <= totals[k] as u64
@@ -506,8 +627,11 @@ fn find_bad_face(path: &Path) -> Option<(usize, String)> {
 /// Parses an MTL file, naming its line on errors. Colour statements (`Ka`, `Kd`, `Ks`, `Ke`)
 /// with a single value mean grey, as the MTL format allows; they are expanded to three values
 /// first (tobj expects three).
-fn load_mtl(path: &Path) -> Result<(Vec<tobj::Material>, PathBuf), LoadError> {
-    let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+fn load_mtl(
+    path: &Path,
+    options: &LoadOptions,
+) -> Result<(Vec<tobj::Material>, PathBuf), LoadError> {
+    let bytes = input::read(path, options)?;
     let text = String::from_utf8(bytes).map_err(|e| {
         let line = e.as_bytes()[..e.utf8_error().valid_up_to()]
             .iter()
@@ -562,23 +686,22 @@ fn color(c: Option<[f32; 3]>, default: Vec3) -> Vec3 {
         .map_or(default, |v| v.max(Vec3::ZERO))
 }
 
+/// `dirs`: the OBJ's folder, and the MTL's folder relative to it.
 fn convert_material(
     m: &tobj::Material,
     mtl_path: &Path,
-    mtl_dir: &Path,
+    (root, mtl_dir): (&Path, &Path),
     textures: &mut TextureCache,
 ) -> Result<Material, LoadError> {
     let kd = m.diffuse.map(Vec3::from).filter(|v| v.is_finite());
     let diffuse = match &m.diffuse_texture {
         Some(file) => {
             let file = texture_file(file);
-            let tex_path = mtl_dir.join(file);
-            let image = textures.file(&tex_path, true, Wrap::Repeat).map_err(|e| {
-                e.referenced(
-                    Location::file(mtl_path).with_key(format!("{}.map_Kd", m.name)),
-                    "texture",
-                )
-            })?;
+            let at = Location::file(mtl_path).with_key(format!("{}.map_Kd", m.name));
+            let tex_path = input::reference(root, mtl_dir, file, textures.options(), &at)?;
+            let image = textures
+                .file(&tex_path, true, Wrap::Repeat)
+                .map_err(|e| e.referenced(at, "texture"))?;
             Texture::Image {
                 image,
                 tint: kd.map_or(Vec3::ONE, |v| v.max(Vec3::ZERO)),

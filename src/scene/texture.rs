@@ -9,6 +9,8 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use super::error::LoadError;
+use super::input::{self, LoadOptions};
+use crate::limits::Bytes;
 use crate::shade::{ImageTexture, Wrap};
 
 /// The sRGB transfer function, inverted: an encoded value in [0, 1] to linear.
@@ -20,10 +22,28 @@ pub fn srgb_to_linear(v: f32) -> f32 {
     }
 }
 
+/// Memory a `width` x `height` texture of `color` needs while it is decoded and converted:
+/// the decoder's buffer, an 8-bit RGB copy (or a float RGB one for 16-bit images) and the
+/// linear float texels (12 bytes each). Saturating, never overflowing.
+pub fn texture_memory_bytes(width: u32, height: u32, color: image::ColorType) -> u64 {
+    let conversion = if color.bytes_per_pixel() <= 4 { 3 } else { 12 };
+    let per_texel = color.bytes_per_pixel() as u64 + conversion + 12;
+    (width as u64)
+        .saturating_mul(height as u64)
+        .saturating_mul(per_texel)
+}
+
 /// Decodes a PNG or JPEG image. Colour textures are sRGB-encoded (`srgb`: converted to linear
-/// here); data textures are not. Alpha is ignored.
-pub fn decode(bytes: &[u8], srgb: bool, wrap: Wrap) -> Result<ImageTexture, String> {
-    let reader = image::ImageReader::new(Cursor::new(bytes))
+/// here); data textures are not. Alpha is ignored. An image whose decoding and conversion
+/// would need more than `max_bytes` ([`texture_memory_bytes`], judged from the header before
+/// anything is decoded) is refused with the size it would need.
+pub fn decode(
+    bytes: &[u8],
+    srgb: bool,
+    wrap: Wrap,
+    max_bytes: u64,
+) -> Result<ImageTexture, String> {
+    let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| e.to_string())?;
     match reader.format() {
@@ -31,7 +51,26 @@ pub fn decode(bytes: &[u8], srgb: bool, wrap: Wrap) -> Result<ImageTexture, Stri
         Some(image::ImageFormat::Jpeg) => check_jpeg_complete(bytes)?,
         Some(_) => {}
     }
-    let img = reader.decode().map_err(|e| format!("cannot decode: {e}"))?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(max_bytes);
+    reader.limits(limits);
+    let decoder = reader
+        .into_decoder()
+        .map_err(|e| format!("cannot decode: {e}"))?;
+    let (w, h) = image::ImageDecoder::dimensions(&decoder);
+    let color = image::ImageDecoder::color_type(&decoder);
+    let needed = texture_memory_bytes(w, h, color);
+    if needed > max_bytes {
+        return Err(format!(
+            "a {w}x{h} texture needs about {} ({needed} bytes) to decode and convert, more \
+             than the texture limit of {} (raise LoadOptions::max_texture_bytes for larger \
+             textures)",
+            Bytes(needed),
+            Bytes(max_bytes)
+        ));
+    }
+    let img =
+        image::DynamicImage::from_decoder(decoder).map_err(|e| format!("cannot decode: {e}"))?;
     let (width, height) = (img.width() as usize, img.height() as usize);
     if width == 0 || height == 0 {
         return Err(format!("the image is empty ({width}x{height})"));
@@ -154,12 +193,26 @@ pub fn check_jpeg_complete(b: &[u8]) -> Result<(), String> {
 }
 
 /// Decoded textures by (file, sRGB, wrap), so a file used by many materials is decoded once.
+/// It carries the [`LoadOptions`] of the load it serves, which the mesh loaders read too.
 #[derive(Default)]
 pub struct TextureCache {
     files: HashMap<(PathBuf, bool, bool), Arc<ImageTexture>>,
+    options: LoadOptions,
 }
 
 impl TextureCache {
+    pub fn new(options: LoadOptions) -> Self {
+        Self {
+            files: HashMap::new(),
+            options,
+        }
+    }
+
+    /// The limits and path policy of this load.
+    pub fn options(&self) -> &LoadOptions {
+        &self.options
+    }
+
     /// The texture in image file `path`.
     pub fn file(
         &mut self,
@@ -171,11 +224,13 @@ impl TextureCache {
         if let Some(t) = self.files.get(&key) {
             return Ok(t.clone());
         }
-        let bytes = std::fs::read(path).map_err(|e| LoadError::io(path, e))?;
+        let bytes = input::read(path, &self.options)?;
         let texture = Arc::new(
-            decode(&bytes, srgb, wrap).map_err(|message| LoadError::Image {
-                path: path.to_path_buf(),
-                message,
+            decode(&bytes, srgb, wrap, self.options.max_texture_bytes).map_err(|message| {
+                LoadError::Image {
+                    path: path.to_path_buf(),
+                    message,
+                }
             })?,
         );
         self.files.insert(key, texture.clone());
@@ -197,13 +252,13 @@ mod tests {
             .unwrap()
             .write_to(&mut Cursor::new(&mut png), image::ImageFormat::Png)
             .unwrap();
-        let t = decode(&png, true, Wrap::Clamp).unwrap();
+        let t = decode(&png, true, Wrap::Clamp, 1 << 30).unwrap();
         assert_eq!((t.width, t.height), (2, 1));
         assert!((t.texels[0].y - 0.2158).abs() < 1e-3, "{:?}", t.texels[0]);
-        let raw = decode(&png, false, Wrap::Clamp).unwrap();
+        let raw = decode(&png, false, Wrap::Clamp, 1 << 30).unwrap();
         assert!((raw.texels[0].y - 128.0 / 255.0).abs() < 1e-6);
-        assert!(decode(&png[..png.len() / 2], true, Wrap::Clamp).is_err());
-        assert!(decode(b"not an image", true, Wrap::Clamp).is_err());
+        assert!(decode(&png[..png.len() / 2], true, Wrap::Clamp, 1 << 30).is_err());
+        assert!(decode(b"not an image", true, Wrap::Clamp, 1 << 30).is_err());
     }
 
     #[test]
@@ -215,13 +270,13 @@ mod tests {
         img.write_to(&mut Cursor::new(&mut jpg), image::ImageFormat::Jpeg)
             .unwrap();
         assert_eq!(check_jpeg_complete(&jpg), Ok(()));
-        assert!(decode(&jpg, true, Wrap::Clamp).is_ok());
+        assert!(decode(&jpg, true, Wrap::Clamp, 1 << 30).is_ok());
         // Bytes after the end-of-image marker are allowed (some cameras append data).
         let mut trailing = jpg.clone();
         trailing.extend([0, 0, 0x12]);
         assert_eq!(check_jpeg_complete(&trailing), Ok(()));
         for cut in 3..jpg.len() {
-            let e = decode(&jpg[..cut], true, Wrap::Clamp).unwrap_err();
+            let e = decode(&jpg[..cut], true, Wrap::Clamp, 1 << 30).unwrap_err();
             assert!(e.contains("truncated JPEG"), "cut at {cut}: {e}");
             assert!(
                 e.contains(&format!("after {cut} bytes")),
