@@ -62,7 +62,8 @@ struct SceneArgs {
     /// threads compute at any time.
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=dofray::limits::MAX_THREADS as i64))]
     threads: Option<u16>,
-    /// Random seed of the lens samples; the same seed gives the same image bit for bit.
+    /// Random seed of the samples (pixel and lens); the same seed gives the same image bit for
+    /// bit, whatever --threads.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Aperture radius in scene units (replaces the scene's lens).
