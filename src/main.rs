@@ -143,11 +143,12 @@ struct RenderArgs {
     #[arg(long)]
     aa: Option<u32>,
     /// The pixel filter that sample positions are drawn from: blackman-harris (smooth and
-    /// sharp), gaussian (softer), or box (each pixel's own square, at width 1).
-    #[arg(long, value_enum, default_value_t = PixelFilterKind::BlackmanHarris)]
-    pixel_filter: PixelFilterKind,
-    /// Full width of the pixel filter in pixels, up to 16 [default: 3 for blackman-harris and
-    /// gaussian, 1 for box].
+    /// sharp), gaussian (softer), or box (each pixel's own square, at width 1) [default: the
+    /// scene's, else blackman-harris].
+    #[arg(long, value_enum)]
+    pixel_filter: Option<PixelFilterKind>,
+    /// Full width of the pixel filter in pixels, up to 16 [default: the scene's for its filter,
+    /// else 3 for blackman-harris and gaussian, 1 for box].
     #[arg(long)]
     pixel_filter_width: Option<f32>,
     /// Sample interval as a fraction of the CoC diameter in defocused regions (the seed's k;
@@ -537,7 +538,11 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     } = prepare(&a.scene)?;
     settings.spp = a.spp.or(desc.spp).unwrap_or(16);
     settings.aa = a.aa.or(desc.aa).unwrap_or(4);
-    settings.pixel_filter = PixelFilter::new(a.pixel_filter);
+    settings.pixel_filter = match (a.pixel_filter, desc.pixel_filter) {
+        (Some(kind), _) => PixelFilter::new(kind),
+        (None, Some(scene)) => scene,
+        (None, None) => PixelFilter::default(),
+    };
     if let Some(width) = a.pixel_filter_width {
         settings.pixel_filter.width = width;
     }

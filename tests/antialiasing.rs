@@ -58,6 +58,7 @@ fn scene(
         background: Background::uniform(Vec3::ZERO),
         spp: None,
         aa: None,
+        pixel_filter: None,
         interval_factor: None,
     }
 }

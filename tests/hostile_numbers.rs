@@ -125,6 +125,7 @@ fn wall_scene(z: f32, material: Material) -> SceneDesc {
         background: Background::uniform(Vec3::ZERO),
         spp: None,
         aa: None,
+        pixel_filter: None,
         interval_factor: None,
     }
 }

@@ -176,6 +176,7 @@ fn rendered_blur_disc_matches_coc_px() {
         background: Background::uniform(Vec3::ZERO),
         spp: None,
         aa: None,
+        pixel_filter: None,
         interval_factor: None,
     };
     let (world, camera) = setup(&desc);
@@ -291,6 +292,7 @@ fn mirror_reflects_one_bounce() {
         background: Background::uniform(Vec3::new(0.0, 0.0, 1.0)),
         spp: None,
         aa: None,
+        pixel_filter: None,
         interval_factor: None,
     };
     let (world, camera) = setup(&desc);

@@ -1460,3 +1460,47 @@ proptest! {
         try_load(&dir, "tex.toml", format!("[[textures]]\nname = \"t\"\nimage = \"tiles.png\"\n{SPHERE}").as_bytes());
     }
 }
+
+/// `[render]` sets the samples and the pixel filter; a bad width names its key.
+#[test]
+fn render_table_sets_samples_and_the_pixel_filter() {
+    use dofray::filter::{PixelFilter, PixelFilterKind};
+    let d = load_files(
+        "render-table",
+        &[(
+            "scene.toml",
+            format!("[render]\nspp = 8\naa = 2\npixel_filter = \"gaussian\"\n{SPHERE}").as_bytes(),
+        )],
+    )
+    .unwrap();
+    assert_eq!((d.spp, d.aa), (Some(8), Some(2)));
+    assert_eq!(
+        d.pixel_filter,
+        Some(PixelFilter::new(PixelFilterKind::Gaussian))
+    );
+    let d = load_files(
+        "render-box",
+        &[(
+            "scene.toml",
+            format!("[render]\npixel_filter = \"box\"\npixel_filter_width = 2\n{SPHERE}")
+                .as_bytes(),
+        )],
+    )
+    .unwrap();
+    let f = d.pixel_filter.unwrap();
+    assert_eq!((f.kind, f.width), (PixelFilterKind::Box, 2.0));
+    let m = error_of(
+        "render-wide",
+        &format!("[render]\npixel_filter_width = 100\n{SPHERE}"),
+    );
+    assert_names(
+        &m,
+        "scene.toml:2:",
+        &["render.pixel_filter_width", "up to 16"],
+    );
+    let m = error_of(
+        "render-kind",
+        &format!("[render]\npixel_filter = \"mitchell\"\n{SPHERE}"),
+    );
+    assert_names(&m, "scene.toml:2:", &["pixel_filter"]);
+}

@@ -45,6 +45,7 @@ fn scene(camera: CameraSpec, objects: Vec<Object>, light: Vec3, intensity: f32) 
         background: Background::uniform(Vec3::ZERO),
         spp: None,
         aa: None,
+        pixel_filter: None,
         interval_factor: None,
     }
 }

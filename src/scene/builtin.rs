@@ -118,6 +118,7 @@ pub fn paper() -> SceneDesc {
         },
         spp: None,
         aa: None,
+        pixel_filter: None,
         interval_factor: None,
     }
 }

@@ -330,6 +330,8 @@ struct RawRender {
     spp: Option<AtLeastOne>,
     aa: Option<AtLeastOne>,
     interval_factor: Option<Positive>,
+    pixel_filter: Option<crate::filter::PixelFilterKind>,
+    pixel_filter_width: Option<Spanned<Positive>>,
 }
 
 #[derive(Deserialize)]
@@ -882,6 +884,8 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         spp: None,
         aa: None,
         interval_factor: None,
+        pixel_filter: None,
+        pixel_filter_width: None,
     });
     let name = raw.name.unwrap_or_else(|| {
         ctx.path
@@ -898,6 +902,23 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         background,
         spp: render.spp.map(|s| s.0),
         aa: render.aa.map(|s| s.0),
+        pixel_filter: match (render.pixel_filter, &render.pixel_filter_width) {
+            (None, None) => None,
+            (kind, width) => {
+                let mut filter = crate::filter::PixelFilter::new(kind.unwrap_or_default());
+                if let Some(w) = width {
+                    filter.width = w.get_ref().0;
+                    if !filter.is_valid() {
+                        return Err(ctx.invalid(
+                            w.span(),
+                            "render.pixel_filter_width",
+                            "a width in pixels up to 16",
+                        ));
+                    }
+                }
+                Some(filter)
+            }
+        },
         interval_factor: render.interval_factor.map(|k| k.0),
     })
 }

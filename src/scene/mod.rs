@@ -100,6 +100,8 @@ pub struct SceneDesc {
     pub spp: Option<u32>,
     /// Samples per in-focus site (anti-aliasing) the scene asks for (likewise).
     pub aa: Option<u32>,
+    /// The pixel filter the scene asks for (likewise).
+    pub pixel_filter: Option<crate::filter::PixelFilter>,
     /// The seed's interval factor k the scene asks for (the command line may override it).
     pub interval_factor: Option<f32>,
 }

@@ -355,6 +355,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         background: default_background(),
         spp: None,
         aa: None,
+        pixel_filter: None,
         interval_factor: None,
     })
 }
