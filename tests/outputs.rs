@@ -351,3 +351,39 @@ fn bench_checks_its_cache_directory_before_rendering() {
     );
     assert_eq!(entries(&dir), vec!["file".to_owned()]);
 }
+
+/// A process killed outright (SIGKILL) cannot clean up after itself; the next write to the
+/// same target sweeps the temporary files of dead processes, and leaves other files alone.
+#[test]
+fn temporary_files_of_killed_processes_are_swept_by_the_next_write() {
+    let dir = scratch("sweep");
+    // PIDs above the kernel's maximum (4194304) belong to no process.
+    let stale = dir.join(".out.png.tmp-99999999-0");
+    let other = dir.join(".other.png.tmp-99999999-0");
+    let unrelated = dir.join(".out.png.tmp-notes");
+    for f in [&stale, &other, &unrelated] {
+        std::fs::write(f, b"partial").unwrap();
+    }
+    let target = dir.join("out.png");
+    let out = dofray(&[
+        "render",
+        "--width",
+        "16",
+        "--quiet",
+        "-o",
+        target.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        !stale.exists(),
+        "the dead process's temporary file is swept"
+    );
+    assert!(
+        other.exists() && unrelated.exists(),
+        "other files are left alone"
+    );
+}

@@ -5,7 +5,9 @@
 //! listed in a process-wide registry while it exists: dropping a [`TempFile`] removes it, and
 //! [`clean_up_on_signals`] installs handlers for SIGINT, SIGTERM and SIGHUP that remove every
 //! listed file and exit with the conventional status (128 + the signal's number: 130, 143,
-//! 129), so an interrupted render or write leaves nothing behind.
+//! 129), so an interrupted render or write leaves nothing behind. A process killed outright
+//! (SIGKILL, a power cut) cannot clean up: the next write to the same target removes the
+//! temporary files of that target whose process no longer exists.
 
 use std::fs::{File, OpenOptions};
 use std::io::Write as _;
@@ -32,6 +34,35 @@ pub(crate) fn parent_dir(path: &Path) -> &Path {
     }
 }
 
+/// Removes `.{name}.tmp-{pid}-{n}` files in `dir` left by processes that no longer exist
+/// (`/proc/{pid}` is gone; where `/proc` is missing nothing is removed). Only this target's own
+/// temporary names are touched; a file whose process is alive (or whose name does not parse)
+/// is left alone. Failures are ignored: sweeping is a courtesy, never a reason not to write.
+fn sweep_stale(dir: &Path, name: &str) {
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let prefix = format!(".{name}.tmp-");
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(rest) = file_name.to_str().and_then(|f| f.strip_prefix(&prefix)) else {
+            continue;
+        };
+        let Some((pid, n)) = rest.split_once('-') else {
+            continue;
+        };
+        let (Ok(pid), Ok(_)) = (pid.parse::<u32>(), n.parse::<u64>()) else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
 /// A registered hidden temporary file next to a target; removed on drop unless persisted.
 #[derive(Debug)]
 pub struct TempFile {
@@ -50,6 +81,7 @@ impl TempFile {
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "output".to_owned());
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+        sweep_stale(parent_dir(target), &name);
         let path = parent_dir(target).join(format!(".{name}.tmp-{}-{n}", std::process::id()));
         // Created and listed under the lock, so a signal sees every file that exists.
         let mut list = registry();
