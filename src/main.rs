@@ -121,6 +121,15 @@ struct SceneArgs {
     /// paths, `..` leading out of it); refused by default.
     #[arg(long)]
     allow_outside_paths: bool,
+    /// Largest input file (scene, mesh, MTL, buffer, texture) read, in MiB [default: 4096].
+    #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(1..))]
+    max_input_mib: Option<u64>,
+    /// Largest memory one decoded texture may need, in MiB [default: 1024].
+    #[arg(long, value_name = "MIB", value_parser = clap::value_parser!(u64).range(1..))]
+    max_texture_mib: Option<u64>,
+    /// Most triangles a glTF file may instance through its node tree [default: 50000000].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    max_instanced_triangles: Option<u64>,
 }
 
 #[derive(Args)]
@@ -467,9 +476,19 @@ struct Prepared {
 }
 
 fn prepare(a: &SceneArgs) -> Result<Prepared> {
+    let defaults = dofray::scene::LoadOptions::default();
     let options = dofray::scene::LoadOptions {
         allow_outside_paths: a.allow_outside_paths,
-        ..Default::default()
+        max_input_bytes: a
+            .max_input_mib
+            .map_or(defaults.max_input_bytes, |m| m.saturating_mul(1 << 20)),
+        max_texture_bytes: a
+            .max_texture_mib
+            .map_or(defaults.max_texture_bytes, |m| m.saturating_mul(1 << 20)),
+        max_instanced_triangles: a
+            .max_instanced_triangles
+            .unwrap_or(defaults.max_instanced_triangles),
+        ..defaults
     };
     let mut desc = dofray::scene::load_with(&a.scene, &options)?;
     // The scene's own autofocus pixel and size, for messages after --width/--height moved it.

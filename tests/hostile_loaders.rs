@@ -456,3 +456,45 @@ fn references_outside_the_model_folder_are_refused_unless_allowed() {
         &["m.gltf", "`/etc/passwd`", "outside"],
     );
 }
+
+/// The command line raises (or lowers) the loader limits.
+#[test]
+fn limit_flags_set_the_loader_limits() {
+    let dir = std::env::temp_dir().join(format!("dofray-limit-flags-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let obj = dir.join("big.obj");
+    let mut text = "v 0 0 0\nv 1 0 0\nv 0 1 0\n".repeat(60_000);
+    text.push_str("f 1 2 3\n");
+    std::fs::write(&obj, text).unwrap(); // about 1.5 MB
+    let render = |limit: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_dofray"))
+            .args([
+                "render",
+                "--width",
+                "16",
+                "--quiet",
+                "--max-input-mib",
+                limit,
+                "-o",
+            ])
+            .arg(dir.join("out.png"))
+            .arg(&obj)
+            .output()
+            .unwrap()
+    };
+    let small = render("1");
+    let err = String::from_utf8_lossy(&small.stderr);
+    assert_eq!(small.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("input limit of 1.0 MiB") && err.contains("--max-input-mib"),
+        "{err}"
+    );
+    let raised = render("4");
+    assert!(
+        raised.status.success(),
+        "{}",
+        String::from_utf8_lossy(&raised.stderr)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -149,7 +149,7 @@ pub enum LoadError {
     /// An input file longer than `LoadOptions::max_input_bytes`.
     #[error(
         "{}: the file is larger than the input limit of {} ({limit} bytes; raise \
-         LoadOptions::max_input_bytes for larger files)",
+         it with --max-input-mib or LoadOptions::max_input_bytes for larger files)",
         shown(path), Bytes(*limit)
     )]
     TooLarge { path: PathBuf, limit: u64 },

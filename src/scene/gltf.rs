@@ -344,8 +344,8 @@ fn check_expansion(
     if triangles > options.max_instanced_triangles {
         return Err(limit(format!(
             "the node tree instances {} triangles ({} node instances; a node used as a child \
-             several times is counted each time), more than the limit of {} (raise \
-             LoadOptions::max_instanced_triangles for larger scenes)",
+             several times is counted each time), more than the limit of {} (raise it with \
+             --max-instanced-triangles or LoadOptions::max_instanced_triangles)",
             count(triangles),
             count(instances),
             options.max_instanced_triangles

@@ -63,7 +63,7 @@ pub fn decode(
     if needed > max_bytes {
         return Err(format!(
             "a {w}x{h} texture needs about {} ({needed} bytes) to decode and convert, more \
-             than the texture limit of {} (raise LoadOptions::max_texture_bytes for larger \
+             than the texture limit of {} (raise it with --max-texture-mib or LoadOptions::max_texture_bytes for larger \
              textures)",
             Bytes(needed),
             Bytes(max_bytes)
