@@ -7,6 +7,9 @@
 //! The number of cases is bounded (`FUZZ_CASES`, default 64) so the suite stays fast; raise it
 //! to search longer: `FUZZ_CASES=2000 cargo test --release --test fuzz_scenes`.
 
+#[allow(dead_code)] // only its base64 encoder is used here
+mod scene_assets;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -147,7 +150,7 @@ fn case() -> impl Strategy<Value = Case> {
 fn gltf_dag(depth: usize, fanout: usize) -> String {
     let positions: [f32; 9] = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
     let bytes: Vec<u8> = positions.iter().flat_map(|f| f.to_le_bytes()).collect();
-    let data = base64(&bytes);
+    let data = scene_assets::base64(&bytes);
     let nodes: Vec<String> = (0..=depth)
         .map(|i| {
             if i == depth {
@@ -168,27 +171,6 @@ fn gltf_dag(depth: usize, fanout: usize) -> String {
 "buffers": [{{"byteLength": 36, "uri": "data:application/octet-stream;base64,{data}"}}]}}"#,
         nodes.join(", ")
     )
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const T: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
-        for i in 0..4 {
-            if i <= chunk.len() {
-                out.push(T[(n >> (18 - 6 * i)) as usize & 63] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }
 
 fn write_case(dir: &Path, c: &Case) -> PathBuf {
