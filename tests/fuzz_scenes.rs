@@ -7,8 +7,7 @@
 //! The number of cases is bounded (`FUZZ_CASES`, default 64) so the suite stays fast; raise it
 //! to search longer: `FUZZ_CASES=2000 cargo test --release --test fuzz_scenes`.
 
-#[allow(dead_code)] // only its base64 encoder is used here
-mod scene_assets;
+mod scene_assets; // for its base64 encoder
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
