@@ -1504,3 +1504,26 @@ fn render_table_sets_samples_and_the_pixel_filter() {
     );
     assert_names(&m, "scene.toml:2:", &["pixel_filter"]);
 }
+
+/// `focus_distance = inf` focuses at infinity; NaN and negative infinity are still refused.
+#[test]
+fn focus_distance_may_be_infinite() {
+    let d = load_files(
+        "focus-inf",
+        &[(
+            "scene.toml",
+            format!("[camera]\neye = [0, 0, -5]\nlook_at = [0, 0, 0]\nfocus_distance = inf\naperture_radius = 0.1\n{SPHERE}").as_bytes(),
+        )],
+    )
+    .unwrap();
+    let camera = d.camera.build(|_| None).unwrap();
+    assert_eq!(camera.inv_focus_distance, 0.0);
+    assert_eq!(camera.coc_px(f32::INFINITY), 0.0);
+    for bad in ["-inf", "nan", "0"] {
+        let m = error_of(
+            "focus-bad",
+            &format!("[camera]\nfocus_distance = {bad}\n{SPHERE}"),
+        );
+        assert_names(&m, "scene.toml:2:", &["camera.focus_distance", "or inf"]);
+    }
+}

@@ -33,12 +33,15 @@ use crate::shade::{ImageTexture, Light, Material, Pattern, Texture, Wrap};
 struct NumberVisitor {
     expected: &'static str,
     ok: fn(f32) -> bool,
+    /// Accept +inf (and numbers beyond f32, which become +inf).
+    allow_inf: bool,
 }
 
 impl NumberVisitor {
     fn check<E: de::Error>(&self, v: f64, unexpected: Unexpected) -> Result<f32, E> {
         let f = v as f32;
-        if v.is_finite() && f.is_finite() && (self.ok)(f) {
+        let in_range = (v.is_finite() && f.is_finite()) || (self.allow_inf && f == f32::INFINITY);
+        if in_range && (self.ok)(f) {
             Ok(f)
         } else {
             Err(E::invalid_value(unexpected, self))
@@ -77,6 +80,7 @@ macro_rules! number {
                 d.deserialize_any(NumberVisitor {
                     expected: $expected,
                     ok: $ok,
+                    allow_inf: false,
                 })
                 .map($name)
             }
@@ -96,6 +100,22 @@ number!(
     "a finite number > 0",
     |v| v > 0.0
 );
+/// A focus distance: a number > 0, or `inf` (focused at infinity; numbers too large for f32
+/// mean the same).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct FocusDistance(f32);
+
+impl<'de> Deserialize<'de> for FocusDistance {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(NumberVisitor {
+            expected: "a number > 0, or inf",
+            ok: |v| v > 0.0,
+            allow_inf: true,
+        })
+        .map(FocusDistance)
+    }
+}
+
 number!(
     /// A finite number >= 0.
     NonNeg,
@@ -347,7 +367,7 @@ struct RawCamera {
     sensor_width_mm: Option<Spanned<Positive>>,
     sharp_range: Option<Spanned<Positive>>,
     spread: Option<Spanned<NonNeg>>,
-    focus_distance: Option<Spanned<Positive>>,
+    focus_distance: Option<Spanned<FocusDistance>>,
     focus_point: Option<Spanned<V3>>,
     focus_pixel: Option<Spanned<[Whole; 2]>>,
     blades: Option<Spanned<Whole>>,
