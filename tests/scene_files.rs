@@ -815,11 +815,13 @@ fn nan_and_infinity_are_rejected_with_the_key() {
         &format!("[camera]\neye = [\n  0,\n  -inf,\n  1]\n{SPHERE}"),
     );
     assert_names(&m, "scene.toml:4:3", &["camera.eye", "finite"]);
+    // A number beyond f32 is refused where it must be finite (a focus distance takes it as
+    // infinity: see focus_distance_may_be_infinite).
     let m = error_of(
         "huge",
-        &format!("[camera]\nfocus_distance = 1e300\n{SPHERE}"),
+        &format!("[camera]\naperture_radius = 1e300\n{SPHERE}"),
     );
-    assert_names(&m, "scene.toml:2:", &["camera.focus_distance", "finite"]);
+    assert_names(&m, "scene.toml:2:", &["camera.aperture_radius", "finite"]);
     let m = error_of(
         "naninarray",
         &format!(
