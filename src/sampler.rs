@@ -139,6 +139,18 @@ fn to_unit(x: u32) -> f32 {
     ((x >> 8) as i32) as f32 * (1.0 / (1u32 << 24) as f32)
 }
 
+/// Samples `first .. first + 16` of `sample` one at a time, as structure of arrays: the
+/// batched paths' fallback for a `first` that is not a multiple of 16.
+fn one_by_one(first: u32, sample: impl Fn(u32) -> Vec2) -> ([f32; BATCH], [f32; BATCH]) {
+    let mut u = [0.0f32; BATCH];
+    let mut v = [0.0f32; BATCH];
+    for lane in 0..BATCH {
+        let p = sample(first.wrapping_add(lane as u32));
+        (u[lane], v[lane]) = (p.x, p.y);
+    }
+    (u, v)
+}
+
 /// The sample stream of one pixel: point `i` of an Owen-scrambled 4D Sobol sequence, whose
 /// dimensions 0 and 1 place the sample on the lens and 2 and 3 within the pixel.
 #[derive(Debug, Clone, Copy)]
@@ -187,15 +199,11 @@ impl PixelSampler {
     /// [`PixelSampler::get_pixel`] of samples `first .. first + 16` as structure of arrays,
     /// bit for bit; `first` must be a multiple of 16 (other values fall back to `get_pixel`).
     pub fn get_pixel16(&self, first: u32) -> ([f32; BATCH], [f32; BATCH]) {
+        if first % BATCH as u32 != 0 {
+            return one_by_one(first, |i| self.get_pixel(i));
+        }
         let mut u = [0.0f32; BATCH];
         let mut v = [0.0f32; BATCH];
-        if first % BATCH as u32 != 0 {
-            for lane in 0..BATCH {
-                let p = self.get_pixel(first.wrapping_add(lane as u32));
-                (u[lane], v[lane]) = (p.x, p.y);
-            }
-            return (u, v);
-        }
         // Sobol points are linear in the index bits: the high part once, the low 4 bits from
         // tables, all bit-reversed as the scramble wants them.
         let high_x = sobol_with(&SOBOL2_DIRECTIONS, first).reverse_bits();
@@ -213,15 +221,11 @@ impl PixelSampler {
     /// bit for bit equal to [`PixelSampler::get`] of each index. `first` must be a multiple of
     /// 16 (other values fall back to `get`).
     pub fn get16(&self, first: u32) -> ([f32; BATCH], [f32; BATCH]) {
+        if first % BATCH as u32 != 0 {
+            return one_by_one(first, |i| self.get(i));
+        }
         let mut u = [0.0f32; BATCH];
         let mut v = [0.0f32; BATCH];
-        if first % BATCH as u32 != 0 {
-            for lane in 0..BATCH {
-                let p = self.get(first.wrapping_add(lane as u32));
-                (u[lane], v[lane]) = (p.x, p.y);
-            }
-            return (u, v);
-        }
         // owen_scramble(sobol0(i)) = reverse(laine_karras(i)): sobol0 is a bit reversal.
         let high_y = sobol1(first).reverse_bits();
         for lane in 0..BATCH {

@@ -184,6 +184,16 @@ const _: () = assert!(
         && std::mem::align_of::<sys::RTCRay4>() == 16
 );
 
+/// The pieces of `n` lanes that have an active lane: each piece's first lane and its active
+/// lanes (bit per lane, counted from the piece's first).
+fn active_parts(valid: &Mask16, n: usize) -> impl Iterator<Item = (usize, u32)> {
+    let active = active_bits(valid);
+    (0..LANES)
+        .step_by(n)
+        .map(move |offset| (offset, (active >> offset) & ((1 << n) - 1)))
+        .filter(|&(_, lanes)| lanes != 0)
+}
+
 /// Copies lanes `offset..offset + N` of a 16-wide ray into an N-wide one.
 macro_rules! copy_ray_part {
     ($dst:expr, $src:expr, $offset:expr, $n:expr) => {{
@@ -211,13 +221,8 @@ macro_rules! narrow_parts {
     ($n:literal, $hit_fn:ident, $shadow_fn:ident, $Mask:ident, $RayHit:ident, $Ray:ident) => {
         impl RayPacket16 {
             pub(super) fn $hit_fn(&mut self, mut query: impl FnMut(&$Mask, &mut sys::$RayHit)) {
-                let active = active_bits(&self.valid);
                 let mut part = sys::$RayHit::default();
-                for offset in (0..LANES).step_by($n) {
-                    let lanes = (active >> offset) & ((1 << $n) - 1);
-                    if lanes == 0 {
-                        continue;
-                    }
+                for (offset, lanes) in active_parts(&self.valid, $n) {
                     let mut valid = $Mask::default();
                     valid.0.copy_from_slice(&self.valid.0[offset..offset + $n]);
                     copy_ray_part!(&mut part.ray, &self.rayhit.ray, offset, $n);
@@ -250,13 +255,8 @@ macro_rules! narrow_parts {
 
         impl ShadowPacket16 {
             pub(super) fn $shadow_fn(&mut self, mut query: impl FnMut(&$Mask, &mut sys::$Ray)) {
-                let active = active_bits(&self.valid);
                 let mut part = sys::$Ray::default();
-                for offset in (0..LANES).step_by($n) {
-                    let lanes = (active >> offset) & ((1 << $n) - 1);
-                    if lanes == 0 {
-                        continue;
-                    }
+                for (offset, lanes) in active_parts(&self.valid, $n) {
                     let mut valid = $Mask::default();
                     valid.0.copy_from_slice(&self.valid.0[offset..offset + $n]);
                     copy_ray_part!(&mut part, &self.rays, offset, $n);

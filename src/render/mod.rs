@@ -27,7 +27,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use crate::camera::Camera;
-use crate::embree::{LANES, RayPacket16};
+use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::PixelFilter;
 use crate::sampler::LensFilter;
 use crate::scene::World;
@@ -226,7 +226,14 @@ fn depth_pass(
                         *slot = y * w + x;
                     }
                 }
-                trace::trace_depth(world, &mut packet, &mut t_hit, &mut local);
+                trace::trace_depth(
+                    world,
+                    &mut packet,
+                    RayKind::Primary,
+                    RayHint::Coherent,
+                    &mut t_hit,
+                    &mut local,
+                );
                 for (lane, &p) in lanes.iter().enumerate() {
                     if p != usize::MAX {
                         depth[p] = if t_hit[lane].is_finite() {
@@ -313,7 +320,6 @@ pub fn render(
         camera,
         settings,
         pixel_filter: &pixel_filter,
-        lens: settings.mode != Mode::Pinhole,
     };
     progress.start(settings.mode.name(), h as u64);
     // Rows are shaded in place; their tallies are merged in row order, so the ray log does not

@@ -15,8 +15,8 @@
 
 use glam::{Vec2, Vec3};
 
-use super::RenderSettings;
 use super::trace::{self, RayKind, Tally};
+use super::{Mode, RenderSettings};
 use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::FilterSampler;
@@ -29,8 +29,6 @@ pub struct SiteShader<'a> {
     pub camera: &'a Camera,
     pub settings: &'a RenderSettings,
     pub pixel_filter: &'a FilterSampler,
-    /// Sample the aperture (false: every ray leaves the lens centre, a pinhole camera).
-    pub lens: bool,
 }
 
 /// Per-thread scratch space for [`SiteShader::shade_row`]; its contents on entry do not
@@ -126,7 +124,8 @@ impl SiteShader<'_> {
     fn chunk(&self, sampler: &PixelSampler, (x, y): (usize, usize), first: u32) -> Batch {
         let (u, v) = sampler.get16(first);
         let (pu, pv) = sampler.get_pixel16(first);
-        let (lens_x, lens_y) = if self.lens {
+        // Pinhole mode samples the pixel only: every ray leaves the lens centre.
+        let (lens_x, lens_y) = if self.settings.mode != Mode::Pinhole {
             aperture_points16(&u, &v, &self.camera.aperture)
         } else {
             ([0.0; LANES], [0.0; LANES])

@@ -263,17 +263,13 @@ pub fn trace_and_shade(
     scratch: &mut Scratch,
     tally: &mut Tally,
 ) {
-    tally.count(kind, packet.active_count());
-    tally.record(kind, hint, |l| packet.is_active(l).then(|| packet.ray(l)));
-    world.scene.intersect16(packet, hint);
     // Lanes whose ray hit a surface (bit per lane).
-    let hits = packet.hit_mask();
+    let hits = trace_depth(world, packet, kind, hint, t_hit, tally);
     let dir = packet.dirs();
     let view = |lane: usize| Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
-    for lane in 0..LANES {
+    for (lane, radiance) in radiance.iter_mut().enumerate() {
         if packet.is_active(lane) && hits & (1 << lane) == 0 {
-            radiance[lane] = world.background.radiance(view(lane));
-            t_hit[lane] = f32::INFINITY;
+            *radiance = world.background.radiance(view(lane));
         }
     }
     if hits == 0 {
@@ -292,7 +288,6 @@ pub fn trace_and_shade(
         let material = &world.materials[m];
         albedo[lane] = material.diffuse.sample(points.uv[lane]);
         radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror);
-        t_hit[lane] = tfar[lane];
         material_of[lane] = m;
         extent[lane] = primitive_extent(world, &hit);
         let sp = points.get(lane);
@@ -421,20 +416,21 @@ pub fn trace_and_shade(
     }
 }
 
-/// Traces the active lanes of `packet` (primary rays) for their hit distance alone, without
-/// shading: `t_hit` gets the distance, infinite for misses (inactive lanes are left as they
-/// were). The depth pass's primitive.
+/// Traces the active lanes of `packet` (rays of `kind`), counting and recording them, for
+/// their hit distance alone: `t_hit` gets the distance, infinite for misses (inactive lanes are
+/// left as they were). Returns the lanes that hit (bit per lane). The depth pass uses it on
+/// its own; [`trace_and_shade`] shades what it found.
 pub fn trace_depth(
     world: &World,
     packet: &mut RayPacket16,
+    kind: RayKind,
+    hint: RayHint,
     t_hit: &mut [f32; LANES],
     tally: &mut Tally,
-) {
-    tally.count(RayKind::Primary, packet.active_count());
-    tally.record(RayKind::Primary, RayHint::Coherent, |l| {
-        packet.is_active(l).then(|| packet.ray(l))
-    });
-    world.scene.intersect16(packet, RayHint::Coherent);
+) -> u32 {
+    tally.count(kind, packet.active_count());
+    tally.record(kind, hint, |l| packet.is_active(l).then(|| packet.ray(l)));
+    world.scene.intersect16(packet, hint);
     let hits = packet.hit_mask();
     let tfar = packet.tfars();
     for lane in (0..LANES).filter(|&l| packet.is_active(l)) {
@@ -444,4 +440,5 @@ pub fn trace_depth(
             f32::INFINITY
         };
     }
+    hits
 }

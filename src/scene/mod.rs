@@ -153,17 +153,6 @@ pub struct World {
     pub background: Background,
 }
 
-fn finite_vec(what: impl Fn() -> String, v: Vec3) -> Result<(), SceneError> {
-    if v.is_finite() {
-        Ok(())
-    } else {
-        Err(SceneError::Invalid {
-            what: what(),
-            expected: "finite",
-        })
-    }
-}
-
 /// The largest colour, albedo or specular value a scene may give (and pattern scale, and
 /// Blinn-Phong exponent): far beyond any real material, small enough that no sum of shading
 /// terms can overflow f32.
@@ -316,21 +305,7 @@ impl World {
                 })
             }
         };
-        for (i, light) in desc.lights.iter().enumerate() {
-            let (a, b) = match *light {
-                Light::Point {
-                    position,
-                    intensity,
-                } => (position, intensity),
-                Light::Directional {
-                    direction,
-                    irradiance,
-                } => (direction, irradiance),
-            };
-            finite_vec(|| format!("light {i}"), a)?;
-            finite_vec(|| format!("light {i}"), b)?;
-        }
-        finite_vec(|| "ambient".into(), desc.ambient)?;
+        // Lights and ambient light are checked with everything else numeric.
         check_ranges(desc)?;
 
         let mut builder = SceneBuilder::new(device)?;
