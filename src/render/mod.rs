@@ -19,6 +19,7 @@
 pub mod film;
 pub mod interpolate;
 pub mod maps;
+pub mod refine;
 pub mod site;
 pub mod trace;
 
@@ -56,6 +57,21 @@ impl Mode {
     }
 }
 
+/// How adaptive mode decides where sample sites go and how many samples each takes.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum SiteRule {
+    /// From an error estimate: intervals and sample counts are refined until interpolation
+    /// and sampling error are within the tolerance (see [`refine`]).
+    #[default]
+    Error,
+    /// The seed's fixed rule: interval = max(2, k x CoC) in power-of-two layers, `spp` samples
+    /// per defocused site (for reproducing the paper's table).
+    Seed,
+}
+
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
@@ -66,9 +82,15 @@ pub struct RenderSettings {
     pub aa: u32,
     /// The pixel (reconstruction) filter the samples' film positions are drawn from.
     pub pixel_filter: PixelFilter,
-    /// The seed's k: sample interval = k x CoC in defocused regions.
+    /// How adaptive mode places sample sites and sets their sample counts.
+    pub rule: SiteRule,
+    /// Error-controlled rule: the largest error accepted where pixels are interpolated or a
+    /// site stops sampling early, in 8-bit sRGB code values (1 = one step of 255). `None`:
+    /// [`RenderSettings::default_tolerance`] for `spp`.
+    pub tolerance: Option<f32>,
+    /// Seed rule: the seed's k, sample interval = k x CoC in defocused regions.
     pub interval_factor: f32,
-    /// Use the seed's plain per-pixel interval rule instead of the conservative one.
+    /// Seed rule: the seed's plain per-pixel interval rule instead of the conservative one.
     pub paper_exact: bool,
     /// Largest interval (power of two).
     pub max_interval: u32,
@@ -87,6 +109,8 @@ impl Default for RenderSettings {
             spp: 16,
             aa: 4,
             pixel_filter: PixelFilter::default(),
+            rule: SiteRule::Error,
+            tolerance: None,
             interval_factor: 0.4,
             paper_exact: false,
             max_interval: 64,
@@ -107,6 +131,8 @@ pub enum RenderError {
     BadAa(u32),
     #[error("the pixel filter width must be a number in (0, {max}] pixels, got {0}", max = PixelFilter::MAX_WIDTH)]
     BadPixelFilterWidth(f32),
+    #[error("tolerance must be a finite number > 0 (8-bit sRGB code values), got {0}")]
+    BadTolerance(f32),
     #[error("interval factor must be a finite number > 0, got {0}")]
     BadIntervalFactor(f32),
     #[error("max interval must be a power of two >= 1, got {0}")]
@@ -124,6 +150,18 @@ impl RenderSettings {
     /// any image, few enough that a typo cannot start a render of days).
     pub const MAX_SAMPLES: u32 = 1 << 16;
 
+    /// The tolerance when none is given: 4 / sqrt(spp) code values (1 at 16 spp), so the
+    /// accepted error shrinks with the noise a site has at `spp` samples.
+    pub fn default_tolerance(spp: u32) -> f32 {
+        4.0 / (spp.max(1) as f32).sqrt()
+    }
+
+    /// The tolerance in effect.
+    pub fn tolerance(&self) -> f32 {
+        self.tolerance
+            .unwrap_or_else(|| Self::default_tolerance(self.spp))
+    }
+
     pub fn validate(&self) -> Result<(), RenderError> {
         if self.spp == 0 || self.spp > Self::MAX_SAMPLES {
             return Err(RenderError::BadSpp(self.spp));
@@ -136,6 +174,11 @@ impl RenderSettings {
         }
         if !(self.interval_factor.is_finite() && self.interval_factor > 0.0) {
             return Err(RenderError::BadIntervalFactor(self.interval_factor));
+        }
+        if let Some(t) = self.tolerance
+            && !(t.is_finite() && t > 0.0)
+        {
+            return Err(RenderError::BadTolerance(t));
         }
         if !self.max_interval.is_power_of_two() {
             return Err(RenderError::BadMaxInterval(self.max_interval));

@@ -1,0 +1,1 @@
+//! Error-controlled adaptive sampling (placeholder while it is built).
