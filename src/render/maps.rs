@@ -113,10 +113,15 @@ fn floor_pow2(v: f32) -> u32 {
 /// The seed's per-pixel interval: 1 where the pixel is in focus (CoC <= 1 px), else
 /// `max(2, k * CoC)`, quantised down to a power-of-two layer and capped at `max_interval`.
 pub fn paper_interval(coc: f32, k: f32, max_interval: u32) -> u32 {
+    layer_interval(coc, k, 2.0, max_interval)
+}
+
+/// `max(floor, k * CoC)` quantised down to a power-of-two layer and capped, 1 in focus.
+fn layer_interval(coc: f32, k: f32, floor: f32, max_interval: u32) -> u32 {
     if coc <= 1.0 {
         1
     } else {
-        floor_pow2((k * coc).max(2.0)).min(max_interval)
+        floor_pow2((k * coc).max(floor)).min(max_interval)
     }
 }
 
@@ -139,6 +144,22 @@ pub fn interval_map(
     if paper_exact {
         return raw;
     }
+    conservative(raw, width, height)
+}
+
+/// The error-controlled rule's starting intervals: `k * CoC` in power-of-two layers with no
+/// every-other-pixel floor (a CoC below 2 / k starts at 1), made conservative like
+/// [`interval_map`]'s. These are upper bounds; [`super::refine`] only ever halves them.
+pub fn start_intervals(coc: &[f32], width: usize, height: usize, k: f32, max: u32) -> Vec<u32> {
+    let raw = coc
+        .iter()
+        .map(|&c| layer_interval(c, k, 1.0, max))
+        .collect();
+    conservative(raw, width, height)
+}
+
+/// Lowers each interval until no pixel within its reach has a smaller one.
+fn conservative(raw: Vec<u32>, width: usize, height: usize) -> Vec<u32> {
     // Work on log2 of the layers as bytes: a quarter of the memory traffic of u32.
     let layer: Vec<u8> = raw.iter().map(|&i| i.trailing_zeros() as u8).collect();
     let top = u32::from(layer.iter().copied().max().unwrap_or(0));

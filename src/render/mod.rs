@@ -16,6 +16,7 @@
 //! pixel) only moves effort: every site's expected value is the filtered, lens-integrated
 //! radiance that dense converges to, and adaptive's one approximation is the interpolation.
 
+pub mod estimate;
 pub mod film;
 pub mod interpolate;
 pub mod maps;
@@ -32,6 +33,7 @@ use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::PixelFilter;
 use crate::sampler::LensFilter;
 use crate::scene::World;
+use estimate::Estimate;
 pub use film::Film;
 pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
@@ -59,7 +61,15 @@ impl Mode {
 
 /// How adaptive mode decides where sample sites go and how many samples each takes.
 #[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
 )]
 #[serde(rename_all = "lowercase")]
 pub enum SiteRule {
@@ -205,6 +215,8 @@ pub struct RenderStats {
     pub sample_sites: u64,
     /// Sites that blur reaches, which took `spp` samples (the others took `aa`).
     pub defocused_sites: u64,
+    /// Rounds of shading and checking of the error-controlled rule (0 for other rules).
+    pub rounds: u32,
     /// Every packet traced, in a deterministic order, when `record_rays` was set.
     #[serde(skip)]
     pub ray_log: Option<Vec<RecordedPacket>>,
@@ -299,6 +311,52 @@ fn depth_pass(
     }
 }
 
+/// Pinhole, dense, and adaptive with the seed's rule: fills `film.samples` (0 where the
+/// pixel will be interpolated) and, for adaptive, `film.interval`; returns the site mask
+/// when some pixels are interpolated.
+fn fixed_sites(
+    settings: &RenderSettings,
+    film: &mut Film,
+    stats: &mut RenderStats,
+) -> Option<Vec<bool>> {
+    let (w, h) = (film.width, film.height);
+    if settings.mode == Mode::Pinhole {
+        film.samples = vec![settings.aa; w * h];
+        return None;
+    }
+    let blurred = maps::blurred(&film.coc, w, h);
+    let per_site = |p: usize| {
+        if blurred[p] {
+            settings.spp
+        } else {
+            settings.aa
+        }
+    };
+    let mut sites = None;
+    film.samples = if settings.mode == Mode::Dense {
+        (0..w * h).map(per_site).collect()
+    } else {
+        film.interval = maps::interval_map(
+            &film.coc,
+            w,
+            h,
+            settings.interval_factor,
+            settings.paper_exact,
+            settings.max_interval,
+        );
+        let mask = maps::site_mask(&film.interval, w, h);
+        let samples = (0..w * h)
+            .map(|p| if mask[p] { per_site(p) } else { 0 })
+            .collect();
+        sites = Some(mask);
+        samples
+    };
+    stats.defocused_sites = (0..w * h)
+        .filter(|&p| blurred[p] && film.samples[p] > 0)
+        .count() as u64;
+    sites
+}
+
 /// Renders `world` through `camera`. The result is bit-identical for any thread count.
 pub fn render(
     world: &World,
@@ -317,45 +375,6 @@ pub fn render(
         ..Default::default()
     };
 
-    // Samples per pixel: 0 where the pixel will be interpolated.
-    let phase = Instant::now();
-    let mut sites = None;
-    film.samples = match settings.mode {
-        Mode::Pinhole => vec![settings.aa; w * h],
-        Mode::Dense | Mode::Adaptive => {
-            let blurred = maps::blurred(&film.coc, w, h);
-            let per_site = |p: usize| {
-                if blurred[p] {
-                    settings.spp
-                } else {
-                    settings.aa
-                }
-            };
-            let samples: Vec<u32> = if settings.mode == Mode::Dense {
-                (0..w * h).map(per_site).collect()
-            } else {
-                film.interval = maps::interval_map(
-                    &film.coc,
-                    w,
-                    h,
-                    settings.interval_factor,
-                    settings.paper_exact,
-                    settings.max_interval,
-                );
-                let mask = maps::site_mask(&film.interval, w, h);
-                let samples = (0..w * h)
-                    .map(|p| if mask[p] { per_site(p) } else { 0 })
-                    .collect();
-                sites = Some(mask);
-                samples
-            };
-            stats.defocused_sites =
-                (0..w * h).filter(|&p| blurred[p] && samples[p] > 0).count() as u64;
-            samples
-        }
-    };
-    stats.maps_seconds = phase.elapsed().as_secs_f64();
-
     let phase = Instant::now();
     let pixel_filter = settings.pixel_filter.sampler();
     let shader = SiteShader {
@@ -364,31 +383,38 @@ pub fn render(
         settings,
         pixel_filter: &pixel_filter,
     };
-    progress.start(settings.mode.name(), h as u64);
-    // Rows are shaded in place; their tallies are merged in row order, so the ray log does not
-    // depend on scheduling.
-    let tallies: Vec<Tally> = film
-        .color
-        .par_chunks_mut(w)
-        .zip(film.samples.par_chunks(w))
-        .enumerate()
-        .map_init(SiteScratch::new, |scratch, (y, (color, samples))| {
-            let mut local = Tally::new(settings.record_rays);
-            shader.shade_row(y, samples, color, scratch, &mut local);
-            progress.advance(1);
-            local
-        })
-        .collect();
-    for local in tallies {
-        tally.merge(local);
+    if settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error {
+        // Maps, sites and interpolation interleave in rounds: timed as shading.
+        let blurred = maps::blurred(&film.coc, w, h);
+        let refined = refine::refine(&shader, &film.coc, &blurred, progress, &mut tally);
+        stats.defocused_sites = (0..w * h)
+            .filter(|&p| blurred[p] && refined.samples[p] > 0)
+            .count() as u64;
+        stats.rounds = refined.rounds;
+        film.color = refined.color;
+        film.interval = refined.interval;
+        film.samples = refined.samples;
+        stats.sites_seconds = phase.elapsed().as_secs_f64();
+    } else {
+        let sites = fixed_sites(settings, &mut film, &mut stats);
+        stats.maps_seconds = phase.elapsed().as_secs_f64();
+        let phase = Instant::now();
+        progress.start(settings.mode.name(), h as u64);
+        let mut estimates = vec![Estimate::default(); w * h];
+        let none = vec![0; w * h];
+        shader.shade_rows(&none, &film.samples, &mut estimates, progress, &mut tally);
+        for ((c, e), &n) in film.color.iter_mut().zip(&estimates).zip(&film.samples) {
+            if n > 0 {
+                *c = e.mean();
+            }
+        }
+        stats.sites_seconds = phase.elapsed().as_secs_f64();
+        let phase = Instant::now();
+        if let Some(sites) = &sites {
+            interpolate::interpolate(&mut film.color, &film.interval, sites, w, h);
+        }
+        stats.interpolate_seconds = phase.elapsed().as_secs_f64();
     }
-    stats.sites_seconds = phase.elapsed().as_secs_f64();
-
-    let phase = Instant::now();
-    if let Some(sites) = &sites {
-        interpolate::interpolate(&mut film.color, &film.interval, sites, w, h);
-    }
-    stats.interpolate_seconds = phase.elapsed().as_secs_f64();
     let bad = |c: &glam::Vec3| !c.is_finite();
     if let Some(first) = film.color.iter().position(bad) {
         return Err(RenderError::NonFinite {

@@ -1,1 +1,473 @@
-//! Error-controlled adaptive sampling (placeholder while it is built).
+//! Error-controlled adaptive sampling: the seed's sample sites and interpolation, with the
+//! sample interval and each site's number of samples chosen from an error estimate instead of
+//! a constant (the seed's open problem).
+//!
+//! 1. **A-priori bound.** A surface blurred by a CoC of C pixels is its sharp image convolved
+//!    with a disc of diameter C, so nothing in that region is narrower than C: a lattice of
+//!    interval C / 2 ([`START_K`]) puts a traced point within C / 2 of every pixel, and every
+//!    blurred feature (even a bokeh disc with a hard rim) touches one. These intervals, made
+//!    conservative near sharper pixels, are upper bounds.
+//! 2. **A-posteriori check.** Every cell of the lattice also traces its centre. Any traced
+//!    pixel inside a cell (its centre, or a corner of a finer neighbour on its edge) is
+//!    compared with the cell's interpolation at that pixel; a difference beyond the tolerance
+//!    plus the noise both carry (from the sites' sample variance) halves the cell, whose new
+//!    corners and centres are traced in the next round. Cells that pass are interpolated
+//!    through their centre too (four triangles), so the centre's information is not wasted.
+//! 3. **Samples where variance is.** A site that blur reaches starts with `max(aa, 16,
+//!    spp / 4)` samples (at most `spp`) and doubles them, up to `spp`, while the standard
+//!    error of its mean exceeds half the tolerance: bright bokeh and edges behind blur get
+//!    `spp`, flat blur stops early. Fewer than 16 samples are never trusted to have
+//!    converged: a few samples that all land on one side of an edge look noise-free.
+//!
+//! Rounds repeat until no cell fails and no site wants samples. Differences and noise are
+//! measured in 8-bit sRGB code values continued above 1 ([`super::estimate::code`]), the
+//! units of the tolerance. Every decision depends only on the estimates, which depend only on
+//! the pixel and its sample indices, so the image is the same for any thread count.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::estimate::{Estimate, code3};
+use super::maps;
+use super::site::SiteShader;
+use super::{Progress, Tally};
+
+/// Start interval as a fraction of the CoC (see the module documentation).
+pub const START_K: f32 = 0.5;
+/// A difference counts as real when it exceeds the tolerance by this many standard errors.
+const NOISE_Z: f32 = 1.0;
+/// The fewest samples whose variance is trusted to stop a site early: with fewer, samples
+/// that happen to agree (all on one side of an edge behind the blur) look converged.
+const MIN_TRUSTED: u32 = 16;
+/// A site keeps sampling while its standard error exceeds this fraction of the tolerance.
+const SAMPLING_SHARE: f32 = 0.5;
+
+/// What the error-controlled rule produced.
+pub struct Refined {
+    pub color: Vec<Vec3>,
+    /// Final interval of every pixel's cell.
+    pub interval: Vec<u32>,
+    /// Samples traced per pixel (0: interpolated).
+    pub samples: Vec<u32>,
+    /// Rounds of shading and checking.
+    pub rounds: u32,
+}
+
+/// A lattice cell: the corners (x0, y0) to (x1, y1), clipped at the image border.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct Cell {
+    size: u32,
+    x0: usize,
+    y0: usize,
+    x1: usize,
+    y1: usize,
+}
+
+impl Cell {
+    /// The cell pixel (x, y) with interval `size` interpolates in.
+    fn of(x: usize, y: usize, size: u32, width: usize, height: usize) -> Self {
+        let (x0, x1) = maps::cell(x, size, width);
+        let (y0, y1) = maps::cell(y, size, height);
+        Self {
+            size,
+            x0,
+            y0,
+            x1,
+            y1,
+        }
+    }
+
+    fn contains(&self, x: usize, y: usize) -> bool {
+        (self.x0..=self.x1).contains(&x) && (self.y0..=self.y1).contains(&y)
+    }
+
+    fn is_corner(&self, x: usize, y: usize) -> bool {
+        (x == self.x0 || x == self.x1) && (y == self.y0 || y == self.y1)
+    }
+
+    /// The traced centre, for cells at least 2 pixels across both ways.
+    fn centre(&self) -> Option<(usize, usize)> {
+        (self.x1 >= self.x0 + 2 && self.y1 >= self.y0 + 2)
+            .then(|| ((self.x0 + self.x1) / 2, (self.y0 + self.y1) / 2))
+    }
+
+    /// The points the interpolation at (x, y) blends and their weights: bilinear over the
+    /// corners, or with `centre` the linear interpolation on the triangle of the cell's fan
+    /// around it that holds (x, y).
+    fn weights(
+        &self,
+        x: usize,
+        y: usize,
+        centre: Option<(usize, usize)>,
+    ) -> [((usize, usize), f32); 4] {
+        let (px, py) = (x as f32, y as f32);
+        let corners = [
+            (self.x0, self.y0),
+            (self.x1, self.y0),
+            (self.x1, self.y1),
+            (self.x0, self.y1),
+        ];
+        if let Some(c) = centre {
+            let (cx, cy) = (c.0 as f32, c.1 as f32);
+            for i in 0..4 {
+                let (a, b) = (corners[i], corners[(i + 1) % 4]);
+                let (ax, ay) = (a.0 as f32 - cx, a.1 as f32 - cy);
+                let (bx, by) = (b.0 as f32 - cx, b.1 as f32 - cy);
+                let det = ax * by - ay * bx;
+                if det == 0.0 {
+                    continue;
+                }
+                let (dx, dy) = (px - cx, py - cy);
+                let s = (dx * by - dy * bx) / det;
+                let t = (ax * dy - ay * dx) / det;
+                const EPS: f32 = -1e-5;
+                if s >= EPS && t >= EPS && s + t <= 1.0 - EPS {
+                    return [(c, 1.0 - s - t), (a, s), (b, t), (a, 0.0)];
+                }
+            }
+        }
+        let fraction = |p: usize, lo: usize, hi: usize| {
+            if hi > lo {
+                (p - lo) as f32 / (hi - lo) as f32
+            } else {
+                0.0
+            }
+        };
+        let (tx, ty) = (fraction(x, self.x0, self.x1), fraction(y, self.y0, self.y1));
+        [
+            (corners[0], (1.0 - tx) * (1.0 - ty)),
+            (corners[1], tx * (1.0 - ty)),
+            (corners[2], tx * ty),
+            (corners[3], (1.0 - tx) * ty),
+        ]
+    }
+}
+
+/// The interpolation at (x, y) from the traced points, with its standard error in code
+/// values, or None when a point it needs is not traced (yet).
+fn interpolate_at(
+    est: &[Estimate],
+    width: usize,
+    cell: &Cell,
+    (x, y): (usize, usize),
+    centre: Option<(usize, usize)>,
+) -> Option<(Vec3, f32)> {
+    let mut value = Vec3::ZERO;
+    let mut var = 0.0;
+    for ((px, py), w) in cell.weights(x, y, centre) {
+        if w == 0.0 {
+            continue;
+        }
+        let e = &est[py * width + px];
+        if e.n == 0 {
+            return None;
+        }
+        value += e.mean() * w;
+        let se = noise(e);
+        var += w * w * se * se;
+    }
+    Some((value, var.sqrt()))
+}
+
+/// A site's standard error in code values for the check; unknown (one sample) counts as
+/// none, so a single-sample site never hides a difference.
+fn noise(e: &Estimate) -> f32 {
+    let se = e.std_error_code();
+    if se.is_finite() { se } else { 0.0 }
+}
+
+/// Marks in `need` the corners of pixel (x, y)'s cell and its centre, when it has one.
+fn mark_needed(
+    need: &mut [bool],
+    interval: &[u32],
+    (x, y): (usize, usize),
+    width: usize,
+    height: usize,
+) {
+    let cell = Cell::of(x, y, interval[y * width + x], width, height);
+    for (cx, cy) in [
+        (cell.x0, cell.y0),
+        (cell.x1, cell.y0),
+        (cell.x0, cell.y1),
+        (cell.x1, cell.y1),
+    ] {
+        need[cy * width + cx] = true;
+    }
+    if let Some((cx, cy)) = cell.centre() {
+        need[cy * width + cx] = true;
+    }
+}
+
+/// The pixels of a cell (half-open: its right and bottom corners belong to the next cell).
+fn cell_pixels(c: &Cell, width: usize, height: usize) -> impl Iterator<Item = (usize, usize)> {
+    let s = c.size as usize;
+    (c.y0..(c.y0 + s).min(height))
+        .flat_map(move |y| (c.x0..(c.x0 + s).min(width)).map(move |x| (x, y)))
+}
+
+/// The cells whose interpolation disagrees with a traced pixel inside them, each with the
+/// interval it should be split to. Only tests that involve a pixel `changed` this round run
+/// or a cell `resized` this round run (the others gave the same answer before).
+fn failed_cells(
+    est: &[Estimate],
+    changed: &[bool],
+    resized: &[bool],
+    interval: &[u32],
+    width: usize,
+    height: usize,
+    tolerance: f32,
+) -> Vec<(Cell, u32)> {
+    let mut failed: Vec<(Cell, u32)> = (0..height)
+        .into_par_iter()
+        .flat_map_iter(|qy| {
+            let mut out = Vec::new();
+            for qx in 0..width {
+                let q = &est[qy * width + qx];
+                if q.n == 0 {
+                    continue;
+                }
+                // Cells whose closure can hold q are those of q and its left, upper and
+                // upper-left neighbours.
+                let candidates = [
+                    (qx, qy),
+                    (qx.wrapping_sub(1), qy),
+                    (qx, qy.wrapping_sub(1)),
+                    (qx.wrapping_sub(1), qy.wrapping_sub(1)),
+                ];
+                for (rx, ry) in candidates {
+                    if rx >= width || ry >= height {
+                        continue;
+                    }
+                    let cell = Cell::of(rx, ry, interval[ry * width + rx], width, height);
+                    if cell.size < 2 || !cell.contains(qx, qy) || cell.is_corner(qx, qy) {
+                        continue;
+                    }
+                    let centre = cell.centre().filter(|&c| c != (qx, qy));
+                    // Unchanged q and unchanged cell points: the same answer as last round.
+                    let at = |(x, y): (usize, usize)| changed[y * width + x];
+                    let fresh = resized[ry * width + rx]
+                        || at((qx, qy))
+                        || at((cell.x0, cell.y0))
+                        || at((cell.x1, cell.y0))
+                        || at((cell.x0, cell.y1))
+                        || at((cell.x1, cell.y1))
+                        || centre.is_some_and(at);
+                    if !fresh {
+                        continue;
+                    }
+                    let Some((value, se)) = interpolate_at(est, width, &cell, (qx, qy), centre)
+                    else {
+                        continue;
+                    };
+                    let diff = (code3(q.mean()) - code3(value)).abs().max_element();
+                    let se_q = noise(q);
+                    let threshold = tolerance + NOISE_Z * (se * se + se_q * se_q).sqrt();
+                    if diff > threshold {
+                        // Interpolation error grows as the interval squared: split far
+                        // enough at once that the error would fall within the threshold.
+                        let levels = (0.5 * (diff / threshold).log2()).ceil().max(1.0) as u32;
+                        let to = (cell.size >> levels.min(cell.size.trailing_zeros())).max(1);
+                        out.push((cell, to));
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    // The finest split each cell needs.
+    failed.sort_unstable();
+    failed.dedup_by_key(|(cell, _)| *cell);
+    failed
+}
+
+/// Lowers the interval of every pixel in each failed cell to the one its split asks for, and
+/// marks the new cells' corners and centres in `need` and their pixels in `resized`.
+fn split(
+    interval: &mut [u32],
+    need: &mut [bool],
+    resized: &mut [bool],
+    cells: &[(Cell, u32)],
+    width: usize,
+    height: usize,
+) {
+    for &(c, to) in cells {
+        for (x, y) in cell_pixels(&c, width, height) {
+            let v = &mut interval[y * width + x];
+            if *v == c.size {
+                *v = to;
+                resized[y * width + x] = true;
+                mark_needed(need, interval, (x, y), width, height);
+            }
+        }
+    }
+}
+
+/// Renders with the error-controlled rule, given the CoC map and which pixels blur reaches.
+pub fn refine(
+    shader: &SiteShader,
+    coc: &[f32],
+    blurred: &[bool],
+    progress: &dyn Progress,
+    tally: &mut Tally,
+) -> Refined {
+    let s = shader.settings;
+    let (width, height) = (shader.camera.width as usize, shader.camera.height as usize);
+    let tolerance = s.tolerance();
+    let target = |p: usize| if blurred[p] { s.spp } else { s.aa };
+    let first = |p: usize| {
+        if blurred[p] {
+            (s.spp / 4).max(s.aa).max(MIN_TRUSTED).min(s.spp)
+        } else {
+            s.aa
+        }
+    };
+    let mut interval = maps::start_intervals(coc, width, height, START_K, s.max_interval);
+    let mut est = vec![Estimate::default(); width * height];
+    let mut rounds = 0;
+    let mut need = vec![false; width * height];
+    let mut resized = vec![false; width * height];
+    for y in 0..height {
+        for x in 0..width {
+            mark_needed(&mut need, &interval, (x, y), width, height);
+        }
+    }
+    let dbg = std::env::var("DOFRAY_DEBUG").is_ok();
+    let mut t = [0.0f64; 4];
+    loop {
+        let t0 = std::time::Instant::now();
+        let from: Vec<u32> = est.iter().map(|e| e.n).collect();
+        let to: Vec<u32> = (0..width * height)
+            .into_par_iter()
+            .map(|p| {
+                let e = &est[p];
+                if e.n == 0 {
+                    if need[p] { first(p) } else { 0 }
+                } else if e.n < target(p) && e.std_error_code() > SAMPLING_SHARE * tolerance {
+                    (2 * e.n).min(target(p))
+                } else {
+                    e.n
+                }
+            })
+            .collect();
+        if to == from {
+            break;
+        }
+        rounds += 1;
+        progress.start(&format!("adaptive, round {rounds}"), height as u64);
+        let t1 = std::time::Instant::now();
+        t[0] += (t1 - t0).as_secs_f64();
+        shader.shade_rows(&from, &to, &mut est, progress, tally);
+        let t2 = std::time::Instant::now();
+        t[1] += (t2 - t1).as_secs_f64();
+        let changed: Vec<bool> = from.iter().zip(&to).map(|(a, b)| a != b).collect();
+        let failed = failed_cells(
+            &est, &changed, &resized, &interval, width, height, tolerance,
+        );
+        resized.fill(false);
+        t[2] += t2.elapsed().as_secs_f64();
+        if std::env::var("DOFRAY_DEBUG").is_ok() {
+            let new: u64 = from.iter().zip(&to).map(|(a, b)| u64::from(b - a)).sum();
+            let fresh = from
+                .iter()
+                .zip(&to)
+                .filter(|(a, b)| **a == 0 && **b > 0)
+                .count();
+            eprintln!(
+                "round {rounds}: {new} samples, {fresh} new sites, {} failed cells",
+                failed.len()
+            );
+        }
+        split(
+            &mut interval,
+            &mut need,
+            &mut resized,
+            &failed,
+            width,
+            height,
+        );
+    }
+
+    if dbg {
+        eprintln!("plan {:.3} shade {:.3} check {:.3}", t[0], t[1], t[2]);
+    }
+    let color = (0..width * height)
+        .into_par_iter()
+        .map(|p| {
+            let e = &est[p];
+            if e.n > 0 {
+                return e.mean();
+            }
+            let (x, y) = (p % width, p / width);
+            let cell = Cell::of(x, y, interval[p], width, height);
+            let centre = cell.centre();
+            interpolate_at(&est, width, &cell, (x, y), centre)
+                .map(|(v, _)| v)
+                .expect("every corner and centre of every cell is traced before the loop ends")
+        })
+        .collect();
+    Refined {
+        color,
+        interval,
+        samples: est.iter().map(|e| e.n).collect(),
+        rounds,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fan_weights_reproduce_linear_functions_and_sum_to_one() {
+        let cell = Cell::of(5, 6, 8, 40, 40);
+        assert_eq!((cell.x0, cell.y0, cell.x1, cell.y1), (0, 0, 8, 8));
+        let f = |x: usize, y: usize| 0.25 * x as f32 - 0.5 * y as f32 + 3.0;
+        for centre in [None, cell.centre()] {
+            for y in 0..=8 {
+                for x in 0..=8 {
+                    let ws = cell.weights(x, y, centre);
+                    let sum: f32 = ws.iter().map(|w| w.1).sum();
+                    assert!((sum - 1.0).abs() < 1e-5, "({x},{y}) sums to {sum}");
+                    assert!(ws.iter().all(|w| w.1 >= -1e-5));
+                    let v: f32 = ws.iter().map(|((px, py), w)| f(*px, *py) * w).sum();
+                    assert!((v - f(x, y)).abs() < 1e-4, "({x},{y}): {v} vs {}", f(x, y));
+                }
+            }
+        }
+        // The fan passes through the centre; on the edges it is the corners' line.
+        let ws = cell.weights(4, 4, cell.centre());
+        assert!(
+            ws.iter()
+                .any(|&(p, w)| p == (4, 4) && (w - 1.0).abs() < 1e-6)
+        );
+        let ws = cell.weights(3, 0, cell.centre());
+        assert!(ws.iter().all(|&(p, w)| p != (4, 4) || w.abs() < 1e-6));
+    }
+
+    #[test]
+    fn cells_at_the_border_are_clipped_and_split() {
+        let (w, h) = (10, 5);
+        let cell = Cell::of(9, 4, 8, w, h);
+        assert_eq!((cell.x0, cell.y0, cell.x1, cell.y1), (8, 0, 9, 4));
+        assert_eq!(cell.centre(), None); // one pixel across
+        let mut interval = vec![8u32; w * h];
+        interval[0] = 4; // a finer pixel inside the same square keeps its interval
+        let mut need = vec![false; w * h];
+        let mut resized = vec![false; w * h];
+        split(
+            &mut interval,
+            &mut need,
+            &mut resized,
+            &[(Cell::of(1, 1, 8, w, h), 4)],
+            w,
+            h,
+        );
+        assert_eq!(interval[0], 4);
+        assert!(interval[1..8].iter().all(|&i| i == 4));
+        assert_eq!(interval[8], 8, "the next cell is untouched");
+        // The new cells' corners (x = 4, 8 on rows 0 and 4) and centres are needed.
+        for (x, y) in [(4, 0), (8, 0), (4, 4), (8, 4), (6, 2)] {
+            assert!(need[y * w + x], "({x},{y})");
+        }
+    }
+}

@@ -14,9 +14,11 @@
 //! thread count.
 
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 
+use super::estimate::Estimate;
 use super::trace::{self, RayKind, Tally};
-use super::{Mode, RenderSettings};
+use super::{Mode, Progress, RenderSettings};
 use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::FilterSampler;
@@ -38,8 +40,6 @@ pub struct SiteScratch {
     packet: RayPacket16,
     trace: trace::Scratch,
     batch: Batch,
-    sums: Vec<Vec3>,
-    weights: Vec<f32>,
 }
 
 impl SiteScratch {
@@ -61,36 +61,65 @@ struct Batch {
 }
 
 impl SiteShader<'_> {
-    /// Shades the sites of row `y`: pixel `x` with `samples[x]` samples (0: not a site, left
-    /// as it is), writing each site's colour to `color[x]`.
+    /// [`SiteShader::shade_row`] for every row, in parallel (`from`, `to` and `estimates`
+    /// hold the whole image); advances `progress` by one per row. Row tallies are merged in
+    /// row order, so the ray log does not depend on scheduling.
+    pub fn shade_rows(
+        &self,
+        from: &[u32],
+        to: &[u32],
+        estimates: &mut [Estimate],
+        progress: &dyn Progress,
+        tally: &mut Tally,
+    ) {
+        let width = self.camera.width as usize;
+        let record = self.settings.record_rays;
+        let tallies: Vec<Tally> = estimates
+            .par_chunks_mut(width)
+            .zip(from.par_chunks(width).zip(to.par_chunks(width)))
+            .enumerate()
+            .map_init(SiteScratch::new, |scratch, (y, (row, (from, to)))| {
+                let mut local = Tally::new(record);
+                if from != to {
+                    self.shade_row(y, from, to, row, scratch, &mut local);
+                }
+                progress.advance(1);
+                local
+            })
+            .collect();
+        for local in tallies {
+            tally.merge(local);
+        }
+    }
+
+    /// Adds samples `from[x] .. to[x]` of pixel (x, y) to `estimates[x]` for every pixel of row
+    /// `y` (none where `to[x] <= from[x]`). A pixel's samples are the same whichever call
+    /// takes them, so an estimate refined in several calls equals one made in a single call.
     pub fn shade_row(
         &self,
         y: usize,
-        samples: &[u32],
-        color: &mut [Vec3],
+        from: &[u32],
+        to: &[u32],
+        estimates: &mut [Estimate],
         scratch: &mut SiteScratch,
         tally: &mut Tally,
     ) {
-        let width = samples.len();
-        scratch.sums.clear();
-        scratch.sums.resize(width, Vec3::ZERO);
-        scratch.weights.clear();
-        scratch.weights.resize(width, 0.0);
+        let width = estimates.len();
         scratch.batch.len = 0;
-        for (x, &n) in samples.iter().enumerate() {
-            if n == 0 {
+        for (x, (&start, &end)) in from.iter().zip(to).enumerate() {
+            if end <= start {
                 continue;
             }
             let sampler = PixelSampler::new(self.settings.seed, (y * width + x) as u64);
             // Samples are made 16 at a time (batched, bit for bit the single-sample values)
             // and queued; a pixel with 16 or more fills whole packets of its own.
-            for first in (0..n).step_by(LANES) {
+            for first in (start..end).step_by(LANES) {
                 let chunk = self.chunk(&sampler, (x, y), first);
-                let count = (n - first).min(LANES as u32) as usize;
+                let count = (end - first).min(LANES as u32) as usize;
                 if count == LANES {
                     // A whole packet of one pixel's coherent rays: traced at once, while any
                     // queued samples of smaller sites wait for more company.
-                    self.trace_batch(&chunk, scratch, tally);
+                    self.trace_batch(&chunk, scratch, estimates, tally);
                     continue;
                 }
                 for lane in 0..count {
@@ -103,18 +132,13 @@ impl SiteShader<'_> {
                     b.pixel[slot] = x;
                     b.len += 1;
                     if b.len == LANES {
-                        self.flush(scratch, tally);
+                        self.flush(scratch, estimates, tally);
                     }
                 }
             }
         }
         if scratch.batch.len > 0 {
-            self.flush(scratch, tally);
-        }
-        for (x, &n) in samples.iter().enumerate() {
-            if n > 0 {
-                color[x] = scratch.sums[x] / scratch.weights[x];
-            }
+            self.flush(scratch, estimates, tally);
         }
     }
 
@@ -143,20 +167,20 @@ impl SiteShader<'_> {
     }
 
     /// Traces the queued samples and empties the queue.
-    fn flush(&self, scratch: &mut SiteScratch, tally: &mut Tally) {
+    fn flush(&self, scratch: &mut SiteScratch, estimates: &mut [Estimate], tally: &mut Tally) {
         let batch = std::mem::take(&mut scratch.batch);
-        self.trace_batch(&batch, scratch, tally);
+        self.trace_batch(&batch, scratch, estimates, tally);
     }
 
-    /// Traces and shades a batch, adding each sample to its pixel's weighted sum.
-    fn trace_batch(&self, b: &Batch, scratch: &mut SiteScratch, tally: &mut Tally) {
-        let SiteScratch {
-            packet,
-            trace,
-            sums,
-            weights,
-            ..
-        } = scratch;
+    /// Traces and shades a batch, adding each sample to its pixel's estimate.
+    fn trace_batch(
+        &self,
+        b: &Batch,
+        scratch: &mut SiteScratch,
+        estimates: &mut [Estimate],
+        tally: &mut Tally,
+    ) {
+        let SiteScratch { packet, trace, .. } = scratch;
         let mut origin = [[0.0f32; LANES]; 3];
         let mut dir = [[0.0f32; LANES]; 3];
         // All 16 lanes are computed (lanes past `len` are simply not traced).
@@ -188,8 +212,7 @@ impl SiteShader<'_> {
                 let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
                 filter.weight(lens, self.camera.aperture.anamorphic)
             };
-            sums[b.pixel[lane]] += radiance[lane] * w;
-            weights[b.pixel[lane]] += w;
+            estimates[b.pixel[lane]].add(radiance[lane], w);
         }
     }
 }

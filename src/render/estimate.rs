@@ -1,0 +1,123 @@
+//! A site's running estimate: the lens-filter-weighted mean of its samples and how uncertain
+//! that mean still is. The error-controlled rule ([`super::refine`]) compares the uncertainty
+//! with its tolerance to decide whether a site needs more samples and whether a difference
+//! between a traced pixel and its interpolation is real or noise.
+
+use glam::Vec3;
+
+/// Weighted sums over the samples of one pixel.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Estimate {
+    /// Samples taken.
+    pub n: u32,
+    sum: Vec3,
+    w: f32,
+    w2: f32,
+    /// Weighted first and second moments of luminance (f64: 65536 samples of bright
+    /// highlights would lose the variance to cancellation in f32).
+    wy: f64,
+    wy2: f64,
+}
+
+/// Rec. 709 luminance of linear RGB.
+pub fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
+/// Linear radiance to 8-bit sRGB code values (0 to 255 for 0 to 1), without clamping above 1:
+/// the same power law continues, so differences in highlights still count, scaled the way a
+/// display-referred comparison after an exposure change would see them.
+pub fn code(v: f32) -> f32 {
+    let v = v.max(0.0);
+    if v <= 0.003_130_8 {
+        255.0 * 12.92 * v
+    } else {
+        255.0 * (1.055 * v.powf(1.0 / 2.4) - 0.055)
+    }
+}
+
+/// A colour in code values, per channel.
+pub fn code3(c: Vec3) -> Vec3 {
+    Vec3::new(code(c.x), code(c.y), code(c.z))
+}
+
+impl Estimate {
+    /// Adds one sample of radiance `l` with lens-filter weight `w`.
+    pub fn add(&mut self, l: Vec3, w: f32) {
+        self.n += 1;
+        self.sum += l * w;
+        self.w += w;
+        self.w2 += w * w;
+        let y = f64::from(luminance(l));
+        self.wy += f64::from(w) * y;
+        self.wy2 += f64::from(w) * y * y;
+    }
+
+    /// The weighted mean (black when nothing was added or every weight was zero).
+    pub fn mean(&self) -> Vec3 {
+        if self.w > 0.0 {
+            self.sum / self.w
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// Standard error of the mean's luminance, linear units; infinite with fewer than two
+    /// samples (nothing is known yet).
+    pub fn std_error(&self) -> f32 {
+        if self.n < 2 || self.w <= 0.0 {
+            return f32::INFINITY;
+        }
+        let (w, w2) = (f64::from(self.w), f64::from(self.w2));
+        let mean = self.wy / w;
+        let n = f64::from(self.n);
+        // Weighted sample variance (Bessel-corrected), then the variance of a weighted mean.
+        let var = ((self.wy2 / w - mean * mean).max(0.0)) * n / (n - 1.0);
+        (var * w2 / (w * w)).sqrt() as f32
+    }
+
+    /// [`Estimate::std_error`] in code values: how far one standard error above the mean
+    /// moves its code (a finite difference, so dark pixels, where the code is steep, and
+    /// bright ones are both measured as a viewer would see them).
+    pub fn std_error_code(&self) -> f32 {
+        let se = self.std_error();
+        if !se.is_finite() {
+            return f32::INFINITY;
+        }
+        let y = luminance(self.mean()).max(0.0);
+        code(y + se) - code(y)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mean_and_standard_error_of_known_samples() {
+        let mut e = Estimate::default();
+        assert!(e.std_error().is_infinite());
+        for v in [0.0f32, 1.0, 0.0, 1.0] {
+            e.add(Vec3::splat(v), 1.0);
+        }
+        assert!((e.mean() - Vec3::splat(0.5)).length() < 1e-6);
+        // Sample variance 1/3, standard error sqrt(1/3 / 4).
+        let want = (1.0f32 / 12.0).sqrt();
+        assert!((e.std_error() - want).abs() < 1e-5, "{}", e.std_error());
+        let mut constant = Estimate::default();
+        for _ in 0..8 {
+            constant.add(Vec3::new(0.3, 0.2, 0.1), 0.5);
+        }
+        assert_eq!(constant.std_error(), 0.0);
+        assert_eq!(constant.std_error_code(), 0.0);
+    }
+
+    #[test]
+    fn code_values_match_srgb_and_continue_above_one() {
+        assert_eq!(code(0.0), 0.0);
+        assert!((code(1.0) - 255.0).abs() < 1e-3);
+        assert!((code(0.5) - 255.0 * crate::metrics::linear_to_srgb(0.5)).abs() < 1e-3);
+        assert!(code(4.0) > code(2.0) && code(2.0) > 255.0);
+        assert_eq!(code(-1.0), 0.0);
+    }
+}
