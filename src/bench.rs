@@ -11,7 +11,7 @@ use std::time::Instant;
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
 use crate::output::TempFile;
-use crate::render::{self, Film, Mode, Progress, RenderSettings, RenderStats};
+use crate::render::{self, Film, Mode, Progress, RenderSettings, RenderStats, SiteRule};
 use crate::scene::{SceneDesc, World};
 
 /// What to measure.
@@ -136,11 +136,13 @@ pub struct BenchImages {
     pub reference: Vec<[f32; 3]>,
 }
 
-/// The modes of the seed's table, in order.
+/// The modes of the seed's table, in order: a `None` interval factor in adaptive mode is the
+/// error-controlled rule at its default tolerance.
 fn modes() -> Vec<(String, Mode, Option<f32>, bool)> {
     vec![
         ("pinhole".into(), Mode::Pinhole, None, false),
         ("dense".into(), Mode::Dense, None, false),
+        ("adaptive".into(), Mode::Adaptive, None, false),
         ("adaptive-k0.4".into(), Mode::Adaptive, Some(0.4), false),
         ("adaptive-k0.2".into(), Mode::Adaptive, Some(0.2), false),
         (
@@ -348,6 +350,11 @@ pub fn run(
                 spp: config.spp,
                 // The seed's "plain ray tracing": one ray per pixel.
                 aa: if *mode == Mode::Pinhole { 1 } else { config.aa },
+                rule: if k.is_some() {
+                    SiteRule::Seed
+                } else {
+                    SiteRule::Error
+                },
                 interval_factor: k.unwrap_or(0.4),
                 paper_exact: *exact,
                 seed: config.seed,

@@ -12,7 +12,7 @@ use dofray::camera::{Camera, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::filter::{PixelFilter, PixelFilterKind};
 use dofray::output;
-use dofray::render::{self, Mode, Progress, RenderSettings};
+use dofray::render::{self, Mode, Progress, RenderSettings, SiteRule};
 use dofray::sampler::LensFilter;
 use dofray::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
 use dofray::scene::{SceneDesc, World, builtin};
@@ -160,20 +160,28 @@ struct RenderArgs {
     /// else 3 for blackman-harris and gaussian, 1 for box].
     #[arg(long)]
     pixel_filter_width: Option<f32>,
-    /// Sample interval as a fraction of the CoC diameter in defocused regions (the seed's k;
-    /// 0.4 is fast, 0.2 is near-identical to dense) [default: the scene's, else 0.4].
+    /// Adaptive mode: the largest error accepted where pixels are interpolated or a site stops
+    /// sampling early, in 8-bit sRGB code values (1 = one step of 255; values above 1.0
+    /// linear count on the same curve continued). Sites, intervals and samples per site
+    /// follow from it [default: the scene's, else 4 / sqrt(spp): 1 at 16 spp, 0.5 at 64].
+    #[arg(long, conflicts_with_all = ["interval_factor", "paper_exact"])]
+    tolerance: Option<f32>,
+    /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
+    /// interval = max(2, k x CoC) in defocused regions, spp samples per defocused site (0.4 is
+    /// the paper's; reproduces its table) [default: the scene's].
     #[arg(long, short = 'k')]
     interval_factor: Option<f32>,
-    /// Use the seed's plain per-pixel interval rule instead of the conservative one that never
-    /// interpolates across an in-focus edge.
+    /// The seed's fixed rule (k = 0.4 unless -k is given), applied per pixel exactly as the
+    /// paper does, without the conservative step that never interpolates across an in-focus
+    /// edge.
     #[arg(long)]
     paper_exact: bool,
     /// Weighting of lens samples over the aperture (the filter over the CoC; box is a real
     /// lens's evenly bright bokeh).
     #[arg(long, value_enum, default_value_t = LensFilter::Box)]
     filter: LensFilter,
-    /// Also write the depth map and interval map as PNG pictures into this directory (created
-    /// if missing).
+    /// Also write the depth map, interval map and samples map (samples traced per pixel,
+    /// black = interpolated) as PNG pictures into this directory (created if missing).
     #[arg(long)]
     aov_dir: Option<PathBuf>,
     /// Print a JSON summary on stdout.
@@ -565,7 +573,16 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     if let Some(width) = a.pixel_filter_width {
         settings.pixel_filter.width = width;
     }
-    settings.interval_factor = a.interval_factor.or(desc.interval_factor).unwrap_or(0.4);
+    // The command line's rule wins; else the scene's; else the error-controlled rule.
+    let seed_rule = a.interval_factor.is_some()
+        || a.paper_exact
+        || (a.tolerance.is_none() && desc.interval_factor.is_some());
+    if seed_rule {
+        settings.rule = SiteRule::Seed;
+        settings.interval_factor = a.interval_factor.or(desc.interval_factor).unwrap_or(0.4);
+    } else {
+        settings.tolerance = a.tolerance.or(desc.tolerance);
+    }
     settings
         .validate()
         .map_err(|e| anyhow::anyhow!("{}", cli_message(&e)))?;
@@ -583,6 +600,12 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             h,
             &output::interval_picture(&film),
         )?;
+        output::write_png_rgb(
+            &dir.join(output::AOV_SAMPLES),
+            w,
+            h,
+            &output::samples_picture(&film),
+        )?;
     }
     if a.json {
         let summary = serde_json::json!({
@@ -595,8 +618,12 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "aa": settings.aa,
             "pixel_filter": settings.pixel_filter.kind,
             "pixel_filter_width": json_f32(settings.pixel_filter.width),
-            "interval_factor": json_f32(settings.interval_factor),
+            "rule": settings.rule,
+            "tolerance": (settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error)
+                .then(|| json_f32(settings.tolerance())),
+            "interval_factor": (settings.rule == SiteRule::Seed).then(|| json_f32(settings.interval_factor)),
             "paper_exact": a.paper_exact,
+            "rounds": stats.rounds,
             "seed": settings.seed,
             "seconds": stats.seconds,
             "pinhole_seconds": stats.pinhole_seconds,
@@ -780,7 +807,7 @@ fn write_bench_images(
             .find(|(l, _)| l == label)
             .map(|(_, f)| f)
     };
-    let (Some(dense), Some(adaptive)) = (film_of("dense"), film_of("adaptive-k0.4")) else {
+    let (Some(dense), Some(adaptive)) = (film_of("dense"), film_of("adaptive")) else {
         return Ok(());
     };
     output::write_png_rgb(
@@ -795,7 +822,13 @@ fn write_bench_images(
         h,
         &output::interval_picture(adaptive),
     )?;
-    // Side by side: reference | dense | adaptive k = 0.4.
+    output::write_png_rgb(
+        &dir.join("samples.png"),
+        w,
+        h,
+        &output::samples_picture(adaptive),
+    )?;
+    // Side by side: reference | dense | adaptive (error-controlled).
     let panels = [&reference, &dense.color, &adaptive.color];
     let mut side = Vec::with_capacity(w * h * panels.len());
     for y in 0..h {
@@ -804,7 +837,7 @@ fn write_bench_images(
         }
     }
     output::write_png_rgb(&dir.join("comparison.png"), w * panels.len(), h, &side)?;
-    for (label, film) in [("adaptive-k0.4", adaptive), ("dense", dense)] {
+    for (label, film) in [("adaptive", adaptive), ("dense", dense)] {
         let errors = dofray::metrics::error_map(
             &film.rgb(),
             &images.reference,
@@ -849,6 +882,9 @@ fn cli_message(e: &render::RenderError) -> String {
         render::RenderError::BadIntervalFactor(k) => {
             format!("--interval-factor must be a finite number > 0, got {k}")
         }
+        render::RenderError::BadTolerance(t) => format!(
+            "--tolerance must be a finite number > 0 (8-bit sRGB code values, e.g. 1), got {t}"
+        ),
         other => other.to_string(),
     }
 }

@@ -30,7 +30,9 @@ use glam::Vec3;
 use crate::render::film::Film;
 use atomic::write_atomic;
 pub use atomic::{TempFile, clean_up_on_signals};
-pub use target::{AOV_DEPTH, AOV_INTERVAL, check_render_outputs, resolve_target, same_file};
+pub use target::{
+    AOV_DEPTH, AOV_INTERVAL, AOV_SAMPLES, AOVS, check_render_outputs, resolve_target, same_file,
+};
 
 /// Why an image could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -220,6 +222,14 @@ pub fn interval_picture(film: &Film) -> Vec<Vec3> {
             palette[level.min(palette.len() - 1)]
         })
         .collect()
+}
+
+/// The samples map: samples traced per pixel as a heat map from black (0: interpolated) to
+/// white (the most any pixel took), so where the renderer spent its rays shows at a glance.
+pub fn samples_picture(film: &Film) -> Vec<Vec3> {
+    let max = film.samples.iter().copied().max().unwrap_or(0) as f32;
+    let values: Vec<f32> = film.samples.iter().map(|&n| n as f32).collect();
+    heat_picture(&values, max)
 }
 
 /// Heat map of a per-pixel error in `[0, max]`: black -> red -> yellow -> white, linear in

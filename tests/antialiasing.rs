@@ -60,6 +60,7 @@ fn scene(
         aa: None,
         pixel_filter: None,
         interval_factor: None,
+        tolerance: None,
     }
 }
 

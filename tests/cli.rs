@@ -280,6 +280,7 @@ fn bench_reports_every_mode_and_caches_the_reference() {
         [
             "pinhole",
             "dense",
+            "adaptive",
             "adaptive-k0.4",
             "adaptive-k0.2",
             "adaptive-paper-k0.4"
@@ -310,11 +311,13 @@ fn bench_reports_every_mode_and_caches_the_reference() {
     for file in [
         "reference.png",
         "dense.png",
+        "adaptive.png",
         "adaptive-k0.4.png",
         "depth.png",
         "interval.png",
+        "samples.png",
         "comparison.png",
-        "error-adaptive-k0.4.png",
+        "error-adaptive.png",
     ] {
         assert!(out_dir.join(file).is_file(), "{file} not written");
     }

@@ -127,6 +127,7 @@ fn wall_scene(z: f32, material: Material) -> SceneDesc {
         aa: None,
         pixel_filter: None,
         interval_factor: None,
+        tolerance: None,
     }
 }
 

@@ -178,6 +178,7 @@ fn rendered_blur_disc_matches_coc_px() {
         aa: None,
         pixel_filter: None,
         interval_factor: None,
+        tolerance: None,
     };
     let (world, camera) = setup(&desc);
     let settings = RenderSettings {
@@ -294,6 +295,7 @@ fn mirror_reflects_one_bounce() {
         aa: None,
         pixel_filter: None,
         interval_factor: None,
+        tolerance: None,
     };
     let (world, camera) = setup(&desc);
     let pinhole = |bounces| RenderSettings {

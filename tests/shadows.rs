@@ -47,6 +47,7 @@ fn scene(camera: CameraSpec, objects: Vec<Object>, light: Vec3, intensity: f32) 
         aa: None,
         pixel_filter: None,
         interval_factor: None,
+        tolerance: None,
     }
 }
 

@@ -125,14 +125,17 @@ pub fn same_file(a: &Path, b: &Path) -> Result<bool, OutputError> {
     Ok(false)
 }
 
-/// The AOV pictures `render --aov-dir DIR` writes: `DIR/depth.png` (the seed's figure 2) and
-/// `DIR/interval.png` (figure 3).
+/// The AOV pictures `render --aov-dir DIR` writes: `DIR/depth.png` (the seed's figure 2),
+/// `DIR/interval.png` (figure 3) and `DIR/samples.png` (samples traced per pixel).
 pub const AOV_DEPTH: &str = "depth.png";
 pub const AOV_INTERVAL: &str = "interval.png";
+pub const AOV_SAMPLES: &str = "samples.png";
+/// Every AOV picture.
+pub const AOVS: [&str; 3] = [AOV_DEPTH, AOV_INTERVAL, AOV_SAMPLES];
 
 /// Checks everything one render will write before it starts: the image at `output` (see
 /// [`super::check_writable`]) and, with `aov_dir`, the directory (created if missing) and its
-/// two pictures, which must each be replaceable and distinct from the image.
+/// pictures, which must each be replaceable and distinct from the image.
 pub fn check_render_outputs(
     output: &Path,
     aov_dir: Option<&Path>,
@@ -141,7 +144,7 @@ pub fn check_render_outputs(
         return super::check_writable(output);
     };
     ImageFormat::from_path(output)?;
-    for name in [AOV_DEPTH, AOV_INTERVAL] {
+    for name in AOVS {
         let aov = dir.join(name);
         if same_file(output, &aov)? {
             return Err(OutputError::Collision {
@@ -156,7 +159,7 @@ pub fn check_render_outputs(
     })?;
     // After creating the directory, which may be the image's too.
     let format = super::check_writable(output)?;
-    for name in [AOV_DEPTH, AOV_INTERVAL] {
+    for name in AOVS {
         super::check_writable(&dir.join(name))?;
     }
     Ok(format)

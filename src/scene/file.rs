@@ -350,6 +350,7 @@ struct RawRender {
     spp: Option<AtLeastOne>,
     aa: Option<AtLeastOne>,
     interval_factor: Option<Positive>,
+    tolerance: Option<Spanned<Positive>>,
     pixel_filter: Option<crate::filter::PixelFilterKind>,
     pixel_filter_width: Option<Spanned<Positive>>,
 }
@@ -904,9 +905,21 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         spp: None,
         aa: None,
         interval_factor: None,
+        tolerance: None,
         pixel_filter: None,
         pixel_filter_width: None,
     });
+    let tolerance = match (&render.tolerance, render.interval_factor) {
+        (Some(t), Some(_)) => {
+            return Err(ctx.invalid(
+                t.span(),
+                "render.tolerance",
+                "either `tolerance` (the error-controlled rule) or `interval_factor` (the \
+                 seed's fixed rule), not both",
+            ));
+        }
+        (t, _) => t.as_ref().map(|t| t.get_ref().0),
+    };
     let name = raw.name.unwrap_or_else(|| {
         ctx.path
             .file_stem()
@@ -940,6 +953,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
             }
         },
         interval_factor: render.interval_factor.map(|k| k.0),
+        tolerance,
     })
 }
 

@@ -102,8 +102,12 @@ pub struct SceneDesc {
     pub aa: Option<u32>,
     /// The pixel filter the scene asks for (likewise).
     pub pixel_filter: Option<crate::filter::PixelFilter>,
-    /// The seed's interval factor k the scene asks for (the command line may override it).
+    /// The seed's interval factor k the scene asks for: the seed's rule (the command line may
+    /// override it).
     pub interval_factor: Option<f32>,
+    /// The error-controlled rule's tolerance the scene asks for, 8-bit sRGB code values
+    /// (likewise).
+    pub tolerance: Option<f32>,
 }
 
 /// Loads a scene: a built-in scene by name (see [`builtin::BUILTIN`]), a `.toml` scene file

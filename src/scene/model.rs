@@ -357,6 +357,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         aa: None,
         pixel_filter: None,
         interval_factor: None,
+        tolerance: None,
     })
 }
 
