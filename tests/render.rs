@@ -3,7 +3,7 @@
 use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
 use dofray::embree::{Device, EMBREE_MAJOR, PacketWidth, limited_isas};
 use dofray::metrics::{Space, psnr};
-use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, render};
+use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, SiteRule, render};
 use dofray::scene::{Background, Object, SceneDesc, World, builtin};
 use dofray::shade::Material;
 use glam::Vec3;
@@ -30,8 +30,11 @@ fn run(
     spp: u32,
     threads: usize,
 ) -> (Film, RenderStats) {
+    // The seed's fixed rule: these tests are about its intervals (tests/error_control.rs
+    // covers the error-controlled rule).
     let settings = RenderSettings {
         mode,
+        rule: SiteRule::Seed,
         interval_factor: k,
         spp,
         seed: 3,
@@ -133,6 +136,7 @@ fn conservative_intervals_never_reach_an_in_focus_pixel() {
     // The paper-exact rule does interpolate next to in-focus pixels somewhere in this scene.
     let settings = RenderSettings {
         mode: Mode::Adaptive,
+        rule: SiteRule::Seed,
         paper_exact: true,
         ..Default::default()
     };
@@ -232,6 +236,14 @@ fn bad_settings_are_rejected() {
         },
         RenderSettings {
             max_interval: 3,
+            ..Default::default()
+        },
+        RenderSettings {
+            tolerance: Some(0.0),
+            ..Default::default()
+        },
+        RenderSettings {
+            tolerance: Some(f32::INFINITY),
             ..Default::default()
         },
     ] {

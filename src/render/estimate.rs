@@ -17,6 +17,8 @@ pub struct Estimate {
     /// highlights would lose the variance to cancellation in f32).
     wy: f64,
     wy2: f64,
+    /// The brightest sample's luminance.
+    peak: f32,
 }
 
 /// Rec. 709 luminance of linear RGB.
@@ -51,6 +53,25 @@ impl Estimate {
         let y = f64::from(luminance(l));
         self.wy += f64::from(w) * y;
         self.wy2 += f64::from(w) * y * y;
+        self.peak = self.peak.max(y as f32);
+    }
+
+    /// The brightest sample's luminance (0 before any sample).
+    pub fn peak(&self) -> f32 {
+        self.peak
+    }
+
+    /// What a rare bright event could still hide, in code values: had the next sample seen
+    /// luminance `brighter` (the brightest sample nearby), the mean would move by
+    /// `(brighter - mean) / n`. Samples that all agree have no variance, yet a small
+    /// highlight behind the blur may simply not have been hit; this is how far that could be
+    /// off.
+    pub fn unseen_code(&self, brighter: f32) -> f32 {
+        if self.n == 0 {
+            return f32::INFINITY;
+        }
+        let y = luminance(self.mean()).max(0.0);
+        code(y + (brighter - y).max(0.0) / self.n as f32) - code(y)
     }
 
     /// The weighted mean (black when nothing was added or every weight was zero).

@@ -61,6 +61,18 @@ fn square_minima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u
     out
 }
 
+/// [`square_minima`]'s counterpart: maxima over the (2r + 1)^2 squares, r = 2^l, l = 1..=top.
+pub fn square_maxima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u8>> {
+    let inverted: Vec<u8> = src.iter().map(|&v| u8::MAX - v).collect();
+    let mut levels = square_minima(&inverted, width, height, top);
+    for level in &mut levels {
+        for v in level.iter_mut() {
+            *v = u8::MAX - *v;
+        }
+    }
+    levels
+}
+
 /// Which pixels the blur of a defocused surface reaches. A surface seen at pixel q with
 /// CoC c > 1 spreads over the disc of diameter c around q, so a pixel whose own surface is in
 /// focus can still be covered by a defocused neighbour (a foreground object's halo); such

@@ -32,6 +32,7 @@ use super::maps;
 use super::site::SiteShader;
 use super::{Progress, Tally};
 
+thread_local!(static TIMES: std::cell::RefCell<[f64; 2]> = const { std::cell::RefCell::new([0.0; 2]) });
 /// Start interval as a fraction of the CoC (see the module documentation).
 pub const START_K: f32 = 0.5;
 /// A difference counts as real when it exceeds the tolerance by this many standard errors.
@@ -176,25 +177,21 @@ fn noise(e: &Estimate) -> f32 {
     if se.is_finite() { se } else { 0.0 }
 }
 
-/// Marks in `need` the corners of pixel (x, y)'s cell and its centre, when it has one.
-fn mark_needed(
-    need: &mut [bool],
-    interval: &[u32],
-    (x, y): (usize, usize),
-    width: usize,
-    height: usize,
-) {
-    let cell = Cell::of(x, y, interval[y * width + x], width, height);
-    for (cx, cy) in [
+/// Marks in `need` the corners of `cell` and its centre, when it has one, and lists the
+/// pixels newly marked in `pending`.
+fn mark_needed(need: &mut [bool], pending: &mut Vec<usize>, cell: &Cell, width: usize) {
+    let corners = [
         (cell.x0, cell.y0),
         (cell.x1, cell.y0),
         (cell.x0, cell.y1),
         (cell.x1, cell.y1),
-    ] {
-        need[cy * width + cx] = true;
-    }
-    if let Some((cx, cy)) = cell.centre() {
-        need[cy * width + cx] = true;
+    ];
+    for (x, y) in corners.into_iter().chain(cell.centre()) {
+        let p = y * width + x;
+        if !need[p] {
+            need[p] = true;
+            pending.push(p);
+        }
     }
 }
 
@@ -205,100 +202,139 @@ fn cell_pixels(c: &Cell, width: usize, height: usize) -> impl Iterator<Item = (u
         .flat_map(move |y| (c.x0..(c.x0 + s).min(width)).map(move |x| (x, y)))
 }
 
-/// The cells whose interpolation disagrees with a traced pixel inside them, each with the
-/// interval it should be split to. Only tests that involve a pixel `changed` this round run
-/// or a cell `resized` this round run (the others gave the same answer before).
+/// Checks `cells` (sorted, without repeats): every traced pixel in a cell's closure other
+/// than its corners (its centre, or corners of finer neighbours on its edges) is compared
+/// with the cell's interpolation there. Returns the cells that fail, each with the interval
+/// it should be split to.
 fn failed_cells(
     est: &[Estimate],
-    changed: &[bool],
-    resized: &[bool],
-    interval: &[u32],
+    cells: &[Cell],
     width: usize,
-    height: usize,
     tolerance: f32,
 ) -> Vec<(Cell, u32)> {
-    let mut failed: Vec<(Cell, u32)> = (0..height)
-        .into_par_iter()
-        .flat_map_iter(|qy| {
-            let mut out = Vec::new();
-            for qx in 0..width {
-                let q = &est[qy * width + qx];
-                if q.n == 0 {
-                    continue;
-                }
-                // Cells whose closure can hold q are those of q and its left, upper and
-                // upper-left neighbours.
-                let candidates = [
-                    (qx, qy),
-                    (qx.wrapping_sub(1), qy),
-                    (qx, qy.wrapping_sub(1)),
-                    (qx.wrapping_sub(1), qy.wrapping_sub(1)),
-                ];
-                for (rx, ry) in candidates {
-                    if rx >= width || ry >= height {
-                        continue;
-                    }
-                    let cell = Cell::of(rx, ry, interval[ry * width + rx], width, height);
-                    if cell.size < 2 || !cell.contains(qx, qy) || cell.is_corner(qx, qy) {
+    cells
+        .par_iter()
+        .filter_map(|cell| {
+            let mut worst = 0.0f32;
+            for qy in cell.y0..=cell.y1 {
+                for qx in cell.x0..=cell.x1 {
+                    let q = &est[qy * width + qx];
+                    if q.n == 0 || cell.is_corner(qx, qy) {
                         continue;
                     }
                     let centre = cell.centre().filter(|&c| c != (qx, qy));
-                    // Unchanged q and unchanged cell points: the same answer as last round.
-                    let at = |(x, y): (usize, usize)| changed[y * width + x];
-                    let fresh = resized[ry * width + rx]
-                        || at((qx, qy))
-                        || at((cell.x0, cell.y0))
-                        || at((cell.x1, cell.y0))
-                        || at((cell.x0, cell.y1))
-                        || at((cell.x1, cell.y1))
-                        || centre.is_some_and(at);
-                    if !fresh {
-                        continue;
-                    }
-                    let Some((value, se)) = interpolate_at(est, width, &cell, (qx, qy), centre)
+                    let Some((value, se)) = interpolate_at(est, width, cell, (qx, qy), centre)
                     else {
                         continue;
                     };
                     let diff = (code3(q.mean()) - code3(value)).abs().max_element();
                     let se_q = noise(q);
                     let threshold = tolerance + NOISE_Z * (se * se + se_q * se_q).sqrt();
-                    if diff > threshold {
-                        // Interpolation error grows as the interval squared: split far
-                        // enough at once that the error would fall within the threshold.
-                        let levels = (0.5 * (diff / threshold).log2()).ceil().max(1.0) as u32;
-                        let to = (cell.size >> levels.min(cell.size.trailing_zeros())).max(1);
-                        out.push((cell, to));
-                    }
+                    worst = worst.max(diff / threshold);
                 }
             }
-            out
+            // Interpolation error grows as the interval squared: split far enough at once
+            // that the error would fall within the threshold.
+            (worst > 1.0).then(|| {
+                let levels = (0.5 * worst.log2()).ceil().max(1.0) as u32;
+                let to = cell.size >> levels.min(cell.size.trailing_zeros());
+                (*cell, to.max(1))
+            })
         })
-        .collect();
-    // The finest split each cell needs.
-    failed.sort_unstable();
-    failed.dedup_by_key(|(cell, _)| *cell);
-    failed
+        .collect()
 }
 
-/// Lowers the interval of every pixel in each failed cell to the one its split asks for, and
-/// marks the new cells' corners and centres in `need` and their pixels in `resized`.
+/// Lowers the interval of every pixel in each failed cell to the one its split asks for;
+/// marks the new cells' corners and centres as needed and lists the new cells.
 fn split(
     interval: &mut [u32],
     need: &mut [bool],
-    resized: &mut [bool],
+    pending: &mut Vec<usize>,
     cells: &[(Cell, u32)],
     width: usize,
     height: usize,
-) {
+) -> Vec<Cell> {
+    let mut new_cells = Vec::new();
     for &(c, to) in cells {
         for (x, y) in cell_pixels(&c, width, height) {
             let v = &mut interval[y * width + x];
             if *v == c.size {
                 *v = to;
-                resized[y * width + x] = true;
-                mark_needed(need, interval, (x, y), width, height);
+                let cell = Cell::of(x, y, to, width, height);
+                if new_cells.last() != Some(&cell) {
+                    mark_needed(need, pending, &cell, width);
+                    new_cells.push(cell);
+                }
             }
         }
+    }
+    new_cells
+}
+
+/// The cells whose closure holds pixel p: those of p and of its left, upper and upper-left
+/// neighbours.
+fn cells_around(
+    p: usize,
+    interval: &[u32],
+    width: usize,
+    height: usize,
+) -> impl Iterator<Item = Cell> + '_ {
+    let (x, y) = (p % width, p / width);
+    [
+        (x, y),
+        (x.wrapping_sub(1), y),
+        (x, y.wrapping_sub(1)),
+        (x.wrapping_sub(1), y.wrapping_sub(1)),
+    ]
+    .into_iter()
+    .filter(move |&(rx, ry)| rx < width && ry < height)
+    .map(move |(rx, ry)| Cell::of(rx, ry, interval[ry * width + rx], width, height))
+    .filter(move |c| c.size >= 2 && c.contains(x, y))
+}
+
+/// The brightest sample near every pixel: within the square of half-size CoC / 2 (at least
+/// 2), the reach of one blurred highlight, from log-quantised per-site peaks.
+struct Peaks {
+    levels: Vec<Vec<u8>>,
+    radius_level: Vec<u8>,
+}
+
+impl Peaks {
+    /// 8 steps per doubling (9% resolution), 2^-16 to 2^16.
+    fn quantise(l: f32) -> u8 {
+        if l <= 0.0 {
+            0
+        } else {
+            (8.0 * l.log2() + 128.0).ceil().clamp(1.0, 255.0) as u8
+        }
+    }
+
+    fn value(q: u8) -> f32 {
+        if q == 0 {
+            0.0
+        } else {
+            ((f32::from(q) - 128.0) / 8.0).exp2()
+        }
+    }
+
+    fn new(est: &[Estimate], coc: &[f32], width: usize, height: usize, max: u32) -> Self {
+        let peak: Vec<u8> = est.iter().map(|e| Self::quantise(e.peak())).collect();
+        let radius_level: Vec<u8> = coc
+            .iter()
+            .map(|&c| {
+                let r = (0.5 * c).clamp(2.0, max as f32);
+                r.log2().ceil().max(1.0) as u8
+            })
+            .collect();
+        let top = u32::from(radius_level.iter().copied().max().unwrap_or(1));
+        Self {
+            levels: maps::square_maxima(&peak, width, height, top),
+            radius_level,
+        }
+    }
+
+    fn near(&self, p: usize) -> f32 {
+        Self::value(self.levels[usize::from(self.radius_level[p]) - 1][p])
     }
 }
 
@@ -323,73 +359,89 @@ pub fn refine(
     };
     let mut interval = maps::start_intervals(coc, width, height, START_K, s.max_interval);
     let mut est = vec![Estimate::default(); width * height];
-    let mut rounds = 0;
     let mut need = vec![false; width * height];
-    let mut resized = vec![false; width * height];
+    // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
+    let mut pending = Vec::new();
     for y in 0..height {
         for x in 0..width {
-            mark_needed(&mut need, &interval, (x, y), width, height);
+            let cell = Cell::of(x, y, interval[y * width + x], width, height);
+            mark_needed(&mut need, &mut pending, &cell, width);
         }
     }
-    let dbg = std::env::var("DOFRAY_DEBUG").is_ok();
-    let mut t = [0.0f64; 4];
+    // Samples per pixel before and after this round's shading.
+    let mut from = vec![0u32; width * height];
+    let mut to = from.clone();
+    // Cells resized by the last split: their checks must run again even if no point changed.
+    let mut resized: Vec<Cell> = Vec::new();
+    let mut rounds = 0;
     loop {
-        let t0 = std::time::Instant::now();
-        let from: Vec<u32> = est.iter().map(|e| e.n).collect();
-        let to: Vec<u32> = (0..width * height)
-            .into_par_iter()
-            .map(|p| {
-                let e = &est[p];
-                if e.n == 0 {
-                    if need[p] { first(p) } else { 0 }
-                } else if e.n < target(p) && e.std_error_code() > SAMPLING_SHARE * tolerance {
-                    (2 * e.n).min(target(p))
-                } else {
-                    e.n
-                }
-            })
-            .collect();
-        if to == from {
+        pending.sort_unstable();
+        pending.dedup();
+        let peaks = (rounds > 0).then(|| Peaks::new(&est, coc, width, height, s.max_interval));
+        let mut work = Vec::new();
+        for p in pending.drain(..) {
+            let e = &est[p];
+            let unsure = |e: &Estimate| {
+                let limit = SAMPLING_SHARE * tolerance;
+                e.std_error_code() > limit
+                    || peaks
+                        .as_ref()
+                        .is_some_and(|k| e.unseen_code(k.near(p)) > limit)
+            };
+            let want = if e.n == 0 {
+                first(p)
+            } else if e.n < target(p) && unsure(e) {
+                (2 * e.n).min(target(p))
+            } else {
+                continue;
+            };
+            to[p] = want;
+            work.push(p);
+        }
+        if work.is_empty() && resized.is_empty() {
             break;
         }
         rounds += 1;
         progress.start(&format!("adaptive, round {rounds}"), height as u64);
-        let t1 = std::time::Instant::now();
-        t[0] += (t1 - t0).as_secs_f64();
+        let t0 = std::time::Instant::now();
         shader.shade_rows(&from, &to, &mut est, progress, tally);
-        let t2 = std::time::Instant::now();
-        t[1] += (t2 - t1).as_secs_f64();
-        let changed: Vec<bool> = from.iter().zip(&to).map(|(a, b)| a != b).collect();
-        let failed = failed_cells(
-            &est, &changed, &resized, &interval, width, height, tolerance,
-        );
-        resized.fill(false);
-        t[2] += t2.elapsed().as_secs_f64();
+        TIMES.with(|t| t.borrow_mut()[0] += t0.elapsed().as_secs_f64());
         if std::env::var("DOFRAY_DEBUG").is_ok() {
-            let new: u64 = from.iter().zip(&to).map(|(a, b)| u64::from(b - a)).sum();
-            let fresh = from
-                .iter()
-                .zip(&to)
-                .filter(|(a, b)| **a == 0 && **b > 0)
-                .count();
+            let n: u32 = work.iter().map(|&p| to[p] - from[p]).sum();
             eprintln!(
-                "round {rounds}: {new} samples, {fresh} new sites, {} failed cells",
-                failed.len()
+                "round {rounds}: {} sites, {n} samples, {:.4}s",
+                work.len(),
+                t0.elapsed().as_secs_f64()
             );
         }
-        split(
+        let t0 = std::time::Instant::now();
+        // Check every cell a new sample or a split touched.
+        let mut dirty = std::mem::take(&mut resized);
+        for &p in &work {
+            from[p] = to[p];
+            if est[p].n < target(p) {
+                pending.push(p);
+            }
+            dirty.extend(cells_around(p, &interval, width, height));
+        }
+        dirty.sort_unstable();
+        dirty.dedup();
+        let mut failed = failed_cells(&est, &dirty, width, tolerance);
+        failed.sort_unstable();
+        resized = split(
             &mut interval,
             &mut need,
-            &mut resized,
+            &mut pending,
             &failed,
             width,
             height,
         );
+        TIMES.with(|t| t.borrow_mut()[1] += t0.elapsed().as_secs_f64());
+    }
+    if std::env::var("DOFRAY_DEBUG").is_ok() {
+        TIMES.with(|t| eprintln!("shade {:.3} check {:.3}", t.borrow()[0], t.borrow()[1]));
     }
 
-    if dbg {
-        eprintln!("plan {:.3} shade {:.3} check {:.3}", t[0], t[1], t[2]);
-    }
     let color = (0..width * height)
         .into_par_iter()
         .map(|p| {
@@ -453,15 +505,20 @@ mod tests {
         let mut interval = vec![8u32; w * h];
         interval[0] = 4; // a finer pixel inside the same square keeps its interval
         let mut need = vec![false; w * h];
-        let mut resized = vec![false; w * h];
-        split(
+        let mut pending = Vec::new();
+        let new_cells = split(
             &mut interval,
             &mut need,
-            &mut resized,
+            &mut pending,
             &[(Cell::of(1, 1, 8, w, h), 4)],
             w,
             h,
         );
+        assert!(
+            new_cells.contains(&Cell::of(5, 1, 4, w, h)),
+            "{new_cells:?}"
+        );
+        assert_eq!(pending.len(), need.iter().filter(|&&n| n).count());
         assert_eq!(interval[0], 4);
         assert!(interval[1..8].iter().all(|&i| i == 4));
         assert_eq!(interval[8], 8, "the next cell is untouched");
