@@ -2,6 +2,12 @@
 //! timed (median of several repeats), its rays counted, and its image compared with dense
 //! and with a converged reference; an intersect-only replay of exactly the rays dense traces
 //! shows how much of dense's time is the renderer's own work.
+//!
+//! [`equal_error`] is the other study: the time dense and adaptive need to reach given PSNR
+//! levels, over a ladder of sample counts, with a PSNR-versus-seconds plot ([`plot`]).
+
+pub mod equal_error;
+pub mod plot;
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -52,6 +58,18 @@ pub enum BenchError {
     Metrics(#[from] metrics::MetricsError),
     #[error("repeat must be at least 1")]
     ZeroRepeat,
+    #[error(
+        "the spp ladder must list at least one sample count, each 1 to {max}, got {0:?}",
+        max = RenderSettings::MAX_SAMPLES
+    )]
+    BadLadder(Vec<u32>),
+    #[error("PSNR levels must be at least one finite number of dB, got {0:?}")]
+    BadLevels(Vec<f64>),
+    #[error(
+        "the reference's samples per pixel ({reference_spp}) must exceed the ladder's largest \
+         rung ({top}); several times more is better"
+    )]
+    ReferenceBelowLadder { reference_spp: u32, top: u32 },
     #[error("reference cache {}: {error}", path.display())]
     Cache {
         path: PathBuf,
@@ -270,28 +288,29 @@ pub fn check_cache_dir(dir: &Path) -> Result<(), BenchError> {
     Ok(())
 }
 
-/// The converged reference: dense with `reference_spp` samples and a seed of its own (so its
-/// noise is independent of the modes it judges), from the cache when possible.
-fn reference(
+/// The converged reference: dense with `reference_spp` samples per pixel and a seed of its own
+/// (derived from `seed`, so its noise is independent of the modes it judges), from the cache
+/// in `cache_dir` when possible. Returns the image, whether it was cached, and its render time.
+pub(crate) fn reference(
     desc: &SceneDesc,
     world: &World,
     camera: &Camera,
-    config: &BenchConfig,
+    reference_spp: u32,
+    seed: u64,
+    cache_dir: Option<&Path>,
     progress: &dyn Progress,
 ) -> Result<(Vec<[f32; 3]>, bool, f64), BenchError> {
     // Every pixel converges: in-focus ones take as many samples as defocused ones.
     let settings = RenderSettings {
         mode: Mode::Dense,
-        spp: config.reference_spp,
-        aa: config.reference_spp,
-        seed: crate::sampler::hash64(config.seed ^ 0x5eed_5eed),
+        spp: reference_spp,
+        aa: reference_spp,
+        seed: crate::sampler::hash64(seed ^ 0x5eed_5eed),
         ..Default::default()
     };
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let path = config
-        .cache_dir
-        .as_ref()
-        .map(|dir| dir.join(format!("{}.ref", reference_key(desc, camera, &settings))));
+    let path =
+        cache_dir.map(|dir| dir.join(format!("{}.ref", reference_key(desc, camera, &settings))));
     if let Some(rgb) = path.as_deref().and_then(|p| read_reference(p, w, h)) {
         return Ok((rgb, true, 0.0));
     }
@@ -318,8 +337,15 @@ pub fn run(
         check_cache_dir(dir)?;
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let (reference, reference_cached, reference_seconds) =
-        reference(desc, world, camera, config, progress)?;
+    let (reference, reference_cached, reference_seconds) = reference(
+        desc,
+        world,
+        camera,
+        config.reference_spp,
+        config.seed,
+        config.cache_dir.as_deref(),
+        progress,
+    )?;
 
     // Intersect-only: replay exactly the packets dense traces, without shading or sampling.
     let recording = RenderSettings {
@@ -350,6 +376,7 @@ pub fn run(
                 spp: config.spp,
                 // The seed's "plain ray tracing": one ray per pixel.
                 aa: if *mode == Mode::Pinhole { 1 } else { config.aa },
+                // The error-controlled row has no k; the others are the seed's fixed rule.
                 rule: if k.is_some() {
                     SiteRule::Seed
                 } else {

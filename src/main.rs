@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
-use dofray::bench::{self, BenchConfig};
+use dofray::bench::{self, BenchConfig, equal_error};
 use dofray::camera::{Camera, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::filter::{PixelFilter, PixelFilterKind};
@@ -38,7 +38,21 @@ enum Command {
     /// Render a scene to an image (PNG: 8-bit sRGB; EXR: linear float with Z/coc/interval/samples).
     Render(RenderArgs),
     /// Reproduce the seed's table: time pinhole, dense and adaptive modes, count their rays, and
-    /// measure their quality against dense and a converged reference.
+    /// measure their quality against dense and a converged reference; or, with --equal-error,
+    /// the time dense and adaptive need to reach given PSNR levels.
+    ///
+    /// The seed's table times pinhole, dense and adaptive (the seed's rule at k = 0.4 and 0.2,
+    /// and --paper-exact) at one sample count and compares them with dense and with a converged
+    /// reference (dense at --reference-spp samples per pixel, cached in --cache-dir).
+    ///
+    /// --equal-error instead renders dense and adaptive (the error-controlled rule at its
+    /// default tolerance, 4 / sqrt(spp) 8-bit code values) at every rung of --ladder, and
+    /// reports for each of --levels the seconds each needs to reach that PSNR against the
+    /// reference (interpolated linearly in PSNR against log seconds between the two rungs that
+    /// bracket it; "not reached" beyond the ladder; "<=" when the cheapest rung already reaches
+    /// it), the speedup dense / adaptive, and the same for the highest level both reach. With
+    /// --out it draws equal-error.png there: PSNR against seconds, both curves, guides at the
+    /// levels. Example: dofray bench paper --equal-error --ladder 4,16,64 --out bench/
     Bench(BenchArgs),
     /// List the built-in scenes.
     Scenes,
@@ -197,17 +211,19 @@ struct BenchArgs {
     #[command(flatten)]
     scene: SceneArgs,
     /// Samples per sample site that blur reaches, in every mode [default: the scene's, else
-    /// 16].
-    #[arg(long)]
+    /// 16]. Not with --equal-error (its --ladder gives the sample counts).
+    #[arg(long, conflicts_with = "equal_error")]
     spp: Option<u32>,
     /// Samples per in-focus sample site (and per pixel in pinhole mode), in every mode
-    /// [default: the scene's, else 4].
+    /// [default: the scene's, else 4]. With --equal-error: the same at every rung [default:
+    /// the rung's spp times the scene's aa / spp (4 / 16), rounded, at least 1].
     #[arg(long)]
     aa: Option<u32>,
-    /// Timed repeats of each mode; medians are reported.
+    /// Timed repeats of each mode (or rung); medians are reported.
     #[arg(long, default_value_t = 3)]
     repeat: usize,
-    /// Samples per pixel of the converged reference image (dense, in focus or not).
+    /// Samples per pixel of the converged reference image (dense, in focus or not). With
+    /// --equal-error it must exceed the ladder's largest rung (several times is better).
     #[arg(long, default_value_t = 1024)]
     reference_spp: u32,
     /// Where the reference is cached between runs [default: $XDG_CACHE_HOME/dofray or
@@ -215,9 +231,32 @@ struct BenchArgs {
     #[arg(long)]
     cache_dir: Option<PathBuf>,
     /// Write every image, the depth (figure 2) and interval (figure 3) maps, a side-by-side
-    /// comparison and an error heat map into this directory.
+    /// comparison and an error heat map into this directory; with --equal-error, the
+    /// PSNR-versus-seconds plot equal-error.png.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Run the equal-error study instead of the seed's table: the time dense and adaptive
+    /// need to reach each PSNR level of --levels over the spp rungs of --ladder.
+    #[arg(long)]
+    equal_error: bool,
+    /// With --equal-error: the samples per defocused site of each rung, for both methods.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "SPP,...",
+        requires = "equal_error",
+        default_value = "4,8,16,32,64,128"
+    )]
+    ladder: Vec<u32>,
+    /// With --equal-error: the PSNR levels in dB (sRGB, against the reference).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "DB,...",
+        requires = "equal_error",
+        default_value = "30,35,40"
+    )]
+    levels: Vec<f64>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
@@ -686,6 +725,9 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
             .with_context(|| format!("cannot create --out directory {}", dir.display()))?;
     }
     let p = prepare(&a.scene)?;
+    if a.equal_error {
+        return run_equal_error(a, &p);
+    }
     let config = BenchConfig {
         spp: a.spp.or(p.desc.spp).unwrap_or(16),
         aa: a.aa.or(p.desc.aa).unwrap_or(4),
@@ -720,6 +762,166 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
         write_bench_images(dir, &report, &images)?;
     }
     Ok(())
+}
+
+fn run_equal_error(a: &BenchArgs, p: &Prepared) -> Result<()> {
+    let max = RenderSettings::MAX_SAMPLES;
+    for (flag, n) in [("--aa", a.aa), ("--reference-spp", Some(a.reference_spp))] {
+        if let Some(n) = n
+            && (n == 0 || n > max)
+        {
+            bail!("{flag} must be 1 to {max}, got {n}");
+        }
+    }
+    if let Some(&n) = a.ladder.iter().find(|&&n| n == 0 || n > max) {
+        bail!("--ladder takes sample counts of 1 to {max}, got {n}");
+    }
+    if let Some(l) = a.levels.iter().find(|l| !l.is_finite()) {
+        bail!("--levels takes finite PSNR values in dB, got {l}");
+    }
+    if a.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let top = a.ladder.iter().copied().max().unwrap_or(0);
+    if a.reference_spp <= top {
+        bail!(
+            "--reference-spp ({}) must exceed the ladder's largest rung ({top}); several \
+             times more is better",
+            a.reference_spp
+        );
+    }
+    // The scene's in-focus to defocused ratio of samples (4 : 16 by default), at every rung.
+    let aa = match a.aa {
+        Some(n) => equal_error::RungAa::Fixed(n),
+        None => equal_error::RungAa::Ratio(
+            p.desc.aa.unwrap_or(4) as f64 / p.desc.spp.unwrap_or(16) as f64,
+        ),
+    };
+    let config = equal_error::EqualErrorConfig {
+        ladder: a.ladder.clone(),
+        levels: a.levels.clone(),
+        aa,
+        repeat: a.repeat,
+        reference_spp: a.reference_spp,
+        seed: a.scene.seed,
+        cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
+    };
+    let bar = Bar::new(a.quiet || a.json);
+    let mut report = p
+        .pool
+        .install(|| equal_error::run(&p.desc, &p.world, &p.camera, &config, &bar))?;
+    if let Some(dir) = &a.out {
+        equal_error::write_plot(&mut report, dir)?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_equal_error(&report);
+    }
+    Ok(())
+}
+
+/// Seconds for a table cell: "not reached", or "<=" before an upper bound.
+fn crossing_cell(c: &equal_error::Crossing) -> String {
+    match c.seconds {
+        None => "not reached".into(),
+        Some(s) if c.at_first_rung => format!("<={s:.4}"),
+        Some(s) => format!("{s:.4}"),
+    }
+}
+
+fn speedup_cell(l: &equal_error::Level) -> String {
+    use equal_error::Bound;
+    match l.speedup {
+        None => "-".into(),
+        Some(x) => match l.speedup_bound {
+            Bound::Exact => format!("{x:.2}x"),
+            Bound::AtMost => format!("<={x:.2}x"),
+            Bound::AtLeast => format!(">={x:.2}x"),
+            Bound::Unknown => format!("~{x:.2}x?"),
+        },
+    }
+}
+
+fn print_equal_error(r: &equal_error::EqualErrorReport) {
+    println!(
+        "dofray bench --equal-error: scene {}, {}x{}, median of {} runs, {} threads; reference {} spp{}",
+        r.scene,
+        r.width,
+        r.height,
+        r.repeat,
+        r.threads,
+        r.reference_spp,
+        if r.reference_cached { " (cached)" } else { "" }
+    );
+    let aa = match r.aa {
+        equal_error::RungAa::Fixed(n) => format!("{n} at every rung"),
+        equal_error::RungAa::Ratio(x) => format!("{x} x spp, at least 1"),
+    };
+    println!(
+        "adaptive: error-controlled rule, default tolerance 4/sqrt(spp) code values; aa: {aa}"
+    );
+    println!(
+        "{:>6} {:>5} | {:>9} {:>11} {:>12} {:>8} | {:>9} {:>11} {:>12} {:>8} {:>6}",
+        "spp",
+        "aa",
+        "dense s",
+        "rays",
+        "samples",
+        "PSNR",
+        "adapt. s",
+        "rays",
+        "samples",
+        "PSNR",
+        "tol."
+    );
+    for (d, ad) in r.dense.iter().zip(&r.adaptive) {
+        println!(
+            "{:>6} {:>5} | {:>9.4} {:>11} {:>12} {:>8.2} | {:>9.4} {:>11} {:>12} {:>8.2} {:>6.2}",
+            d.spp,
+            d.aa,
+            d.seconds,
+            d.rays,
+            d.samples,
+            d.psnr_vs_reference,
+            ad.seconds,
+            ad.rays,
+            ad.samples,
+            ad.psnr_vs_reference,
+            ad.tolerance.unwrap_or(f32::NAN)
+        );
+    }
+    println!("time to reach each PSNR level (seconds, interpolated in log time between rungs):");
+    println!(
+        "  {:>10} {:>12} {:>12} {:>10}",
+        "level", "dense", "adaptive", "speedup"
+    );
+    let row = |name: String, l: &equal_error::Level| {
+        println!(
+            "  {:>10} {:>12} {:>12} {:>10}",
+            name,
+            crossing_cell(&l.dense),
+            crossing_cell(&l.adaptive),
+            speedup_cell(l)
+        );
+    };
+    for l in &r.levels {
+        row(format!("{} dB", l.psnr_db), l);
+    }
+    match &r.highest_common {
+        Some(l) => {
+            println!("highest level both reach:");
+            row(format!("{:.2} dB", l.psnr_db), l);
+        }
+        None => println!("highest level both reach: none (no finite PSNR)"),
+    }
+    println!(
+        "PSNR in sRGB against the reference; \"<=\": the cheapest rung already reaches the level \
+         (an upper bound)."
+    );
+    if let Some(plot) = &r.plot {
+        println!("plot: {}", plot.display());
+    }
 }
 
 fn print_table(r: &bench::BenchReport) {

@@ -139,9 +139,31 @@ pub fn write_png_rgb(
     height: usize,
     rgb: &[Vec3],
 ) -> Result<(), OutputError> {
+    check_len(path, width, height, rgb.len(), "colour")?;
+    let bytes: Vec<u8> = rgb
+        .iter()
+        .flat_map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
+        .collect();
+    write_png_srgb8(path, width, height, &bytes)
+}
+
+/// Writes an 8-bit PNG of bytes that are already sRGB (`width x height` RGB triples, top row
+/// first), atomically like every other output. Used for plots.
+pub fn write_png_srgb8(
+    path: &Path,
+    width: usize,
+    height: usize,
+    bytes: &[u8],
+) -> Result<(), OutputError> {
     use image::ImageEncoder;
 
-    check_len(path, width, height, rgb.len(), "colour")?;
+    if bytes.len() % 3 != 0 {
+        return Err(OutputError::Encode {
+            path: path.to_path_buf(),
+            message: format!("{} bytes are not whole RGB pixels", bytes.len()),
+        });
+    }
+    check_len(path, width, height, bytes.len() / 3, "colour")?;
     let (w, h) = match (u32::try_from(width), u32::try_from(height)) {
         (Ok(w), Ok(h)) => (w, h),
         _ => {
@@ -151,15 +173,11 @@ pub fn write_png_rgb(
             });
         }
     };
-    let bytes: Vec<u8> = rgb
-        .iter()
-        .flat_map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
-        .collect();
     let resolved = target::check_target(path)?;
     write_atomic(path, &resolved, |file| {
         let mut out = BufWriter::new(file);
         image::codecs::png::PngEncoder::new(&mut out)
-            .write_image(&bytes, w, h, image::ExtendedColorType::Rgb8)
+            .write_image(bytes, w, h, image::ExtendedColorType::Rgb8)
             .map_err(|e| encode_or_io(path, e))?;
         out.flush().map_err(|source| OutputError::Io {
             path: path.to_path_buf(),

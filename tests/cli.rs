@@ -330,6 +330,152 @@ fn bench_reports_every_mode_and_caches_the_reference() {
     std::fs::remove_dir_all(dir).unwrap();
 }
 
+#[test]
+fn bench_equal_error_reports_levels_rungs_and_a_plot() {
+    let dir = scratch("equal-error");
+    let cache = dir.join("cache");
+    let out_dir = dir.join("out");
+    let common = [
+        "bench",
+        "--equal-error",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--ladder",
+        "8,4",
+        "--levels",
+        "15,35,90",
+        "--reference-spp",
+        "32",
+        "--repeat",
+        "1",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+    ];
+    let out = dofray(&[&common[..], &["--json"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(report["width"], 64);
+    assert_eq!(report["reference_spp"], 32);
+    for method in ["dense", "adaptive"] {
+        let rungs = report[method].as_array().unwrap();
+        // The ladder, sorted.
+        let spp: Vec<u64> = rungs.iter().map(|r| r["spp"].as_u64().unwrap()).collect();
+        assert_eq!(spp, [4, 8], "{method}");
+        for r in rungs {
+            for key in [
+                "seconds",
+                "rays",
+                "psnr_vs_reference",
+                "samples",
+                "sample_sites",
+            ] {
+                assert!(r.get(key).is_some(), "{key} missing in {r}");
+            }
+            assert!(r["samples"].as_u64().unwrap() > 0);
+            assert!(r["psnr_vs_reference"].as_f64().unwrap() > 10.0, "{r}");
+        }
+    }
+    // Dense shades every pixel: 4 spp at every defocused site, aa = 1 elsewhere.
+    assert_eq!(report["dense"][0]["aa"], 1);
+    assert_eq!(report["dense"][0]["sample_sites"], 64 * 48);
+    assert!(report["dense"][0]["tolerance"].is_null());
+    assert_eq!(report["adaptive"][0]["tolerance"], 2.0);
+    let levels = report["levels"].as_array().unwrap();
+    let db: Vec<f64> = levels
+        .iter()
+        .map(|l| l["psnr_db"].as_f64().unwrap())
+        .collect();
+    assert_eq!(db, [15.0, 35.0, 90.0]);
+    // 15 dB: both reach it at their cheapest rung (upper bounds).
+    assert_eq!(levels[0]["dense"]["at_first_rung"], true);
+    assert_eq!(levels[0]["speedup_bound"], "unknown");
+    assert!(levels[0]["speedup"].as_f64().unwrap() > 0.0);
+    // 90 dB: beyond any ladder.
+    assert!(levels[2]["dense"]["seconds"].is_null());
+    assert!(levels[2]["adaptive"]["seconds"].is_null());
+    assert!(levels[2]["speedup"].is_null());
+    assert!(report["highest_common"]["psnr_db"].as_f64().unwrap() > 10.0);
+    let plot = out_dir.join("equal-error.png");
+    assert_eq!(report["plot"], plot.to_str().unwrap());
+    let png = image::open(&plot).expect("a PNG");
+    assert_eq!((png.width(), png.height()), (960, 600));
+
+    // The table, with the reference now cached.
+    let out = dofray(&common);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = String::from_utf8_lossy(&out.stdout);
+    for phrase in [
+        "reference 32 spp (cached)",
+        "90 dB",
+        "not reached",
+        "highest level both reach",
+        "plot: ",
+    ] {
+        assert!(table.contains(phrase), "table lacks {phrase:?}:\n{table}");
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn bench_equal_error_flags_are_checked() {
+    for (args, expected) in [
+        (&["bench", "--ladder", "4,8"][..], "--equal-error"),
+        (
+            &["bench", "--equal-error", "--spp", "4"][..],
+            "cannot be used",
+        ),
+        (
+            &["bench", "--equal-error", "--ladder", "4,0", "--width", "8"][..],
+            "--ladder",
+        ),
+        (
+            &[
+                "bench",
+                "--equal-error",
+                "--levels",
+                "30,nan",
+                "--width",
+                "8",
+            ][..],
+            "--levels",
+        ),
+        (
+            &[
+                "bench",
+                "--equal-error",
+                "--ladder",
+                "4,64",
+                "--reference-spp",
+                "64",
+            ][..],
+            "must exceed the ladder's largest rung (64)",
+        ),
+    ] {
+        let out = dofray(args);
+        assert!(!out.status.success(), "{args:?} was accepted");
+        assert!(
+            stderr(&out).contains(expected),
+            "{args:?}: {}",
+            stderr(&out)
+        );
+    }
+    let help = dofray(&["bench", "--help"]);
+    let text = String::from_utf8_lossy(&help.stdout);
+    for phrase in [
+        "--equal-error",
+        "--ladder",
+        "--levels",
+        "log seconds",
+        "equal-error.png",
+    ] {
+        assert!(text.contains(phrase), "help lacks {phrase:?}");
+    }
+}
+
 fn repo(rel: &str) -> String {
     format!("{}/{rel}", env!("CARGO_MANIFEST_DIR"))
 }
