@@ -17,7 +17,10 @@
 //!    spp / 4)` samples (at most `spp`) and doubles them, up to `spp`, while the standard
 //!    error of its mean exceeds half the tolerance: bright bokeh and edges behind blur get
 //!    `spp`, flat blur stops early. Fewer than 16 samples are never trusted to have
-//!    converged: a few samples that all land on one side of an edge look noise-free.
+//!    converged: a few samples that all land on one side of an edge look noise-free. Nor
+//!    are samples that agree while a much brighter sample was seen within the CoC's reach
+//!    (a small highlight behind the blur that this site's samples happened to miss): the
+//!    site keeps sampling while one such sample more would move it beyond the limit.
 //!
 //! Rounds repeat until no cell fails and no site wants samples. Differences and noise are
 //! measured in 8-bit sRGB code values continued above 1 ([`super::estimate::code`]), the
@@ -32,7 +35,6 @@ use super::maps;
 use super::site::SiteShader;
 use super::{Progress, Tally};
 
-thread_local!(static TIMES: std::cell::RefCell<[f64; 2]> = const { std::cell::RefCell::new([0.0; 2]) });
 /// Start interval as a fraction of the CoC (see the module documentation).
 pub const START_K: f32 = 0.5;
 /// A difference counts as real when it exceeds the tolerance by this many standard errors.
@@ -377,12 +379,21 @@ pub fn refine(
     loop {
         pending.sort_unstable();
         pending.dedup();
-        let peaks = (rounds > 0).then(|| Peaks::new(&est, coc, width, height, s.max_interval));
+        let limit = SAMPLING_SHARE * tolerance;
+        // A site that looks converged by its variance must also not be missing a highlight
+        // seen nearby; the peaks map is only built when some site is in that position.
+        let calm = |p: usize| {
+            let e = &est[p];
+            e.n > 0 && e.n < target(p) && e.std_error_code() <= limit
+        };
+        let peaks = pending
+            .iter()
+            .any(|&p| calm(p))
+            .then(|| Peaks::new(&est, coc, width, height, s.max_interval));
         let mut work = Vec::new();
         for p in pending.drain(..) {
             let e = &est[p];
             let unsure = |e: &Estimate| {
-                let limit = SAMPLING_SHARE * tolerance;
                 e.std_error_code() > limit
                     || peaks
                         .as_ref()
@@ -403,18 +414,7 @@ pub fn refine(
         }
         rounds += 1;
         progress.start(&format!("adaptive, round {rounds}"), height as u64);
-        let t0 = std::time::Instant::now();
         shader.shade_rows(&from, &to, &mut est, progress, tally);
-        TIMES.with(|t| t.borrow_mut()[0] += t0.elapsed().as_secs_f64());
-        if std::env::var("DOFRAY_DEBUG").is_ok() {
-            let n: u32 = work.iter().map(|&p| to[p] - from[p]).sum();
-            eprintln!(
-                "round {rounds}: {} sites, {n} samples, {:.4}s",
-                work.len(),
-                t0.elapsed().as_secs_f64()
-            );
-        }
-        let t0 = std::time::Instant::now();
         // Check every cell a new sample or a split touched.
         let mut dirty = std::mem::take(&mut resized);
         for &p in &work {
@@ -436,10 +436,6 @@ pub fn refine(
             width,
             height,
         );
-        TIMES.with(|t| t.borrow_mut()[1] += t0.elapsed().as_secs_f64());
-    }
-    if std::env::var("DOFRAY_DEBUG").is_ok() {
-        TIMES.with(|t| eprintln!("shade {:.3} check {:.3}", t.borrow()[0], t.borrow()[1]));
     }
 
     let color = (0..width * height)
