@@ -38,7 +38,7 @@ use super::{Progress, Tally};
 /// Start interval as a fraction of the CoC (see the module documentation).
 pub const START_K: f32 = 0.5;
 /// A difference counts as real when it exceeds the tolerance by this many standard errors.
-const NOISE_Z: f32 = 1.0;
+const NOISE_Z: f32 = 2.0;
 /// The fewest samples whose variance is trusted to stop a site early: with fewer, samples
 /// that happen to agree (all on one side of an edge behind the blur) look converged.
 const MIN_TRUSTED: u32 = 16;
