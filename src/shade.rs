@@ -163,7 +163,8 @@ impl Texture {
     }
 }
 
-/// A surface: Lambertian diffuse, optional Blinn-Phong highlight, optional perfect mirror.
+/// A surface: Lambertian diffuse, optional Blinn-Phong highlight, optional perfect mirror,
+/// optional emission.
 #[derive(Debug, Clone)]
 pub struct Material {
     pub diffuse: Texture,
@@ -173,6 +174,12 @@ pub struct Material {
     pub shininess: f32,
     /// Fraction of light reflected as a perfect mirror (one bounce).
     pub mirror: f32,
+    /// Radiance the surface emits (linear RGB, zero for none), added wherever a camera ray or
+    /// a mirror reflection sees it. It is not a light source: it lights no other surface and
+    /// casts no shadows (use point or directional lights for that).
+    pub emission: Vec3,
+    /// An image the emission is multiplied by (glTF `emissiveTexture`), if any.
+    pub emission_texture: Option<Arc<ImageTexture>>,
 }
 
 impl Material {
@@ -182,6 +189,20 @@ impl Material {
             specular: Vec3::ZERO,
             shininess: 32.0,
             mirror: 0.0,
+            emission: Vec3::ZERO,
+            emission_texture: None,
+        }
+    }
+
+    /// The radiance the surface emits at texture coordinates `uv` (zero for most materials).
+    #[inline]
+    pub fn emitted(&self, uv: Vec2) -> Vec3 {
+        if self.emission == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        match &self.emission_texture {
+            Some(image) => self.emission * image.sample(uv),
+            None => self.emission,
         }
     }
 }

@@ -316,11 +316,17 @@ fn the_image_and_its_aov_pictures_never_overwrite_one_another() {
     // Distinct names in the same directory are fine, even one that does not exist yet.
     let o = render_tiny(&aov.join("image.png"), &["--aov-dir", s(&aov)]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(entries(&aov), ["depth.png", "image.png", "interval.png"]);
+    assert_eq!(
+        entries(&aov),
+        ["depth.png", "image.png", "interval.png", "samples.png"]
+    );
     let fresh = dir.join("fresh");
     let o = render_tiny(&fresh.join("image.png"), &["--aov-dir", s(&fresh)]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert_eq!(entries(&fresh), ["depth.png", "image.png", "interval.png"]);
+    assert_eq!(
+        entries(&fresh),
+        ["depth.png", "image.png", "interval.png", "samples.png"]
+    );
 }
 
 #[test]

@@ -163,7 +163,7 @@ fn every_scene_file_loads_builds_and_renders() {
         }
     }
     names.sort();
-    assert_eq!(names, ["gallery", "paper", "vase"]);
+    assert_eq!(names, ["bokeh", "gallery", "paper", "vase"]);
 }
 
 /// The packet-wide surface points the renderer shades equal `World::surface_point` of each
@@ -172,7 +172,7 @@ fn every_scene_file_loads_builds_and_renders() {
 fn packet_surface_points_equal_single_ones() {
     use dofray::embree::{LANES, RayHint, RayPacket16};
     use dofray::shade::SurfacePoints16;
-    for name in ["paper", "gallery", "vase"] {
+    for name in ["paper", "gallery", "vase", "bokeh"] {
         let desc = load(&repo().join(format!("scenes/{name}.toml"))).unwrap();
         let world = world(&desc);
         let camera = desc.camera.build(|_| Some(1.0)).unwrap();

@@ -287,7 +287,8 @@ pub fn trace_and_shade(
         let m = world.material_index(&hit);
         let material = &world.materials[m];
         albedo[lane] = material.diffuse.sample(points.uv[lane]);
-        radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror);
+        radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror)
+            + material.emitted(points.uv[lane]);
         material_of[lane] = m;
         extent[lane] = primitive_extent(world, &hit);
         let sp = points.get(lane);

@@ -43,7 +43,7 @@ pub fn paper() -> SceneDesc {
         },
         specular: Vec3::splat(0.25),
         shininess: 48.0,
-        mirror: 0.0,
+        ..Material::diffuse(Vec3::ZERO)
     };
     let materials = vec![
         proc(Pattern::Checker, [0.85, 0.1, 0.08], [0.95, 0.9, 0.8], 12.0),
@@ -58,9 +58,8 @@ pub fn paper() -> SceneDesc {
                 b: Vec3::splat(0.12),
                 scale: 1.0,
             },
-            specular: Vec3::ZERO,
             shininess: 1.0,
-            mirror: 0.0,
+            ..Material::diffuse(Vec3::ZERO)
         },
     ];
     let mut objects: Vec<Object> = (0..5)

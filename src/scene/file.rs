@@ -19,10 +19,10 @@ use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
 use super::model::{
     self, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, Transform, default_background,
-    default_light, default_material, euler_xyz_deg,
+    default_light, default_material, euler_xyz_deg, short_vec,
 };
 use super::texture::TextureCache;
-use super::{Background, MeshMaterials, Object, SceneDesc};
+use super::{Background, MAX_MATERIAL_VALUE, MeshMaterials, Object, SceneDesc};
 use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
 use crate::embree::TriangleMesh;
 use crate::shade::{ImageTexture, Light, Material, Pattern, Texture, Wrap};
@@ -424,6 +424,7 @@ struct RawMaterial {
     specular: Option<Color>,
     shininess: Option<Positive>,
     mirror: Option<Unit>,
+    emission: Option<Spanned<Color>>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -654,11 +655,27 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
                 }
             },
         };
+        let emission = match &m.emission {
+            None => Vec3::ZERO,
+            Some(e) if e.get_ref().0.max_element() > MAX_MATERIAL_VALUE => {
+                return Err(ctx.invalid(
+                    e.span(),
+                    format!("{key}.emission"),
+                    format!(
+                        "emission {} is out of range: each component must be from 0 to 1e6",
+                        short_vec(e.get_ref().0)
+                    ),
+                ));
+            }
+            Some(e) => e.get_ref().0,
+        };
         materials.push(Material {
             diffuse,
             specular: m.specular.map_or(Vec3::ZERO, |c| c.0),
             shininess: m.shininess.map_or(32.0, |s| s.0),
             mirror: m.mirror.map_or(0.0, |u| u.0),
+            emission,
+            emission_texture: None,
         });
         material_index.insert(name, materials.len() - 1);
     }

@@ -17,9 +17,10 @@ use ::gltf::mesh::Mode;
 use ::gltf::texture::WrappingMode;
 use glam::{Affine3A, Mat4, Vec3};
 
+use super::MAX_MATERIAL_VALUE;
 use super::error::{LoadError, Location};
 use super::input::{self, LoadOptions};
-use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh};
+use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh, short_number, short_vec};
 use super::texture::{TextureCache, decode};
 use crate::shade::{ImageTexture, Material, Texture, Wrap};
 
@@ -583,10 +584,7 @@ impl Loader<'_> {
             )?;
         }
         let material = prim.material();
-        let uv_set = material
-            .pbr_metallic_roughness()
-            .base_color_texture()
-            .map_or(0, |t| t.tex_coord());
+        let uv_set = uv_set(&material);
         let uvs = prim.get(&::gltf::Semantic::TexCoords(uv_set));
         if let Some(t) = &uvs {
             check_accessor(
@@ -717,6 +715,33 @@ impl Loader<'_> {
         let name = m
             .name()
             .map_or_else(|| format!("material {index}"), str::to_string);
+        // Emission: emissiveFactor times KHR_materials_emissive_strength, times
+        // emissiveTexture when it uses the texture coordinates the mesh is loaded with.
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        let emission = Vec3::from(m.emissive_factor()) * strength;
+        if !(emission.is_finite() && emission.max_element() <= MAX_MATERIAL_VALUE) {
+            return Err(LoadError::Gltf {
+                at: Location::file(self.path).with_key(format!("materials[{index}]")),
+                message: format!(
+                    "emission {} (emissiveFactor times emissiveStrength {}) is out of range: \
+                     each component must be finite and at most 1e6",
+                    short_vec(emission),
+                    short_number(strength)
+                ),
+            });
+        }
+        let emission = emission.max(Vec3::ZERO);
+        let emission_texture = match m.emissive_texture() {
+            Some(info) if emission != Vec3::ZERO && info.tex_coord() == uv_set(m) => {
+                let texture = info.texture();
+                let wrap = match texture.sampler().wrap_s() {
+                    WrappingMode::ClampToEdge => Wrap::Clamp,
+                    _ => Wrap::Repeat,
+                };
+                Some(self.image(&texture.source(), wrap)?)
+            }
+            _ => None,
+        };
         self.materials.push((
             name,
             Material {
@@ -724,6 +749,8 @@ impl Loader<'_> {
                 specular,
                 shininess,
                 mirror,
+                emission,
+                emission_texture,
             },
         ));
         let i = self.materials.len() - 1;
@@ -772,6 +799,18 @@ impl Loader<'_> {
         };
         self.images.insert(key, texture.clone());
         Ok(texture)
+    }
+}
+
+/// The texture coordinate set a primitive is loaded with: the base-colour texture's, else the
+/// emissive texture's, else 0.
+fn uv_set(material: &::gltf::Material) -> u32 {
+    match (
+        material.pbr_metallic_roughness().base_color_texture(),
+        material.emissive_texture(),
+    ) {
+        (Some(t), _) | (None, Some(t)) => t.tex_coord(),
+        (None, None) => 0,
     }
 }
 

@@ -157,7 +157,7 @@ pub struct World {
     pub background: Background,
 }
 
-/// The largest colour, albedo or specular value a scene may give (and pattern scale, and
+/// The largest colour, albedo, specular or emission value a scene may give (and pattern scale, and
 /// Blinn-Phong exponent): far beyond any real material, small enough that no sum of shading
 /// terms can overflow f32.
 pub const MAX_MATERIAL_VALUE: f32 = 1e6;
@@ -231,6 +231,11 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
             || format!("material {i}'s mirror"),
             (0.0..=1.0).contains(&m.mirror),
             "from 0 to 1",
+        )?;
+        check_value(
+            || format!("material {i}'s emission"),
+            colour_ok(m.emission, MAX_MATERIAL_VALUE),
+            COLOUR,
         )?;
     }
     for (i, light) in desc.lights.iter().enumerate() {

@@ -12,9 +12,10 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
+use super::MAX_MATERIAL_VALUE;
 use super::error::{LoadError, Location};
 use super::input::{self, LoadOptions};
-use super::model::{Model, ModelMesh, Transform, mesh};
+use super::model::{Model, ModelMesh, Transform, mesh, short_vec};
 use super::texture::TextureCache;
 use crate::shade::{Material, Texture, Wrap};
 
@@ -718,11 +719,28 @@ fn convert_material(
         Some(3 | 5 | 7) => specular.max_element().clamp(0.0, 1.0),
         _ => 0.0,
     };
+    // `Ke`: emitted radiance. Negative components mean none, as for the other colours; a
+    // value the renderer would refuse is an error naming the statement.
+    let emission = match m.emissive.map(Vec3::from) {
+        None => Vec3::ZERO,
+        Some(e) if !(e.is_finite() && e.max_element() <= MAX_MATERIAL_VALUE) => {
+            return Err(LoadError::Obj {
+                at: Location::file(mtl_path).with_key(format!("{}.Ke", m.name)),
+                message: format!(
+                    "emission {} is out of range: each component must be finite and at most 1e6",
+                    short_vec(e)
+                ),
+            });
+        }
+        Some(e) => e.max(Vec3::ZERO),
+    };
     Ok(Material {
         diffuse,
         specular,
         shininess,
         mirror,
+        emission,
+        emission_texture: None,
     })
 }
 
