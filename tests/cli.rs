@@ -835,3 +835,60 @@ fn threads_bound_embree_too_and_the_environment_configures_embree() {
     assert_eq!(json["embree"]["native_packet_width"], 4);
     assert_eq!(json["embree"]["lanes_per_call"], 16);
 }
+
+#[test]
+fn the_site_rule_follows_the_flags_and_the_scene_file() {
+    let dir = scratch("rule");
+    let png = dir.join("rule.png");
+    let json = |flags: &[&str]| -> serde_json::Value {
+        let mut args = vec!["render", "-o", png.to_str().unwrap(), "--width", "64"];
+        args.extend_from_slice(&["--height", "48", "--json"]);
+        args.extend_from_slice(flags);
+        let out = dofray(&args);
+        assert!(out.status.success(), "{flags:?}: {}", stderr(&out));
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    // The error-controlled rule by default, at 4 / sqrt(spp).
+    let default = json(&["--aov-dir", dir.to_str().unwrap()]);
+    assert_eq!(default["rule"], "error");
+    assert_eq!(default["tolerance"], 1.0);
+    assert!(default["interval_factor"].is_null());
+    assert!(default["rounds"].as_u64().unwrap() >= 1);
+    assert!(dir.join("samples.png").is_file());
+    assert_eq!(json(&["--spp", "64"])["tolerance"], 0.5);
+    assert_eq!(json(&["--tolerance", "2.5"])["tolerance"], 2.5);
+    // -k or --paper-exact: the seed's rule.
+    let seed = json(&["-k", "0.3"]);
+    assert_eq!((seed["rule"].as_str(), seed["rounds"].as_u64()), (Some("seed"), Some(0)));
+    assert_eq!(seed["interval_factor"], 0.3);
+    assert!(seed["tolerance"].is_null());
+    assert_eq!(json(&["--paper-exact"])["interval_factor"], 0.4);
+    // Both rules at once, or a tolerance that is no error bound, are refused.
+    for (flags, want) in [
+        (&["--tolerance", "1", "-k", "0.4"][..], "--tolerance"),
+        (&["--tolerance", "0"][..], "--tolerance must be a finite number > 0"),
+        (&["--tolerance", "nan"][..], "--tolerance"),
+    ] {
+        let mut args = vec!["render", "-o", png.to_str().unwrap(), "--width", "16"];
+        args.extend_from_slice(flags);
+        let out = dofray(&args);
+        assert!(!out.status.success(), "{flags:?} was accepted");
+        assert!(stderr(&out).contains(want), "{flags:?}: {}", stderr(&out));
+    }
+    // A scene file picks a rule too; the command line's wins.
+    let scene = dir.join("rule.toml");
+    let base = "[image]\nwidth = 32\nheight = 24\n[render]\n";
+    std::fs::write(&scene, format!("{base}interval_factor = 0.25\n")).unwrap();
+    let s = scene.to_str().unwrap();
+    let seed = json(&[s]);
+    assert_eq!((seed["rule"].as_str(), seed["interval_factor"].as_f64()), (Some("seed"), Some(0.25)));
+    assert_eq!(json(&[s, "--tolerance", "3"])["rule"], "error");
+    std::fs::write(&scene, format!("{base}tolerance = 0.75\n")).unwrap();
+    assert_eq!(json(&[s])["tolerance"], 0.75);
+    std::fs::write(&scene, format!("{base}tolerance = 1\ninterval_factor = 0.4\n")).unwrap();
+    let out = dofray(&["render", s, "-o", png.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let err = stderr(&out);
+    assert!(err.contains("render.tolerance") && err.contains("rule.toml"), "{err}");
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -134,6 +134,26 @@ mod tests {
     }
 
     #[test]
+    fn agreeing_samples_still_doubt_a_brighter_neighbour() {
+        let mut e = Estimate::default();
+        for _ in 0..16 {
+            e.add(Vec3::splat(0.2), 1.0);
+        }
+        assert_eq!(e.std_error_code(), 0.0);
+        assert_eq!(e.peak(), 0.2);
+        // Nothing brighter nearby: nothing unseen.
+        assert_eq!(e.unseen_code(0.2), 0.0);
+        // A highlight of 400 seen nearby could move this mean by 400 / 16: far beyond a code.
+        assert!(e.unseen_code(400.0) > 100.0);
+        // With 4x the samples, a quarter of that in linear terms.
+        let mut more = e;
+        for _ in 0..48 {
+            more.add(Vec3::splat(0.2), 1.0);
+        }
+        assert!(more.unseen_code(400.0) < e.unseen_code(400.0));
+    }
+
+    #[test]
     fn code_values_match_srgb_and_continue_above_one() {
         assert_eq!(code(0.0), 0.0);
         assert!((code(1.0) - 255.0).abs() < 1e-3);

@@ -7,11 +7,15 @@
 //!   centre (no depth of field).
 //! - `dense` (Cook's distributed ray tracing): every pixel is a site.
 //! - `adaptive` (the seed's method): sites on power-of-two lattices whose spacing follows the
-//!   CoC; the pixels between them are interpolated.
+//!   CoC; the pixels between them are interpolated. By default an error estimate sets the
+//!   spacing and each site's samples ([`refine`], [`SiteRule::Error`]); [`SiteRule::Seed`] is
+//!   the seed's fixed rule ([`maps::interval_map`], [`interpolate`]).
 //!
 //! Every mode starts with the depth pass: one ray per pixel through the pixel centre and the
 //! lens centre, intersected only, for the depth and CoC maps. In dense and adaptive mode a site
-//! that blur reaches (see [`maps::blurred`]) takes `spp` samples, any other site `aa`. Both are
+//! that blur reaches (see [`maps::blurred`]) takes up to `spp` samples (exactly `spp` except
+//! under the error-controlled rule, which stops converged sites early), any other site `aa`.
+//! Each site keeps an [`estimate::Estimate`] (mean and uncertainty). Both are
 //! full samples of pixel x lens, so the depth pass (which misses whatever is smaller than a
 //! pixel) only moves effort: every site's expected value is the filtered, lens-integrated
 //! radiance that dense converges to, and adaptive's one approximation is the interpolation.

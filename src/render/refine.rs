@@ -5,8 +5,10 @@
 //! 1. **A-priori bound.** A surface blurred by a CoC of C pixels is its sharp image convolved
 //!    with a disc of diameter C, so nothing in that region is narrower than C: a lattice of
 //!    interval C / 2 ([`START_K`]) puts a traced point within C / 2 of every pixel, and every
-//!    blurred feature (even a bokeh disc with a hard rim) touches one. These intervals, made
-//!    conservative near sharper pixels, are upper bounds.
+//!    blurred feature (even a bokeh disc with a hard rim) touches one. As interpolation error
+//!    grows with the interval squared, the start interval scales with the tolerance's square
+//!    root ([`start_k`]: C / 2 at 1 code value). These intervals, made conservative near
+//!    sharper pixels, are upper bounds.
 //! 2. **A-posteriori check.** Every cell of the lattice also traces its centre. Any traced
 //!    pixel inside a cell (its centre, or a corner of a finer neighbour on its edge) is
 //!    compared with the cell's interpolation at that pixel; a difference beyond the tolerance
@@ -35,8 +37,16 @@ use super::maps;
 use super::site::SiteShader;
 use super::{Progress, Tally};
 
-/// Start interval as a fraction of the CoC (see the module documentation).
+/// Start interval as a fraction of the CoC at a tolerance of 1 code value (see the module
+/// documentation).
 pub const START_K: f32 = 0.5;
+
+/// The start interval's fraction of the CoC for `tolerance`: interpolation error grows with
+/// the square of the interval, so the interval that keeps it in bounds grows with the
+/// tolerance's square root (within 1/4 and 1 of the CoC).
+pub fn start_k(tolerance: f32) -> f32 {
+    (START_K * tolerance.sqrt()).clamp(0.25, 1.0)
+}
 /// A difference counts as real when it exceeds the tolerance by this many standard errors.
 const NOISE_Z: f32 = 2.0;
 /// The fewest samples whose variance is trusted to stop a site early: with fewer, samples
@@ -359,7 +369,8 @@ pub fn refine(
             s.aa
         }
     };
-    let mut interval = maps::start_intervals(coc, width, height, START_K, s.max_interval);
+    let mut interval =
+        maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval);
     let mut est = vec![Estimate::default(); width * height];
     let mut need = vec![false; width * height];
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
@@ -490,6 +501,14 @@ mod tests {
         );
         let ws = cell.weights(3, 0, cell.centre());
         assert!(ws.iter().all(|&(p, w)| p != (4, 4) || w.abs() < 1e-6));
+    }
+
+    #[test]
+    fn start_intervals_shrink_with_the_tolerance() {
+        assert_eq!(start_k(1.0), START_K);
+        assert!(start_k(0.25) < start_k(1.0) && start_k(1.0) < start_k(4.0));
+        assert_eq!(start_k(1e-6), 0.25);
+        assert_eq!(start_k(1e6), 1.0);
     }
 
     #[test]
