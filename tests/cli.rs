@@ -859,14 +859,20 @@ fn the_site_rule_follows_the_flags_and_the_scene_file() {
     assert_eq!(json(&["--tolerance", "2.5"])["tolerance"], 2.5);
     // -k or --paper-exact: the seed's rule.
     let seed = json(&["-k", "0.3"]);
-    assert_eq!((seed["rule"].as_str(), seed["rounds"].as_u64()), (Some("seed"), Some(0)));
+    assert_eq!(
+        (seed["rule"].as_str(), seed["rounds"].as_u64()),
+        (Some("seed"), Some(0))
+    );
     assert_eq!(seed["interval_factor"], 0.3);
     assert!(seed["tolerance"].is_null());
     assert_eq!(json(&["--paper-exact"])["interval_factor"], 0.4);
     // Both rules at once, or a tolerance that is no error bound, are refused.
     for (flags, want) in [
         (&["--tolerance", "1", "-k", "0.4"][..], "--tolerance"),
-        (&["--tolerance", "0"][..], "--tolerance must be a finite number > 0"),
+        (
+            &["--tolerance", "0"][..],
+            "--tolerance must be a finite number > 0",
+        ),
         (&["--tolerance", "nan"][..], "--tolerance"),
     ] {
         let mut args = vec!["render", "-o", png.to_str().unwrap(), "--width", "16"];
@@ -877,18 +883,29 @@ fn the_site_rule_follows_the_flags_and_the_scene_file() {
     }
     // A scene file picks a rule too; the command line's wins.
     let scene = dir.join("rule.toml");
-    let base = "[image]\nwidth = 32\nheight = 24\n[render]\n";
+    let base = "[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 5]\nradius = 1\n\
+                [image]\nwidth = 32\nheight = 24\n[render]\n";
     std::fs::write(&scene, format!("{base}interval_factor = 0.25\n")).unwrap();
     let s = scene.to_str().unwrap();
     let seed = json(&[s]);
-    assert_eq!((seed["rule"].as_str(), seed["interval_factor"].as_f64()), (Some("seed"), Some(0.25)));
+    assert_eq!(
+        (seed["rule"].as_str(), seed["interval_factor"].as_f64()),
+        (Some("seed"), Some(0.25))
+    );
     assert_eq!(json(&[s, "--tolerance", "3"])["rule"], "error");
     std::fs::write(&scene, format!("{base}tolerance = 0.75\n")).unwrap();
     assert_eq!(json(&[s])["tolerance"], 0.75);
-    std::fs::write(&scene, format!("{base}tolerance = 1\ninterval_factor = 0.4\n")).unwrap();
+    std::fs::write(
+        &scene,
+        format!("{base}tolerance = 1\ninterval_factor = 0.4\n"),
+    )
+    .unwrap();
     let out = dofray(&["render", s, "-o", png.to_str().unwrap()]);
     assert!(!out.status.success());
     let err = stderr(&out);
-    assert!(err.contains("render.tolerance") && err.contains("rule.toml"), "{err}");
+    assert!(
+        err.contains("render.tolerance") && err.contains("rule.toml"),
+        "{err}"
+    );
     std::fs::remove_dir_all(dir).unwrap();
 }
