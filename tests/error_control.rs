@@ -239,3 +239,37 @@ fn the_samples_map_records_what_was_traced() {
     assert!(film.samples.contains(&16) && film.samples.contains(&4));
     assert!(film.interval.iter().all(|i| i.is_power_of_two()));
 }
+
+#[test]
+fn the_rule_decides_the_same_for_any_thread_count() {
+    let mut desc = builtin::paper();
+    desc.camera.width = 96;
+    desc.camera.height = 72;
+    let (world, camera) = setup(&desc);
+    let on = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            draw(
+                &world,
+                &camera,
+                RenderSettings {
+                    spp: 64,
+                    ..Default::default()
+                },
+            )
+        })
+    };
+    let ((one, s1), (two, s2)) = (on(1), on(2));
+    let bits = |f: &Film| -> Vec<u32> {
+        f.color
+            .iter()
+            .flat_map(|c| c.to_array().map(f32::to_bits))
+            .collect()
+    };
+    assert_eq!(bits(&one), bits(&two));
+    assert_eq!((one.samples, one.interval), (two.samples, two.interval));
+    assert_eq!((s1.rays, s1.rounds), (s2.rays, s2.rounds));
+}
