@@ -159,7 +159,7 @@ impl Cell {
 /// The interpolation at (x, y) from the traced points, with its standard error in code
 /// values, or None when a point it needs is not traced (yet).
 fn interpolate_at(
-    est: &[Estimate],
+    traced: &Traced,
     width: usize,
     cell: &Cell,
     (x, y): (usize, usize),
@@ -171,22 +171,54 @@ fn interpolate_at(
         if w == 0.0 {
             continue;
         }
-        let e = &est[py * width + px];
+        let p = py * width + px;
+        let e = &traced.est[p];
         if e.n == 0 {
             return None;
         }
         value += e.mean() * w;
-        let se = noise(e);
+        let se = traced.noise(p);
         var += w * w * se * se;
     }
     Some((value, var.sqrt()))
 }
 
-/// A site's standard error in code values for the check; unknown (one sample) counts as
-/// none, so a single-sample site never hides a difference.
-fn noise(e: &Estimate) -> f32 {
-    let se = e.std_error_code();
-    if se.is_finite() { se } else { 0.0 }
+/// Every pixel's estimate, with what the checks read of each traced one computed once per
+/// round: its standard error and its mean, in code values.
+struct Traced {
+    est: Vec<Estimate>,
+    /// [`Estimate::std_error_code`]: infinite while unknown (fewer than two samples).
+    se: Vec<f32>,
+    code: Vec<Vec3>,
+}
+
+impl Traced {
+    fn new(n: usize) -> Self {
+        Self {
+            est: vec![Estimate::default(); n],
+            se: vec![f32::INFINITY; n],
+            code: vec![Vec3::ZERO; n],
+        }
+    }
+
+    /// Recomputes the cached values of the pixels in `changed`.
+    fn update(&mut self, changed: &[usize]) {
+        let fresh: Vec<(f32, Vec3)> = changed
+            .par_iter()
+            .map(|&p| (self.est[p].std_error_code(), code3(self.est[p].mean())))
+            .collect();
+        for (&p, (se, code)) in changed.iter().zip(fresh) {
+            self.se[p] = se;
+            self.code[p] = code;
+        }
+    }
+
+    /// The standard error in code values for the check; unknown (one sample) counts as none,
+    /// so a single-sample site never hides a difference.
+    fn noise(&self, p: usize) -> f32 {
+        let se = self.se[p];
+        if se.is_finite() { se } else { 0.0 }
+    }
 }
 
 /// Marks in `need` the corners of `cell` and its centre, when it has one, and lists the
@@ -218,29 +250,24 @@ fn cell_pixels(c: &Cell, width: usize, height: usize) -> impl Iterator<Item = (u
 /// than its corners (its centre, or corners of finer neighbours on its edges) is compared
 /// with the cell's interpolation there. Returns the cells that fail, each with the interval
 /// it should be split to.
-fn failed_cells(
-    est: &[Estimate],
-    cells: &[Cell],
-    width: usize,
-    tolerance: f32,
-) -> Vec<(Cell, u32)> {
+fn failed_cells(traced: &Traced, cells: &[Cell], width: usize, tolerance: f32) -> Vec<(Cell, u32)> {
     cells
         .par_iter()
         .filter_map(|cell| {
             let mut worst = 0.0f32;
             for qy in cell.y0..=cell.y1 {
                 for qx in cell.x0..=cell.x1 {
-                    let q = &est[qy * width + qx];
-                    if q.n == 0 || cell.is_corner(qx, qy) {
+                    let q = qy * width + qx;
+                    if traced.est[q].n == 0 || cell.is_corner(qx, qy) {
                         continue;
                     }
                     let centre = cell.centre().filter(|&c| c != (qx, qy));
-                    let Some((value, se)) = interpolate_at(est, width, cell, (qx, qy), centre)
+                    let Some((value, se)) = interpolate_at(traced, width, cell, (qx, qy), centre)
                     else {
                         continue;
                     };
-                    let diff = (code3(q.mean()) - code3(value)).abs().max_element();
-                    let se_q = noise(q);
+                    let diff = (traced.code[q] - code3(value)).abs().max_element();
+                    let se_q = traced.noise(q);
                     let threshold = tolerance + NOISE_Z * (se * se + se_q * se_q).sqrt();
                     worst = worst.max(diff / threshold);
                 }
@@ -371,7 +398,7 @@ pub fn refine(
     };
     let mut interval =
         maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval);
-    let mut est = vec![Estimate::default(); width * height];
+    let mut traced = Traced::new(width * height);
     let mut need = vec![false; width * height];
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
     let mut pending = Vec::new();
@@ -394,25 +421,25 @@ pub fn refine(
         // A site that looks converged by its variance must also not be missing a highlight
         // seen nearby; the peaks map is only built when some site is in that position.
         let calm = |p: usize| {
-            let e = &est[p];
-            e.n > 0 && e.n < target(p) && e.std_error_code() <= limit
+            let n = traced.est[p].n;
+            n > 0 && n < target(p) && traced.se[p] <= limit
         };
         let peaks = pending
             .iter()
             .any(|&p| calm(p))
-            .then(|| Peaks::new(&est, coc, width, height, s.max_interval));
+            .then(|| Peaks::new(&traced.est, coc, width, height, s.max_interval));
         let mut work = Vec::new();
         for p in pending.drain(..) {
-            let e = &est[p];
-            let unsure = |e: &Estimate| {
-                e.std_error_code() > limit
+            let e = &traced.est[p];
+            let unsure = || {
+                traced.se[p] > limit
                     || peaks
                         .as_ref()
                         .is_some_and(|k| e.unseen_code(k.near(p)) > limit)
             };
             let want = if e.n == 0 {
                 first(p)
-            } else if e.n < target(p) && unsure(e) {
+            } else if e.n < target(p) && unsure() {
                 (2 * e.n).min(target(p))
             } else {
                 continue;
@@ -425,19 +452,20 @@ pub fn refine(
         }
         rounds += 1;
         progress.start(&format!("adaptive, round {rounds}"), height as u64);
-        shader.shade_rows(&from, &to, &mut est, progress, tally);
+        shader.shade_rows(&from, &to, &mut traced.est, progress, tally);
+        traced.update(&work);
         // Check every cell a new sample or a split touched.
         let mut dirty = std::mem::take(&mut resized);
         for &p in &work {
             from[p] = to[p];
-            if est[p].n < target(p) {
+            if traced.est[p].n < target(p) {
                 pending.push(p);
             }
             dirty.extend(cells_around(p, &interval, width, height));
         }
         dirty.sort_unstable();
         dirty.dedup();
-        let mut failed = failed_cells(&est, &dirty, width, tolerance);
+        let mut failed = failed_cells(&traced, &dirty, width, tolerance);
         failed.sort_unstable();
         resized = split(
             &mut interval,
@@ -452,14 +480,14 @@ pub fn refine(
     let color = (0..width * height)
         .into_par_iter()
         .map(|p| {
-            let e = &est[p];
+            let e = &traced.est[p];
             if e.n > 0 {
                 return e.mean();
             }
             let (x, y) = (p % width, p / width);
             let cell = Cell::of(x, y, interval[p], width, height);
             let centre = cell.centre();
-            interpolate_at(&est, width, &cell, (x, y), centre)
+            interpolate_at(&traced, width, &cell, (x, y), centre)
                 .map(|(v, _)| v)
                 .expect("every corner and centre of every cell is traced before the loop ends")
         })
@@ -467,7 +495,7 @@ pub fn refine(
     Refined {
         color,
         interval,
-        samples: est.iter().map(|e| e.n).collect(),
+        samples: traced.est.iter().map(|e| e.n).collect(),
         rounds,
     }
 }
