@@ -2,7 +2,7 @@
 
 #![deny(unsafe_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
@@ -198,6 +198,9 @@ struct RenderArgs {
     /// black = interpolated) as PNG pictures into this directory (created if missing).
     #[arg(long)]
     aov_dir: Option<PathBuf>,
+    /// PNG output: 16 bits per channel instead of 8 (still sRGB; EXR is always float).
+    #[arg(long)]
+    png_16: bool,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     json: bool,
@@ -628,7 +631,21 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let bar = Bar::new(a.quiet || a.json);
     let (film, stats) = pool.install(|| render::render(&world, &camera, &settings, &bar))?;
 
-    output::write_film(&a.output, &film)?;
+    // The scene's file, when it is one, is recorded and hashed in the image's metadata.
+    let scene_file = Path::new(&a.scene.scene);
+    let metadata = output::Metadata::for_render(
+        &desc.name,
+        scene_file.is_file().then_some(scene_file),
+        &camera,
+        &settings,
+        &stats,
+        &world.scene.device().embree_version(),
+    );
+    let options = output::WriteOptions {
+        metadata,
+        png_16bit: a.png_16,
+    };
+    output::write_film_with(&a.output, &film, &options)?;
     if let Some(dir) = &a.aov_dir {
         let (w, h) = (film.width, film.height);
         let depth = output::depth_picture(&film);

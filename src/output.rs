@@ -2,11 +2,12 @@
 //!
 //! Two formats, chosen by the file extension (case-insensitive):
 //!
-//! - `.png`: 8-bit sRGB of the linear colour, clamped to `[0, 1]`.
+//! - `.png`: 8-bit (or, with [`WriteOptions::png_16bit`], 16-bit) sRGB of the linear colour,
+//!   clamped to `[0, 1]`, with an `sRGB` chunk and the [`Metadata`] as text chunks.
 //! - `.exr`: one unnamed layer of 32-bit float channels `R`, `G`, `B` (linear), `Z` (view-axis
 //!   depth, `+inf` for misses), `coc` (circle of confusion in pixels), `interval` (sample
 //!   interval) and `samples` (lens samples traced), which compositors read as the beauty pass
-//!   plus auxiliary channels.
+//!   plus auxiliary channels; the [`Metadata`] as text header attributes.
 //!
 //! Every writer is atomic: it writes a hidden temporary file next to the target and renames it
 //! over the target only once everything has been written, removing the temporary file on any
@@ -20,6 +21,7 @@
 //! space and linearised, so the PNG shows exactly the intended grey ramps and palettes.
 
 pub mod atomic;
+pub mod metadata;
 pub mod target;
 
 use std::io::{BufWriter, Write};
@@ -30,6 +32,7 @@ use glam::Vec3;
 use crate::render::film::Film;
 use atomic::write_atomic;
 pub use atomic::{TempFile, clean_up_on_signals};
+pub use metadata::Metadata;
 pub use target::{
     AOV_DEPTH, AOV_INTERVAL, AOV_SAMPLES, AOVS, check_render_outputs, resolve_target, same_file,
 };
@@ -121,13 +124,59 @@ pub fn check_writable(path: &Path) -> Result<ImageFormat, OutputError> {
     Ok(format)
 }
 
+/// How [`write_film_with`] writes.
+#[derive(Debug, Clone, Default)]
+pub struct WriteOptions {
+    /// Written as EXR header attributes and PNG text chunks.
+    pub metadata: Metadata,
+    /// PNG: 16 bits per channel instead of 8 (still sRGB-encoded).
+    pub png_16bit: bool,
+}
+
 /// Writes `film` to `path` in the format its extension names (see the module documentation).
 pub fn write_film(path: &Path, film: &Film) -> Result<(), OutputError> {
+    write_film_with(path, film, &WriteOptions::default())
+}
+
+/// [`write_film`] with metadata and format options.
+pub fn write_film_with(
+    path: &Path,
+    film: &Film,
+    options: &WriteOptions,
+) -> Result<(), OutputError> {
     let format = ImageFormat::from_path(path)?;
     check_film(path, film)?;
     match format {
-        ImageFormat::Png => write_png_rgb(path, film.width, film.height, &film.color),
-        ImageFormat::Exr => write_exr(path, film),
+        ImageFormat::Png if options.png_16bit => {
+            let bytes: Vec<u8> = film
+                .color
+                .iter()
+                .flat_map(|c| [c.x, c.y, c.z])
+                .flat_map(|v| srgb16(v).to_be_bytes())
+                .collect();
+            let png = Png {
+                width: film.width,
+                height: film.height,
+                data: &bytes,
+                sixteen: true,
+            };
+            png.write(path, &options.metadata)
+        }
+        ImageFormat::Png => {
+            let bytes: Vec<u8> = film
+                .color
+                .iter()
+                .flat_map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
+                .collect();
+            let png = Png {
+                width: film.width,
+                height: film.height,
+                data: &bytes,
+                sixteen: false,
+            };
+            png.write(path, &options.metadata)
+        }
+        ImageFormat::Exr => write_exr(path, film, &options.metadata),
     }
 }
 
@@ -155,35 +204,88 @@ pub fn write_png_srgb8(
     height: usize,
     bytes: &[u8],
 ) -> Result<(), OutputError> {
-    use image::ImageEncoder;
-
-    if bytes.len() % 3 != 0 {
-        return Err(OutputError::Encode {
-            path: path.to_path_buf(),
-            message: format!("{} bytes are not whole RGB pixels", bytes.len()),
-        });
-    }
-    check_len(path, width, height, bytes.len() / 3, "colour")?;
-    let (w, h) = match (u32::try_from(width), u32::try_from(height)) {
-        (Ok(w), Ok(h)) => (w, h),
-        _ => {
-            return Err(OutputError::Encode {
-                path: path.to_path_buf(),
-                message: format!("{width}x{height} is too large for PNG"),
-            });
-        }
+    let png = Png {
+        width,
+        height,
+        data: bytes,
+        sixteen: false,
     };
-    let resolved = target::check_target(path)?;
-    write_atomic(path, &resolved, |file| {
-        let mut out = BufWriter::new(file);
-        image::codecs::png::PngEncoder::new(&mut out)
-            .write_image(bytes, w, h, image::ExtendedColorType::Rgb8)
-            .map_err(|e| encode_or_io(path, e))?;
-        out.flush().map_err(|source| OutputError::Io {
+    png.write(path, &Metadata::new())
+}
+
+/// An sRGB-encoded RGB image ready for the PNG encoder: 8-bit bytes, or 16-bit big-endian
+/// pairs.
+struct Png<'a> {
+    width: usize,
+    height: usize,
+    data: &'a [u8],
+    sixteen: bool,
+}
+
+impl Png<'_> {
+    /// Writes it atomically with an `sRGB` chunk (so viewers and compositors know the
+    /// encoding) and one text chunk per metadata entry (`tEXt`, or `iTXt` for non-Latin-1).
+    fn write(&self, path: &Path, metadata: &Metadata) -> Result<(), OutputError> {
+        let encode = |message: String| OutputError::Encode {
             path: path.to_path_buf(),
-            source,
+            message,
+        };
+        let pixel = if self.sixteen { 6 } else { 3 };
+        if self.data.len() % pixel != 0 {
+            return Err(encode(format!(
+                "{} bytes are not whole RGB pixels",
+                self.data.len()
+            )));
+        }
+        check_len(
+            path,
+            self.width,
+            self.height,
+            self.data.len() / pixel,
+            "colour",
+        )?;
+        let (Ok(w), Ok(h)) = (u32::try_from(self.width), u32::try_from(self.height)) else {
+            return Err(encode(format!(
+                "{}x{} is too large for PNG",
+                self.width, self.height
+            )));
+        };
+        let resolved = target::check_target(path)?;
+        write_atomic(path, &resolved, |file| {
+            let png_error = |e: png::EncodingError| match e {
+                png::EncodingError::IoError(source) => OutputError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                },
+                other => encode(other.to_string()),
+            };
+            let mut out = BufWriter::new(file);
+            let mut encoder = png::Encoder::new(&mut out, w, h);
+            encoder.set_color(png::ColorType::Rgb);
+            encoder.set_depth(if self.sixteen {
+                png::BitDepth::Sixteen
+            } else {
+                png::BitDepth::Eight
+            });
+            encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+            for (key, value) in metadata.iter() {
+                let latin1 = value.chars().all(|c| u32::from(c) < 256);
+                let added = if latin1 {
+                    encoder.add_text_chunk(key.to_string(), value.to_string())
+                } else {
+                    encoder.add_itxt_chunk(key.to_string(), value.to_string())
+                };
+                added.map_err(png_error)?;
+            }
+            let mut writer = encoder.write_header().map_err(png_error)?;
+            writer.write_image_data(self.data).map_err(png_error)?;
+            writer.finish().map_err(png_error)?;
+            out.flush().map_err(|source| OutputError::Io {
+                path: path.to_path_buf(),
+                source,
+            })
         })
-    })
+    }
 }
 
 /// The seed's figure 2: depth as a grey picture, near = white, far = dark grey, misses black.
@@ -284,13 +386,22 @@ pub fn heat_picture(values: &[f32], max: f32) -> Vec<Vec3> {
 
 /// sRGB-encodes one linear channel, clamped to `[0, 1]` (NaN counts as 0), to 8 bits.
 pub fn srgb8(v: f32) -> u8 {
+    (srgb_unit(v) * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+/// [`srgb8`] to 16 bits.
+pub fn srgb16(v: f32) -> u16 {
+    (srgb_unit(v) * 65535.0).round().clamp(0.0, 65535.0) as u16
+}
+
+/// The sRGB encoding of one linear channel in `[0, 1]` (clamped; NaN counts as 0).
+fn srgb_unit(v: f32) -> f32 {
     let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
-    let e = if v <= 0.003_130_8 {
+    if v <= 0.003_130_8 {
         12.92 * v
     } else {
         1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (e * 255.0).round().clamp(0.0, 255.0) as u8
+    }
 }
 
 /// The inverse of the sRGB transfer function: display value in `[0, 1]` to linear.
@@ -303,7 +414,7 @@ fn srgb_to_linear(e: f32) -> f32 {
     }
 }
 
-fn write_exr(path: &Path, film: &Film) -> Result<(), OutputError> {
+fn write_exr(path: &Path, film: &Film, metadata: &Metadata) -> Result<(), OutputError> {
     use exr::prelude::*;
 
     let channel = |name: &str, data: Vec<f32>| AnyChannel::new(name, FlatSamples::F32(data));
@@ -319,12 +430,25 @@ fn write_exr(path: &Path, film: &Film) -> Result<(), OutputError> {
         ),
         channel("samples", film.samples.iter().map(|&s| s as f32).collect()),
     ]);
+    let mut attributes = LayerAttributes {
+        software_name: Some(Text::from(
+            format!("dofray {}", env!("CARGO_PKG_VERSION")).as_str(),
+        )),
+        ..LayerAttributes::default()
+    };
+    for (key, value) in metadata.iter().filter(|(k, _)| *k != "Software") {
+        // EXR text is Latin-1: other characters become '?'.
+        let latin1: String = value
+            .chars()
+            .map(|c| if u32::from(c) < 256 { c } else { '?' })
+            .collect();
+        if let (Some(k), Some(v)) = (Text::new_or_none(key), Text::new_or_none(latin1)) {
+            attributes.other.insert(k, AttributeValue::Text(v));
+        }
+    }
     let layer = Layer::new(
         (film.width, film.height),
-        LayerAttributes {
-            software_name: Some(Text::from("dofray")),
-            ..LayerAttributes::default()
-        },
+        attributes,
         Encoding::SMALL_LOSSLESS,
         // EXR requires channels sorted by name; `sort` does that (bytewise: B G R Z coc ...).
         AnyChannels::sort(channels),
@@ -374,19 +498,6 @@ fn check_len(
             path: path.to_path_buf(),
             message: format!("{what} buffer has {len} pixels, expected {width}x{height}"),
         }),
-    }
-}
-
-fn encode_or_io(path: &Path, e: image::ImageError) -> OutputError {
-    match e {
-        image::ImageError::IoError(source) => OutputError::Io {
-            path: path.to_path_buf(),
-            source,
-        },
-        other => OutputError::Encode {
-            path: path.to_path_buf(),
-            message: other.to_string(),
-        },
     }
 }
 

@@ -909,3 +909,80 @@ fn the_site_rule_follows_the_flags_and_the_scene_file() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// The text chunks and colour-space chunk of a PNG.
+fn png_info(path: &std::path::Path) -> (Vec<(String, String)>, bool, png::BitDepth) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    let info = reader.info();
+    let text = info
+        .uncompressed_latin1_text
+        .iter()
+        .map(|t| (t.keyword.clone(), t.text.clone()))
+        .collect();
+    (text, info.srgb.is_some(), info.bit_depth)
+}
+
+#[test]
+fn outputs_record_their_settings_and_colour_space() {
+    let dir = scratch("meta");
+    let scene = repo("scenes/gallery.toml");
+    let png8 = dir.join("g8.png");
+    let png16 = dir.join("g16.png");
+    let exr = dir.join("g.exr");
+    for (out, extra) in [(&png8, None), (&png16, Some("--png-16")), (&exr, None)] {
+        let mut args = vec!["render", &scene, "-o", out.to_str().unwrap()];
+        args.extend_from_slice(&["--width", "48", "--spp", "4", "--seed", "7", "-q"]);
+        args.extend(extra);
+        let run = dofray(&args);
+        assert!(run.status.success(), "{}", stderr(&run));
+    }
+    let (text, srgb, depth) = png_info(&png8);
+    assert!(srgb, "an sRGB chunk");
+    assert_eq!(depth, png::BitDepth::Eight);
+    let get = |text: &[(String, String)], key: &str| {
+        text.iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.clone())
+            .unwrap_or_else(|| panic!("{key} missing in {text:?}"))
+    };
+    assert_eq!(get(&text, "dofray:spp"), "4");
+    assert_eq!(get(&text, "dofray:seed"), "7");
+    assert_eq!(get(&text, "dofray:mode"), "adaptive");
+    assert_eq!(get(&text, "dofray:rule"), "error");
+    assert_eq!(get(&text, "dofray:scene"), "gallery");
+    assert!(get(&text, "dofray:scene_file").ends_with("gallery.toml"));
+    assert_eq!(get(&text, "dofray:scene_fnv1a64").len(), 16);
+    let embree = get(&text, "dofray:embree");
+    assert!(
+        embree.starts_with(&dofray::embree::EMBREE_MAJOR.to_string()),
+        "{embree}"
+    );
+    assert!(get(&text, "Software").starts_with("dofray "));
+    // 16-bit: the same picture, finer steps.
+    let (text16, srgb16, depth16) = png_info(&png16);
+    assert!(srgb16 && depth16 == png::BitDepth::Sixteen);
+    assert_eq!(get(&text16, "dofray:spp"), "4");
+    let (a, b) = (
+        image::open(&png8).unwrap().to_rgb16(),
+        image::open(&png16).unwrap().to_rgb16(),
+    );
+    let worst = a
+        .as_raw()
+        .iter()
+        .zip(b.as_raw())
+        .map(|(&x, &y)| (i32::from(x) - i32::from(y)).abs())
+        .max()
+        .unwrap();
+    assert!(worst <= 129, "8- and 16-bit differ by {worst} of 65535");
+    // EXR: the same settings as header attributes.
+    let meta = exr::meta::MetaData::read_from_file(&exr, false).unwrap();
+    let attrs = &meta.headers[0].own_attributes.other;
+    let text_of = |key: &str| match attrs.get(&exr::prelude::Text::from(key)) {
+        Some(exr::meta::attribute::AttributeValue::Text(t)) => t.to_string(),
+        other => panic!("{key}: {other:?}"),
+    };
+    assert_eq!(text_of("dofray:spp"), "4");
+    assert_eq!(text_of("dofray:scene"), "gallery");
+    std::fs::remove_dir_all(dir).unwrap();
+}
