@@ -272,6 +272,8 @@ fn bench_reports_every_mode_and_caches_the_reference() {
     assert!(first.status.success(), "{}", stderr(&first));
     let report: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
     assert_eq!(report["reference_cached"], false);
+    assert_eq!(report["schema_version"], 1);
+    assert_eq!(report["git_commit"], dofray::GIT_COMMIT);
     assert!(report["intersect_only_mrays_per_s"].as_f64().unwrap() > 0.0);
     let rows = report["rows"].as_array().unwrap();
     let labels: Vec<&str> = rows.iter().map(|r| r["label"].as_str().unwrap()).collect();
@@ -360,6 +362,8 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
     assert_eq!(report["width"], 64);
     assert_eq!(report["reference_spp"], 32);
+    assert_eq!(report["schema_version"], 1);
+    assert_eq!(report["dofray_version"], env!("CARGO_PKG_VERSION"));
     for method in ["dense", "adaptive"] {
         let rungs = report[method].as_array().unwrap();
         // The ladder, sorted.
