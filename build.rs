@@ -34,6 +34,7 @@ fn main() {
     println!("cargo::rerun-if-env-changed=LIBCLANG_PATH");
     println!("cargo::rerun-if-changed=ffi/wrapper.h");
     println!("cargo::rerun-if-changed=build.rs");
+    git_commit();
 
     let embree = match find_embree() {
         Ok(e) => e,
@@ -62,6 +63,46 @@ fn main() {
     let out = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR")).join("bindings.rs");
     if let Err(why) = generate_bindings(&embree, &out) {
         fail(&why);
+    }
+}
+
+/// Exports the git commit as `DOFRAY_GIT_COMMIT` (`dofray --version`, `--json`): the
+/// environment variable of that name if set (builds from a source archive), else
+/// `git rev-parse --short HEAD`, else "unknown". Never fails the build.
+fn git_commit() {
+    println!("cargo::rerun-if-env-changed=DOFRAY_GIT_COMMIT");
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .stderr(std::process::Stdio::null())
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .and_then(|o| String::from_utf8(o.stdout).ok())
+            .map(|s| s.trim().to_string())
+            .filter(|s| !s.is_empty())
+    };
+    let commit = env::var("DOFRAY_GIT_COMMIT")
+        .ok()
+        .filter(|s| !s.trim().is_empty())
+        .or_else(|| git(&["rev-parse", "--short", "HEAD"]))
+        .unwrap_or_else(|| "unknown".to_string());
+    println!("cargo::rustc-env=DOFRAY_GIT_COMMIT={commit}");
+    // Run again when HEAD moves: HEAD itself (a checkout), the branch it names (a commit) and
+    // packed-refs. Only existing files: a missing one would make every build rerun this script.
+    let mut watch = Vec::new();
+    if let Some(dir) = git(&["rev-parse", "--git-dir"]) {
+        watch.push(PathBuf::from(dir).join("HEAD"));
+    }
+    if let Some(common) = git(&["rev-parse", "--git-common-dir"]) {
+        let common = PathBuf::from(common);
+        watch.push(common.join("packed-refs"));
+        if let Some(branch) = git(&["symbolic-ref", "-q", "HEAD"]) {
+            watch.push(common.join(branch));
+        }
+    }
+    for path in watch.iter().filter(|p| p.is_file()) {
+        println!("cargo::rerun-if-changed={}", path.display());
     }
 }
 

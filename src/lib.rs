@@ -8,11 +8,19 @@
 //! -> [`camera::Camera`] -> [`render::render`] -> [`render::Film`] -> [`output`].
 #![deny(unsafe_code)]
 
+/// dofray's version (Cargo's package version).
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// The git commit dofray was built from (`git rev-parse --short HEAD` at build time, or the
+/// `DOFRAY_GIT_COMMIT` environment variable), or `"unknown"` when built outside a git checkout.
+pub const GIT_COMMIT: &str = env!("DOFRAY_GIT_COMMIT");
+
 pub mod bench;
 pub mod camera;
 // The only module with FFI; its unsafe blocks are documented (clippy::undocumented_unsafe_blocks).
 #[allow(unsafe_code)]
 pub mod embree;
+pub mod exit;
 pub mod filter;
 pub mod limits;
 pub mod metrics;

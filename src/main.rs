@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use dofray::bench::{self, BenchConfig, equal_error};
 use dofray::camera::{Camera, Focus, LensSpec};
@@ -19,6 +19,13 @@ use dofray::scene::{SceneDesc, World, builtin};
 use dofray::shade::Light;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// Returns a usage error (exit status 2): a flag's value or a combination of flags is wrong.
+macro_rules! usage {
+    ($($arg:tt)*) => {
+        return Err(anyhow::Error::new(dofray::exit::UsageError(format!($($arg)*))))
+    };
+}
 
 /// Depth-of-field ray tracer on Intel Embree.
 ///
@@ -357,7 +364,7 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     let cam = &mut desc.camera;
     for (name, v) in [("--width", a.width), ("--height", a.height)] {
         if v == Some(0) {
-            bail!("{name} must be at least 1 pixel");
+            usage!("{name} must be at least 1 pixel");
         }
     }
     let (old_w, old_h) = (cam.width, cam.height);
@@ -394,12 +401,12 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
         if let Some(v) = v
             && !(v.is_finite() && v > 0.0)
         {
-            bail!("{flag} must be a finite number > 0, got {v}");
+            usage!("{flag} must be a finite number > 0, got {v}");
         }
     }
     if let Some(r) = a.aperture_radius {
         if !(r.is_finite() && r >= 0.0) {
-            bail!("--aperture-radius must be a finite number >= 0, got {r}");
+            usage!("--aperture-radius must be a finite number >= 0, got {r}");
         }
         // A photographic lens set the field of view: keep the framing it gave.
         cam.vfov_deg = cam.effective_vfov_deg();
@@ -407,10 +414,10 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     }
     if let (Some(sharp_range), Some(spread)) = (a.sharp_range, a.spread) {
         if !(sharp_range.is_finite() && sharp_range > 0.0) {
-            bail!("--sharp-range must be a finite number > 0, got {sharp_range}");
+            usage!("--sharp-range must be a finite number > 0, got {sharp_range}");
         }
         if !(spread.is_finite() && spread >= 0.0) {
-            bail!("--spread must be a finite number >= 0, got {spread}");
+            usage!("--spread must be a finite number >= 0, got {spread}");
         }
         // A photographic lens set the field of view: keep the framing it gave.
         cam.vfov_deg = cam.effective_vfov_deg();
@@ -443,7 +450,7 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
                     LensSpec::Seed { .. } => "the seed's (sharp_range and spread)",
                     LensSpec::Photographic { .. } => unreachable!("matched above"),
                 };
-                bail!(
+                usage!(
                     "{flag} applies to a photographic lens, but the scene's lens is {what}; \
                      give --f-number too to replace it with a photographic lens"
                 );
@@ -474,7 +481,7 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     {
         let vfov = cam.effective_vfov_deg();
         if !(vfov > 0.0 && vfov < 180.0) {
-            bail!(
+            usage!(
                 "a {focal_length_mm:e} mm lens on a {sensor_width_mm} mm sensor has no usable \
                  field of view ({vfov} degrees vertically); choose a longer --focal-length or \
                  a smaller --sensor-width"
@@ -483,7 +490,7 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     }
     if let Some(d) = a.focus_distance {
         if d.is_nan() || d <= 0.0 {
-            bail!("--focus-distance must be a number > 0 (or inf), got {d}");
+            usage!("--focus-distance must be a number > 0 (or inf), got {d}");
         }
         cam.focus = Focus::Distance(d);
     }
@@ -492,13 +499,13 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     }
     if let Some(b) = a.blades {
         if b == 1 || b == 2 {
-            bail!("--blades must be 0 (a circular aperture) or at least 3, got {b}");
+            usage!("--blades must be 0 (a circular aperture) or at least 3, got {b}");
         }
         cam.aperture.blades = b;
     }
     if let Some(r) = a.blade_rotation {
         if !r.is_finite() {
-            bail!("--blade-rotation must be a finite angle in degrees, got {r}");
+            usage!("--blade-rotation must be a finite angle in degrees, got {r}");
         }
         cam.aperture.rotation_deg = r;
     }
@@ -510,11 +517,27 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     }
     if let Some(v) = a.ambient {
         if !(v.is_finite() && v >= 0.0) {
-            bail!("--ambient must be a finite number >= 0, got {v}");
+            usage!("--ambient must be a finite number >= 0, got {v}");
         }
         desc.ambient = Vec3::splat(v);
     }
     Ok(())
+}
+
+/// Whether any flag replaced the scene's lens, focus or aperture shape (a camera error is then
+/// a usage error, not the scene's).
+fn lens_flags_given(a: &SceneArgs) -> bool {
+    a.aperture_radius.is_some()
+        || a.f_number.is_some()
+        || a.focal_length.is_some()
+        || a.sensor_width.is_some()
+        || a.sharp_range.is_some()
+        || a.spread.is_some()
+        || a.focus_distance.is_some()
+        || a.autofocus.is_some()
+        || a.blades.is_some()
+        || a.blade_rotation.is_some()
+        || a.anamorphic.is_some()
 }
 
 /// A scene ready to render: its description, the Embree world and the camera.
@@ -571,12 +594,19 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
             (
                 dofray::camera::CameraError::FocusPixelMisses { x, y },
                 (Focus::Pixel { x: x0, y: y0 }, w0, h0),
-            ) if (x, y) != (x0, y0) => anyhow::anyhow!(
-                "the scene's autofocus pixel ({x0}, {y0}) of its {w0}x{h0} image (({x}, {y}) at \
-                 {}x{}) sees no surface to focus on",
-                desc.camera.width,
-                desc.camera.height
-            ),
+            ) if (x, y) != (x0, y0) => anyhow::Error::new(dofray::exit::KindError {
+                kind: dofray::exit::ErrorKind::BadInput,
+                message: format!(
+                    "the scene's autofocus pixel ({x0}, {y0}) of its {w0}x{h0} image (({x}, \
+                     {y}) at {}x{}) sees no surface to focus on",
+                    desc.camera.width, desc.camera.height
+                ),
+            }),
+            // The lens or focus came from the flags: the command line asked for this camera.
+            (e, _) if lens_flags_given(a) => anyhow::Error::new(dofray::exit::KindError {
+                kind: dofray::exit::ErrorKind::Usage,
+                message: e.to_string(),
+            }),
             (e, _) => anyhow::Error::new(e),
         })
         .context("invalid camera")?;
@@ -627,7 +657,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     }
     settings
         .validate()
-        .map_err(|e| anyhow::anyhow!("{}", cli_message(&e)))?;
+        .map_err(|e| dofray::exit::UsageError(cli_message(&e)))?;
     let bar = Bar::new(a.quiet || a.json);
     let (film, stats) = pool.install(|| render::render(&world, &camera, &settings, &bar))?;
 
@@ -665,6 +695,9 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     }
     if a.json {
         let summary = serde_json::json!({
+            "schema_version": dofray::exit::SCHEMA_VERSION,
+            "dofray_version": dofray::VERSION,
+            "git_commit": dofray::GIT_COMMIT,
             "scene": desc.name,
             "output": a.output,
             "mode": a.mode.name(),
@@ -723,6 +756,7 @@ fn embree_json(scene: &dofray::embree::Scene) -> serde_json::Value {
         "version": device.embree_version(),
         "config": device.config(),
         "native_packet_width": device.native_packet_width(),
+        "isa": isa_family(device.native_packet_width()),
         "lanes_per_call": scene.lanes_per_call(),
     })
 }
@@ -760,23 +794,24 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
         ("--reference-spp", config.reference_spp),
     ] {
         if n == 0 || n > max {
-            bail!("{flag} must be 1 to {max}, got {n}");
+            usage!("{flag} must be 1 to {max}, got {n}");
         }
     }
     if config.repeat == 0 {
-        bail!("--repeat must be at least 1");
+        usage!("--repeat must be at least 1");
     }
     let bar = Bar::new(a.quiet || a.json);
     let (report, images) = p
         .pool
         .install(|| bench::run(&p.desc, &p.world, &p.camera, &config, &bar))?;
-    if a.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print_table(&report);
-    }
+    // Images first: a failure then reports one JSON object (the error), never two.
     if let Some(dir) = &a.out {
         write_bench_images(dir, &report, &images)?;
+    }
+    if a.json {
+        println!("{}", versioned_json(&report)?);
+    } else {
+        print_table(&report);
     }
     Ok(())
 }
@@ -787,21 +822,21 @@ fn run_equal_error(a: &BenchArgs, p: &Prepared) -> Result<()> {
         if let Some(n) = n
             && (n == 0 || n > max)
         {
-            bail!("{flag} must be 1 to {max}, got {n}");
+            usage!("{flag} must be 1 to {max}, got {n}");
         }
     }
     if let Some(&n) = a.ladder.iter().find(|&&n| n == 0 || n > max) {
-        bail!("--ladder takes sample counts of 1 to {max}, got {n}");
+        usage!("--ladder takes sample counts of 1 to {max}, got {n}");
     }
     if let Some(l) = a.levels.iter().find(|l| !l.is_finite()) {
-        bail!("--levels takes finite PSNR values in dB, got {l}");
+        usage!("--levels takes finite PSNR values in dB, got {l}");
     }
     if a.repeat == 0 {
-        bail!("--repeat must be at least 1");
+        usage!("--repeat must be at least 1");
     }
     let top = a.ladder.iter().copied().max().unwrap_or(0);
     if a.reference_spp <= top {
-        bail!(
+        usage!(
             "--reference-spp ({}) must exceed the ladder's largest rung ({top}); several \
              times more is better",
             a.reference_spp
@@ -831,7 +866,7 @@ fn run_equal_error(a: &BenchArgs, p: &Prepared) -> Result<()> {
         equal_error::write_plot(&mut report, dir)?;
     }
     if a.json {
-        println!("{}", serde_json::to_string(&report)?);
+        println!("{}", versioned_json(&report)?);
     } else {
         print_equal_error(&report);
     }
@@ -1108,23 +1143,104 @@ fn cli_message(e: &render::RenderError) -> String {
     }
 }
 
+/// A bench report (or any serialisable object) with `schema_version`, `dofray_version` and
+/// `git_commit` added at the top level.
+fn versioned_json(report: &impl serde::Serialize) -> Result<String> {
+    let mut value = serde_json::to_value(report)?;
+    if let Some(map) = value.as_object_mut() {
+        map.insert("schema_version".into(), dofray::exit::SCHEMA_VERSION.into());
+        map.insert("dofray_version".into(), dofray::VERSION.into());
+        map.insert("git_commit".into(), dofray::GIT_COMMIT.into());
+    }
+    Ok(serde_json::to_string(&value)?)
+}
+
+/// What `dofray --version` prints: dofray's version and commit, and the Embree it runs on.
+fn version_text() -> String {
+    let mut text = format!(
+        "dofray {}\ncommit: {}\n",
+        dofray::VERSION,
+        dofray::GIT_COMMIT
+    );
+    match Device::new() {
+        Ok(device) => {
+            let width = device.native_packet_width();
+            text += &format!(
+                "embree: {}\nembree isa: {} (native packet width {width})\nembree config: {:?}\n",
+                device.embree_version(),
+                isa_family(width),
+                device.config()
+            );
+        }
+        Err(e) => text += &format!("embree: unavailable ({e})\n"),
+    }
+    text
+}
+
+/// The instruction-set family behind a native packet width (Embree reports the width, not the
+/// exact ISA: 8 lanes are AVX or AVX2).
+fn isa_family(width: u32) -> &'static str {
+    match width {
+        16 => "AVX-512",
+        8 => "AVX/AVX2",
+        4 if cfg!(target_arch = "aarch64") => "NEON",
+        4 => "SSE",
+        _ => "scalar",
+    }
+}
+
+/// Prints a failure: the plain message on stderr and, with `--json`, the error object on stdout.
+fn report_error(kind: dofray::exit::ErrorKind, message: &str, json: bool) -> ExitCode {
+    eprintln!("error: {message}");
+    if json {
+        println!("{}", dofray::exit::json_error(kind, message));
+    }
+    ExitCode::from(kind.exit_code())
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    let result = match &cli.command {
-        Command::Render(a) => run_render(a),
-        Command::Bench(a) => run_bench(a),
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind as Clap;
+            return match e.kind() {
+                Clap::DisplayVersion => {
+                    print!("{}", version_text());
+                    ExitCode::SUCCESS
+                }
+                // --help and friends print and exit 0; real errors exit 2 (clap's usage status).
+                _ if !e.use_stderr() || !std::env::args().skip(1).any(|a| a == "--json") => {
+                    e.exit()
+                }
+                _ => {
+                    let _ = e.print();
+                    let text = e.render().to_string();
+                    let message = text
+                        .lines()
+                        .next()
+                        .unwrap_or_default()
+                        .trim_start_matches("error: ");
+                    println!(
+                        "{}",
+                        dofray::exit::json_error(dofray::exit::ErrorKind::Usage, message)
+                    );
+                    ExitCode::from(dofray::exit::USAGE)
+                }
+            };
+        }
+    };
+    let (result, json) = match &cli.command {
+        Command::Render(a) => (run_render(a), a.json),
+        Command::Bench(a) => (run_bench(a), a.json),
         Command::Scenes => {
             for (name, about) in builtin::BUILTIN {
                 println!("{name:<10} {about}");
             }
-            Ok(())
+            (Ok(()), false)
         }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
+        Err(e) => report_error(dofray::exit::classify_anyhow(&e), &format!("{e:#}"), json),
     }
 }

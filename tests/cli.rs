@@ -272,6 +272,8 @@ fn bench_reports_every_mode_and_caches_the_reference() {
     assert!(first.status.success(), "{}", stderr(&first));
     let report: serde_json::Value = serde_json::from_slice(&first.stdout).unwrap();
     assert_eq!(report["reference_cached"], false);
+    assert_eq!(report["schema_version"], 1);
+    assert_eq!(report["git_commit"], dofray::GIT_COMMIT);
     assert!(report["intersect_only_mrays_per_s"].as_f64().unwrap() > 0.0);
     let rows = report["rows"].as_array().unwrap();
     let labels: Vec<&str> = rows.iter().map(|r| r["label"].as_str().unwrap()).collect();
@@ -360,6 +362,8 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
     assert_eq!(report["width"], 64);
     assert_eq!(report["reference_spp"], 32);
+    assert_eq!(report["schema_version"], 1);
+    assert_eq!(report["dofray_version"], env!("CARGO_PKG_VERSION"));
     for method in ["dense", "adaptive"] {
         let rungs = report[method].as_array().unwrap();
         // The ladder, sorted.
@@ -908,6 +912,167 @@ fn the_site_rule_follows_the_flags_and_the_scene_file() {
         "{err}"
     );
     std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// The one JSON object a failing `--json` run prints on stdout.
+fn json_error(out: &Output) -> serde_json::Value {
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout is not one JSON object ({e}): {:?}",
+            String::from_utf8_lossy(&out.stdout)
+        )
+    });
+    assert_eq!(v["schema_version"], 1, "{v}");
+    v
+}
+
+#[test]
+fn exit_codes_name_the_kind_of_failure() {
+    let dir = scratch("exit");
+    let png = dir.join("out.png");
+    let p = png.to_str().unwrap();
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[camera]\nfov = 40\n").unwrap();
+    let missing = dir.join("missing.toml");
+    let read_only = dir.join("read-only.png");
+    std::fs::write(&read_only, b"keep").unwrap();
+    let mut perms = std::fs::metadata(&read_only).unwrap().permissions();
+    perms.set_readonly(true);
+    std::fs::set_permissions(&read_only, perms).unwrap();
+    let (b, m, r) = (
+        bad.to_str().unwrap(),
+        missing.to_str().unwrap(),
+        read_only.to_str().unwrap(),
+    );
+    let cases: &[(&[&str], i32, &str, &str)] = &[
+        // clap's own errors, and values checked after parsing.
+        (
+            &["render", "--no-such-flag", "-o", p],
+            2,
+            "usage",
+            "--no-such-flag",
+        ),
+        (&["render", "--spp", "0", "-o", p], 2, "usage", "--spp"),
+        (&["render", "--width", "0", "-o", p], 2, "usage", "--width"),
+        (
+            &["render", "--tolerance=-1", "-o", p],
+            2,
+            "usage",
+            "--tolerance",
+        ),
+        (&["render", "-o", "out.jpg"], 2, "usage", ".png or .exr"),
+        (&["bench", "--repeat", "0"], 2, "usage", "--repeat"),
+        // Inputs.
+        (
+            &["render", b, "-o", p],
+            3,
+            "bad_input",
+            "unknown field `fov`",
+        ),
+        (
+            &["render", m, "-o", p],
+            3,
+            "bad_input",
+            "missing.toml: cannot read",
+        ),
+        (
+            &["render", "no-such-scene", "-o", p],
+            3,
+            "bad_input",
+            "unknown scene",
+        ),
+        // Outputs.
+        (
+            &["render", "-o", "/nonexistent-dir/x/out.png"],
+            4,
+            "io",
+            "/nonexistent-dir",
+        ),
+        (&["render", "-o", r], 4, "io", "read-only"),
+        // Resource limits.
+        (
+            &["render", "--width", "200000", "--height", "200000", "-o", p],
+            5,
+            "resource_limit",
+            "choose a smaller --width/--height",
+        ),
+    ];
+    for &(args, code, kind, needle) in cases {
+        let mut all = args.to_vec();
+        if !args.contains(&"--width") {
+            all.extend(["--width", "16"]);
+        }
+        all.push("--quiet");
+        let plain = dofray(&all);
+        let err = stderr(&plain);
+        assert_eq!(plain.status.code(), Some(code), "{all:?}: {err}");
+        assert!(err.contains(needle), "{all:?}: {err}");
+        assert!(plain.stdout.is_empty(), "{all:?} printed on stdout");
+        // With --json: the same status, the message on stderr, one error object on stdout.
+        all.push("--json");
+        let json = dofray(&all);
+        assert_eq!(json.status.code(), Some(code), "{all:?}: {}", stderr(&json));
+        assert!(stderr(&json).contains(needle), "{all:?}: {}", stderr(&json));
+        let v = json_error(&json);
+        assert_eq!(v["error"]["kind"], kind, "{all:?}: {v}");
+        assert_eq!(v["error"]["exit_code"], code, "{all:?}: {v}");
+        let message = v["error"]["message"].as_str().unwrap();
+        assert!(message.contains(needle), "{all:?}: {v}");
+        assert!(!png.exists(), "{all:?} left an output file");
+    }
+    assert_eq!(std::fs::read(&read_only).unwrap(), b"keep");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn json_summaries_carry_the_schema_and_build() {
+    let dir = scratch("schema");
+    let png = dir.join("out.png");
+    let out = dofray(&[
+        "render",
+        "-o",
+        png.to_str().unwrap(),
+        "--width",
+        "16",
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["schema_version"], 1);
+    assert_eq!(v["dofray_version"], env!("CARGO_PKG_VERSION"));
+    let commit = v["git_commit"].as_str().unwrap();
+    assert!(!commit.is_empty(), "{v}");
+    assert_eq!(commit, dofray::GIT_COMMIT);
+    let width = v["embree"]["native_packet_width"].as_u64().unwrap();
+    assert!([1, 4, 8, 16].contains(&width), "{v}");
+    assert!(v["embree"]["isa"].is_string(), "{v}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn version_names_the_commit_and_embree() {
+    for flag in ["--version", "-V"] {
+        let out = dofray(&[flag]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.starts_with(&format!("dofray {}\n", env!("CARGO_PKG_VERSION"))),
+            "{text}"
+        );
+        assert!(
+            text.contains(&format!("commit: {}\n", dofray::GIT_COMMIT)),
+            "{text}"
+        );
+        let version = text
+            .lines()
+            .find_map(|l| l.strip_prefix("embree: "))
+            .unwrap_or_else(|| panic!("no Embree version: {text}"));
+        assert!(
+            version.split('.').count() == 3 && version.starts_with(['3', '4']),
+            "{text}"
+        );
+        assert!(text.contains("native packet width"), "{text}");
+    }
 }
 
 /// The text chunks and colour-space chunk of a PNG.

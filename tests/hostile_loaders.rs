@@ -485,7 +485,8 @@ fn limit_flags_set_the_loader_limits() {
     };
     let small = render("1");
     let err = String::from_utf8_lossy(&small.stderr);
-    assert_eq!(small.status.code(), Some(1), "{err}");
+    // Beyond an input size cap: a resource limit.
+    assert_eq!(small.status.code(), Some(5), "{err}");
     assert!(
         err.contains("input limit of 1.0 MiB") && err.contains("--max-input-mib"),
         "{err}"

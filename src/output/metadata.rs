@@ -48,6 +48,7 @@ impl Metadata {
         let mut m = Self::new();
         m.push("Software", format!("dofray {}", env!("CARGO_PKG_VERSION")));
         m.push("dofray:version", env!("CARGO_PKG_VERSION"));
+        m.push("dofray:commit", crate::GIT_COMMIT);
         m.push("dofray:embree", embree_version);
         m.push("dofray:scene", scene_name);
         if let Some(path) = scene_file {
