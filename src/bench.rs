@@ -17,6 +17,7 @@ use std::time::Instant;
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
 use crate::output::TempFile;
+use crate::output::metadata::Fnv1a;
 use crate::render::{self, Film, Mode, Progress, RenderSettings, RenderStats, SiteRule};
 use crate::scene::{SceneDesc, World};
 
@@ -186,25 +187,13 @@ pub fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-/// FNV-1a over formatted text: a stable hash (unlike std's) for the reference cache key.
-struct Fnv(u64);
-
-impl std::fmt::Write for Fnv {
-    fn write_str(&mut self, s: &str) -> std::fmt::Result {
-        for b in s.bytes() {
-            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
-        }
-        Ok(())
-    }
-}
-
 /// Bumped whenever the renderer's estimate of a pixel changes (sampling, filters, shading),
 /// so that a cached reference from an older renderer is not reused.
 const RENDERER_REVISION: u32 = 2;
 
 /// The cache key of a reference: everything that changes its pixels.
 pub fn reference_key(desc: &SceneDesc, camera: &Camera, settings: &RenderSettings) -> String {
-    let mut h = Fnv(0xcbf2_9ce4_8422_2325);
+    let mut h = Fnv1a::default();
     let _ = write!(
         h,
         "{}.{RENDERER_REVISION}|{desc:?}|{camera:?}|{}|{}|{}|{:?}|{}|{:?}",
@@ -228,7 +217,12 @@ pub fn reference_key(desc: &SceneDesc, camera: &Camera, settings: &RenderSetting
             }
         })
         .collect();
-    format!("{name}-{}x{}-{:016x}", camera.width, camera.height, h.0)
+    format!(
+        "{name}-{}x{}-{:016x}",
+        camera.width,
+        camera.height,
+        h.finish()
+    )
 }
 
 const MAGIC: &[u8; 8] = b"DOFREF01";
@@ -290,7 +284,8 @@ pub fn check_cache_dir(dir: &Path) -> Result<(), BenchError> {
 
 /// The converged reference: dense with `reference_spp` samples per pixel and a seed of its own
 /// (derived from `seed`, so its noise is independent of the modes it judges), from the cache
-/// in `cache_dir` when possible. Returns the image, whether it was cached, and its render time.
+/// in `cache_dir` when possible (an unusable `cache_dir` fails here, before anything is
+/// rendered). Returns the image, whether it was cached, and its render time.
 pub(crate) fn reference(
     desc: &SceneDesc,
     world: &World,
@@ -300,6 +295,9 @@ pub(crate) fn reference(
     cache_dir: Option<&Path>,
     progress: &dyn Progress,
 ) -> Result<(Vec<[f32; 3]>, bool, f64), BenchError> {
+    if let Some(dir) = cache_dir {
+        check_cache_dir(dir)?;
+    }
     // Every pixel converges: in-focus ones take as many samples as defocused ones.
     let settings = RenderSettings {
         mode: Mode::Dense,
@@ -332,9 +330,6 @@ pub fn run(
 ) -> Result<(BenchReport, BenchImages), BenchError> {
     if config.repeat == 0 {
         return Err(BenchError::ZeroRepeat);
-    }
-    if let Some(dir) = &config.cache_dir {
-        check_cache_dir(dir)?;
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
     let (reference, reference_cached, reference_seconds) = reference(

@@ -93,6 +93,16 @@ pub fn linear_to_srgb(v: f32) -> f32 {
     srgb_encode(f64::from(v)) as f32
 }
 
+/// The sRGB curve of a linear value >= 0 without the clamp at 1 (the same power law continues
+/// above 1): `12.92 v` for `v <= 0.0031308`, else `1.055 v^(1/2.4) - 0.055`.
+pub fn srgb_curve(v: f32) -> f32 {
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
 /// [`linear_to_srgb`] in double precision (the metrics compute in f64).
 fn srgb_encode(v: f64) -> f64 {
     let v = v.clamp(0.0, 1.0);

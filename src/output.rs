@@ -396,12 +396,7 @@ pub fn srgb16(v: f32) -> u16 {
 
 /// The sRGB encoding of one linear channel in `[0, 1]` (clamped; NaN counts as 0).
 fn srgb_unit(v: f32) -> f32 {
-    let v = if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
-    if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
+    crate::metrics::srgb_curve(if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) })
 }
 
 /// The inverse of the sRGB transfer function: display value in `[0, 1]` to linear.

@@ -355,9 +355,6 @@ pub fn run(
             .settings(*spp, config.aa.at(*spp), config.seed)
             .validate()?;
     }
-    if let Some(dir) = &config.cache_dir {
-        super::check_cache_dir(dir)?;
-    }
     let (w, h) = (camera.width as usize, camera.height as usize);
     let (reference, reference_cached, reference_seconds) = reference(
         desc,

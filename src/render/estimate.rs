@@ -30,12 +30,7 @@ pub fn luminance(c: Vec3) -> f32 {
 /// the same power law continues, so differences in highlights still count, scaled the way a
 /// display-referred comparison after an exposure change would see them.
 pub fn code(v: f32) -> f32 {
-    let v = v.max(0.0);
-    if v <= 0.003_130_8 {
-        255.0 * 12.92 * v
-    } else {
-        255.0 * (1.055 * v.powf(1.0 / 2.4) - 0.055)
-    }
+    255.0 * crate::metrics::srgb_curve(v.max(0.0))
 }
 
 /// A colour in code values, per channel.

@@ -64,17 +64,7 @@ impl Mode {
 }
 
 /// How adaptive mode decides where sample sites go and how many samples each takes.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SiteRule {
     /// From an error estimate: intervals and sample counts are refined until interpolation

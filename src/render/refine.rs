@@ -335,7 +335,17 @@ fn cells_around(
 /// 2), the reach of one blurred highlight, from log-quantised per-site peaks.
 struct Peaks {
     levels: Vec<Vec<u8>>,
-    radius_level: Vec<u8>,
+}
+
+/// Per pixel, the [`Peaks`] level whose square covers its reach, CoC / 2 (2 to `max`): a
+/// property of the CoC map, so made once per render.
+fn reach_levels(coc: &[f32], max: u32) -> Vec<u8> {
+    coc.iter()
+        .map(|&c| {
+            let r = (0.5 * c).clamp(2.0, max as f32);
+            r.log2().ceil().max(1.0) as u8
+        })
+        .collect()
 }
 
 impl Peaks {
@@ -356,24 +366,17 @@ impl Peaks {
         }
     }
 
-    fn new(est: &[Estimate], coc: &[f32], width: usize, height: usize, max: u32) -> Self {
+    /// `top`: the largest of the [`reach_levels`].
+    fn new(est: &[Estimate], width: usize, height: usize, top: u8) -> Self {
         let peak: Vec<u8> = est.iter().map(|e| Self::quantise(e.peak())).collect();
-        let radius_level: Vec<u8> = coc
-            .iter()
-            .map(|&c| {
-                let r = (0.5 * c).clamp(2.0, max as f32);
-                r.log2().ceil().max(1.0) as u8
-            })
-            .collect();
-        let top = u32::from(radius_level.iter().copied().max().unwrap_or(1));
         Self {
-            levels: maps::square_maxima(&peak, width, height, top),
-            radius_level,
+            levels: maps::square_maxima(&peak, width, height, u32::from(top)),
         }
     }
 
-    fn near(&self, p: usize) -> f32 {
-        Self::value(self.levels[usize::from(self.radius_level[p]) - 1][p])
+    /// The brightest sample within `level`'s square around pixel p.
+    fn near(&self, p: usize, level: u8) -> f32 {
+        Self::value(self.levels[usize::from(level) - 1][p])
     }
 }
 
@@ -399,6 +402,8 @@ pub fn refine(
     let mut interval =
         maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval);
     let mut traced = Traced::new(width * height);
+    let reach = reach_levels(coc, s.max_interval);
+    let top_reach = reach.iter().copied().max().unwrap_or(1);
     let mut need = vec![false; width * height];
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
     let mut pending = Vec::new();
@@ -427,7 +432,7 @@ pub fn refine(
         let peaks = pending
             .iter()
             .any(|&p| calm(p))
-            .then(|| Peaks::new(&traced.est, coc, width, height, s.max_interval));
+            .then(|| Peaks::new(&traced.est, width, height, top_reach));
         let mut work = Vec::new();
         for p in pending.drain(..) {
             let e = &traced.est[p];
@@ -435,7 +440,7 @@ pub fn refine(
                 traced.se[p] > limit
                     || peaks
                         .as_ref()
-                        .is_some_and(|k| e.unseen_code(k.near(p)) > limit)
+                        .is_some_and(|k| e.unseen_code(k.near(p, reach[p])) > limit)
             };
             let want = if e.n == 0 {
                 first(p)
