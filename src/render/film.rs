@@ -7,8 +7,13 @@ use glam::Vec3;
 pub struct Film {
     pub width: usize,
     pub height: usize,
-    /// Linear RGB radiance, row-major, top row first.
+    /// Linear RGB radiance, row-major, top row first. With
+    /// [`RenderSettings::transparent`](super::RenderSettings) the background contributes
+    /// nothing, so this is premultiplied by [`Film::alpha`].
     pub color: Vec<Vec3>,
+    /// Coverage: the filter- and lens-weighted fraction of the pixel's camera samples that hit
+    /// geometry (1 where everything hit, 0 where every sample saw the background).
+    pub alpha: Vec<f32>,
     /// Distance along the camera's view axis of the surface the pinhole ray hit (inf for misses).
     pub depth: Vec<f32>,
     /// Circle-of-confusion diameter in pixels at `depth`.
@@ -27,6 +32,7 @@ impl Film {
             width,
             height,
             color: vec![Vec3::ZERO; n],
+            alpha: vec![1.0; n],
             depth: vec![f32::INFINITY; n],
             coc: vec![0.0; n],
             interval: vec![1; n],
