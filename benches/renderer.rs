@@ -59,7 +59,7 @@ fn benches(c: &mut Criterion) {
         b.iter(|| black_box(maps::site_mask(&interval, w, h)))
     });
     g.bench_function("interpolation", |b| {
-        let mut color = film.color.clone();
+        let mut color: Vec<glam::Vec4> = film.color.iter().map(|c| c.extend(1.0)).collect();
         b.iter(|| interpolate::interpolate(black_box(&mut color), &interval, &sites, w, h))
     });
     g.finish();

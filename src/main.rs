@@ -187,6 +187,12 @@ struct RenderArgs {
     /// follow from it [default: the scene's, else 4 / sqrt(spp): 1 at 16 spp, 0.5 at 64].
     #[arg(long, conflicts_with_all = ["interval_factor", "paper_exact"])]
     tolerance: Option<f32>,
+    /// Leave the background out (Blender's Film > Transparent): alpha is the coverage (the
+    /// filtered fraction of camera samples that hit geometry) and the colour is premultiplied
+    /// by it, so the render composites over a plate. PNGs get an alpha channel (straight
+    /// alpha), EXRs a coverage A. Without it, alpha is 1 [default: the scene's, else off].
+    #[arg(long)]
+    transparent: bool,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
     /// interval = max(2, k x CoC) in defocused regions, spp samples per defocused site (0.4 is
     /// the paper's; reproduces its table) [default: the scene's].
@@ -655,6 +661,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     } else {
         settings.tolerance = a.tolerance.or(desc.tolerance);
     }
+    settings.transparent = a.transparent || desc.transparent;
     settings
         .validate()
         .map_err(|e| dofray::exit::UsageError(cli_message(&e)))?;
@@ -712,6 +719,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
                 .then(|| json_f32(settings.tolerance())),
             "interval_factor": (settings.rule == SiteRule::Seed).then(|| json_f32(settings.interval_factor)),
             "paper_exact": a.paper_exact,
+            "transparent": settings.transparent,
             "rounds": stats.rounds,
             "seed": settings.seed,
             "seconds": stats.seconds,

@@ -74,6 +74,7 @@ impl Metadata {
         m.push("dofray:spp", settings.spp);
         m.push("dofray:aa", settings.aa);
         m.push("dofray:seed", settings.seed);
+        m.push("dofray:transparent", settings.transparent);
         m.push(
             "dofray:pixel_filter",
             format!(

@@ -3,7 +3,7 @@
 //! with its tolerance to decide whether a site needs more samples and whether a difference
 //! between a traced pixel and its interpolation is real or noise.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// Weighted sums over the samples of one pixel.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -11,6 +11,8 @@ pub struct Estimate {
     /// Samples taken.
     pub n: u32,
     sum: Vec3,
+    /// Weight of the samples whose camera ray hit geometry (for the coverage).
+    hit_w: f32,
     w: f32,
     w2: f32,
     /// Weighted first and second moments of luminance (f64: 65536 samples of bright
@@ -39,10 +41,14 @@ pub fn code3(c: Vec3) -> Vec3 {
 }
 
 impl Estimate {
-    /// Adds one sample of radiance `l` with lens-filter weight `w`.
-    pub fn add(&mut self, l: Vec3, w: f32) {
+    /// Adds one sample of radiance `l` with lens-filter weight `w`; `hit` says whether its
+    /// camera ray hit geometry.
+    pub fn add(&mut self, l: Vec3, w: f32, hit: bool) {
         self.n += 1;
         self.sum += l * w;
+        if hit {
+            self.hit_w += w;
+        }
         self.w += w;
         self.w2 += w * w;
         let y = f64::from(luminance(l));
@@ -76,6 +82,34 @@ impl Estimate {
         } else {
             Vec3::ZERO
         }
+    }
+
+    /// The weighted fraction of samples that hit geometry (0 when nothing was added).
+    pub fn coverage(&self) -> f32 {
+        if self.w > 0.0 {
+            (self.hit_w / self.w).min(1.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// The mean colour with the coverage as its fourth component.
+    pub fn mean_rgba(&self) -> Vec4 {
+        self.mean().extend(self.coverage())
+    }
+
+    /// Standard error of the coverage, in code values of alpha (255 = opaque): hits are
+    /// Bernoulli trials, so their variance is a (1 - a). Infinite with fewer than two
+    /// samples.
+    pub fn coverage_error_code(&self) -> f32 {
+        if self.n < 2 || self.w <= 0.0 {
+            return f32::INFINITY;
+        }
+        let a = f64::from(self.coverage());
+        let n = f64::from(self.n);
+        let var = a * (1.0 - a) * n / (n - 1.0);
+        let (w, w2) = (f64::from(self.w), f64::from(self.w2));
+        (255.0 * (var * w2 / (w * w)).sqrt()) as f32
     }
 
     /// Standard error of the mean's luminance, linear units; infinite with fewer than two
@@ -114,7 +148,7 @@ mod tests {
         let mut e = Estimate::default();
         assert!(e.std_error().is_infinite());
         for v in [0.0f32, 1.0, 0.0, 1.0] {
-            e.add(Vec3::splat(v), 1.0);
+            e.add(Vec3::splat(v), 1.0, true);
         }
         assert!((e.mean() - Vec3::splat(0.5)).length() < 1e-6);
         // Sample variance 1/3, standard error sqrt(1/3 / 4).
@@ -122,7 +156,7 @@ mod tests {
         assert!((e.std_error() - want).abs() < 1e-5, "{}", e.std_error());
         let mut constant = Estimate::default();
         for _ in 0..8 {
-            constant.add(Vec3::new(0.3, 0.2, 0.1), 0.5);
+            constant.add(Vec3::new(0.3, 0.2, 0.1), 0.5, true);
         }
         assert_eq!(constant.std_error(), 0.0);
         assert_eq!(constant.std_error_code(), 0.0);
@@ -132,7 +166,7 @@ mod tests {
     fn agreeing_samples_still_doubt_a_brighter_neighbour() {
         let mut e = Estimate::default();
         for _ in 0..16 {
-            e.add(Vec3::splat(0.2), 1.0);
+            e.add(Vec3::splat(0.2), 1.0, true);
         }
         assert_eq!(e.std_error_code(), 0.0);
         assert_eq!(e.peak(), 0.2);
@@ -143,9 +177,27 @@ mod tests {
         // With 4x the samples, a quarter of that in linear terms.
         let mut more = e;
         for _ in 0..48 {
-            more.add(Vec3::splat(0.2), 1.0);
+            more.add(Vec3::splat(0.2), 1.0, true);
         }
         assert!(more.unseen_code(400.0) < e.unseen_code(400.0));
+    }
+
+    #[test]
+    fn coverage_is_the_weighted_fraction_of_hits() {
+        let mut e = Estimate::default();
+        assert_eq!(e.coverage(), 0.0);
+        e.add(Vec3::ONE, 3.0, true);
+        e.add(Vec3::ZERO, 1.0, false);
+        assert!((e.coverage() - 0.75).abs() < 1e-6);
+        assert_eq!(e.mean_rgba().w, e.coverage());
+        // Bernoulli: sqrt(a (1 - a) n / (n - 1) * sum w^2) / sum w, times 255.
+        let want = 255.0 * (0.1875f32 * 2.0 * 10.0).sqrt() / 4.0;
+        assert!((e.coverage_error_code() - want).abs() < 1e-3);
+        let mut all = Estimate::default();
+        for _ in 0..4 {
+            all.add(Vec3::ONE, 1.0, true);
+        }
+        assert_eq!((all.coverage(), all.coverage_error_code()), (1.0, 0.0));
     }
 
     #[test]

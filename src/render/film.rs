@@ -1,6 +1,6 @@
 //! The rendered image and its per-pixel arbitrary output variables (AOVs).
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 
 /// A rendered frame: linear RGB radiance plus the maps the seed's method works from.
 #[derive(Debug, Clone)]
@@ -42,6 +42,12 @@ impl Film {
 
     pub fn index(&self, x: usize, y: usize) -> usize {
         y * self.width + x
+    }
+
+    /// Sets colour and alpha from RGBA pixels.
+    pub fn set_rgba(&mut self, rgba: &[Vec4]) {
+        self.color = rgba.iter().map(|c| c.truncate()).collect();
+        self.alpha = rgba.iter().map(|c| c.w).collect();
     }
 
     /// The colour as `[f32; 3]` pixels (for metrics and writers).

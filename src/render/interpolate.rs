@@ -1,14 +1,15 @@
 //! Filling the pixels between sample sites from the surrounding sites.
 
-use glam::Vec3;
+use glam::Vec4;
 use rayon::prelude::*;
 
 use super::maps::cell;
 
-/// Replaces every non-site pixel's colour by the bilinear blend of the sites at the corners
-/// of its lattice cell (see [`super::maps::site_mask`], which guarantees they are sites).
+/// Replaces every non-site pixel's colour and coverage (RGBA) by the bilinear blend of the
+/// sites at the corners of its lattice cell (see [`super::maps::site_mask`], which guarantees
+/// they are sites).
 pub fn interpolate(
-    color: &mut [Vec3],
+    color: &mut [Vec4],
     interval: &[u32],
     sites: &[bool],
     width: usize,
@@ -17,7 +18,7 @@ pub fn interpolate(
     if sites.iter().all(|&s| s) {
         return; // nothing to fill (dense)
     }
-    let snapshot: Vec<Vec3> = color.to_vec();
+    let snapshot: Vec<Vec4> = color.to_vec();
     color
         .par_chunks_mut(width)
         .enumerate()
@@ -57,13 +58,13 @@ mod tests {
         let (w, h) = (17, 9);
         let interval = vec![4u32; w * h];
         let sites = site_mask(&interval, w, h);
-        let truth: Vec<Vec3> = (0..w * h)
-            .map(|p| Vec3::new((p % w) as f32 * 0.1, (p / w) as f32 * 0.2, 1.0))
+        let truth: Vec<Vec4> = (0..w * h)
+            .map(|p| Vec4::new((p % w) as f32 * 0.1, (p / w) as f32 * 0.2, 1.0, 0.5))
             .collect();
-        let mut color: Vec<Vec3> = truth
+        let mut color: Vec<Vec4> = truth
             .iter()
             .zip(&sites)
-            .map(|(c, &s)| if s { *c } else { Vec3::splat(-1.0) })
+            .map(|(c, &s)| if s { *c } else { Vec4::splat(-1.0) })
             .collect();
         interpolate(&mut color, &interval, &sites, w, h);
         for (got, want) in color.iter().zip(&truth) {

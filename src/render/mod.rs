@@ -104,6 +104,10 @@ pub struct RenderSettings {
     pub bounces: u32,
     /// Keep every traced packet in [`RenderStats::ray_log`] (for intersect-only benchmarks).
     pub record_rays: bool,
+    /// Leave the background out of the image (Blender's "Film > Transparent"): camera rays
+    /// that miss contribute black, so [`Film::color`] is premultiplied by [`Film::alpha`], the
+    /// coverage, and the render composites over a plate. Otherwise alpha is 1 everywhere.
+    pub transparent: bool,
 }
 
 impl Default for RenderSettings {
@@ -122,6 +126,7 @@ impl Default for RenderSettings {
             filter: LensFilter::Box,
             bounces: 1,
             record_rays: false,
+            transparent: false,
         }
     }
 }
@@ -385,7 +390,7 @@ pub fn render(
             .filter(|&p| blurred[p] && refined.samples[p] > 0)
             .count() as u64;
         stats.rounds = refined.rounds;
-        film.color = refined.color;
+        film.set_rgba(&refined.color);
         film.interval = refined.interval;
         film.samples = refined.samples;
         stats.sites_seconds = phase.elapsed().as_secs_f64();
@@ -397,16 +402,13 @@ pub fn render(
         let mut estimates = vec![Estimate::default(); w * h];
         let none = vec![0; w * h];
         shader.shade_rows(&none, &film.samples, &mut estimates, progress, &mut tally);
-        for ((c, e), &n) in film.color.iter_mut().zip(&estimates).zip(&film.samples) {
-            if n > 0 {
-                *c = e.mean();
-            }
-        }
+        let mut rgba: Vec<glam::Vec4> = estimates.iter().map(|e| e.mean_rgba()).collect();
         stats.sites_seconds = phase.elapsed().as_secs_f64();
         let phase = Instant::now();
         if let Some(sites) = &sites {
-            interpolate::interpolate(&mut film.color, &film.interval, sites, w, h);
+            interpolate::interpolate(&mut rgba, &film.interval, sites, w, h);
         }
+        film.set_rgba(&rgba);
         stats.interpolate_seconds = phase.elapsed().as_secs_f64();
     }
     let bad = |c: &glam::Vec3| !c.is_finite();
@@ -416,6 +418,10 @@ pub fn render(
             x: first % w,
             y: first / w,
         });
+    }
+    if !settings.transparent {
+        // The background is part of the picture: every pixel is opaque.
+        film.alpha.fill(1.0);
     }
     stats.sample_sites = film.samples.iter().filter(|&&n| n > 0).count() as u64;
     progress.finish();

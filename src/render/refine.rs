@@ -24,12 +24,16 @@
 //!    (a small highlight behind the blur that this site's samples happened to miss): the
 //!    site keeps sampling while one such sample more would move it beyond the limit.
 //!
+//! With [`super::RenderSettings::transparent`] the coverage (alpha) takes part in both
+//! checks like a colour channel, 255 code values from empty to opaque, its noise from the
+//! hits' Bernoulli variance: a dark object on an empty background differs only there.
+//!
 //! Rounds repeat until no cell fails and no site wants samples. Differences and noise are
 //! measured in 8-bit sRGB code values continued above 1 ([`super::estimate::code`]), the
 //! units of the tolerance. Every decision depends only on the estimates, which depend only on
 //! the pixel and its sample indices, so the image is the same for any thread count.
 
-use glam::Vec3;
+use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
 use super::estimate::{Estimate, code3};
@@ -57,7 +61,8 @@ const SAMPLING_SHARE: f32 = 0.5;
 
 /// What the error-controlled rule produced.
 pub struct Refined {
-    pub color: Vec<Vec3>,
+    /// Colour with the coverage as alpha.
+    pub color: Vec<Vec4>,
     /// Final interval of every pixel's cell.
     pub interval: Vec<u32>,
     /// Samples traced per pixel (0: interpolated).
@@ -156,17 +161,18 @@ impl Cell {
     }
 }
 
-/// The interpolation at (x, y) from the traced points, with its standard error in code
-/// values, or None when a point it needs is not traced (yet).
+/// The interpolation (colour and coverage) at (x, y) from the traced points, with the
+/// standard errors of its luminance and coverage in code values, or None when a point it
+/// needs is not traced (yet).
 fn interpolate_at(
     traced: &Traced,
     width: usize,
     cell: &Cell,
     (x, y): (usize, usize),
     centre: Option<(usize, usize)>,
-) -> Option<(Vec3, f32)> {
-    let mut value = Vec3::ZERO;
-    let mut var = 0.0;
+) -> Option<(Vec4, f32, f32)> {
+    let mut value = Vec4::ZERO;
+    let (mut var, mut var_alpha) = (0.0, 0.0);
     for ((px, py), w) in cell.weights(x, y, centre) {
         if w == 0.0 {
             continue;
@@ -176,11 +182,12 @@ fn interpolate_at(
         if e.n == 0 {
             return None;
         }
-        value += e.mean() * w;
-        let se = traced.noise(p);
+        value += e.mean_rgba() * w;
+        let (se, se_alpha) = traced.noise(p);
         var += w * w * se * se;
+        var_alpha += w * w * se_alpha * se_alpha;
     }
-    Some((value, var.sqrt()))
+    Some((value, var.sqrt(), var_alpha.sqrt()))
 }
 
 /// Every pixel's estimate, with what the checks read of each traced one computed once per
@@ -189,6 +196,8 @@ struct Traced {
     est: Vec<Estimate>,
     /// [`Estimate::std_error_code`]: infinite while unknown (fewer than two samples).
     se: Vec<f32>,
+    /// [`Estimate::coverage_error_code`], likewise.
+    se_alpha: Vec<f32>,
     code: Vec<Vec3>,
 }
 
@@ -197,27 +206,32 @@ impl Traced {
         Self {
             est: vec![Estimate::default(); n],
             se: vec![f32::INFINITY; n],
+            se_alpha: vec![f32::INFINITY; n],
             code: vec![Vec3::ZERO; n],
         }
     }
 
     /// Recomputes the cached values of the pixels in `changed`.
     fn update(&mut self, changed: &[usize]) {
-        let fresh: Vec<(f32, Vec3)> = changed
+        let fresh: Vec<(f32, f32, Vec3)> = changed
             .par_iter()
-            .map(|&p| (self.est[p].std_error_code(), code3(self.est[p].mean())))
+            .map(|&p| {
+                let e = &self.est[p];
+                (e.std_error_code(), e.coverage_error_code(), code3(e.mean()))
+            })
             .collect();
-        for (&p, (se, code)) in changed.iter().zip(fresh) {
+        for (&p, (se, se_alpha, code)) in changed.iter().zip(fresh) {
             self.se[p] = se;
+            self.se_alpha[p] = se_alpha;
             self.code[p] = code;
         }
     }
 
-    /// The standard error in code values for the check; unknown (one sample) counts as none,
-    /// so a single-sample site never hides a difference.
-    fn noise(&self, p: usize) -> f32 {
-        let se = self.se[p];
-        if se.is_finite() { se } else { 0.0 }
+    /// The standard errors of luminance and coverage in code values for the check; unknown
+    /// (one sample) counts as none, so a single-sample site never hides a difference.
+    fn noise(&self, p: usize) -> (f32, f32) {
+        let known = |se: f32| if se.is_finite() { se } else { 0.0 };
+        (known(self.se[p]), known(self.se_alpha[p]))
     }
 }
 
@@ -248,9 +262,16 @@ fn cell_pixels(c: &Cell, width: usize, height: usize) -> impl Iterator<Item = (u
 
 /// Checks `cells` (sorted, without repeats): every traced pixel in a cell's closure other
 /// than its corners (its centre, or corners of finer neighbours on its edges) is compared
-/// with the cell's interpolation there. Returns the cells that fail, each with the interval
-/// it should be split to.
-fn failed_cells(traced: &Traced, cells: &[Cell], width: usize, tolerance: f32) -> Vec<(Cell, u32)> {
+/// with the cell's interpolation there. With `alpha` the coverage is compared too (255 code
+/// values from empty to opaque). Returns the cells that fail, each with the interval it
+/// should be split to.
+fn failed_cells(
+    traced: &Traced,
+    cells: &[Cell],
+    width: usize,
+    tolerance: f32,
+    alpha: bool,
+) -> Vec<(Cell, u32)> {
     cells
         .par_iter()
         .filter_map(|cell| {
@@ -262,14 +283,22 @@ fn failed_cells(traced: &Traced, cells: &[Cell], width: usize, tolerance: f32) -
                         continue;
                     }
                     let centre = cell.centre().filter(|&c| c != (qx, qy));
-                    let Some((value, se)) = interpolate_at(traced, width, cell, (qx, qy), centre)
+                    let Some((value, se, se_alpha)) =
+                        interpolate_at(traced, width, cell, (qx, qy), centre)
                     else {
                         continue;
                     };
-                    let diff = (traced.code[q] - code3(value)).abs().max_element();
-                    let se_q = traced.noise(q);
-                    let threshold = tolerance + NOISE_Z * (se * se + se_q * se_q).sqrt();
-                    worst = worst.max(diff / threshold);
+                    let threshold =
+                        |se: f32, se_q: f32| tolerance + NOISE_Z * (se * se + se_q * se_q).sqrt();
+                    let (se_q, se_alpha_q) = traced.noise(q);
+                    let diff = (traced.code[q] - code3(value.truncate()))
+                        .abs()
+                        .max_element();
+                    worst = worst.max(diff / threshold(se, se_q));
+                    if alpha {
+                        let diff = 255.0 * (traced.est[q].coverage() - value.w).abs();
+                        worst = worst.max(diff / threshold(se_alpha, se_alpha_q));
+                    }
                 }
             }
             // Interpolation error grows as the interval squared: split far enough at once
@@ -427,7 +456,10 @@ pub fn refine(
         // seen nearby; the peaks map is only built when some site is in that position.
         let calm = |p: usize| {
             let n = traced.est[p].n;
-            n > 0 && n < target(p) && traced.se[p] <= limit
+            n > 0
+                && n < target(p)
+                && traced.se[p] <= limit
+                && !(s.transparent && traced.se_alpha[p] > limit)
         };
         let peaks = pending
             .iter()
@@ -438,6 +470,7 @@ pub fn refine(
             let e = &traced.est[p];
             let unsure = || {
                 traced.se[p] > limit
+                    || (s.transparent && traced.se_alpha[p] > limit)
                     || peaks
                         .as_ref()
                         .is_some_and(|k| e.unseen_code(k.near(p, reach[p])) > limit)
@@ -470,7 +503,7 @@ pub fn refine(
         }
         dirty.sort_unstable();
         dirty.dedup();
-        let mut failed = failed_cells(&traced, &dirty, width, tolerance);
+        let mut failed = failed_cells(&traced, &dirty, width, tolerance, s.transparent);
         failed.sort_unstable();
         resized = split(
             &mut interval,
@@ -487,13 +520,13 @@ pub fn refine(
         .map(|p| {
             let e = &traced.est[p];
             if e.n > 0 {
-                return e.mean();
+                return e.mean_rgba();
             }
             let (x, y) = (p % width, p / width);
             let cell = Cell::of(x, y, interval[p], width, height);
             let centre = cell.centre();
             interpolate_at(&traced, width, &cell, (x, y), centre)
-                .map(|(v, _)| v)
+                .map(|(v, ..)| v)
                 .expect("every corner and centre of every cell is traced before the loop ends")
         })
         .collect();

@@ -205,14 +205,20 @@ impl SiteShader<'_> {
             tally,
         );
         let filter = self.settings.filter;
+        let transparent = self.settings.transparent;
         for lane in 0..b.len {
+            let hit = t_hit[lane].is_finite();
+            if transparent && !hit {
+                // The background is left out (the plate goes there); mirrors still see it.
+                radiance[lane] = Vec3::ZERO;
+            }
             let w = if filter == LensFilter::Box {
                 1.0
             } else {
                 let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
                 filter.weight(lens, self.camera.aperture.anamorphic)
             };
-            estimates[b.pixel[lane]].add(radiance[lane], w);
+            estimates[b.pixel[lane]].add(radiance[lane], w, hit);
         }
     }
 }

@@ -353,6 +353,7 @@ struct RawRender {
     tolerance: Option<Spanned<Positive>>,
     pixel_filter: Option<crate::filter::PixelFilterKind>,
     pixel_filter_width: Option<Spanned<Positive>>,
+    transparent: Option<bool>,
 }
 
 #[derive(Deserialize)]
@@ -925,6 +926,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         tolerance: None,
         pixel_filter: None,
         pixel_filter_width: None,
+        transparent: None,
     });
     let tolerance = match (&render.tolerance, render.interval_factor) {
         (Some(t), Some(_)) => {
@@ -971,6 +973,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         },
         interval_factor: render.interval_factor.map(|k| k.0),
         tolerance,
+        transparent: render.transparent.unwrap_or(false),
     })
 }
 

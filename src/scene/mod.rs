@@ -108,6 +108,9 @@ pub struct SceneDesc {
     /// The error-controlled rule's tolerance the scene asks for, 8-bit sRGB code values
     /// (likewise).
     pub tolerance: Option<f32>,
+    /// Leave the background out of the image, with alpha = coverage
+    /// ([`crate::render::RenderSettings::transparent`]).
+    pub transparent: bool,
 }
 
 /// Loads a scene: a built-in scene by name (see [`builtin::BUILTIN`]), a `.toml` scene file

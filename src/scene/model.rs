@@ -358,6 +358,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        transparent: false,
     })
 }
 
