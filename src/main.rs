@@ -701,7 +701,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let options = output::WriteOptions {
         metadata,
         png_16bit: a.png_16,
-        // --transparent hook: set `png_alpha: a.transparent` once the render flag exists.
+        // HOOK(--transparent): `png_alpha: a.transparent,` (RGBA PNG) once that flag exists.
         png_alpha: false,
         exr_half: a.exr_half,
         exr_compression: a.exr_compression.unwrap_or_default(),
