@@ -42,7 +42,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render a scene to an image (PNG: 8-bit sRGB; EXR: linear float with Z/coc/interval/samples).
+    /// Render a scene to an image (PNG: 8-bit sRGB; EXR: linear float RGBA with depth, CoC,
+    /// interval and samples passes).
     Render(RenderArgs),
     /// Reproduce the seed's table: time pinhole, dense and adaptive modes, count their rays, and
     /// measure their quality against dense and a converged reference; or, with --equal-error,
@@ -157,7 +158,9 @@ struct SceneArgs {
 struct RenderArgs {
     #[command(flatten)]
     scene: SceneArgs,
-    /// Output image: .png (8-bit sRGB) or .exr (linear RGB plus Z, coc, interval, samples).
+    /// Output image: .png (8-bit sRGB) or .exr (Blender-style multilayer: linear RGBA in
+    /// ViewLayer.Combined, depth in ViewLayer.Depth.Z, and CoC, interval and samples passes;
+    /// docs/outputs.md).
     #[arg(short, long, default_value = "dofray.png")]
     output: PathBuf,
     /// pinhole: no depth of field; dense: lens samples at every pixel (Cook's distributed ray
@@ -214,6 +217,16 @@ struct RenderArgs {
     /// PNG output: 16 bits per channel instead of 8 (still sRGB; EXR is always float).
     #[arg(long)]
     png_16: bool,
+    /// EXR output: the beauty (ViewLayer.Combined.R/G/B/A) as 16-bit half float, clamped to
+    /// +-65504; depth (ViewLayer.Depth.Z) and dofray's passes (ViewLayer.CoC.X,
+    /// ViewLayer.Interval.X, ViewLayer.Samples.X) stay 32-bit float. See docs/outputs.md.
+    #[arg(long)]
+    exr_half: bool,
+    /// EXR output: pixel compression, one of none, rle, zip (deflate, 16 scan lines), zips
+    /// (deflate, 1 line), piz (wavelet) - all lossless - or pxr24 (float channels to 24 bits),
+    /// b44, b44a (half channels only), dwaa, dwab (lossy DCT on the colour) [default: zip].
+    #[arg(long, value_name = "METHOD", value_parser = parse_exr_compression)]
+    exr_compression: Option<output::ExrCompression>,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     json: bool,
@@ -285,6 +298,11 @@ fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
     let (x, y) = s.split_once(',').ok_or("expected X,Y (e.g. 320,240)")?;
     let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?}: {e}"));
     Ok((parse(x)?, parse(y)?))
+}
+
+fn parse_exr_compression(s: &str) -> Result<output::ExrCompression, String> {
+    s.parse()
+        .map_err(|e: output::CompressionError| e.to_string())
 }
 
 fn parse_light(s: &str) -> Result<Light, String> {
@@ -633,6 +651,15 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         ..Default::default()
     };
     output::clean_up_on_signals()?;
+    // EXR-only flags would be silently ignored for a PNG.
+    if (a.exr_half || a.exr_compression.is_some())
+        && output::ImageFormat::from_path(&a.output).is_ok_and(|f| f == output::ImageFormat::Png)
+    {
+        usage!(
+            "--exr-half and --exr-compression apply to .exr output only, and -o {} is a PNG",
+            a.output.display()
+        );
+    }
     // Image and AOV targets checked, --aov-dir created, before rendering.
     output::check_render_outputs(&a.output, a.aov_dir.as_deref())?;
     let Prepared {
@@ -681,6 +708,10 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let options = output::WriteOptions {
         metadata,
         png_16bit: a.png_16,
+        // HOOK(--transparent): `png_alpha: a.transparent,` (RGBA PNG) once that flag exists.
+        png_alpha: false,
+        exr_half: a.exr_half,
+        exr_compression: a.exr_compression.unwrap_or_default(),
     };
     output::write_film_with(&a.output, &film, &options)?;
     if let Some(dir) = &a.aov_dir {

@@ -2,12 +2,16 @@
 //!
 //! Two formats, chosen by the file extension (case-insensitive):
 //!
-//! - `.png`: 8-bit (or, with [`WriteOptions::png_16bit`], 16-bit) sRGB of the linear colour,
-//!   clamped to `[0, 1]`, with an `sRGB` chunk and the [`Metadata`] as text chunks.
-//! - `.exr`: one unnamed layer of 32-bit float channels `R`, `G`, `B` (linear), `Z` (view-axis
-//!   depth, `+inf` for misses), `coc` (circle of confusion in pixels), `interval` (sample
-//!   interval) and `samples` (lens samples traced), which compositors read as the beauty pass
-//!   plus auxiliary channels; the [`Metadata`] as text header attributes.
+//! - `.png` ([`png`]): 8-bit (or, with [`WriteOptions::png_16bit`], 16-bit) sRGB of the linear
+//!   colour, clamped to `[0, 1]`, with an `sRGB` chunk and the [`Metadata`] as text chunks;
+//!   with [`WriteOptions::png_alpha`], RGBA with straight (unassociated) alpha.
+//! - `.exr` ([`exr`]): Blender-style multilayer channels in one part: the beauty
+//!   `ViewLayer.Combined.R/G/B/A` (linear, premultiplied by the coverage alpha; 32-bit float,
+//!   or half with [`WriteOptions::exr_half`]), `ViewLayer.Depth.Z` (camera-axis depth,
+//!   [`exr::DEPTH_MISS`] for misses) and dofray's passes `ViewLayer.CoC.X`,
+//!   `ViewLayer.Interval.X` and `ViewLayer.Samples.X` (32-bit float), compressed as
+//!   [`WriteOptions::exr_compression`] says (ZIP by default); the [`Metadata`] as text header
+//!   attributes. docs/outputs.md shows how compositors read it.
 //!
 //! Every writer is atomic: it writes a hidden temporary file next to the target and renames it
 //! over the target only once everything has been written, removing the temporary file on any
@@ -21,17 +25,18 @@
 //! space and linearised, so the PNG shows exactly the intended grey ramps and palettes.
 
 pub mod atomic;
+pub mod exr;
 pub mod metadata;
+pub mod png;
 pub mod target;
 
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
 use crate::render::film::Film;
-use atomic::write_atomic;
 pub use atomic::{TempFile, clean_up_on_signals};
+pub use exr::{CompressionError, ExrCompression};
 pub use metadata::Metadata;
 pub use target::{
     AOV_DEPTH, AOV_INTERVAL, AOV_SAMPLES, AOVS, check_render_outputs, resolve_target, same_file,
@@ -86,9 +91,9 @@ pub enum OutputError {
 /// The file formats [`write_film`] writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ImageFormat {
-    /// 8-bit sRGB colour.
+    /// 8- or 16-bit sRGB colour, optionally with straight alpha.
     Png,
-    /// 32-bit float linear colour plus depth, CoC, interval and sample-count channels.
+    /// Float linear colour and alpha plus depth, CoC, interval and sample-count passes.
     Exr,
 }
 
@@ -131,6 +136,16 @@ pub struct WriteOptions {
     pub metadata: Metadata,
     /// PNG: 16 bits per channel instead of 8 (still sRGB-encoded).
     pub png_16bit: bool,
+    /// PNG: RGBA instead of RGB, with straight (unassociated) alpha from [`Film::alpha`]: the
+    /// colour is divided by alpha where alpha > 0 before sRGB encoding; alpha is stored
+    /// linear. Meant for renders whose background is transparent (the film's colour then is
+    /// premultiplied by its coverage); otherwise alpha is 1 everywhere. EXR always has alpha.
+    pub png_alpha: bool,
+    /// EXR: the beauty (`ViewLayer.Combined.R/G/B/A`) as 16-bit half floats, clamped to
+    /// +-65504; depth and dofray's passes stay 32-bit.
+    pub exr_half: bool,
+    /// EXR: how pixels are compressed (ZIP, lossless, by default).
+    pub exr_compression: ExrCompression,
 }
 
 /// Writes `film` to `path` in the format its extension names (see the module documentation).
@@ -147,36 +162,25 @@ pub fn write_film_with(
     let format = ImageFormat::from_path(path)?;
     check_film(path, film)?;
     match format {
-        ImageFormat::Png if options.png_16bit => {
-            let bytes: Vec<u8> = film
-                .color
-                .iter()
-                .flat_map(|c| [c.x, c.y, c.z])
-                .flat_map(|v| srgb16(v).to_be_bytes())
-                .collect();
-            let png = Png {
-                width: film.width,
-                height: film.height,
-                data: &bytes,
-                sixteen: true,
-            };
-            png.write(path, &options.metadata)
-        }
         ImageFormat::Png => {
-            let bytes: Vec<u8> = film
-                .color
-                .iter()
-                .flat_map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
-                .collect();
-            let png = Png {
+            let (sixteen, alpha) = (options.png_16bit, options.png_alpha);
+            let data = png::film_samples(film, sixteen, alpha);
+            let png = png::Png {
                 width: film.width,
                 height: film.height,
-                data: &bytes,
-                sixteen: false,
+                data: &data,
+                sixteen,
+                alpha,
             };
             png.write(path, &options.metadata)
         }
-        ImageFormat::Exr => write_exr(path, film, &options.metadata),
+        ImageFormat::Exr => {
+            let exr_options = exr::ExrOptions {
+                half: options.exr_half,
+                compression: options.exr_compression,
+            };
+            exr::write_exr(path, film, &options.metadata, exr_options)
+        }
     }
 }
 
@@ -204,88 +208,14 @@ pub fn write_png_srgb8(
     height: usize,
     bytes: &[u8],
 ) -> Result<(), OutputError> {
-    let png = Png {
+    let png = png::Png {
         width,
         height,
         data: bytes,
         sixteen: false,
+        alpha: false,
     };
     png.write(path, &Metadata::new())
-}
-
-/// An sRGB-encoded RGB image ready for the PNG encoder: 8-bit bytes, or 16-bit big-endian
-/// pairs.
-struct Png<'a> {
-    width: usize,
-    height: usize,
-    data: &'a [u8],
-    sixteen: bool,
-}
-
-impl Png<'_> {
-    /// Writes it atomically with an `sRGB` chunk (so viewers and compositors know the
-    /// encoding) and one text chunk per metadata entry (`tEXt`, or `iTXt` for non-Latin-1).
-    fn write(&self, path: &Path, metadata: &Metadata) -> Result<(), OutputError> {
-        let encode = |message: String| OutputError::Encode {
-            path: path.to_path_buf(),
-            message,
-        };
-        let pixel = if self.sixteen { 6 } else { 3 };
-        if self.data.len() % pixel != 0 {
-            return Err(encode(format!(
-                "{} bytes are not whole RGB pixels",
-                self.data.len()
-            )));
-        }
-        check_len(
-            path,
-            self.width,
-            self.height,
-            self.data.len() / pixel,
-            "colour",
-        )?;
-        let (Ok(w), Ok(h)) = (u32::try_from(self.width), u32::try_from(self.height)) else {
-            return Err(encode(format!(
-                "{}x{} is too large for PNG",
-                self.width, self.height
-            )));
-        };
-        let resolved = target::check_target(path)?;
-        write_atomic(path, &resolved, |file| {
-            let png_error = |e: png::EncodingError| match e {
-                png::EncodingError::IoError(source) => OutputError::Io {
-                    path: path.to_path_buf(),
-                    source,
-                },
-                other => encode(other.to_string()),
-            };
-            let mut out = BufWriter::new(file);
-            let mut encoder = png::Encoder::new(&mut out, w, h);
-            encoder.set_color(png::ColorType::Rgb);
-            encoder.set_depth(if self.sixteen {
-                png::BitDepth::Sixteen
-            } else {
-                png::BitDepth::Eight
-            });
-            encoder.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-            for (key, value) in metadata.iter() {
-                let latin1 = value.chars().all(|c| u32::from(c) < 256);
-                let added = if latin1 {
-                    encoder.add_text_chunk(key.to_string(), value.to_string())
-                } else {
-                    encoder.add_itxt_chunk(key.to_string(), value.to_string())
-                };
-                added.map_err(png_error)?;
-            }
-            let mut writer = encoder.write_header().map_err(png_error)?;
-            writer.write_image_data(self.data).map_err(png_error)?;
-            writer.finish().map_err(png_error)?;
-            out.flush().map_err(|source| OutputError::Io {
-                path: path.to_path_buf(),
-                source,
-            })
-        })
-    }
 }
 
 /// The seed's figure 2: depth as a grey picture, near = white, far = dark grey, misses black.
@@ -409,68 +339,11 @@ fn srgb_to_linear(e: f32) -> f32 {
     }
 }
 
-fn write_exr(path: &Path, film: &Film, metadata: &Metadata) -> Result<(), OutputError> {
-    use exr::prelude::*;
-
-    let channel = |name: &str, data: Vec<f32>| AnyChannel::new(name, FlatSamples::F32(data));
-    let channels = SmallVec::from_vec(vec![
-        channel("R", film.color.iter().map(|c| c.x).collect()),
-        channel("G", film.color.iter().map(|c| c.y).collect()),
-        channel("B", film.color.iter().map(|c| c.z).collect()),
-        channel("Z", film.depth.clone()),
-        channel("coc", film.coc.clone()),
-        channel(
-            "interval",
-            film.interval.iter().map(|&i| i as f32).collect(),
-        ),
-        channel("samples", film.samples.iter().map(|&s| s as f32).collect()),
-    ]);
-    let mut attributes = LayerAttributes {
-        software_name: Some(Text::from(
-            format!("dofray {}", env!("CARGO_PKG_VERSION")).as_str(),
-        )),
-        ..LayerAttributes::default()
-    };
-    for (key, value) in metadata.iter().filter(|(k, _)| *k != "Software") {
-        // EXR text is Latin-1: other characters become '?'.
-        let latin1: String = value
-            .chars()
-            .map(|c| if u32::from(c) < 256 { c } else { '?' })
-            .collect();
-        if let (Some(k), Some(v)) = (Text::new_or_none(key), Text::new_or_none(latin1)) {
-            attributes.other.insert(k, AttributeValue::Text(v));
-        }
-    }
-    let layer = Layer::new(
-        (film.width, film.height),
-        attributes,
-        Encoding::SMALL_LOSSLESS,
-        // EXR requires channels sorted by name; `sort` does that (bytewise: B G R Z coc ...).
-        AnyChannels::sort(channels),
-    );
-    let image = Image::from_layer(layer);
-    let resolved = target::check_target(path)?;
-    write_atomic(path, &resolved, |file| {
-        image
-            .write()
-            .to_unbuffered(&mut *file)
-            .map_err(|e| match e {
-                Error::Io(source) => OutputError::Io {
-                    path: path.to_path_buf(),
-                    source,
-                },
-                other => OutputError::Encode {
-                    path: path.to_path_buf(),
-                    message: other.to_string(),
-                },
-            })
-    })
-}
-
 /// Checks that every buffer of `film` has `width * height` entries.
 fn check_film(path: &Path, film: &Film) -> Result<(), OutputError> {
     let (w, h) = (film.width, film.height);
     check_len(path, w, h, film.color.len(), "colour")?;
+    check_len(path, w, h, film.alpha.len(), "alpha")?;
     check_len(path, w, h, film.depth.len(), "depth")?;
     check_len(path, w, h, film.coc.len(), "coc")?;
     check_len(path, w, h, film.interval.len(), "interval")?;
@@ -498,7 +371,9 @@ fn check_len(
 
 #[cfg(test)]
 mod tests {
+    use super::atomic::write_atomic;
     use super::*;
+    use std::io::Write;
     use std::sync::atomic::{AtomicU64, Ordering};
 
     /// A unique scratch directory under the system temp dir, removed on drop.
@@ -613,63 +488,232 @@ mod tests {
         assert_eq!(img.get_pixel(3, 2).0, [255, 255, srgb8(0.25)]);
     }
 
-    #[test]
-    fn exr_round_trip() {
-        use exr::prelude::*;
-
-        let dir = Scratch::new("exr");
-        let path = dir.0.join("film.EXR");
-        let film = test_film();
-        write_film(&path, &film).unwrap();
-        assert_eq!(dir.entries(), vec!["film.EXR".to_owned()]);
-
-        let image = read_all_flat_layers_from_file(&path).unwrap();
-        assert_eq!(image.layer_data.len(), 1);
+    /// Every channel of an EXR, by name, as f32 (half samples widened), and whether it was
+    /// stored as half.
+    fn read_exr(path: &Path) -> Vec<(String, bool, Vec<f32>)> {
+        use ::exr::prelude::*;
+        let image = read_all_flat_layers_from_file(path).unwrap();
+        assert_eq!(image.layer_data.len(), 1, "one part");
         let layer = &image.layer_data[0];
-        assert_eq!(layer.size, Vec2(4, 3));
-        let names: Vec<String> = layer
+        layer
             .channel_data
             .list
             .iter()
-            .map(|c| c.name.to_string())
-            .collect();
-        assert_eq!(
-            names,
-            ["B", "G", "R", "Z", "coc", "interval", "samples"].map(String::from)
+            .map(|c| {
+                let (half, values) = match &c.sample_data {
+                    FlatSamples::F32(v) => (false, v.clone()),
+                    FlatSamples::F16(v) => (true, v.iter().map(|h| h.to_f32()).collect()),
+                    other => panic!("{}: unexpected samples {other:?}", c.name),
+                };
+                (c.name.to_string(), half, values)
+            })
+            .collect()
+    }
+
+    fn channel<'a>(channels: &'a [(String, bool, Vec<f32>)], name: &str) -> &'a [f32] {
+        &channels
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .unwrap_or_else(|| panic!("{name} missing"))
+            .2
+    }
+
+    /// A film with partial coverage: premultiplied colour and alpha below 1 in places.
+    fn transparent_film() -> Film {
+        let mut film = test_film();
+        for i in 0..film.alpha.len() {
+            film.alpha[i] = [1.0, 0.5, 0.25, 0.0][i % 4];
+            film.color[i] *= film.alpha[i];
+        }
+        film
+    }
+
+    #[test]
+    fn exr_round_trip() {
+        let dir = Scratch::new("exr");
+        let path = dir.0.join("film.EXR");
+        let film = transparent_film();
+        write_film(&path, &film).unwrap();
+        assert_eq!(dir.entries(), vec!["film.EXR".to_owned()]);
+
+        let channels = read_exr(&path);
+        let names: Vec<&str> = channels.iter().map(|(n, _, _)| n.as_str()).collect();
+        assert_eq!(names, exr::CHANNELS);
+        assert!(channels.iter().all(|(_, half, _)| !half), "all f32");
+        let get = |name| channel(&channels, name);
+        let (r, g, a, z) = (
+            get(exr::CHANNEL_R),
+            get(exr::CHANNEL_G),
+            get(exr::CHANNEL_A),
+            get(exr::CHANNEL_DEPTH),
         );
-        let get = |name: &str| -> Vec<f32> {
-            let ch = layer
-                .channel_data
-                .list
-                .iter()
-                .find(|c| c.name == *name)
-                .unwrap();
-            match &ch.sample_data {
-                FlatSamples::F32(v) => v.clone(),
-                other => panic!("{name}: expected f32 samples, got {other:?}"),
-            }
-        };
-        let r = get("R");
-        let z = get("Z");
-        let interval = get("interval");
-        let samples = get("samples");
-        let coc = get("coc");
         assert_eq!(r.len(), 12);
         for i in 0..12 {
             assert_eq!(r[i], film.color[i].x, "R[{i}]");
-            assert_eq!(get("G")[i], film.color[i].y, "G[{i}]");
-            assert_eq!(coc[i], film.coc[i], "coc[{i}]");
-            assert_eq!(interval[i], film.interval[i] as f32, "interval[{i}]");
-            assert_eq!(samples[i], film.samples[i] as f32, "samples[{i}]");
+            assert_eq!(g[i], film.color[i].y, "G[{i}]");
+            assert_eq!(get(exr::CHANNEL_B)[i], film.color[i].z, "B[{i}]");
+            assert_eq!(a[i], film.alpha[i], "A[{i}]");
+            assert_eq!(get(exr::CHANNEL_COC)[i], film.coc[i], "coc[{i}]");
+            assert_eq!(
+                get(exr::CHANNEL_INTERVAL)[i],
+                film.interval[i] as f32,
+                "interval[{i}]"
+            );
+            assert_eq!(
+                get(exr::CHANNEL_SAMPLES)[i],
+                film.samples[i] as f32,
+                "samples[{i}]"
+            );
             if film.depth[i].is_finite() {
                 assert_eq!(z[i], film.depth[i], "Z[{i}]");
             } else {
-                assert_eq!(z[i], f32::INFINITY, "Z[{i}]");
+                assert_eq!(z[i], exr::DEPTH_MISS, "Z[{i}]: misses are finite");
             }
         }
         // Linear values are stored unclamped.
         assert_eq!(r[0], 2.0);
-        assert_eq!(get("G")[0], -1.0);
+        assert_eq!(g[0], -1.0);
+
+        // The header: Blender's multilayer marker, and no view or part name.
+        let meta = ::exr::meta::MetaData::read_from_file(&path, false).unwrap();
+        let header = &meta.headers[0];
+        assert_eq!(header.compression, ::exr::compression::Compression::ZIP16);
+        let (key, value) = exr::BLENDER_MULTICHANNEL;
+        assert_eq!(
+            header
+                .own_attributes
+                .other
+                .get(&::exr::prelude::Text::from(key)),
+            Some(&::exr::meta::attribute::AttributeValue::Text(
+                ::exr::prelude::Text::from(value)
+            ))
+        );
+        assert!(header.own_attributes.layer_name.is_none());
+    }
+
+    #[test]
+    fn exr_half_beauty_keeps_the_passes_f32() {
+        let dir = Scratch::new("exr-half");
+        let path = dir.0.join("half.exr");
+        let mut film = transparent_film();
+        film.color[1] = Vec3::new(1e6, -1e6, 0.1); // beyond half's range: clamped
+        film.depth[2] = 1234.567; // needs f32
+        let options = WriteOptions {
+            exr_half: true,
+            ..WriteOptions::default()
+        };
+        write_film_with(&path, &film, &options).unwrap();
+        let channels = read_exr(&path);
+        for (name, half, _) in &channels {
+            let beauty = name.starts_with("ViewLayer.Combined.");
+            assert_eq!(*half, beauty, "{name}: half only for the beauty");
+        }
+        let (r, a) = (
+            channel(&channels, exr::CHANNEL_R),
+            channel(&channels, exr::CHANNEL_A),
+        );
+        for i in [0, 3, 5, 6, 9, 11] {
+            let c = film.color[i].x;
+            // Half has an 11-bit significand: relative error at most 2^-11.
+            assert!(
+                (r[i] - c).abs() <= c.abs() / 2048.0,
+                "R[{i}] {} vs {c}",
+                r[i]
+            );
+            assert_eq!(a[i], film.alpha[i], "A[{i}]: 1, 0.5, 0.25 and 0 are exact");
+        }
+        assert_eq!(r[1], exr::HALF_MAX);
+        assert_eq!(channel(&channels, exr::CHANNEL_G)[1], -exr::HALF_MAX);
+        assert_eq!(channel(&channels, exr::CHANNEL_DEPTH)[2], 1234.567);
+    }
+
+    #[test]
+    fn every_exr_compression_writes_a_readable_file() {
+        let dir = Scratch::new("exr-compression");
+        let film = transparent_film();
+        for compression in ExrCompression::ALL {
+            for half in [false, true] {
+                let path = dir.0.join(format!("{compression}-{half}.exr"));
+                let options = WriteOptions {
+                    exr_half: half,
+                    exr_compression: compression,
+                    ..WriteOptions::default()
+                };
+                write_film_with(&path, &film, &options)
+                    .unwrap_or_else(|e| panic!("{compression} half={half}: {e}"));
+                let channels = read_exr(&path);
+                assert_eq!(channels.len(), 8, "{compression}");
+                let meta = ::exr::meta::MetaData::read_from_file(&path, false).unwrap();
+                assert_eq!(
+                    meta.headers[0].compression,
+                    compression.to_exr(),
+                    "{compression}"
+                );
+                let samples = channel(&channels, exr::CHANNEL_SAMPLES);
+                let a = channel(&channels, exr::CHANNEL_A);
+                for i in 0..12 {
+                    if compression.is_lossless() {
+                        assert_eq!(samples[i], film.samples[i] as f32, "{compression}");
+                        assert_eq!(a[i], film.alpha[i], "{compression}");
+                    } else {
+                        // Lossy methods stay close on these small values.
+                        let s = film.samples[i] as f32;
+                        assert!((samples[i] - s).abs() <= 0.01 * s.max(1.0), "{compression}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn png_rgba_has_straight_alpha_in_8_and_16_bits() {
+        let dir = Scratch::new("png-rgba");
+        let film = transparent_film();
+        for sixteen in [false, true] {
+            let path = dir.0.join(format!("rgba-{sixteen}.png"));
+            let options = WriteOptions {
+                png_alpha: true,
+                png_16bit: sixteen,
+                ..WriteOptions::default()
+            };
+            write_film_with(&path, &film, &options).unwrap();
+            let decoded = image::open(&path).unwrap();
+            assert!(decoded.color().has_alpha());
+            let img = decoded.to_rgba16();
+            for i in 0..12 {
+                let (x, y) = ((i % 4) as u32, (i / 4) as u32);
+                let px = img.get_pixel(x, y).0;
+                let a = film.alpha[i];
+                let straight = if a > 0.0 {
+                    film.color[i] / a
+                } else {
+                    film.color[i]
+                };
+                let expected: [u16; 4] = if sixteen {
+                    [
+                        srgb16(straight.x),
+                        srgb16(straight.y),
+                        srgb16(straight.z),
+                        (a * 65535.0).round() as u16,
+                    ]
+                } else {
+                    // 8-bit samples widen to 16 bits as v * 257.
+                    [
+                        u16::from(srgb8(straight.x)) * 257,
+                        u16::from(srgb8(straight.y)) * 257,
+                        u16::from(srgb8(straight.z)) * 257,
+                        u16::from((a * 255.0).round() as u8) * 257,
+                    ]
+                };
+                assert_eq!(px, expected, "sixteen={sixteen} pixel {i}");
+                // Straight alpha: the colour of a half-covered pixel is the full colour.
+                if a > 0.0 {
+                    let original = test_film().color[i];
+                    assert_eq!(px[0], expected[0]);
+                    assert!((straight.x - original.x).abs() < 1e-6);
+                }
+            }
+        }
     }
 
     #[test]

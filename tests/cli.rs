@@ -120,7 +120,7 @@ fn renders_png_and_exr_with_a_json_summary() {
         .iter()
         .map(|c| c.name.to_string())
         .collect();
-    for name in ["R", "G", "B", "Z", "coc", "interval", "samples"] {
+    for name in dofray::output::exr::CHANNELS {
         assert!(
             names.iter().any(|n| n == name),
             "{name} missing from {names:?}"
@@ -231,6 +231,8 @@ fn help_and_scene_list() {
         "--paper-exact",
         "--json",
         "--aov-dir",
+        "--exr-half",
+        "--exr-compression",
     ] {
         assert!(text.contains(flag), "help lacks {flag}");
     }
@@ -961,6 +963,24 @@ fn exit_codes_name_the_kind_of_failure() {
             "--tolerance",
         ),
         (&["render", "-o", "out.jpg"], 2, "usage", ".png or .exr"),
+        (
+            &["render", "--exr-compression", "lzma", "-o", "o.exr"],
+            2,
+            "usage",
+            "choose one of: none, rle, zip, zips, piz, pxr24, b44, b44a, dwaa, dwab",
+        ),
+        (
+            &["render", "--exr-compression", "htj2k", "-o", "o.exr"],
+            2,
+            "usage",
+            "cannot be written",
+        ),
+        (
+            &["render", "--exr-half", "-o", p],
+            2,
+            "usage",
+            "apply to .exr output only",
+        ),
         (&["bench", "--repeat", "0"], 2, "usage", "--repeat"),
         // Inputs.
         (

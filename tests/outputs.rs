@@ -1,7 +1,8 @@
 //! What `dofray` writes, and what it never loses or clobbers: signals during a render or a
 //! write leave no temporary file, read-only targets are refused, symbolic links are written
 //! through, a render and its AOV pictures never overwrite one another, and `bench` checks its
-//! cache directory before rendering.
+//! cache directory before rendering. And what readers make of the EXR: OpenImageIO's
+//! `oiiotool` (skipped, with a notice, where it is not installed) and the exr crate.
 //!
 //! `DOFRAY_TEST_BIN` runs these tests against another build of the binary (for example an
 //! older one, to see them fail).
@@ -392,4 +393,175 @@ fn temporary_files_of_killed_processes_are_swept_by_the_next_write() {
         other.exists() && unrelated.exists(),
         "other files are left alone"
     );
+}
+
+/// Whether `oiiotool` (OpenImageIO; Debian's openimageio-tools, which CI installs) runs here.
+fn have_oiiotool() -> bool {
+    Command::new("oiiotool")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success())
+}
+
+fn run_oiiotool(args: &[&str]) -> String {
+    let out = Command::new("oiiotool").args(args).output().unwrap();
+    assert!(out.status.success(), "oiiotool {args:?}: {}", stderr(&out));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// What OpenImageIO (the library behind oiiotool, and the EXR reader of many DCC tools) makes
+/// of dofray's EXRs: the layered channel names with the right per-channel type, the alpha and
+/// depth channels recognised as such, the compression, and the metadata header attributes.
+#[test]
+fn oiiotool_reads_layers_alpha_depth_precision_compression_and_metadata() {
+    if !have_oiiotool() {
+        println!(
+            "SKIPPED oiiotool_reads_layers_alpha_depth_precision_compression_and_metadata: \
+             oiiotool is not installed (apt-get install openimageio-tools; CI installs it)"
+        );
+        return;
+    }
+    let dir = scratch("oiiotool");
+    let cases: [(&[&str], bool, &str); 4] = [
+        (&[], false, "zip"),
+        (&["--exr-half"], true, "zip"),
+        (&["--exr-compression", "piz"], false, "piz"),
+        (&["--exr-half", "--exr-compression", "dwab"], true, "dwab"),
+    ];
+    for (extra, half, compression) in cases {
+        let path = dir.join(format!("{compression}-{half}.exr"));
+        let mut flags = vec!["--seed", "3"];
+        flags.extend_from_slice(extra);
+        let run = render_tiny(&path, &flags);
+        assert!(run.status.success(), "{extra:?}: {}", stderr(&run));
+        let info = run_oiiotool(&["--info", "-v", s(&path)]);
+        let case = format!("{extra:?}:\n{info}");
+
+        // "channel list: A (half), B (float), ..." when the types differ, else untyped and
+        // the one type on the summary line ("8 channel, float openexr").
+        let list = info
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("channel list: "))
+            .unwrap_or_else(|| panic!("no channel list in {case}"));
+        let channels: Vec<(String, String)> = list
+            .split(", ")
+            .map(|c| match c.split_once(" (") {
+                Some((name, ty)) => (name.to_owned(), ty.trim_end_matches(')').to_owned()),
+                None => (c.to_owned(), "float".to_owned()),
+            })
+            .collect();
+        let names: Vec<&str> = channels.iter().map(|(n, _)| n.as_str()).collect();
+        // OpenImageIO lists R, G, B, A first within their layer; the set is dofray's.
+        assert_eq!(
+            names,
+            [
+                "ViewLayer.CoC.X",
+                "ViewLayer.Combined.R",
+                "ViewLayer.Combined.G",
+                "ViewLayer.Combined.B",
+                "ViewLayer.Combined.A",
+                "ViewLayer.Depth.Z",
+                "ViewLayer.Interval.X",
+                "ViewLayer.Samples.X",
+            ],
+            "{case}"
+        );
+        for (name, ty) in &channels {
+            let expected = if half && name.starts_with("ViewLayer.Combined.") {
+                "half"
+            } else {
+                "float"
+            };
+            assert_eq!(ty, expected, "{name} in {case}");
+        }
+        assert!(
+            info.contains(&format!("compression: \"{compression}\"")),
+            "{case}"
+        );
+        for attribute in [
+            "BlenderMultiChannel: \"Blender V2.55.1 and newer\"",
+            "software: \"dofray ",
+            "dofray:mode: \"adaptive\"",
+            "dofray:seed: \"3\"",
+            "dofray:width: \"16\"",
+            "dofray:commit: ",
+        ] {
+            assert!(info.contains(attribute), "{attribute} missing: {case}");
+        }
+        // The alpha and depth channels are recognised as such (indices into the list above).
+        let roles = run_oiiotool(&[
+            s(&path),
+            "--echo",
+            "alpha={TOP.alpha_channel} z={TOP.z_channel}",
+        ]);
+        assert!(roles.contains("alpha=4 z=5"), "{roles} for {case}");
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+/// Every channel of an EXR by name, widened to f32, with whether it was stored as half.
+fn exr_channels(path: &Path) -> Vec<(String, bool, Vec<f32>)> {
+    use exr::prelude::*;
+    let image = read_all_flat_layers_from_file(path).unwrap();
+    assert_eq!(image.layer_data.len(), 1);
+    image.layer_data[0]
+        .channel_data
+        .list
+        .iter()
+        .map(|c| match &c.sample_data {
+            FlatSamples::F32(v) => (c.name.to_string(), false, v.clone()),
+            FlatSamples::F16(v) => (
+                c.name.to_string(),
+                true,
+                v.iter().map(|h| h.to_f32()).collect(),
+            ),
+            FlatSamples::U32(_) => panic!("{}: u32 samples", c.name),
+        })
+        .collect()
+}
+
+/// The same render written as float and as half: the same channels, the beauty within half
+/// precision, depth and dofray's passes bit for bit.
+#[test]
+fn exr_half_round_trips_the_beauty_within_half_precision() {
+    let dir = scratch("half");
+    let (float, half) = (dir.join("float.exr"), dir.join("half.exr"));
+    let scene = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/gallery.toml");
+    for (out, extra) in [(&float, None), (&half, Some("--exr-half"))] {
+        let mut args = vec!["render", scene, "-o", s(out), "--width", "48", "-q"];
+        args.extend(extra);
+        let run = dofray(&args);
+        assert!(run.status.success(), "{}", stderr(&run));
+    }
+    let (f, h) = (exr_channels(&float), exr_channels(&half));
+    let names = |c: &[(String, bool, Vec<f32>)]| -> Vec<String> {
+        c.iter().map(|(n, _, _)| n.clone()).collect()
+    };
+    assert_eq!(names(&f), names(&h));
+    assert_eq!(names(&f), dofray::output::exr::CHANNELS.map(String::from));
+    for ((name, f_half, fv), (_, h_half, hv)) in f.iter().zip(&h) {
+        assert!(!f_half, "{name}: float file has no half channels");
+        let beauty = name.starts_with("ViewLayer.Combined.");
+        assert_eq!(*h_half, beauty, "{name}: only the beauty is half");
+        for (i, (&a, &b)) in fv.iter().zip(hv).enumerate() {
+            if beauty {
+                // 11 significant bits: relative error <= 2^-11, plus half's subnormal step.
+                assert!(
+                    (a - b).abs() <= a.abs() / 2048.0 + 6e-8,
+                    "{name}[{i}]: {a} as half {b}"
+                );
+            } else {
+                assert_eq!(a.to_bits(), b.to_bits(), "{name}[{i}]");
+            }
+        }
+    }
+    // Misses have a finite depth (the gallery's sky).
+    let depth = &f
+        .iter()
+        .find(|(n, _, _)| n == "ViewLayer.Depth.Z")
+        .unwrap()
+        .2;
+    assert!(depth.contains(&dofray::output::exr::DEPTH_MISS));
+    assert!(depth.iter().all(|d| d.is_finite() && *d > 0.0));
+    std::fs::remove_dir_all(dir).unwrap();
 }
