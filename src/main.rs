@@ -708,8 +708,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     let options = output::WriteOptions {
         metadata,
         png_16bit: a.png_16,
-        // HOOK(--transparent): `png_alpha: a.transparent,` (RGBA PNG) once that flag exists.
-        png_alpha: false,
+        png_alpha: settings.transparent,
         exr_half: a.exr_half,
         exr_compression: a.exr_compression.unwrap_or_default(),
     };

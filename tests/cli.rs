@@ -1171,3 +1171,49 @@ fn outputs_record_their_settings_and_colour_space() {
     assert_eq!(text_of("dofray:scene"), "gallery");
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn transparent_renders_carry_coverage_alpha() {
+    let dir = scratch("transparent");
+    // A sphere on nothing: the corners see only the background.
+    let scene = dir.join("s.toml");
+    std::fs::write(
+        &scene,
+        "[image]\nwidth = 40\nheight = 30\n[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n\
+         vfov = 30\n[[objects]]\ntype = \"sphere\"\nradius = 0.5\n",
+    )
+    .unwrap();
+    let scene = scene.to_str().unwrap();
+    let png = dir.join("t.png");
+    let run = dofray(&[
+        "render",
+        scene,
+        "-o",
+        png.to_str().unwrap(),
+        "--transparent",
+        "--json",
+        "-q",
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let json: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(json["transparent"], true);
+    let image = image::open(&png).unwrap();
+    assert_eq!(image.color(), image::ColorType::Rgba8);
+    let rgba = image.to_rgba8();
+    assert_eq!(rgba.get_pixel(0, 0)[3], 0, "a corner sees nothing");
+    assert_eq!(rgba.get_pixel(20, 15)[3], 255, "the centre sees the sphere");
+    // Without the flag: RGB, the background in the corner.
+    let opaque = dir.join("o.png");
+    let run = dofray(&["render", scene, "-o", opaque.to_str().unwrap(), "-q"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    assert_eq!(
+        image::open(&opaque).unwrap().color(),
+        image::ColorType::Rgb8
+    );
+    // The scene file can ask for it too.
+    let text = std::fs::read_to_string(scene).unwrap();
+    std::fs::write(scene, format!("[render]\ntransparent = true\n{text}")).unwrap();
+    let run = dofray(&["render", scene, "-o", png.to_str().unwrap(), "-q"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    assert_eq!(image::open(&png).unwrap().color(), image::ColorType::Rgba8);
+}
