@@ -650,7 +650,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         filter: a.filter,
         ..Default::default()
     };
-    output::clean_up_on_signals()?;
+    output::clean_up_on_signals(a.json)?;
     // EXR-only flags would be silently ignored for a PNG.
     if (a.exr_half || a.exr_compression.is_some())
         && output::ImageFormat::from_path(&a.output).is_ok_and(|f| f == output::ImageFormat::Png)
@@ -808,7 +808,7 @@ fn default_cache_dir() -> PathBuf {
 }
 
 fn run_bench(a: &BenchArgs) -> Result<()> {
-    output::clean_up_on_signals()?;
+    output::clean_up_on_signals(a.json)?;
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --out directory {}", dir.display()))?;

@@ -75,7 +75,7 @@ fn send(signal: &str, child: &Child) {
 fn spawn(args: &[&str]) -> Child {
     Command::new(bin())
         .args(args)
-        .stdout(Stdio::null())
+        .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("start dofray")
@@ -83,6 +83,13 @@ fn spawn(args: &[&str]) -> Child {
 
 fn stderr_of(child: Child) -> String {
     String::from_utf8_lossy(&child.wait_with_output().unwrap().stderr).into_owned()
+}
+
+/// Stdout and stderr of a child that has exited.
+fn outputs_of(child: Child) -> (String, String) {
+    let out = child.wait_with_output().unwrap();
+    let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+    (text(&out.stdout), text(&out.stderr))
 }
 
 #[test]
@@ -150,6 +157,7 @@ fn sigterm_during_a_render_exits_143_and_leaves_nothing() {
         "--aov-dir",
         s(&aov),
         "--quiet",
+        "--json",
     ]);
     // Well past start-up (handlers are installed first thing), long before the render ends.
     std::thread::sleep(Duration::from_millis(400));
@@ -159,9 +167,19 @@ fn sigterm_during_a_render_exits_143_and_leaves_nothing() {
     );
     send("-TERM", &child);
     let status = wait_bounded(&mut child, Duration::from_secs(10));
-    let err = stderr_of(child);
+    let (out, err) = outputs_of(child);
     assert_eq!(status.code(), Some(143), "{status}: {err}");
     assert!(err.contains("interrupted by SIGTERM"), "{err}");
+    // --json: the same error as an object on stdout.
+    let json: serde_json::Value = serde_json::from_str(out.trim()).expect(&out);
+    assert_eq!(json["error"]["kind"], "interrupted", "{json}");
+    assert_eq!(json["error"]["exit_code"], 143, "{json}");
+    assert!(
+        json["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("SIGTERM")
+    );
     assert_eq!(entries(&dir), vec!["aov".to_owned()]);
     assert!(entries(&aov).is_empty(), "{:?}", entries(&aov));
 }

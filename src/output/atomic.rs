@@ -12,7 +12,7 @@
 use std::fs::{File, OpenOptions};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
 use super::OutputError;
@@ -155,13 +155,18 @@ pub(crate) fn write_atomic(
     tmp.persist().map_err(io_err)
 }
 
+/// Whether an interrupted run also prints its error as a `--json` object on stdout.
+static JSON_ON_SIGNAL: AtomicBool = AtomicBool::new(false);
+
 /// Installs (once per process) handlers for SIGINT, SIGTERM and SIGHUP that remove every
-/// temporary file that exists, print `error: interrupted by SIG...` on stderr and exit with
-/// status 128 + the signal's number (SIGINT 130, SIGTERM 143, SIGHUP 129).
+/// temporary file that exists, print `error: interrupted by SIG...` on stderr (and, with
+/// `json`, the same error as a `--json` error object on stdout: [`crate::exit::json_error`])
+/// and exit with status 128 + the signal's number (SIGINT 130, SIGTERM 143, SIGHUP 129).
 #[cfg(unix)]
-pub fn clean_up_on_signals() -> Result<(), OutputError> {
+pub fn clean_up_on_signals(json: bool) -> Result<(), OutputError> {
     use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
 
+    JSON_ON_SIGNAL.store(json, Ordering::SeqCst);
     static INSTALLED: Mutex<bool> = Mutex::new(false);
     let mut installed = INSTALLED.lock().unwrap_or_else(|e| e.into_inner());
     if *installed {
@@ -184,7 +189,8 @@ pub fn clean_up_on_signals() -> Result<(), OutputError> {
 /// Without Unix signals there is nothing to install; temporary files are still removed on
 /// every error.
 #[cfg(not(unix))]
-pub fn clean_up_on_signals() -> Result<(), OutputError> {
+pub fn clean_up_on_signals(json: bool) -> Result<(), OutputError> {
+    JSON_ON_SIGNAL.store(json, Ordering::SeqCst);
     Ok(())
 }
 
@@ -194,7 +200,7 @@ pub fn clean_up_on_signals() -> Result<(), OutputError> {
 fn exit_on_signal(signal: i32) -> ! {
     let list = registry();
     let mut message = format!(
-        "error: interrupted by {}",
+        "interrupted by {}",
         signal_hook::low_level::signal_name(signal).unwrap_or("a signal")
     );
     for path in list.iter() {
@@ -202,7 +208,12 @@ fn exit_on_signal(signal: i32) -> ! {
             message.push_str(&format!("; removed the unfinished {}", path.display()));
         }
     }
-    let _ = writeln!(std::io::stderr(), "{message}");
+    if JSON_ON_SIGNAL.load(Ordering::SeqCst) {
+        let error = crate::exit::json_error(crate::exit::ErrorKind::Interrupted(signal), &message);
+        let mut out = std::io::stdout().lock();
+        let _ = writeln!(out, "{error}").and_then(|()| out.flush());
+    }
+    let _ = writeln!(std::io::stderr(), "error: {message}");
     // _exit: no atexit handlers or static destructors run while worker threads still trace.
     signal_hook::low_level::exit(128 + signal)
 }
