@@ -1,8 +1,11 @@
 //! Building and committing an Embree scene, then tracing rays against it from any thread.
 
+use std::sync::Arc;
+
 use glam::Vec3;
 
 use super::device::{Device, EmbreeError, Result};
+use super::filter::{self, FilterBox, HitFilter};
 use super::geometry::{Geometry, GeometryId, Spheres, TriangleMesh};
 use super::packet::{Hit, Ray, RayHint, RayPacket16, ShadowPacket16};
 use super::{sys, version};
@@ -70,6 +73,8 @@ pub struct SceneBuilder {
     // Field order is drop order: the scene handle goes before the buffers it shares.
     handle: SceneHandle,
     geometries: Vec<Geometry>,
+    /// The hit filters Embree's geometries point at (see `filter.rs`).
+    filters: Vec<FilterBox>,
     device: Device,
     quality: BuildQuality,
 }
@@ -92,6 +97,7 @@ impl SceneBuilder {
         Ok(Self {
             handle: SceneHandle(raw),
             geometries: Vec::new(),
+            filters: Vec::new(),
             device: device.clone(),
             quality: BuildQuality::default(),
         })
@@ -104,11 +110,41 @@ impl SceneBuilder {
 
     /// Adds a triangle mesh; its buffers are shared with Embree, not copied.
     pub fn add_mesh(&mut self, mesh: TriangleMesh) -> Result<GeometryId> {
+        self.add_mesh_with(mesh, None)
+    }
+
+    /// Adds a triangle mesh whose candidate hits `filter` accepts or rejects, for nearest-hit
+    /// and occlusion queries alike (holes in alpha-masked surfaces). Embree calls the filter
+    /// during traversal; a mesh without one costs nothing extra.
+    pub fn add_mesh_filtered(
+        &mut self,
+        mesh: TriangleMesh,
+        filter: Arc<dyn HitFilter>,
+    ) -> Result<GeometryId> {
+        self.add_mesh_with(mesh, Some(filter))
+    }
+
+    fn add_mesh_with(
+        &mut self,
+        mesh: TriangleMesh,
+        filter: Option<Arc<dyn HitFilter>>,
+    ) -> Result<GeometryId> {
         let (vertices, vertex_count, indices, triangle_count) = mesh.raw_buffers();
-        self.attach(
+        let filters = &mut self.filters;
+        Self::attach_to(
+            &self.handle,
+            &mut self.geometries,
+            &self.device,
+            self.quality,
             Geometry::Mesh(mesh),
             sys::RTC_GEOMETRY_TYPE_TRIANGLE,
             |geom| {
+                if let Some(filter) = filter {
+                    // SAFETY: geom is live and not yet committed; the box is kept in the
+                    // builder, then the Scene, whose field order drops it after the scene
+                    // handle is released.
+                    filters.push(unsafe { filter::install(geom, filter) });
+                }
                 // SAFETY: both buffers are owned by the Geometry that this builder (then the Scene)
                 // keeps until after the scene handle is released; each is padded by one element so
                 // Embree's 16-byte loads of the last item stay in bounds; strides match the layouts.
@@ -168,13 +204,35 @@ impl SceneBuilder {
         kind: sys::RTCGeometryType,
         set_buffers: impl FnOnce(sys::RTCGeometry),
     ) -> Result<GeometryId> {
-        let id = u32::try_from(self.geometries.len())
+        Self::attach_to(
+            &self.handle,
+            &mut self.geometries,
+            &self.device,
+            self.quality,
+            geometry,
+            kind,
+            set_buffers,
+        )
+    }
+
+    /// [`SceneBuilder::attach`] over the builder's fields, so that `set_buffers` may borrow
+    /// the others (the filters).
+    fn attach_to(
+        handle: &SceneHandle,
+        geometries: &mut Vec<Geometry>,
+        device: &Device,
+        quality: BuildQuality,
+        geometry: Geometry,
+        kind: sys::RTCGeometryType,
+        set_buffers: impl FnOnce(sys::RTCGeometry),
+    ) -> Result<GeometryId> {
+        let id = u32::try_from(geometries.len())
             .ok()
             .filter(|&id| id != sys::RTC_INVALID_GEOMETRY_ID)
             .ok_or_else(|| EmbreeError::InvalidGeometry("too many geometries".into()))?;
         // SAFETY: live device; the geometry handle is released below on every path.
-        let geom = unsafe { sys::rtcNewGeometry(self.device.raw(), kind) };
-        if let Err(e) = self.device.check("rtcNewGeometry") {
+        let geom = unsafe { sys::rtcNewGeometry(device.raw(), kind) };
+        if let Err(e) = device.check("rtcNewGeometry") {
             if !geom.is_null() {
                 // SAFETY: geom came from rtcNewGeometry and is released once.
                 unsafe { sys::rtcReleaseGeometry(geom) };
@@ -185,14 +243,14 @@ impl SceneBuilder {
         // SAFETY: geom is live with its buffers set; the scene takes its own reference when
         // attaching, so releasing ours afterwards is correct.
         unsafe {
-            sys::rtcSetGeometryBuildQuality(geom, self.quality.raw());
+            sys::rtcSetGeometryBuildQuality(geom, quality.raw());
             sys::rtcCommitGeometry(geom);
-            sys::rtcAttachGeometryByID(self.handle.0, geom, id);
+            sys::rtcAttachGeometryByID(handle.0, geom, id);
             sys::rtcReleaseGeometry(geom);
         }
         // Keep the Rust-side data even on error: Embree may still reference its buffers.
-        self.geometries.push(geometry);
-        self.device.check("attaching geometry")?;
+        geometries.push(geometry);
+        device.check("attaching geometry")?;
         Ok(GeometryId(id))
     }
 
@@ -212,6 +270,7 @@ impl SceneBuilder {
             lanes_per_call: PacketWidth::Auto.lanes(),
             handle: self.handle,
             geometries: self.geometries,
+            _filters: self.filters,
             device: self.device,
             bounds: (
                 Vec3::new(bounds.lower_x, bounds.lower_y, bounds.lower_z),
@@ -226,6 +285,8 @@ pub struct Scene {
     // Field order is drop order: the scene handle goes before the buffers it shares.
     handle: SceneHandle,
     geometries: Vec<Geometry>,
+    /// Kept alive: filtered geometries' user data points into them.
+    _filters: Vec<FilterBox>,
     /// Kept alive: the scene's error callback user pointer lives in it.
     device: Device,
     bounds: (Vec3, Vec3),

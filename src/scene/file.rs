@@ -676,6 +676,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
             mirror: m.mirror.map_or(0.0, |u| u.0),
             emission,
             emission_texture: None,
+            maps: Default::default(),
         });
         material_index.insert(name, materials.len() - 1);
     }

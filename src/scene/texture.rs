@@ -34,7 +34,7 @@ pub fn texture_memory_bytes(width: u32, height: u32, color: image::ColorType) ->
 }
 
 /// Decodes a PNG or JPEG image. Colour textures are sRGB-encoded (`srgb`: converted to linear
-/// here); data textures are not. Alpha is ignored. An image whose decoding and conversion
+/// here); data textures are not. Alpha (always linear) is kept when it is below 1 somewhere. An image whose decoding and conversion
 /// would need more than `max_bytes` ([`texture_memory_bytes`], judged from the header before
 /// anything is decoded) is refused with the size it would need.
 pub fn decode(
@@ -75,6 +75,29 @@ pub fn decode(
     if width == 0 || height == 0 {
         return Err(format!("the image is empty ({width}x{height})"));
     }
+    let alpha: Option<Vec<f32>> = if img.color().has_alpha() {
+        let a: Vec<f32> = match &img {
+            image::DynamicImage::ImageLumaA8(_) | image::DynamicImage::ImageRgba8(_) => img
+                .to_rgba8()
+                .pixels()
+                .map(|p| p[3] as f32 / 255.0)
+                .collect(),
+            other => other
+                .to_rgba32f()
+                .pixels()
+                .map(|p| p[3].clamp(0.0, 1.0))
+                .collect(),
+        };
+        a.iter().any(|&v| v < 1.0).then_some(a)
+    } else {
+        None
+    };
+    if alpha
+        .as_ref()
+        .is_some_and(|a| a.iter().any(|v| !v.is_finite()))
+    {
+        return Err("the image has non-finite alpha".into());
+    }
     let texels: Vec<Vec3> = match img {
         image::DynamicImage::ImageLuma8(_)
         | image::DynamicImage::ImageLumaA8(_)
@@ -114,6 +137,7 @@ pub fn decode(
         width,
         height,
         texels,
+        alpha,
         wrap,
     })
 }
