@@ -629,6 +629,96 @@ mod tests {
         assert!((0..LANES).all(|l| empty(shadow.ray(l))));
     }
 
+    /// Rejects every hit on triangle `reject`; panics on `panic_on`.
+    struct TestFilter {
+        reject: u32,
+        panic_on: u32,
+    }
+
+    impl HitFilter for TestFilter {
+        fn accept(&self, hit: &crate::embree::CandidateHit) -> bool {
+            assert!(hit.prim != self.panic_on, "a panicking filter");
+            hit.prim != self.reject
+        }
+    }
+
+    /// The quad of `quad_scene` with a filter, and a second quad behind it at z = 4.
+    fn filtered_scene(device: &Device, filter: TestFilter) -> Scene {
+        let quad = |z: f32| {
+            TriangleMesh::new(
+                vec![
+                    [-10.0, -10.0, z],
+                    [10.0, -10.0, z],
+                    [10.0, 10.0, z],
+                    [-10.0, 10.0, z],
+                ],
+                vec![[0, 1, 2], [0, 2, 3]],
+            )
+            .unwrap()
+        };
+        let mut b = SceneBuilder::new(device).unwrap();
+        b.add_mesh_filtered(quad(2.0), Arc::new(filter)).unwrap();
+        b.add_mesh(quad(4.0)).unwrap();
+        b.commit().unwrap()
+    }
+
+    /// Hit filters run on every kernel path and packet width, for nearest-hit and occlusion
+    /// queries: a rejected triangle lets rays through to what is behind it; a filter that
+    /// panics accepts the hit (and the panic does not cross into Embree).
+    #[test]
+    fn hit_filters_reject_hits_and_survive_panics() {
+        let mut devices = vec![Device::with_config("").unwrap()];
+        for isa in crate::embree::limited_isas() {
+            devices.push(Device::with_config(&format!("isa={isa}")).unwrap());
+        }
+        for device in &devices {
+            for width in [PacketWidth::X16, PacketWidth::X8, PacketWidth::X4] {
+                // Triangle 0 ([0, 1, 2]) covers x > y; triangle 1 panics.
+                let filter = TestFilter {
+                    reject: 0,
+                    panic_on: 1,
+                };
+                let mut scene = filtered_scene(device, filter);
+                scene.set_packet_width(width);
+                let mut packet = RayPacket16::new();
+                let mut shadow = ShadowPacket16::new();
+                let mut expected = [0.0f32; LANES];
+                for (lane, e) in expected.iter_mut().enumerate() {
+                    let ray = lane_ray(lane);
+                    packet.set(lane, &ray);
+                    let p = ray.at(2.0 / ray.dir.z);
+                    // Through the rejected triangle to the quad behind, else the first quad.
+                    let through = p.x > p.y + 1e-3;
+                    *e = if through { 4.0 } else { 2.0 };
+                    if (p.x - p.y).abs() < 1e-3 {
+                        *e = f32::NAN; // on the diagonal: either
+                    }
+                    // A shadow segment ending before the back quad: blocked unless through.
+                    shadow.set(
+                        lane,
+                        &Ray::segment(ray.origin, ray.dir, 0.0, 3.0 / ray.dir.z),
+                    );
+                }
+                scene.intersect16(&mut packet, RayHint::Coherent);
+                scene.occluded16(&mut shadow, RayHint::Coherent);
+                for (lane, &e) in expected.iter().enumerate() {
+                    if e.is_nan() {
+                        continue;
+                    }
+                    let hit = packet.hit(lane).expect("every lane hits a quad");
+                    let z = lane_ray(lane).at(hit.t).z;
+                    assert!(
+                        (z - e).abs() < 1e-3,
+                        "{width:?} lane {lane}: z {z}, not {e}"
+                    );
+                    assert_eq!(shadow.occluded(lane), e == 2.0, "{width:?} lane {lane}");
+                    let single = scene.intersect1(&lane_ray(lane)).unwrap();
+                    assert!((lane_ray(lane).at(single.t).z - e).abs() < 1e-3);
+                }
+            }
+        }
+    }
+
     #[test]
     fn embree_error_from_a_call_becomes_a_typed_error_with_embrees_message() {
         let device = Device::new().unwrap();
