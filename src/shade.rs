@@ -234,6 +234,27 @@ pub struct Alpha {
 }
 
 impl Alpha {
+    /// The alpha of `factor` times `texture`'s alpha channel (if it has one) in `mode`, or
+    /// `None` when it can never make a hole (MASK: never below the cutoff; BLEND: never below
+    /// 1), so the surface needs no hit filter.
+    pub fn new(factor: f32, texture: Option<Arc<ImageTexture>>, mode: AlphaMode) -> Option<Alpha> {
+        let texture = texture.filter(|t| t.alpha.is_some());
+        let lowest_texel = texture
+            .as_ref()
+            .and_then(|t| t.alpha.as_ref())
+            .map_or(1.0, |a| a.iter().copied().fold(1.0f32, f32::min));
+        let lowest = factor * lowest_texel;
+        let holes = match mode {
+            AlphaMode::Mask { cutoff } => lowest < cutoff,
+            AlphaMode::Blend => lowest < 1.0,
+        };
+        holes.then_some(Alpha {
+            factor,
+            texture,
+            mode,
+        })
+    }
+
     /// Opacity at texture coordinates `uv`.
     pub fn at(&self, uv: Vec2) -> f32 {
         match &self.texture {

@@ -422,3 +422,41 @@ fn normal_maps_tilt_the_shading_normal_in_tangent_space() {
     let v_other = tilted("nv2", true, [0.0, h, h]);
     assert!(v_other < 0.02, "lit from below: {v_other}");
 }
+
+#[test]
+fn scene_files_have_alpha_too() {
+    // A white quad of alpha 0.25 (blended by default) in front of the black wall.
+    let scene = VIEW
+        .replace("ambient = 0", "ambient = 1\nlights = []")
+        .replace("diffuse = [0.2, 0.9, 0.3]", "diffuse = 0")
+        .replace(
+            "[[objects]]\ntype = \"mesh\"\nfile = \"quad.gltf\"",
+            "[[materials]]\nname = \"veil\"\ndiffuse = 1\nalpha = 0.25\n\n\
+             [[objects]]\ntype = \"quad\"\nsize = [2, 2]\nrotate = [-90, 0, 0]\nmaterial = \"veil\"",
+        );
+    let desc = load("toml-blend", "{}", &scene);
+    assert!(desc.materials[1].maps.alpha.is_some());
+    let film = render_with(&desc, 64, 2, PacketWidth::Auto);
+    let m = mean(&film, 13, 27, 13, 27).x;
+    assert!((m - 0.25).abs() < 0.02, "{m}");
+
+    // A mask from an image texture's alpha: the checker's holes show the black wall.
+    let dir = scratch("toml-mask");
+    std::fs::write(dir.join("alpha.png"), checker_alpha()).unwrap();
+    let scene = scene
+        .replace("alpha = 0.25", "texture = \"holes\"\nalpha_mode = \"mask\"")
+        .replace(
+            "[[materials]]\nname = \"veil\"",
+            "[[textures]]\nname = \"holes\"\nimage = \"alpha.png\"\n\n[[materials]]\nname = \"veil\"",
+        );
+    std::fs::write(dir.join("scene.toml"), &scene).unwrap();
+    let desc = scene::load(dir.join("scene.toml").to_str().unwrap()).unwrap();
+    let film = render_with(&desc, 4, 2, PacketWidth::Auto);
+    let m = mean(&film, 12, 28, 12, 28).x;
+    assert!((m - 0.5).abs() < 0.05, "half the quad is holes: {m}");
+    // Opaque without alpha keys.
+    let scene = scene.replace("alpha_mode = \"mask\"", "");
+    std::fs::write(dir.join("scene.toml"), &scene).unwrap();
+    let desc = scene::load(dir.join("scene.toml").to_str().unwrap()).unwrap();
+    assert!(desc.materials.iter().all(|m| m.maps.alpha.is_none()));
+}

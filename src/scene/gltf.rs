@@ -778,12 +778,6 @@ impl Loader<'_> {
         } else {
             1.0
         };
-        let texture_alpha = base_image.as_ref().and_then(|t| {
-            t.alpha
-                .as_ref()
-                .map(|a| a.iter().copied().fold(1.0f32, f32::min))
-        });
-        let lowest = factor * texture_alpha.unwrap_or(1.0);
         let mode = match m.alpha_mode() {
             ::gltf::material::AlphaMode::Opaque => None,
             ::gltf::material::AlphaMode::Mask => {
@@ -797,15 +791,11 @@ impl Loader<'_> {
                         ),
                     });
                 }
-                (lowest < cutoff).then_some(AlphaMode::Mask { cutoff })
+                Some(AlphaMode::Mask { cutoff })
             }
-            ::gltf::material::AlphaMode::Blend => (lowest < 1.0).then_some(AlphaMode::Blend),
+            ::gltf::material::AlphaMode::Blend => Some(AlphaMode::Blend),
         };
-        let alpha = mode.map(|mode| Alpha {
-            factor,
-            texture: base_image.clone().filter(|t| t.alpha.is_some()),
-            mode,
-        });
+        let alpha = mode.and_then(|mode| Alpha::new(factor, base_image.clone(), mode));
         // Normal map: tangent space, on the mesh's texture coordinates (else ignored).
         let normal = match m.normal_texture() {
             Some(info) if info.tex_coord() == uv => {
