@@ -24,10 +24,17 @@ pub fn srgb_to_linear(v: f32) -> f32 {
 
 /// Memory a `width` x `height` texture of `color` needs while it is decoded and converted:
 /// the decoder's buffer, an 8-bit RGB copy (or a float RGB one for 16-bit images) and the
-/// linear float texels (12 bytes each). Saturating, never overflowing.
+/// linear float texels (12 bytes each); images with alpha add an RGBA copy (8-bit or float)
+/// and the kept alpha channel (4 bytes a texel). Saturating, never overflowing.
 pub fn texture_memory_bytes(width: u32, height: u32, color: image::ColorType) -> u64 {
-    let conversion = if color.bytes_per_pixel() <= 4 { 3 } else { 12 };
-    let per_texel = color.bytes_per_pixel() as u64 + conversion + 12;
+    let wide = color.bytes_per_pixel() > 4;
+    let conversion = if wide { 12 } else { 3 };
+    let alpha = match (color.has_alpha(), wide) {
+        (false, _) => 0,
+        (true, false) => 4 + 4,
+        (true, true) => 16 + 4,
+    };
+    let per_texel = color.bytes_per_pixel() as u64 + conversion + 12 + alpha;
     (width as u64)
         .saturating_mul(height as u64)
         .saturating_mul(per_texel)
