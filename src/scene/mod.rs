@@ -159,7 +159,8 @@ impl GeometryMaterials {
 }
 
 /// Embree's hit filter for meshes with alpha: rejects hits where the material is transparent
-/// (MASK: alpha below the cutoff; BLEND: with probability 1 - alpha, by [`blend_coin`]), so camera, mirror and shadow rays all pass through holes.
+/// (MASK: alpha below the cutoff; BLEND: with probability 1 - alpha, by [`blend_coin`]), so
+/// camera, mirror and shadow rays all pass through holes.
 struct AlphaFilter {
     mesh: TriangleMesh,
     materials: GeometryMaterials,
