@@ -381,9 +381,34 @@ fn metallic_roughness_texture_varies_per_hit() {
     assert!((metal.shininess - 30.0).abs() < 1e-3);
 }
 
+/// Gives the quad of `gltf` a TANGENT attribute of `t` at every vertex, in a buffer of its own.
+fn with_tangents(gltf: &str, t: [f32; 4]) -> String {
+    let mut doc: serde_json::Value = serde_json::from_str(gltf).unwrap();
+    let bytes: Vec<u8> = (0..4).flat_map(|_| t).flat_map(f32::to_le_bytes).collect();
+    doc["buffers"].as_array_mut().unwrap().push(json!({
+        "byteLength": bytes.len(),
+        "uri": format!("data:application/octet-stream;base64,{}", base64(&bytes))
+    }));
+    doc["bufferViews"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"buffer": 1, "byteOffset": 0, "byteLength": 64}));
+    doc["accessors"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!({"bufferView": 4, "componentType": 5126, "count": 4, "type": "VEC4"}));
+    doc["meshes"][0]["primitives"][0]["attributes"]["TANGENT"] = json!(4);
+    serde_json::to_string(&doc).unwrap()
+}
+
 /// A normal map tilting every normal by 45 degrees towards +u (`towards_v`: +v, up in the
 /// image), lit along the tilted normal: brighter than the flat quad by 1 / cos 45.
 fn tilted(test: &str, towards_v: bool, light: [f32; 3]) -> f32 {
+    tilted_with(test, towards_v, light, None)
+}
+
+/// [`tilted`], with a TANGENT attribute when `tangent` is given.
+fn tilted_with(test: &str, towards_v: bool, light: [f32; 3], tangent: Option<[f32; 4]>) -> f32 {
     let s = (0.5 + 0.5 * std::f32::consts::FRAC_1_SQRT_2) * 255.0;
     let texel = if towards_v {
         [128, s.round() as u8, s.round() as u8, 255]
@@ -398,7 +423,11 @@ fn tilted(test: &str, towards_v: bool, light: [f32; 3]) -> f32 {
     let scene = format!(
         "{VIEW}\n[[lights]]\ntype = \"directional\"\ndirection = {light:?}\nirradiance = 1\n"
     );
-    let desc = load(test, &quad_gltf(material, &[map]), &scene);
+    let mut gltf = quad_gltf(material, &[map]);
+    if let Some(t) = tangent {
+        gltf = with_tangents(&gltf, t);
+    }
+    let desc = load(test, &gltf, &scene);
     let film = render_with(&desc, 1, 2, PacketWidth::Auto);
     pixel(&film, 20, 20).x
 }
@@ -421,6 +450,12 @@ fn normal_maps_tilt_the_shading_normal_in_tangent_space() {
     );
     let v_other = tilted("nv2", true, [0.0, h, h]);
     assert!(v_other < 0.02, "lit from below: {v_other}");
+    // TANGENT agreeing with the UVs (bitangent = cross(normal, tangent) * w = +y): the same.
+    let t = tilted_with("nt", false, [-h, 0.0, h], Some([1.0, 0.0, 0.0, -1.0]));
+    assert!((t - 1.0).abs() < 0.02, "with TANGENT: {t}");
+    // A TANGENT along +y is used as given: tilting towards +u now tilts towards +y.
+    let t = tilted_with("nty", false, [0.0, -h, h], Some([0.0, 1.0, 0.0, 1.0]));
+    assert!((t - 1.0).abs() < 0.02, "TANGENT along +y: {t}");
 }
 
 #[test]
