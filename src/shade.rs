@@ -35,6 +35,9 @@ pub struct ImageTexture {
     pub height: usize,
     /// Row-major, top row first (v = 1 is the top, as in OBJ and glTF after its flip).
     pub texels: Vec<Vec3>,
+    /// The alpha channel, same layout as `texels`, when the image has one that is not 1
+    /// everywhere.
+    pub alpha: Option<Vec<f32>>,
     pub wrap: Wrap,
 }
 
@@ -61,6 +64,33 @@ impl ImageTexture {
         let top = self.texel(x0, y0).lerp(self.texel(x0 + 1, y0), fx);
         let bottom = self.texel(x0, y0 + 1).lerp(self.texel(x0 + 1, y0 + 1), fx);
         top.lerp(bottom, fy)
+    }
+
+    /// Bilinear lookup of the alpha channel (1 for images without one), as [`Self::sample`].
+    pub fn sample_alpha(&self, uv: Vec2) -> f32 {
+        let Some(alpha) = &self.alpha else {
+            return 1.0;
+        };
+        let x = uv.x * self.width as f32 - 0.5;
+        let y = (1.0 - uv.y) * self.height as f32 - 0.5;
+        if !(x.is_finite() && y.is_finite()) {
+            return 1.0;
+        }
+        let (x0, y0) = (floor(x), floor(y));
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let (w, h) = (self.width as i64, self.height as i64);
+        let at = |x: i64, y: i64| {
+            let (x, y) = match self.wrap {
+                Wrap::Repeat => (x.rem_euclid(w), y.rem_euclid(h)),
+                Wrap::Clamp => (x.clamp(0, w - 1), y.clamp(0, h - 1)),
+            };
+            alpha[(y * w + x) as usize]
+        };
+        let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
+        let top = lerp(at(x0, y0), at(x0 + 1, y0), fx);
+        let bottom = lerp(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx);
+        lerp(top, bottom, fy)
     }
 }
 
@@ -180,6 +210,121 @@ pub struct Material {
     pub emission: Vec3,
     /// An image the emission is multiplied by (glTF `emissiveTexture`), if any.
     pub emission_texture: Option<Arc<ImageTexture>>,
+    /// Alpha, a metallic-roughness texture and a normal map (glTF materials); none by default.
+    pub maps: MaterialMaps,
+}
+
+/// How a material's alpha makes it transparent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AlphaMode {
+    /// A hole wherever alpha < cutoff (glTF `MASK`, `alphaCutoff`).
+    Mask { cutoff: f32 },
+    /// Stochastic transparency (glTF `BLEND`): each ray passes with probability 1 - alpha,
+    /// decided by a hash of the ray and the triangle, so renders are deterministic and the
+    /// many pixel x lens samples average to the blend.
+    Blend,
+}
+
+/// A material's opacity: `factor` times the texture's alpha channel.
+#[derive(Debug, Clone)]
+pub struct Alpha {
+    pub factor: f32,
+    pub texture: Option<Arc<ImageTexture>>,
+    pub mode: AlphaMode,
+}
+
+impl Alpha {
+    /// The alpha of `factor` times `texture`'s alpha channel (if it has one) in `mode`, or
+    /// `None` when it can never make a hole (MASK: never below the cutoff; BLEND: never below
+    /// 1), so the surface needs no hit filter.
+    pub fn new(factor: f32, texture: Option<Arc<ImageTexture>>, mode: AlphaMode) -> Option<Alpha> {
+        let texture = texture.filter(|t| t.alpha.is_some());
+        let lowest_texel = texture
+            .as_ref()
+            .and_then(|t| t.alpha.as_ref())
+            .map_or(1.0, |a| a.iter().copied().fold(1.0f32, f32::min));
+        let lowest = factor * lowest_texel;
+        let holes = match mode {
+            AlphaMode::Mask { cutoff } => lowest < cutoff,
+            AlphaMode::Blend => lowest < 1.0,
+        };
+        holes.then_some(Alpha {
+            factor,
+            texture,
+            mode,
+        })
+    }
+
+    /// Opacity at texture coordinates `uv`.
+    pub fn at(&self, uv: Vec2) -> f32 {
+        match &self.texture {
+            Some(t) => self.factor * t.sample_alpha(uv),
+            None => self.factor,
+        }
+    }
+}
+
+/// glTF metallic-roughness, evaluated per hit: `factor`s times the texture's blue (metallic)
+/// and green (roughness) channels, mapped by [`pbr_params`].
+#[derive(Debug, Clone)]
+pub struct MetalRough {
+    /// The base colour (glTF `baseColorFactor` times `baseColorTexture`), before it is dimmed
+    /// by metalness into the diffuse colour.
+    pub base: Texture,
+    pub metallic: f32,
+    pub roughness: f32,
+    pub texture: Arc<ImageTexture>,
+}
+
+/// A tangent-space normal map (glTF `normalTexture`, linear RGB, +y up as in OpenGL).
+#[derive(Debug, Clone)]
+pub struct NormalMap {
+    pub image: Arc<ImageTexture>,
+    /// Scales the map's x and y (glTF `scale`).
+    pub scale: f32,
+}
+
+impl NormalMap {
+    /// The shading normal at `uv` for the unit normal `n`, unit tangent `t` (orthogonal to `n`)
+    /// and bitangent sign `w`.
+    pub fn perturb(&self, uv: Vec2, n: Vec3, t: Vec3, w: f32) -> Vec3 {
+        let c = self.image.sample(uv) * 2.0 - Vec3::ONE;
+        let b = n.cross(t) * w;
+        let p = (t * (c.x * self.scale) + b * (c.y * self.scale) + n * c.z).normalize_or_zero();
+        if p == Vec3::ZERO { n } else { p }
+    }
+}
+
+/// Optional material features (all from glTF materials).
+#[derive(Debug, Clone, Default)]
+pub struct MaterialMaps {
+    /// Cut-outs and transparency; `None` when the material is opaque everywhere.
+    pub alpha: Option<Alpha>,
+    /// Per-hit metallic and roughness; `None` when they are constant (already in the
+    /// material's diffuse, specular, shininess and mirror).
+    pub metal_rough: Option<MetalRough>,
+    pub normal: Option<NormalMap>,
+}
+
+/// What shading uses of a material at one point: diffuse albedo, Blinn-Phong specular colour
+/// and exponent, and mirror fraction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Surface {
+    pub albedo: Vec3,
+    pub specular: Vec3,
+    pub shininess: f32,
+    pub mirror: f32,
+}
+
+/// The mapping of glTF metallic-roughness onto dofray's material (see docs/scene-format.md):
+/// (diffuse, specular, shininess, mirror) for base colour `base`, metalness `metallic` and
+/// perceptual roughness `roughness` (both in [0, 1]).
+pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> (Vec3, Vec3, f32, f32) {
+    let alpha = (roughness * roughness).max(1e-3);
+    let shininess = (2.0 / (alpha * alpha) - 2.0).clamp(1.0, 10_000.0);
+    let specular = Vec3::splat(0.04).lerp(base, metallic) * (1.0 - roughness);
+    let mirror = metallic * (1.0 - roughness) * (1.0 - roughness);
+    (base * (1.0 - metallic), specular, shininess, mirror)
 }
 
 impl Material {
@@ -191,6 +336,33 @@ impl Material {
             mirror: 0.0,
             emission: Vec3::ZERO,
             emission_texture: None,
+            maps: MaterialMaps::default(),
+        }
+    }
+
+    /// The material at texture coordinates `uv`.
+    #[inline]
+    pub fn surface(&self, uv: Vec2) -> Surface {
+        match &self.maps.metal_rough {
+            None => Surface {
+                albedo: self.diffuse.sample(uv),
+                specular: self.specular,
+                shininess: self.shininess,
+                mirror: self.mirror,
+            },
+            Some(mr) => {
+                let t = mr.texture.sample(uv);
+                let metallic = (mr.metallic * t.z).clamp(0.0, 1.0);
+                let roughness = (mr.roughness * t.y).clamp(0.0, 1.0);
+                let (albedo, specular, shininess, mirror) =
+                    pbr_params(mr.base.sample(uv), metallic, roughness);
+                Surface {
+                    albedo,
+                    specular,
+                    shininess,
+                    mirror,
+                }
+            }
         }
     }
 
@@ -295,23 +467,17 @@ impl SurfacePoints16 {
 }
 
 /// Direct lighting from one light through an unoccluded shadow ray: diffuse + highlight.
-pub fn direct(
-    material: &Material,
-    albedo: Vec3,
-    sp: &SurfacePoint,
-    view: Vec3,
-    light: &LightSample,
-) -> Vec3 {
+pub fn direct(surface: &Surface, sp: &SurfacePoint, view: Vec3, light: &LightSample) -> Vec3 {
     let cos = sp.normal.dot(light.dir);
     if cos <= 0.0 {
         return Vec3::ZERO;
     }
-    let mut c = albedo * (1.0 - material.mirror) * cos;
-    if material.specular != Vec3::ZERO {
+    let mut c = surface.albedo * (1.0 - surface.mirror) * cos;
+    if surface.specular != Vec3::ZERO {
         let h = (light.dir - view).normalize_or_zero();
         let cos_h = sp.normal.dot(h);
         if cos_h > 0.0 {
-            c += material.specular * cos_h.powf(material.shininess);
+            c += surface.specular * cos_h.powf(surface.shininess);
         }
     }
     c * light.irradiance
@@ -393,6 +559,7 @@ mod tests {
             width: 2,
             height: 1,
             texels: vec![Vec3::ZERO, Vec3::ONE],
+            alpha: None,
             wrap: Wrap::Clamp,
         };
         assert_eq!(img.sample(Vec2::new(0.25, 0.5)), Vec3::ZERO);
@@ -418,13 +585,23 @@ mod tests {
             position: Vec3::new(0.0, 2.0, 0.0),
             intensity: Vec3::splat(4.0),
         };
-        let c = direct(&m, Vec3::ONE, &sp, -Vec3::Y, &light.sample(sp.position));
+        let c = direct(
+            &m.surface(Vec2::ZERO),
+            &sp,
+            -Vec3::Y,
+            &light.sample(sp.position),
+        );
         assert!((c.x - 1.0).abs() < 1e-6);
         let slanted = Light::Directional {
             direction: Vec3::new(1.0, -1.0, 0.0),
             irradiance: Vec3::ONE,
         };
-        let c = direct(&m, Vec3::ONE, &sp, -Vec3::Y, &slanted.sample(sp.position));
+        let c = direct(
+            &m.surface(Vec2::ZERO),
+            &sp,
+            -Vec3::Y,
+            &slanted.sample(sp.position),
+        );
         assert!((c.x - std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-6);
     }
 }

@@ -21,6 +21,8 @@ pub struct TriangleMesh {
     indices: Arc<Vec<[u32; 3]>>,
     normals: Option<Arc<Vec<[f32; 3]>>>,
     uvs: Option<Arc<Vec<[f32; 2]>>>,
+    /// Per-vertex tangents for normal maps: xyz unit, w the bitangent sign (+1 or -1).
+    tangents: Option<Arc<Vec<[f32; 4]>>>,
 }
 
 fn check_finite(values: &[f32], what: &str, width: usize) -> Result<()> {
@@ -69,6 +71,7 @@ impl TriangleMesh {
             indices: Arc::new(indices),
             normals: None,
             uvs: None,
+            tangents: None,
         })
     }
 
@@ -104,6 +107,44 @@ impl TriangleMesh {
         Ok(self)
     }
 
+    /// Per-vertex tangents (one per vertex, finite): xyz is normalised here, w becomes the
+    /// sign of the bitangent (`cross(normal, tangent) * w`).
+    pub fn with_tangents(mut self, tangents: Vec<[f32; 4]>) -> Result<Self> {
+        if tangents.len() != self.vertex_count() {
+            return Err(EmbreeError::InvalidGeometry(format!(
+                "{} tangents for {} vertices",
+                tangents.len(),
+                self.vertex_count()
+            )));
+        }
+        check_finite(tangents.as_flattened(), "tangent", 4)?;
+        let mut tangents = tangents;
+        for t in &mut tangents {
+            let xyz = Vec3::new(t[0], t[1], t[2]).normalize_or_zero();
+            let w = if t[3] < 0.0 { -1.0 } else { 1.0 };
+            *t = [xyz.x, xyz.y, xyz.z, w];
+        }
+        self.tangents = Some(Arc::new(tangents));
+        Ok(self)
+    }
+
+    pub fn tangents(&self) -> Option<&[[f32; 4]]> {
+        self.tangents.as_deref().map(Vec::as_slice)
+    }
+
+    /// Interpolated tangent (xyz, not normalised) and bitangent sign at barycentrics (u, v)
+    /// of triangle `prim`, or `None` when the mesh has no tangents.
+    ///
+    /// # Panics
+    /// When `prim` is not a triangle of this mesh.
+    pub fn tangent(&self, prim: u32, u: f32, v: f32) -> Option<(Vec3, f32)> {
+        let tangents = self.tangents.as_ref()?;
+        let [a, b, c] = self.corners(tangents, prim);
+        let xyz = |t: [f32; 4]| Vec3::new(t[0], t[1], t[2]);
+        let t = xyz(a) * (1.0 - u - v) + xyz(b) * u + xyz(c) * v;
+        Some((t, a[3]))
+    }
+
     pub fn vertex_count(&self) -> usize {
         self.positions.len() - 1
     }
@@ -135,6 +176,7 @@ impl TriangleMesh {
             + self.indices.capacity() * 12
             + self.normals.as_ref().map_or(0, |n| n.capacity() * 12)
             + self.uvs.as_ref().map_or(0, |u| u.capacity() * 8)
+            + self.tangents.as_ref().map_or(0, |t| t.capacity() * 16)
     }
 
     /// The buffers Embree shares: (vertex pointer, vertex count, index pointer, triangle count).

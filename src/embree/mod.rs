@@ -10,6 +10,7 @@
 #![warn(clippy::undocumented_unsafe_blocks)]
 
 mod device;
+mod filter;
 mod geometry;
 mod packet;
 mod scene;
@@ -17,6 +18,7 @@ mod sys;
 mod version;
 
 pub use device::{CONFIG_ENV, Device, EmbreeError, ErrorCode, Result, env_config, limited_isas};
+pub use filter::{CandidateHit, HitFilter};
 pub use geometry::{Geometry, GeometryId, Spheres, TriangleMesh};
 pub use packet::{Hit, LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 pub use scene::{BuildQuality, PacketWidth, Scene, SceneBuilder};

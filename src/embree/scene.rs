@@ -1,8 +1,11 @@
 //! Building and committing an Embree scene, then tracing rays against it from any thread.
 
+use std::sync::Arc;
+
 use glam::Vec3;
 
 use super::device::{Device, EmbreeError, Result};
+use super::filter::{self, FilterBox, HitFilter};
 use super::geometry::{Geometry, GeometryId, Spheres, TriangleMesh};
 use super::packet::{Hit, Ray, RayHint, RayPacket16, ShadowPacket16};
 use super::{sys, version};
@@ -70,6 +73,8 @@ pub struct SceneBuilder {
     // Field order is drop order: the scene handle goes before the buffers it shares.
     handle: SceneHandle,
     geometries: Vec<Geometry>,
+    /// The hit filters Embree's geometries point at (see `filter.rs`).
+    filters: Vec<FilterBox>,
     device: Device,
     quality: BuildQuality,
 }
@@ -92,6 +97,7 @@ impl SceneBuilder {
         Ok(Self {
             handle: SceneHandle(raw),
             geometries: Vec::new(),
+            filters: Vec::new(),
             device: device.clone(),
             quality: BuildQuality::default(),
         })
@@ -104,11 +110,41 @@ impl SceneBuilder {
 
     /// Adds a triangle mesh; its buffers are shared with Embree, not copied.
     pub fn add_mesh(&mut self, mesh: TriangleMesh) -> Result<GeometryId> {
+        self.add_mesh_with(mesh, None)
+    }
+
+    /// Adds a triangle mesh whose candidate hits `filter` accepts or rejects, for nearest-hit
+    /// and occlusion queries alike (holes in alpha-masked surfaces). Embree calls the filter
+    /// during traversal; a mesh without one costs nothing extra.
+    pub fn add_mesh_filtered(
+        &mut self,
+        mesh: TriangleMesh,
+        filter: Arc<dyn HitFilter>,
+    ) -> Result<GeometryId> {
+        self.add_mesh_with(mesh, Some(filter))
+    }
+
+    fn add_mesh_with(
+        &mut self,
+        mesh: TriangleMesh,
+        filter: Option<Arc<dyn HitFilter>>,
+    ) -> Result<GeometryId> {
         let (vertices, vertex_count, indices, triangle_count) = mesh.raw_buffers();
-        self.attach(
+        let filters = &mut self.filters;
+        Self::attach_to(
+            &self.handle,
+            &mut self.geometries,
+            &self.device,
+            self.quality,
             Geometry::Mesh(mesh),
             sys::RTC_GEOMETRY_TYPE_TRIANGLE,
             |geom| {
+                if let Some(filter) = filter {
+                    // SAFETY: geom is live and not yet committed; the box is kept in the
+                    // builder, then the Scene, whose field order drops it after the scene
+                    // handle is released.
+                    filters.push(unsafe { filter::install(geom, filter) });
+                }
                 // SAFETY: both buffers are owned by the Geometry that this builder (then the Scene)
                 // keeps until after the scene handle is released; each is padded by one element so
                 // Embree's 16-byte loads of the last item stay in bounds; strides match the layouts.
@@ -168,13 +204,35 @@ impl SceneBuilder {
         kind: sys::RTCGeometryType,
         set_buffers: impl FnOnce(sys::RTCGeometry),
     ) -> Result<GeometryId> {
-        let id = u32::try_from(self.geometries.len())
+        Self::attach_to(
+            &self.handle,
+            &mut self.geometries,
+            &self.device,
+            self.quality,
+            geometry,
+            kind,
+            set_buffers,
+        )
+    }
+
+    /// [`SceneBuilder::attach`] over the builder's fields, so that `set_buffers` may borrow
+    /// the others (the filters).
+    fn attach_to(
+        handle: &SceneHandle,
+        geometries: &mut Vec<Geometry>,
+        device: &Device,
+        quality: BuildQuality,
+        geometry: Geometry,
+        kind: sys::RTCGeometryType,
+        set_buffers: impl FnOnce(sys::RTCGeometry),
+    ) -> Result<GeometryId> {
+        let id = u32::try_from(geometries.len())
             .ok()
             .filter(|&id| id != sys::RTC_INVALID_GEOMETRY_ID)
             .ok_or_else(|| EmbreeError::InvalidGeometry("too many geometries".into()))?;
         // SAFETY: live device; the geometry handle is released below on every path.
-        let geom = unsafe { sys::rtcNewGeometry(self.device.raw(), kind) };
-        if let Err(e) = self.device.check("rtcNewGeometry") {
+        let geom = unsafe { sys::rtcNewGeometry(device.raw(), kind) };
+        if let Err(e) = device.check("rtcNewGeometry") {
             if !geom.is_null() {
                 // SAFETY: geom came from rtcNewGeometry and is released once.
                 unsafe { sys::rtcReleaseGeometry(geom) };
@@ -185,14 +243,14 @@ impl SceneBuilder {
         // SAFETY: geom is live with its buffers set; the scene takes its own reference when
         // attaching, so releasing ours afterwards is correct.
         unsafe {
-            sys::rtcSetGeometryBuildQuality(geom, self.quality.raw());
+            sys::rtcSetGeometryBuildQuality(geom, quality.raw());
             sys::rtcCommitGeometry(geom);
-            sys::rtcAttachGeometryByID(self.handle.0, geom, id);
+            sys::rtcAttachGeometryByID(handle.0, geom, id);
             sys::rtcReleaseGeometry(geom);
         }
         // Keep the Rust-side data even on error: Embree may still reference its buffers.
-        self.geometries.push(geometry);
-        self.device.check("attaching geometry")?;
+        geometries.push(geometry);
+        device.check("attaching geometry")?;
         Ok(GeometryId(id))
     }
 
@@ -212,6 +270,7 @@ impl SceneBuilder {
             lanes_per_call: PacketWidth::Auto.lanes(),
             handle: self.handle,
             geometries: self.geometries,
+            _filters: self.filters,
             device: self.device,
             bounds: (
                 Vec3::new(bounds.lower_x, bounds.lower_y, bounds.lower_z),
@@ -226,6 +285,8 @@ pub struct Scene {
     // Field order is drop order: the scene handle goes before the buffers it shares.
     handle: SceneHandle,
     geometries: Vec<Geometry>,
+    /// Kept alive: filtered geometries' user data points into them.
+    _filters: Vec<FilterBox>,
     /// Kept alive: the scene's error callback user pointer lives in it.
     device: Device,
     bounds: (Vec3, Vec3),
@@ -566,6 +627,96 @@ mod tests {
         );
         shadow.clear();
         assert!((0..LANES).all(|l| empty(shadow.ray(l))));
+    }
+
+    /// Rejects every hit on triangle `reject`; panics on `panic_on`.
+    struct TestFilter {
+        reject: u32,
+        panic_on: u32,
+    }
+
+    impl HitFilter for TestFilter {
+        fn accept(&self, hit: &crate::embree::CandidateHit) -> bool {
+            assert!(hit.prim != self.panic_on, "a panicking filter");
+            hit.prim != self.reject
+        }
+    }
+
+    /// The quad of `quad_scene` with a filter, and a second quad behind it at z = 4.
+    fn filtered_scene(device: &Device, filter: TestFilter) -> Scene {
+        let quad = |z: f32| {
+            TriangleMesh::new(
+                vec![
+                    [-10.0, -10.0, z],
+                    [10.0, -10.0, z],
+                    [10.0, 10.0, z],
+                    [-10.0, 10.0, z],
+                ],
+                vec![[0, 1, 2], [0, 2, 3]],
+            )
+            .unwrap()
+        };
+        let mut b = SceneBuilder::new(device).unwrap();
+        b.add_mesh_filtered(quad(2.0), Arc::new(filter)).unwrap();
+        b.add_mesh(quad(4.0)).unwrap();
+        b.commit().unwrap()
+    }
+
+    /// Hit filters run on every kernel path and packet width, for nearest-hit and occlusion
+    /// queries: a rejected triangle lets rays through to what is behind it; a filter that
+    /// panics accepts the hit (and the panic does not cross into Embree).
+    #[test]
+    fn hit_filters_reject_hits_and_survive_panics() {
+        let mut devices = vec![Device::with_config("").unwrap()];
+        for isa in crate::embree::limited_isas() {
+            devices.push(Device::with_config(&format!("isa={isa}")).unwrap());
+        }
+        for device in &devices {
+            for width in [PacketWidth::X16, PacketWidth::X8, PacketWidth::X4] {
+                // Triangle 0 ([0, 1, 2]) covers x > y; triangle 1 panics.
+                let filter = TestFilter {
+                    reject: 0,
+                    panic_on: 1,
+                };
+                let mut scene = filtered_scene(device, filter);
+                scene.set_packet_width(width);
+                let mut packet = RayPacket16::new();
+                let mut shadow = ShadowPacket16::new();
+                let mut expected = [0.0f32; LANES];
+                for (lane, e) in expected.iter_mut().enumerate() {
+                    let ray = lane_ray(lane);
+                    packet.set(lane, &ray);
+                    let p = ray.at(2.0 / ray.dir.z);
+                    // Through the rejected triangle to the quad behind, else the first quad.
+                    let through = p.x > p.y + 1e-3;
+                    *e = if through { 4.0 } else { 2.0 };
+                    if (p.x - p.y).abs() < 1e-3 {
+                        *e = f32::NAN; // on the diagonal: either
+                    }
+                    // A shadow segment ending before the back quad: blocked unless through.
+                    shadow.set(
+                        lane,
+                        &Ray::segment(ray.origin, ray.dir, 0.0, 3.0 / ray.dir.z),
+                    );
+                }
+                scene.intersect16(&mut packet, RayHint::Coherent);
+                scene.occluded16(&mut shadow, RayHint::Coherent);
+                for (lane, &e) in expected.iter().enumerate() {
+                    if e.is_nan() {
+                        continue;
+                    }
+                    let hit = packet.hit(lane).expect("every lane hits a quad");
+                    let z = lane_ray(lane).at(hit.t).z;
+                    assert!(
+                        (z - e).abs() < 1e-3,
+                        "{width:?} lane {lane}: z {z}, not {e}"
+                    );
+                    assert_eq!(shadow.occluded(lane), e == 2.0, "{width:?} lane {lane}");
+                    let single = scene.intersect1(&lane_ray(lane)).unwrap();
+                    assert!((lane_ray(lane).at(single.t).z - e).abs() < 1e-3);
+                }
+            }
+        }
     }
 
     #[test]

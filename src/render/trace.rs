@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use crate::embree::{Geometry, Hit, LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::scene::World;
-use crate::shade::{self, Light, LightSample, SurfacePoints16};
+use crate::shade::{self, Light, LightSample, Surface, SurfacePoints16};
 
 /// Rays traced, by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -277,19 +277,22 @@ pub fn trace_and_shade(
     }
     let points = &mut scratch.points;
     world.surface_points16(packet, hits, points);
-    let mut material_of = [0usize; LANES];
-    let mut albedo = [Vec3::ZERO; LANES];
+    let mut surface = [Surface {
+        albedo: Vec3::ZERO,
+        specular: Vec3::ZERO,
+        shininess: 0.0,
+        mirror: 0.0,
+    }; LANES];
     let mut extent = [0.0f32; LANES];
     let mut lift = [[0.0f32; LANES]; 3];
     let tfar = packet.tfars();
     for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
         let hit = packet.hit(lane).expect("lanes in `hits` hit");
-        let m = world.material_index(&hit);
-        let material = &world.materials[m];
-        albedo[lane] = material.diffuse.sample(points.uv[lane]);
-        radiance[lane] = albedo[lane] * world.ambient * (1.0 - material.mirror)
-            + material.emitted(points.uv[lane]);
-        material_of[lane] = m;
+        let material = world.material(&hit);
+        let s = material.surface(points.uv[lane]);
+        surface[lane] = s;
+        radiance[lane] =
+            s.albedo * world.ambient * (1.0 - s.mirror) + material.emitted(points.uv[lane]);
         extent[lane] = primitive_extent(world, &hit);
         let sp = points.get(lane);
         let up = terminator_lift(world, &hit, sp.position, sp.normal);
@@ -374,15 +377,12 @@ pub fn trace_and_shade(
                         irradiance[2][lane],
                     ),
                 };
-                let material = &world.materials[material_of[lane]];
-                radiance[lane] +=
-                    shade::direct(material, albedo[lane], &points.get(lane), view(lane), &ls);
+                radiance[lane] += shade::direct(&surface[lane], &points.get(lane), view(lane), &ls);
             }
         }
     }
 
-    let reflects =
-        |lane: usize| hits & (1 << lane) != 0 && world.materials[material_of[lane]].mirror > 0.0;
+    let reflects = |lane: usize| hits & (1 << lane) != 0 && surface[lane].mirror > 0.0;
     if bounces == 0 || !(0..LANES).any(reflects) {
         return;
     }
@@ -412,7 +412,7 @@ pub fn trace_and_shade(
     );
     for lane in 0..LANES {
         if mirror.is_active(lane) {
-            radiance[lane] += reflected[lane] * world.materials[material_of[lane]].mirror;
+            radiance[lane] += reflected[lane] * surface[lane].mirror;
         }
     }
 }

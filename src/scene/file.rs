@@ -25,7 +25,9 @@ use super::texture::TextureCache;
 use super::{Background, MAX_MATERIAL_VALUE, MeshMaterials, Object, SceneDesc};
 use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
 use crate::embree::TriangleMesh;
-use crate::shade::{ImageTexture, Light, Material, Pattern, Texture, Wrap};
+use crate::shade::{
+    Alpha, AlphaMode, ImageTexture, Light, Material, MaterialMaps, Pattern, Texture, Wrap,
+};
 
 // ---------------------------------------------------------------------------------------------
 // Checked numbers: rejected while parsing, so the error points at the value.
@@ -426,6 +428,16 @@ struct RawMaterial {
     shininess: Option<Positive>,
     mirror: Option<Unit>,
     emission: Option<Spanned<Color>>,
+    alpha: Option<Unit>,
+    alpha_mode: Option<RawAlphaMode>,
+    alpha_cutoff: Option<Unit>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum RawAlphaMode {
+    Mask,
+    Blend,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -670,6 +682,27 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
             }
             Some(e) => e.get_ref().0,
         };
+        // Alpha: `alpha` times an image texture's alpha channel, as a mask (with its cutoff)
+        // or blended. Without `alpha_mode`: blended when `alpha` is given, a mask when only
+        // `alpha_cutoff` is, else opaque.
+        let mode = m.alpha_mode.or(match (m.alpha, m.alpha_cutoff) {
+            (Some(_), _) => Some(RawAlphaMode::Blend),
+            (None, Some(_)) => Some(RawAlphaMode::Mask),
+            (None, None) => None,
+        });
+        let alpha = mode.and_then(|mode| {
+            let mode = match mode {
+                RawAlphaMode::Mask => AlphaMode::Mask {
+                    cutoff: m.alpha_cutoff.map_or(0.5, |c| c.0),
+                },
+                RawAlphaMode::Blend => AlphaMode::Blend,
+            };
+            let image = match &diffuse {
+                Texture::Image { image, .. } => Some(image.clone()),
+                _ => None,
+            };
+            Alpha::new(m.alpha.map_or(1.0, |a| a.0), image, mode)
+        });
         materials.push(Material {
             diffuse,
             specular: m.specular.map_or(Vec3::ZERO, |c| c.0),
@@ -677,6 +710,10 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
             mirror: m.mirror.map_or(0.0, |u| u.0),
             emission,
             emission_texture: None,
+            maps: MaterialMaps {
+                alpha,
+                ..Default::default()
+            },
         });
         material_index.insert(name, materials.len() - 1);
     }

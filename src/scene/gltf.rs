@@ -22,7 +22,10 @@ use super::error::{LoadError, Location};
 use super::input::{self, LoadOptions};
 use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh, short_number, short_vec};
 use super::texture::{TextureCache, decode};
-use crate::shade::{ImageTexture, Material, Texture, Wrap};
+use crate::shade::{
+    Alpha, AlphaMode, ImageTexture, Material, MaterialMaps, MetalRough, NormalMap, Texture, Wrap,
+    pbr_params,
+};
 
 fn gltf_error(path: &Path, message: impl Into<String>) -> LoadError {
     LoadError::Gltf {
@@ -236,7 +239,8 @@ struct Loader<'a> {
     base: PathBuf,
     buffers: Vec<Vec<u8>>,
     textures: &'a mut TextureCache,
-    images: HashMap<usize, Arc<ImageTexture>>,
+    /// Decoded images by (glTF image index, repeat, sRGB).
+    images: HashMap<(usize, bool, bool), Arc<ImageTexture>>,
     materials: Vec<(String, Material)>,
     /// glTF material index -> our material index.
     material_map: HashMap<usize, usize>,
@@ -663,11 +667,50 @@ impl Loader<'_> {
         if tris.is_empty() || p.is_empty() {
             return Ok(());
         }
-        let mesh = mesh(self.path, &what, p, tris, n, uv)?;
         let material = match material.index() {
             Some(i) => Some(self.material(&material, i)?),
             None => None,
         };
+        // Normal-mapped materials need tangents: TANGENT when the primitive has it (w is the
+        // bitangent sign, flipped with the winding by a mirroring transform), else computed.
+        let normal_mapped = material.is_some_and(|i| self.materials[i].1.maps.normal.is_some());
+        let tangents = match &uv {
+            Some(uv) if normal_mapped => {
+                let given = match prim.get(&::gltf::Semantic::Tangents) {
+                    Some(t) => {
+                        check_accessor(
+                            self.path,
+                            &self.buffers,
+                            &t,
+                            "TANGENT",
+                            Dimensions::Vec4,
+                            &[DataType::F32],
+                        )?;
+                        let flip = if world.mirrors { -1.0 } else { 1.0 };
+                        prim.reader(|b| self.buffers.get(b.index()).map(Vec::as_slice))
+                            .read_tangents()
+                            .map(|it| {
+                                it.map(|[x, y, z, w]| {
+                                    let v = world.affine.transform_vector3(Vec3::new(x, y, z));
+                                    [v.x, v.y, v.z, w * flip]
+                                })
+                                .collect::<Vec<_>>()
+                            })
+                            .filter(|t| t.len() == p.len())
+                    }
+                    None => None,
+                };
+                Some(given.unwrap_or_else(|| compute_tangents(&p, &tris, n.as_deref(), uv)))
+            }
+            _ => None,
+        };
+        let mut mesh = mesh(self.path, &what, p, tris, n, uv)?;
+        if let Some(t) = tangents {
+            mesh = mesh.with_tangents(t).map_err(|e| LoadError::Geometry {
+                at: Location::file(self.path),
+                message: format!("{what}: {e}"),
+            })?;
+        }
         self.meshes.push(ModelMesh { mesh, material });
         Ok(())
     }
@@ -677,23 +720,23 @@ impl Loader<'_> {
             return Ok(i);
         }
         let pbr = m.pbr_metallic_roughness();
-        let [r, g, b, _] = pbr.base_color_factor();
+        let [r, g, b, a] = pbr.base_color_factor();
         let base = Vec3::new(r, g, b);
         let base = if base.is_finite() {
             base.max(Vec3::ZERO)
         } else {
             Vec3::ONE
         };
-        let diffuse = match pbr.base_color_texture() {
-            Some(info) => {
-                let texture = info.texture();
-                let wrap = match texture.sampler().wrap_s() {
-                    WrappingMode::ClampToEdge => Wrap::Clamp,
-                    _ => Wrap::Repeat,
-                };
-                let image = self.image(&texture.source(), wrap)?;
-                Texture::Image { image, tint: base }
-            }
+        let uv = uv_set(m);
+        let base_image = match pbr.base_color_texture() {
+            Some(info) => Some(self.texture_image(&info.texture(), true)?),
+            None => None,
+        };
+        let base_colour = match &base_image {
+            Some(image) => Texture::Image {
+                image: image.clone(),
+                tint: base,
+            },
             None => Texture::Constant(base),
         };
         let metallic = pbr.metallic_factor();
@@ -708,10 +751,77 @@ impl Loader<'_> {
         } else {
             1.0
         };
-        let alpha = (roughness * roughness).max(1e-3);
-        let shininess = (2.0 / (alpha * alpha) - 2.0).clamp(1.0, 10_000.0);
-        let specular = Vec3::splat(0.04).lerp(base, metallic) * (1.0 - roughness);
-        let mirror = metallic * (1.0 - roughness) * (1.0 - roughness);
+        let (dimmed, specular, shininess, mirror) = pbr_params(base, metallic, roughness);
+        let diffuse = match &base_image {
+            Some(image) => Texture::Image {
+                image: image.clone(),
+                tint: dimmed,
+            },
+            None => Texture::Constant(dimmed),
+        };
+        // A metallic-roughness texture on the mesh's texture coordinates makes metalness and
+        // roughness vary per hit; one on another set is ignored (the factors apply).
+        let metal_rough = match pbr.metallic_roughness_texture() {
+            Some(info) if info.tex_coord() == uv => Some(MetalRough {
+                base: base_colour,
+                metallic,
+                roughness,
+                texture: self.texture_image(&info.texture(), false)?,
+            }),
+            _ => None,
+        };
+        // Alpha: baseColorFactor's alpha times the base-colour texture's alpha channel, for
+        // MASK (holes below alphaCutoff, default 0.5) and BLEND (stochastic transparency).
+        // A material whose alpha cannot fall below what it needs stays opaque (no filter).
+        let factor = if a.is_finite() {
+            a.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let mode = match m.alpha_mode() {
+            ::gltf::material::AlphaMode::Opaque => None,
+            ::gltf::material::AlphaMode::Mask => {
+                let cutoff = m.alpha_cutoff().unwrap_or(0.5);
+                if !(cutoff.is_finite() && cutoff >= 0.0) {
+                    return Err(LoadError::Gltf {
+                        at: Location::file(self.path).with_key(format!("materials[{index}]")),
+                        message: format!(
+                            "alphaCutoff {} is out of range (expected a number >= 0)",
+                            short_number(cutoff)
+                        ),
+                    });
+                }
+                Some(AlphaMode::Mask { cutoff })
+            }
+            ::gltf::material::AlphaMode::Blend => Some(AlphaMode::Blend),
+        };
+        let alpha = mode.and_then(|mode| Alpha::new(factor, base_image.clone(), mode));
+        // Normal map: tangent space, on the mesh's texture coordinates (else ignored).
+        let normal = match m.normal_texture() {
+            Some(info) if info.tex_coord() == uv => {
+                let scale = info.scale();
+                if !(scale.is_finite() && scale.abs() <= MAX_MATERIAL_VALUE) {
+                    return Err(LoadError::Gltf {
+                        at: Location::file(self.path).with_key(format!("materials[{index}]")),
+                        message: format!(
+                            "normalTexture scale {} is out of range (expected a finite number \
+                             of magnitude at most 1e6)",
+                            short_number(scale)
+                        ),
+                    });
+                }
+                Some(NormalMap {
+                    image: self.texture_image(&info.texture(), false)?,
+                    scale,
+                })
+            }
+            _ => None,
+        };
+        let maps = MaterialMaps {
+            alpha,
+            metal_rough,
+            normal,
+        };
         let name = m
             .name()
             .map_or_else(|| format!("material {index}"), str::to_string);
@@ -733,12 +843,7 @@ impl Loader<'_> {
         let emission = emission.max(Vec3::ZERO);
         let emission_texture = match m.emissive_texture() {
             Some(info) if emission != Vec3::ZERO && info.tex_coord() == uv_set(m) => {
-                let texture = info.texture();
-                let wrap = match texture.sampler().wrap_s() {
-                    WrappingMode::ClampToEdge => Wrap::Clamp,
-                    _ => Wrap::Repeat,
-                };
-                Some(self.image(&texture.source(), wrap)?)
+                Some(self.texture_image(&info.texture(), true)?)
             }
             _ => None,
         };
@@ -751,6 +856,7 @@ impl Loader<'_> {
                 mirror,
                 emission,
                 emission_texture,
+                maps,
             },
         ));
         let i = self.materials.len() - 1;
@@ -758,8 +864,27 @@ impl Loader<'_> {
         Ok(i)
     }
 
-    fn image(&mut self, image: &::gltf::Image, wrap: Wrap) -> Result<Arc<ImageTexture>, LoadError> {
-        let key = image.index() * 2 + (wrap == Wrap::Repeat) as usize;
+    /// The image of a texture, with its sampler's wrap mode (wrapS clamp-to-edge gives clamp,
+    /// else repeat).
+    fn texture_image(
+        &mut self,
+        texture: &::gltf::Texture,
+        srgb: bool,
+    ) -> Result<Arc<ImageTexture>, LoadError> {
+        let wrap = match texture.sampler().wrap_s() {
+            WrappingMode::ClampToEdge => Wrap::Clamp,
+            _ => Wrap::Repeat,
+        };
+        self.image(&texture.source(), wrap, srgb)
+    }
+
+    fn image(
+        &mut self,
+        image: &::gltf::Image,
+        wrap: Wrap,
+        srgb: bool,
+    ) -> Result<Arc<ImageTexture>, LoadError> {
+        let key = (image.index(), wrap == Wrap::Repeat, srgb);
         if let Some(t) = self.images.get(&key) {
             return Ok(t.clone());
         }
@@ -773,7 +898,7 @@ impl Loader<'_> {
                     .ok_or_else(|| {
                         gltf_error(self.path, format!("{what}: buffer view out of range"))
                     })?;
-                let t = decode(bytes, true, wrap, self.options.max_texture_bytes)
+                let t = decode(bytes, srgb, wrap, self.options.max_texture_bytes)
                     .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
                 Arc::new(t)
             }
@@ -787,12 +912,12 @@ impl Loader<'_> {
                 let file =
                     input::reference(&self.base, Path::new(""), &decoded, &self.options, &at)?;
                 self.textures
-                    .file(&file, true, wrap)
+                    .file(&file, srgb, wrap)
                     .map_err(|e| e.referenced(Location::file(self.path), "texture"))?
             }
             ::gltf::image::Source::Uri { uri, .. } => {
                 let bytes = read_uri(self.path, &self.base, uri, "image", &self.options)?;
-                let t = decode(&bytes, true, wrap, self.options.max_texture_bytes)
+                let t = decode(&bytes, srgb, wrap, self.options.max_texture_bytes)
                     .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
                 Arc::new(t)
             }
@@ -800,6 +925,79 @@ impl Loader<'_> {
         self.images.insert(key, texture.clone());
         Ok(texture)
     }
+}
+
+/// Per-vertex tangents from positions and texture coordinates (v up, as loaded): each
+/// triangle's dP/du and dP/dv, weighted by its area in UV space, summed at its corners, then
+/// made orthogonal to the vertex normal (else the summed face normals); w is the sign that
+/// makes `cross(normal, tangent) * w` follow dP/dv. Vertices without a usable UV gradient get
+/// any tangent orthogonal to their normal. Not MikkTSpace: seams are not split or welded.
+fn compute_tangents(
+    p: &[[f32; 3]],
+    tris: &[[u32; 3]],
+    normals: Option<&[[f32; 3]]>,
+    uv: &[[f32; 2]],
+) -> Vec<[f32; 4]> {
+    let mut t = vec![Vec3::ZERO; p.len()];
+    let mut b = vec![Vec3::ZERO; p.len()];
+    let mut face = vec![Vec3::ZERO; p.len()];
+    for tri in tris {
+        let [i0, i1, i2] = tri.map(|i| i as usize);
+        let (Some(&p0), Some(&p1), Some(&p2)) = (p.get(i0), p.get(i1), p.get(i2)) else {
+            continue;
+        };
+        let (p0, p1, p2) = (Vec3::from(p0), Vec3::from(p1), Vec3::from(p2));
+        let (w0, w1, w2) = (uv[i0], uv[i1], uv[i2]);
+        let (e1, e2) = (p1 - p0, p2 - p0);
+        let (du1, dv1) = (w1[0] - w0[0], w1[1] - w0[1]);
+        let (du2, dv2) = (w2[0] - w0[0], w2[1] - w0[1]);
+        let det = du1 * dv2 - du2 * dv1;
+        let n = e1.cross(e2);
+        for i in [i0, i1, i2] {
+            face[i] += n;
+        }
+        if det == 0.0 || !det.is_finite() {
+            continue;
+        }
+        // Area-weighted: dividing by |det| only for the sign keeps big triangles heavier.
+        let sign = det.signum();
+        let tangent = (e1 * dv2 - e2 * dv1) * sign;
+        let bitangent = (e2 * du1 - e1 * du2) * sign;
+        if !(tangent.is_finite() && bitangent.is_finite()) {
+            continue;
+        }
+        for i in [i0, i1, i2] {
+            t[i] += tangent;
+            b[i] += bitangent;
+        }
+    }
+    (0..p.len())
+        .map(|i| {
+            let n = normals
+                .and_then(|n| n.get(i))
+                .map_or(face[i], |&n| Vec3::from(n))
+                .normalize_or_zero();
+            let mut tangent = (t[i] - n * n.dot(t[i])).normalize_or_zero();
+            if tangent == Vec3::ZERO {
+                tangent = if n == Vec3::ZERO {
+                    Vec3::X
+                } else {
+                    n.any_orthonormal_vector()
+                };
+            }
+            let w = if n.cross(tangent).dot(b[i]) < 0.0 {
+                -1.0
+            } else {
+                1.0
+            };
+            let tangent = if tangent.is_finite() {
+                tangent
+            } else {
+                Vec3::X
+            };
+            [tangent.x, tangent.y, tangent.z, w]
+        })
+        .collect()
 }
 
 /// The texture coordinate set a primitive is loaded with: the base-colour texture's, else the

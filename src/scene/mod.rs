@@ -14,16 +14,17 @@ pub use error::{LoadError, Location};
 pub use input::LoadOptions;
 
 use std::f32::consts::{PI, TAU};
+use std::sync::Arc;
 
 use glam::{Vec2, Vec3};
 
 use crate::camera::CameraSpec;
 use crate::embree::{
-    self, Device, EmbreeError, Geometry, Hit, LANES, Ray, RayPacket16, SceneBuilder, Spheres,
-    TriangleMesh,
+    self, CandidateHit, Device, EmbreeError, Geometry, Hit, HitFilter, LANES, Ray, RayPacket16,
+    SceneBuilder, Spheres, TriangleMesh,
 };
 use crate::limits::MAX_COORDINATE;
-use crate::shade::{Light, Material, SurfacePoint, SurfacePoints16, Texture};
+use crate::shade::{Alpha, AlphaMode, Light, Material, SurfacePoint, SurfacePoints16, Texture};
 
 /// Why a scene could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -150,11 +151,72 @@ enum GeometryMaterials {
     PerPrimitive(Vec<u32>),
 }
 
+impl GeometryMaterials {
+    /// The material of primitive `prim` (`None` for a primitive beyond the list).
+    fn of(&self, prim: u32) -> Option<usize> {
+        match self {
+            Self::One(m) => Some(*m),
+            Self::PerPrimitive(ids) => ids.get(prim as usize).map(|&m| m as usize),
+        }
+    }
+}
+
+/// Embree's hit filter for meshes with alpha: rejects hits where the material is transparent
+/// (MASK: alpha below the cutoff; BLEND: with probability 1 - alpha, by [`blend_coin`]), so
+/// camera, mirror and shadow rays all pass through holes.
+struct AlphaFilter {
+    mesh: TriangleMesh,
+    materials: GeometryMaterials,
+    /// Every material's alpha, by material index.
+    alphas: Arc<[Option<Alpha>]>,
+}
+
+/// A number in [0, 1) fixed by a ray (origin, direction) and the primitive it meets: BLEND's
+/// coin. The same for every thread count, packet width and traversal order.
+fn blend_coin(hit: &CandidateHit) -> f32 {
+    let (o, d) = (hit.origin, hit.dir);
+    let mut x = crate::sampler::hash64(hit.prim as u64 ^ 0xa1fa_b1e4_d000_0000);
+    for c in [o.x, o.y, o.z, d.x, d.y, d.z] {
+        x = crate::sampler::hash64(x ^ c.to_bits() as u64);
+    }
+    (x >> 40) as f32 / (1u64 << 24) as f32
+}
+
+impl HitFilter for AlphaFilter {
+    fn accept(&self, hit: &CandidateHit) -> bool {
+        let Some(Some(alpha)) = self.materials.of(hit.prim).map(|m| self.alphas.get(m)) else {
+            return true;
+        };
+        let Some(alpha) = alpha else {
+            return true;
+        };
+        if hit.prim as usize >= self.mesh.triangle_count() {
+            return true;
+        }
+        // As shading does: the mesh's UVs, else the hit's world (x, z).
+        let uv = self.mesh.uv(hit.prim, hit.u, hit.v).unwrap_or_else(|| {
+            let [a, b, c] = self.mesh.indices()[hit.prim as usize]
+                .map(|i| Vec3::from(self.mesh.positions()[i as usize]));
+            let p = a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v;
+            Vec2::new(p.x, p.z)
+        });
+        match alpha.mode {
+            AlphaMode::Mask { cutoff } => alpha.at(uv) >= cutoff,
+            AlphaMode::Blend => {
+                let a = alpha.at(uv);
+                a >= 1.0 || (a > 0.0 && blend_coin(hit) < a)
+            }
+        }
+    }
+}
+
 /// A scene ready to trace: the committed Embree scene and everything needed to shade hits.
 pub struct World {
     pub scene: embree::Scene,
     pub materials: Vec<Material>,
     geometry_materials: Vec<GeometryMaterials>,
+    /// Some material has a normal map (else surface points skip looking for one).
+    normal_mapped: bool,
     pub lights: Vec<Light>,
     pub ambient: Vec3,
     pub background: Background,
@@ -240,6 +302,40 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
             colour_ok(m.emission, MAX_MATERIAL_VALUE),
             COLOUR,
         )?;
+        if let Some(alpha) = &m.maps.alpha {
+            let cutoff_ok = match alpha.mode {
+                AlphaMode::Mask { cutoff } => cutoff.is_finite() && cutoff >= 0.0,
+                AlphaMode::Blend => true,
+            };
+            check_value(
+                || format!("material {i}'s alpha"),
+                (0.0..=1.0).contains(&alpha.factor) && cutoff_ok,
+                "from 0 to 1, with a finite cutoff >= 0",
+            )?;
+        }
+        if let Some(mr) = &m.maps.metal_rough {
+            check_value(
+                || format!("material {i}'s metallic and roughness"),
+                (0.0..=1.0).contains(&mr.metallic) && (0.0..=1.0).contains(&mr.roughness),
+                "from 0 to 1",
+            )?;
+            let base_ok = match &mr.base {
+                Texture::Constant(c) | Texture::Image { tint: c, .. } => {
+                    colour_ok(*c, MAX_MATERIAL_VALUE)
+                }
+                Texture::Procedural { a, b, .. } => {
+                    colour_ok(*a, MAX_MATERIAL_VALUE) && colour_ok(*b, MAX_MATERIAL_VALUE)
+                }
+            };
+            check_value(|| format!("material {i}'s base colour"), base_ok, COLOUR)?;
+        }
+        if let Some(normal) = &m.maps.normal {
+            check_value(
+                || format!("material {i}'s normal map scale"),
+                normal.scale.is_finite() && normal.scale.abs() <= MAX_MATERIAL_VALUE,
+                "finite and at most 1e6 in magnitude",
+            )?;
+        }
     }
     for (i, light) in desc.lights.iter().enumerate() {
         let (place, power, place_ok) = match *light {
@@ -322,6 +418,11 @@ impl World {
 
         let mut builder = SceneBuilder::new(device)?;
         let mut geometry_materials = Vec::new();
+        let alphas: Arc<[Option<Alpha>]> = desc
+            .materials
+            .iter()
+            .map(|m| m.maps.alpha.clone())
+            .collect();
         let mut spheres = Vec::new();
         let mut sphere_materials = Vec::new();
         for (i, object) in desc.objects.iter().enumerate() {
@@ -354,7 +455,22 @@ impl World {
                             GeometryMaterials::PerPrimitive(ids.clone())
                         }
                     };
-                    builder.add_mesh(mesh.clone())?;
+                    let transparent = match &lookup {
+                        GeometryMaterials::One(m) => alphas[*m].is_some(),
+                        GeometryMaterials::PerPrimitive(ids) => {
+                            ids.iter().any(|&m| alphas[m as usize].is_some())
+                        }
+                    };
+                    if transparent {
+                        let filter = AlphaFilter {
+                            mesh: mesh.clone(),
+                            materials: lookup.clone(),
+                            alphas: alphas.clone(),
+                        };
+                        builder.add_mesh_filtered(mesh.clone(), Arc::new(filter))?;
+                    } else {
+                        builder.add_mesh(mesh.clone())?;
+                    }
                     geometry_materials.push(lookup);
                 }
             }
@@ -367,6 +483,7 @@ impl World {
             scene: builder.commit()?,
             materials: desc.materials.clone(),
             geometry_materials,
+            normal_mapped: desc.materials.iter().any(|m| m.maps.normal.is_some()),
             lights: desc.lights.clone(),
             ambient: desc.ambient,
             background: desc.background,
@@ -436,6 +553,13 @@ impl World {
             }
         }
         // normalize_or_zero, as glam evaluates it, in every lane.
+        let lane_hit = |lane: usize| {
+            if self.normal_mapped {
+                packet.hit(lane)
+            } else {
+                None
+            }
+        };
         let mut unit = [[0.0f32; LANES]; 3];
         for lane in 0..LANES {
             let (x, y, z) = (raw[0][lane], raw[1][lane], raw[2][lane]);
@@ -470,15 +594,37 @@ impl World {
                     .unwrap_or(Vec2::new(pos[0][lane], pos[2][lane]))
             };
             let view = Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
-            let normal = if normal.dot(view) > 0.0 {
-                -normal
-            } else {
-                normal
+            let normal = match self.normal_map(lane_hit(lane), out.uv[lane]) {
+                Some((base, bumped)) if base.dot(view) > 0.0 => -bumped,
+                Some((_, bumped)) => bumped,
+                None if normal.dot(view) > 0.0 => -normal,
+                None => normal,
             };
             for k in 0..3 {
                 out.normal[k][lane] = normal[k];
             }
         }
+    }
+
+    /// For a hit on a mesh with tangents whose material has a normal map: the unperturbed unit
+    /// normal (interpolated, else the face normal in winding order, which the tangents'
+    /// handedness refers to) and the normal-mapped one. `None` otherwise.
+    fn normal_map(&self, hit: Option<Hit>, uv: Vec2) -> Option<(Vec3, Vec3)> {
+        let hit = hit?;
+        let map = self.material(&hit).maps.normal.as_ref()?;
+        let Geometry::Mesh(m) = self.scene.geometry(hit.geometry) else {
+            return None;
+        };
+        let (t, w) = m.tangent(hit.prim, hit.u, hit.v)?;
+        let n = m
+            .shading_normal(hit.prim, hit.u, hit.v)
+            .filter(|n| *n != Vec3::ZERO)
+            .unwrap_or_else(|| m.face_normal(hit.prim).normalize_or_zero());
+        let t = (t - n * n.dot(t)).normalize_or_zero();
+        if n == Vec3::ZERO || t == Vec3::ZERO {
+            return None;
+        }
+        Some((n, map.perturb(uv, n, t, w)))
     }
 
     /// Position, shading normal (facing the ray) and texture coordinates of a hit.
@@ -505,10 +651,16 @@ impl World {
                 (n, uv)
             }
         };
-        let normal = if normal.dot(ray.dir) > 0.0 {
-            -normal
+        let bump = if self.normal_mapped {
+            self.normal_map(Some(*hit), uv)
         } else {
-            normal
+            None
+        };
+        let normal = match bump {
+            Some((base, bumped)) if base.dot(ray.dir) > 0.0 => -bumped,
+            Some((_, bumped)) => bumped,
+            None if normal.dot(ray.dir) > 0.0 => -normal,
+            None => normal,
         };
         SurfacePoint {
             position,

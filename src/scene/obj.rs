@@ -741,6 +741,7 @@ fn convert_material(
         mirror,
         emission,
         emission_texture: None,
+        maps: Default::default(),
     })
 }
 

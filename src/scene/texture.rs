@@ -24,17 +24,24 @@ pub fn srgb_to_linear(v: f32) -> f32 {
 
 /// Memory a `width` x `height` texture of `color` needs while it is decoded and converted:
 /// the decoder's buffer, an 8-bit RGB copy (or a float RGB one for 16-bit images) and the
-/// linear float texels (12 bytes each). Saturating, never overflowing.
+/// linear float texels (12 bytes each); images with alpha add an RGBA copy (8-bit or float)
+/// and the kept alpha channel (4 bytes a texel). Saturating, never overflowing.
 pub fn texture_memory_bytes(width: u32, height: u32, color: image::ColorType) -> u64 {
-    let conversion = if color.bytes_per_pixel() <= 4 { 3 } else { 12 };
-    let per_texel = color.bytes_per_pixel() as u64 + conversion + 12;
+    let wide = color.bytes_per_pixel() > 4;
+    let conversion = if wide { 12 } else { 3 };
+    let alpha = match (color.has_alpha(), wide) {
+        (false, _) => 0,
+        (true, false) => 4 + 4,
+        (true, true) => 16 + 4,
+    };
+    let per_texel = color.bytes_per_pixel() as u64 + conversion + 12 + alpha;
     (width as u64)
         .saturating_mul(height as u64)
         .saturating_mul(per_texel)
 }
 
 /// Decodes a PNG or JPEG image. Colour textures are sRGB-encoded (`srgb`: converted to linear
-/// here); data textures are not. Alpha is ignored. An image whose decoding and conversion
+/// here); data textures are not. Alpha (always linear) is kept when it is below 1 somewhere. An image whose decoding and conversion
 /// would need more than `max_bytes` ([`texture_memory_bytes`], judged from the header before
 /// anything is decoded) is refused with the size it would need.
 pub fn decode(
@@ -75,6 +82,29 @@ pub fn decode(
     if width == 0 || height == 0 {
         return Err(format!("the image is empty ({width}x{height})"));
     }
+    let alpha: Option<Vec<f32>> = if img.color().has_alpha() {
+        let a: Vec<f32> = match &img {
+            image::DynamicImage::ImageLumaA8(_) | image::DynamicImage::ImageRgba8(_) => img
+                .to_rgba8()
+                .pixels()
+                .map(|p| p[3] as f32 / 255.0)
+                .collect(),
+            other => other
+                .to_rgba32f()
+                .pixels()
+                .map(|p| p[3].clamp(0.0, 1.0))
+                .collect(),
+        };
+        a.iter().any(|&v| v < 1.0).then_some(a)
+    } else {
+        None
+    };
+    if alpha
+        .as_ref()
+        .is_some_and(|a| a.iter().any(|v| !v.is_finite()))
+    {
+        return Err("the image has non-finite alpha".into());
+    }
     let texels: Vec<Vec3> = match img {
         image::DynamicImage::ImageLuma8(_)
         | image::DynamicImage::ImageLumaA8(_)
@@ -114,6 +144,7 @@ pub fn decode(
         width,
         height,
         texels,
+        alpha,
         wrap,
     })
 }
