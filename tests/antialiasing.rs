@@ -61,6 +61,7 @@ fn scene(
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        warnings: Vec::new(),
     }
 }
 

@@ -113,6 +113,7 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        warnings: Vec::new(),
     };
     let (world, camera) = setup(&desc);
     let coc = camera.coc_px(5.0);

@@ -129,6 +129,7 @@ fn wall_scene(z: f32, material: Material) -> SceneDesc {
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        warnings: Vec::new(),
     }
 }
 

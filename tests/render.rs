@@ -183,6 +183,7 @@ fn rendered_blur_disc_matches_coc_px() {
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        warnings: Vec::new(),
     };
     let (world, camera) = setup(&desc);
     let settings = RenderSettings {
@@ -308,6 +309,7 @@ fn mirror_reflects_one_bounce() {
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        warnings: Vec::new(),
     };
     let (world, camera) = setup(&desc);
     let pinhole = |bounces| RenderSettings {

@@ -48,6 +48,7 @@ fn scene(camera: CameraSpec, objects: Vec<Object>, light: Vec3, intensity: f32) 
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        warnings: Vec::new(),
     }
 }
 

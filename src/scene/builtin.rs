@@ -120,5 +120,6 @@ pub fn paper() -> SceneDesc {
         pixel_filter: None,
         interval_factor: None,
         tolerance: None,
+        warnings: Vec::new(),
     }
 }
