@@ -133,7 +133,9 @@ struct SceneArgs {
     anamorphic: Option<f32>,
     /// A light replacing the scene's lights (repeat for several):
     /// `point:X,Y,Z[:INTENSITY]` (a point light, radiant intensity, default 100) or
-    /// `sun:DX,DY,DZ[:IRRADIANCE]` (a directional light shining along DX,DY,DZ, default 2).
+    /// `sun:DX,DY,DZ[:IRRADIANCE]` (a directional light shining along DX,DY,DZ, default 2) or
+    /// `spot:X,Y,Z:DX,DY,DZ[:INTENSITY[:OUTER[:INNER]]]` (a spot light at X,Y,Z shining along
+    /// DX,DY,DZ; intensity default 100, cone half-angles in degrees, default 45 and 0).
     #[arg(long = "light", value_name = "KIND:X,Y,Z[:POWER]", value_parser = parse_light)]
     lights: Vec<Light>,
     /// Ambient light level (replaces the scene's).
@@ -305,7 +307,59 @@ fn parse_exr_compression(s: &str) -> Result<output::ExrCompression, String> {
         .map_err(|e: output::CompressionError| e.to_string())
 }
 
+/// `spot:X,Y,Z:DX,DY,DZ[:INTENSITY[:OUTER[:INNER]]]`.
+fn parse_spot(s: &str) -> Result<Light, String> {
+    const USAGE: &str = "expected spot:X,Y,Z:DX,DY,DZ[:INTENSITY[:OUTER[:INNER]]] (cone \
+                         half-angles in degrees), e.g. spot:0,5,0:0,-1,0:200:30:20";
+    let number = |v: &str| match v.trim().parse::<f32>() {
+        Ok(n) if n.is_finite() => Ok(n),
+        _ => Err(format!("{v:?} is not a finite number")),
+    };
+    let vector = |v: &str| -> Result<Vec3, String> {
+        let c: Vec<f32> = v.split(',').map(number).collect::<Result<_, _>>()?;
+        match c[..] {
+            [x, y, z] => Ok(Vec3::new(x, y, z)),
+            _ => Err(format!("expected three numbers X,Y,Z, got {v:?}; {USAGE}")),
+        }
+    };
+    let parts: Vec<&str> = s.split(':').skip(1).collect();
+    if !(2..=5).contains(&parts.len()) {
+        return Err(USAGE.into());
+    }
+    let position = vector(parts[0])?;
+    let direction = vector(parts[1])?;
+    if direction.length_squared() == 0.0 || !direction.normalize().is_finite() {
+        return Err("a spot light's direction must not be 0,0,0".into());
+    }
+    let intensity = parts
+        .get(2)
+        .map(|v| number(v))
+        .transpose()?
+        .unwrap_or(100.0);
+    let outer = parts.get(3).map(|v| number(v)).transpose()?.unwrap_or(45.0);
+    let inner = parts.get(4).map(|v| number(v)).transpose()?.unwrap_or(0.0);
+    if intensity < 0.0 {
+        return Err("the light's power must be >= 0".into());
+    }
+    if !(outer > 0.0 && outer <= 90.0 && inner >= 0.0 && inner <= outer) {
+        return Err(format!(
+            "cone angles outer {outer} and inner {inner} degrees: expected 0 < outer <= 90 and \
+             0 <= inner <= outer"
+        ));
+    }
+    Ok(Light::Spot {
+        position,
+        direction: direction.normalize(),
+        intensity: Vec3::splat(intensity),
+        inner_angle: inner.to_radians(),
+        outer_angle: outer.to_radians(),
+    })
+}
+
 fn parse_light(s: &str) -> Result<Light, String> {
+    if s.starts_with("spot:") {
+        return parse_spot(s);
+    }
     let mut parts = s.split(':');
     let kind = parts.next().unwrap_or_default();
     let xyz = parts
@@ -342,7 +396,7 @@ fn parse_light(s: &str) -> Result<Light, String> {
             })
         }
         other => Err(format!(
-            "unknown light kind {other:?}: expected point or sun"
+            "unknown light kind {other:?}: expected point, sun or spot"
         )),
     }
 }
@@ -588,6 +642,9 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
         ..defaults
     };
     let mut desc = dofray::scene::load_with(&a.scene, &options)?;
+    for warning in &desc.warnings {
+        eprintln!("warning: {warning}");
+    }
     // The scene's own autofocus pixel and size, for messages after --width/--height moved it.
     let scene_focus = (desc.camera.focus, desc.camera.width, desc.camera.height);
     apply_overrides(&mut desc, a)?;
@@ -769,6 +826,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "threads": pool.current_num_threads(),
             "process_threads": dofray::limits::process_threads(),
             "embree": embree_json(&world.scene),
+            "warnings": desc.warnings,
         });
         println!("{summary}");
     } else if !a.quiet {

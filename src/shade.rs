@@ -386,6 +386,33 @@ pub enum Light {
     Point { position: Vec3, intensity: Vec3 },
     /// Parallel light arriving along `direction` (pointing from the light into the scene).
     Directional { direction: Vec3, irradiance: Vec3 },
+    /// A point light limited to a cone around `direction` (the way it shines, unit length):
+    /// radiant intensity `intensity` inside the inner cone, none outside the outer cone, and
+    /// glTF's smooth falloff between (see [`spot_falloff`]). Angles are half-angles from the
+    /// axis, radians, `0 <= inner <= outer <= pi / 2` (equal: a hard edge).
+    Spot {
+        position: Vec3,
+        direction: Vec3,
+        intensity: Vec3,
+        inner_angle: f32,
+        outer_angle: f32,
+    },
+}
+
+/// Photometric to radiometric: lumens per watt (the luminous efficacy of 555 nm light, which
+/// glTF and Blender's exporter use). glTF point and spot intensities (candela, lm/sr) divided
+/// by it are radiant intensities (W/sr); directional ones (lux, lm/m^2) are irradiances (W/m^2).
+pub const LUMENS_PER_WATT: f32 = 683.0;
+
+/// The fraction of a spot light's intensity sent along a direction whose cosine with the
+/// spot's axis is `cos_angle`: 1 inside the inner cone, 0 outside the outer cone, and between
+/// them the falloff of the glTF KHR_lights_punctual reference,
+/// `t = clamp((cos - cos(outer)) / max(0.001, cos(inner) - cos(outer)), 0, 1)`, squared.
+#[inline]
+pub fn spot_falloff(cos_angle: f32, cos_inner: f32, cos_outer: f32) -> f32 {
+    let scale = 1.0 / (cos_inner - cos_outer).max(1e-3);
+    let t = ((cos_angle - cos_outer) * scale).clamp(0.0, 1.0);
+    t * t
 }
 
 /// What a shadow ray needs to know about a light as seen from a point.
@@ -423,6 +450,25 @@ impl Light {
                 distance: f32::INFINITY,
                 irradiance,
             },
+            Self::Spot {
+                position,
+                direction,
+                intensity,
+                inner_angle,
+                outer_angle,
+            } => {
+                let d = position - p;
+                let dist2 = d.length_squared().max(1e-12);
+                let distance = dist2.sqrt();
+                let dir = d / distance;
+                let axis = direction.normalize_or_zero();
+                let falloff = spot_falloff(-dir.dot(axis), inner_angle.cos(), outer_angle.cos());
+                LightSample {
+                    dir,
+                    distance,
+                    irradiance: intensity * (falloff / dist2),
+                }
+            }
         }
     }
 }

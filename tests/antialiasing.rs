@@ -62,6 +62,7 @@ fn scene(
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: Vec::new(),
     }
 }
 

@@ -585,12 +585,17 @@ fn lights_from_the_command_line_replace_the_scenes() {
         let img = image::open(&png).unwrap().to_luma8();
         img.pixels().map(|p| p.0[0] as f64).sum::<f64>() / img.pixels().len() as f64
     };
+    // A spot light parses and renders.
+    assert!(mean("spot:0,6,4:0,-1,-0.5:200:40:30") > 0.0);
     let bright = mean("sun:0.3,-1,0.2:3");
     let dim = mean("sun:0.3,-1,0.2:0.5");
     assert!(bright > dim + 10.0, "bright {bright} vs dim {dim}");
 
     for (light, expected) in [
-        ("moon:1,2,3", "expected point or sun"),
+        ("moon:1,2,3", "expected point, sun or spot"),
+        ("spot:0,5,0", "expected spot:X,Y,Z:DX,DY,DZ"),
+        ("spot:0,5,0:0,0,0", "must not be 0,0,0"),
+        ("spot:0,5,0:0,-1,0:100:30:40", "0 <= inner <= outer"),
         ("point:1,2", "three coordinates"),
         ("point:1,2,3:-4", ">= 0"),
         ("sun:0,0,0", "must not be 0,0,0"),

@@ -114,6 +114,7 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: Vec::new(),
     };
     let (world, camera) = setup(&desc);
     let coc = camera.coc_px(5.0);

@@ -130,6 +130,7 @@ fn wall_scene(z: f32, material: Material) -> SceneDesc {
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: Vec::new(),
     }
 }
 

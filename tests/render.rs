@@ -184,6 +184,7 @@ fn rendered_blur_disc_matches_coc_px() {
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: Vec::new(),
     };
     let (world, camera) = setup(&desc);
     let settings = RenderSettings {
@@ -310,6 +311,7 @@ fn mirror_reflects_one_bounce() {
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: Vec::new(),
     };
     let (world, camera) = setup(&desc);
     let pinhole = |bounces| RenderSettings {

@@ -49,6 +49,7 @@ fn scene(camera: CameraSpec, objects: Vec<Object>, light: Vec3, intensity: f32) 
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: Vec::new(),
     }
 }
 

@@ -331,6 +331,33 @@ pub fn trace_and_shade(
                     distance[lane] = dist;
                 }
             }
+            Light::Spot {
+                position,
+                direction,
+                intensity,
+                inner_angle,
+                outer_angle,
+            } => {
+                let axis = direction.normalize_or_zero();
+                let (cos_inner, cos_outer) = (inner_angle.cos(), outer_angle.cos());
+                for lane in 0..LANES {
+                    let d = [
+                        position.x - pos[0][lane],
+                        position.y - pos[1][lane],
+                        position.z - pos[2][lane],
+                    ];
+                    let dist2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).max(1e-12);
+                    let dist = dist2.sqrt();
+                    let l = [d[0] / dist, d[1] / dist, d[2] / dist];
+                    let cos = -(l[0] * axis.x + l[1] * axis.y + l[2] * axis.z);
+                    let scale = shade::spot_falloff(cos, cos_inner, cos_outer) / dist2;
+                    for k in 0..3 {
+                        to_light[k][lane] = l[k];
+                        irradiance[k][lane] = intensity[k] * scale;
+                    }
+                    distance[lane] = dist;
+                }
+            }
             Light::Directional { .. } => {
                 let ls = light.sample(Vec3::ZERO);
                 for k in 0..3 {
@@ -346,7 +373,9 @@ pub fn trace_and_shade(
                 + nrm[1][lane] * to_light[1][lane]
                 + nrm[2][lane] * to_light[2][lane];
             // A NaN cosine (a degenerate normal) is unlit: Embree must never see a NaN ray.
-            lit |= ((cos > 0.0) as u32) << lane;
+            // Lanes the light sends nothing to (outside a spot's cone) need no shadow ray.
+            let sent = irradiance[0][lane] + irradiance[1][lane] + irradiance[2][lane] > 0.0;
+            lit |= ((cos > 0.0 && sent) as u32) << lane;
             // The segment from the leaving origin towards the light.
             seg_end[lane] = if distance[lane].is_finite() {
                 distance[lane] * (1.0 - 1e-4) - reach[lane]

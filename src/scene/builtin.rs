@@ -121,5 +121,6 @@ pub fn paper() -> SceneDesc {
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: Vec::new(),
     }
 }

@@ -18,7 +18,7 @@ use toml::Spanned;
 use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
 use super::model::{
-    self, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, Transform, default_background,
+    self, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, ModelCamera, Transform, default_background,
     default_light, default_material, euler_xyz_deg, short_vec,
 };
 use super::texture::TextureCache;
@@ -392,6 +392,7 @@ struct RawBackground {
 enum LightKind {
     Point,
     Directional,
+    Spot,
 }
 
 #[derive(Deserialize)]
@@ -403,6 +404,8 @@ struct RawLight {
     intensity: Option<Color>,
     direction: Option<Spanned<V3>>,
     irradiance: Option<Color>,
+    inner_angle: Option<Spanned<Finite>>,
+    outer_angle: Option<Spanned<Finite>>,
 }
 
 #[derive(Deserialize)]
@@ -463,6 +466,8 @@ struct RawObject {
     rotate_axis: Option<Spanned<V3>>,
     rotate_angle: Option<Spanned<Finite>>,
     scale: Option<Spanned<Scale>>,
+    lights: Option<bool>,
+    camera: Option<Spanned<bool>>,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -726,7 +731,11 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         })
     };
 
-    // Objects, and where each came from (a mesh file gives several).
+    // Objects, and where each came from (a mesh file gives several); the lights and camera of
+    // the model files, and their warnings.
+    let mut model_lights: Vec<Light> = Vec::new();
+    let mut model_camera: Option<(ModelCamera, Range<usize>, String)> = None;
+    let mut warnings: Vec<String> = Vec::new();
     let mut objects = Vec::new();
     let mut origins: Vec<(Range<usize>, String)> = Vec::new();
     for (i, o) in raw.objects.into_iter().enumerate() {
@@ -742,13 +751,15 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         let allowed: &[&str] = match kind {
             ObjectKind::Sphere => &["center", "radius"],
             ObjectKind::Quad => &["center", "size"],
-            ObjectKind::Mesh => &["file"],
+            ObjectKind::Mesh => &["file", "lights", "camera"],
         };
         for (k, set) in [
             ("center", o.center.is_some()),
             ("radius", o.radius.is_some()),
             ("size", o.size.is_some()),
             ("file", o.file.is_some()),
+            ("lights", o.lights.is_some()),
+            ("camera", o.camera.is_some()),
         ] {
             if set && !allowed.contains(&k) {
                 return Err(ctx.invalid(
@@ -881,6 +892,47 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
                     ),
                     e => e.referenced(at.clone(), "mesh"),
                 })?;
+                if o.lights != Some(false) {
+                    model_lights.extend(model.lights.iter().copied());
+                }
+                warnings.extend(model.warnings.iter().cloned());
+                if let Some(c) = o.camera.as_ref().filter(|c| *c.get_ref()) {
+                    if let Some((_, _, first)) = &model_camera {
+                        return Err(ctx.invalid(
+                            c.span(),
+                            format!("{key}.camera"),
+                            format!(
+                                "{first} already gives the camera; set `camera = true` on one model"
+                            ),
+                        ));
+                    }
+                    let camera = match (model.camera, &model.orthographic_camera) {
+                        (Some(camera), _) => camera,
+                        (None, Some(ortho)) => {
+                            return Err(ctx.invalid(
+                                c.span(),
+                                format!("{key}.camera"),
+                                format!(
+                                    "{:?} has no perspective camera: its only camera, {ortho}, \
+                                     is orthographic, and dofray renders perspective views only",
+                                    file.get_ref()
+                                ),
+                            ));
+                        }
+                        (None, None) => {
+                            return Err(ctx.invalid(
+                                c.span(),
+                                format!("{key}.camera"),
+                                format!(
+                                    "{:?} has no camera (`camera = true` takes the first \
+                                     perspective camera of a .gltf or .glb file)",
+                                    file.get_ref()
+                                ),
+                            ));
+                        }
+                    };
+                    model_camera = Some((camera, c.span(), key.clone()));
+                }
                 let offset = materials.len();
                 let model_materials = model.materials.len();
                 materials.extend(model.materials.into_iter().map(|(_, m)| m));
@@ -910,9 +962,19 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
     let width = image
         .and_then(|i| i.width.as_ref())
         .map_or(DEFAULT_WIDTH, |p| p.get_ref().0);
-    let height = image
-        .and_then(|i| i.height.as_ref())
-        .map_or(DEFAULT_HEIGHT, |p| p.get_ref().0);
+    // A model camera's aspect ratio sets the height when the file gives none.
+    let aspect = model_camera
+        .as_ref()
+        .and_then(|(c, _, _)| c.aspect)
+        .filter(|a| a.is_finite() && *a > 0.05 && *a < 20.0);
+    let height = image.and_then(|i| i.height.as_ref()).map_or_else(
+        || {
+            aspect.map_or(DEFAULT_HEIGHT, |a| {
+                ((width as f32 / a).round() as u32).max(1)
+            })
+        },
+        |p| p.get_ref().0,
+    );
     // An image whose render buffers cannot fit is refused here, naming the key that asks for
     // it (the larger side's; the command line's --width/--height cannot rescue such a file).
     if let Err(e) = crate::limits::check_image_memory(width, height) {
@@ -925,19 +987,30 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         };
         return Err(ctx.invalid(span, key, e.to_string()));
     }
-    let camera = camera(ctx, raw.camera, width, height, &objects, &origins)?;
+    let camera = camera(
+        ctx,
+        raw.camera,
+        width,
+        height,
+        &objects,
+        &origins,
+        model_camera.as_ref(),
+    )?;
 
-    // Lights and environment.
-    let lights = match raw.lights {
-        None => vec![default_light(
+    // Lights and environment: the file's, else the default key light unless a model brings
+    // lights; plus the models' lights.
+    let mut lights: Vec<Light> = match raw.lights {
+        None if model_lights.is_empty() => vec![default_light(
             (camera.look_at - camera.eye).normalize_or(Vec3::Z),
         )],
+        None => Vec::new(),
         Some(lights) => lights
             .into_iter()
             .enumerate()
             .map(|(i, l)| light(ctx, i, l))
             .collect::<Result<_, _>>()?,
     };
+    lights.extend(model_lights);
     let background = match raw.background {
         None => default_background(),
         Some(b) => {
@@ -1011,6 +1084,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         interval_factor: render.interval_factor.map(|k| k.0),
         tolerance,
         transparent: render.transparent.unwrap_or(false),
+        warnings,
     })
 }
 
@@ -1126,8 +1200,29 @@ fn camera(
     height: u32,
     objects: &[Object],
     origins: &[(Range<usize>, String)],
+    from_model: Option<&(ModelCamera, Range<usize>, String)>,
 ) -> Result<CameraSpec, LoadError> {
     let table_span = raw.as_ref().map_or(0..0, |r| r.span());
+    if let (Some((_, _, key)), Some(raw)) = (from_model, &raw) {
+        let raw = raw.get_ref();
+        for (k, span) in [
+            ("eye", raw.eye.as_ref().map(|s| s.span())),
+            ("look_at", raw.look_at.as_ref().map(|s| s.span())),
+            ("up", raw.up.as_ref().map(|s| s.span())),
+            ("vfov", raw.vfov.as_ref().map(|s| s.span())),
+        ] {
+            if let Some(span) = span {
+                return Err(ctx.invalid(
+                    span,
+                    format!("camera.{k}"),
+                    format!(
+                        "the camera's view comes from the model of {key} (`camera = true`); \
+                         remove `{k}` (lens and focus keys still apply)"
+                    ),
+                ));
+            }
+        }
+    }
     let raw = raw.map(Spanned::into_inner).unwrap_or(RawCamera {
         eye: None,
         look_at: None,
@@ -1146,10 +1241,30 @@ fn camera(
         blade_rotation: None,
         anamorphic: None,
     });
-    let vfov_deg = raw.vfov.as_ref().map_or(DEFAULT_VFOV, |v| v.get_ref().0);
-    let up = raw.up.as_ref().map_or(Vec3::Y, |u| v3(*u.get_ref()));
+    let vfov_deg = match from_model {
+        Some((c, _, _)) => c.vfov_deg,
+        None => raw.vfov.as_ref().map_or(DEFAULT_VFOV, |v| v.get_ref().0),
+    };
+    let mut up = raw.up.as_ref().map_or(Vec3::Y, |u| v3(*u.get_ref()));
     let spanned = |v: &Spanned<V3>| v3(*v.get_ref());
     let (eye, look_at) = match (&raw.eye, &raw.look_at) {
+        _ if from_model.is_some() => {
+            // The model's camera, looking as far as the objects' centre lies along its view
+            // (the default focus).
+            let (c, _, _) = from_model.expect("checked");
+            let center =
+                model::bounds(objects).map_or(c.eye + c.forward, |(lo, hi)| (lo + hi) * 0.5);
+            let along = (center - c.eye).dot(c.forward);
+            let along = if along.is_finite() {
+                along.max(1e-3)
+            } else {
+                1.0
+            };
+            if c.up.cross(c.forward).length_squared() > 1e-6 {
+                up = c.up;
+            }
+            (c.eye, c.eye + c.forward * along)
+        }
         (Some(e), Some(l)) => (spanned(e), spanned(l)),
         (e, l) => {
             let (lo, hi) = model::bounds(objects).unwrap_or((Vec3::splat(-1.0), Vec3::splat(1.0)));
@@ -1278,16 +1393,24 @@ fn camera(
             }
         }
     } else if let Some(n) = &raw.f_number {
+        let sensor_width_mm = raw
+            .sensor_width_mm
+            .as_ref()
+            .map_or(model::DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0);
+        // With a model's camera, the focal length that keeps its field of view on this sensor.
+        let keep_fov = from_model.map(|_| {
+            let tan_half_h = (vfov_deg.to_radians() * 0.5).tan() * width as f32 / height as f32;
+            sensor_width_mm / (2.0 * tan_half_h)
+        });
         LensSpec::Photographic {
             focal_length_mm: raw
                 .focal_length_mm
                 .as_ref()
-                .map_or(model::DEFAULT_FOCAL_LENGTH_MM, |f| f.get_ref().0),
+                .map_or(keep_fov.unwrap_or(model::DEFAULT_FOCAL_LENGTH_MM), |f| {
+                    f.get_ref().0
+                }),
             f_number: n.get_ref().0,
-            sensor_width_mm: raw
-                .sensor_width_mm
-                .as_ref()
-                .map_or(model::DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0),
+            sensor_width_mm,
         }
     } else if let (Some(r), Some(s)) = (&raw.sharp_range, &raw.spread) {
         LensSpec::Seed {
@@ -1373,7 +1496,75 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<Light, LoadError> 
     let span = l.span();
     let l = l.into_inner();
     let key = format!("lights[{i}]");
+    let cone = |k: &str, set: bool| -> Result<(), LoadError> {
+        if set {
+            Err(ctx.invalid(
+                span.clone(),
+                format!("{key}.{k}"),
+                format!("`{k}` belongs to spot lights"),
+            ))
+        } else {
+            Ok(())
+        }
+    };
+    if l.kind != LightKind::Spot {
+        cone("inner_angle", l.inner_angle.is_some())?;
+        cone("outer_angle", l.outer_angle.is_some())?;
+    }
     match l.kind {
+        LightKind::Spot => {
+            if l.irradiance.is_some() {
+                return Err(ctx.invalid(span, format!("{key}.irradiance"), "`irradiance` belongs to directional lights; a spot light takes `position`, `direction`, `intensity`, `inner_angle` and `outer_angle`"));
+            }
+            let position = l.position.ok_or_else(|| {
+                ctx.invalid(span.clone(), key.clone(), "a spot light needs `position`")
+            })?;
+            let direction = l.direction.ok_or_else(|| {
+                ctx.invalid(
+                    span.clone(),
+                    key.clone(),
+                    "a spot light needs `direction` (the way it shines)",
+                )
+            })?;
+            let d = v3(*direction.get_ref());
+            if d.length_squared() == 0.0 || !d.normalize().is_finite() {
+                return Err(ctx.invalid(
+                    direction.span(),
+                    format!("{key}.direction"),
+                    "the direction must not be zero",
+                ));
+            }
+            let angle = |a: &Option<Spanned<Finite>>, default: f32| {
+                a.as_ref()
+                    .map_or((default, span.clone()), |a| (a.get_ref().0, a.span()))
+            };
+            let (outer, outer_span) = angle(&l.outer_angle, 45.0);
+            let (inner, inner_span) = angle(&l.inner_angle, 0.0);
+            if !(outer > 0.0 && outer <= 90.0) {
+                return Err(ctx.invalid(
+                    outer_span,
+                    format!("{key}.outer_angle"),
+                    "the outer cone angle (degrees from the axis) must be > 0 and at most 90",
+                ));
+            }
+            if !(inner >= 0.0 && inner <= outer) {
+                return Err(ctx.invalid(
+                    inner_span,
+                    format!("{key}.inner_angle"),
+                    format!(
+                        "the inner cone angle (degrees from the axis) must be from 0 to \
+                         outer_angle ({outer})"
+                    ),
+                ));
+            }
+            Ok(Light::Spot {
+                position: v3(position),
+                direction: d.normalize(),
+                intensity: l.intensity.map_or(Vec3::splat(100.0), |c| c.0),
+                inner_angle: inner.to_radians(),
+                outer_angle: outer.to_radians(),
+            })
+        }
         LightKind::Point => {
             for (k, set) in [
                 ("direction", l.direction.is_some()),

@@ -4,7 +4,10 @@
 //! becomes one mesh with positions, normals (inverse-transpose transformed) and the UV set of
 //! its base-colour texture. Materials: base-colour factor and texture (sRGB) become the diffuse
 //! colour; metallic and roughness map to a Blinn-Phong highlight and a mirror term (see
-//! `docs/scene-format.md`). The first perspective camera met in the tree is returned too.
+//! `docs/scene-format.md`). The first perspective camera met in the tree is returned too, and
+//! the KHR_lights_punctual lights of the nodes (converted from photometric to radiometric
+//! units). An extension in `extensionsRequired` that is not in [`SUPPORTED_EXTENSIONS`] is an
+//! error; everything else the file uses and dofray ignores is named in one warning.
 //! Accessors are checked before they are read, and a panic inside the parser becomes an error.
 
 use std::collections::HashMap;
@@ -17,15 +20,21 @@ use ::gltf::mesh::Mode;
 use ::gltf::texture::WrappingMode;
 use glam::{Affine3A, Mat4, Vec3};
 
-use super::MAX_MATERIAL_VALUE;
-use super::error::{LoadError, Location};
+use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
 use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh, short_number, short_vec};
 use super::texture::{TextureCache, decode};
+use super::{MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE};
 use crate::shade::{
-    Alpha, AlphaMode, ImageTexture, Material, MaterialMaps, MetalRough, NormalMap, Texture, Wrap,
-    pbr_params,
+    Alpha, AlphaMode, ImageTexture, LUMENS_PER_WATT, Light, Material, MaterialMaps, MetalRough,
+    NormalMap, Texture, Wrap, pbr_params,
 };
+
+/// The glTF extensions dofray implements: a file may require these (`extensionsRequired`);
+/// requiring any other is an error, and using any other is named in the file's warning.
+/// Keep this the one list (loaders of new extensions append here).
+pub const SUPPORTED_EXTENSIONS: &[&str] =
+    &["KHR_lights_punctual", "KHR_materials_emissive_strength"];
 
 fn gltf_error(path: &Path, message: impl Into<String>) -> LoadError {
     LoadError::Gltf {
@@ -246,6 +255,12 @@ struct Loader<'a> {
     material_map: HashMap<usize, usize>,
     meshes: Vec<ModelMesh>,
     camera: Option<ModelCamera>,
+    /// Orthographic cameras met (named), and perspective ones after the first.
+    orthographic: Vec<String>,
+    extra_cameras: usize,
+    lights: Vec<Light>,
+    /// What the file uses that dofray ignores, for the file's one warning.
+    ignored: Vec<String>,
     visits: u64,
     options: LoadOptions,
 }
@@ -386,8 +401,25 @@ pub fn load(
     let parsed = catch_unwind(AssertUnwindSafe(|| {
         let ::gltf::Gltf { document, blob } =
             ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| invalid(&e))?;
+        let mut root = document.into_json();
+        if let Some(ext) = root
+            .extensions_required
+            .iter()
+            .find(|e| !SUPPORTED_EXTENSIONS.contains(&e.as_str()))
+        {
+            return Err(gltf_error(
+                path,
+                format!(
+                    "the file requires glTF extension {ext:?} (extensionsRequired), which \
+                     dofray does not implement (supported: {})",
+                    SUPPORTED_EXTENSIONS.join(", ")
+                ),
+            ));
+        }
+        // Required extensions are all ours: the parser need not check them against its own.
+        root.extensions_required.clear();
+        let used = root.extensions_used.clone();
         // gltf's validation indexes accessors by the primitives' POSITION before checking them.
-        let root = document.into_json();
         for (m, mesh) in root.meshes.iter().enumerate() {
             for (p, prim) in mesh.primitives.iter().enumerate() {
                 let refs = prim.attributes.values().chain(prim.indices.as_ref());
@@ -400,10 +432,10 @@ pub fn load(
             }
         }
         let document = ::gltf::Document::from_json(root).map_err(|e| invalid(&e))?;
-        Ok((document, blob))
+        Ok((document, blob, used))
     }))
     .map_err(|_| gltf_error(path, "malformed file (the glTF parser failed on it)"))?;
-    let (document, blob) = parsed?;
+    let (document, blob, extensions_used) = parsed?;
     drop(bytes);
     let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
 
@@ -446,6 +478,10 @@ pub fn load(
         material_map: HashMap::new(),
         meshes: Vec::new(),
         camera: None,
+        orthographic: Vec::new(),
+        extra_cameras: 0,
+        lights: Vec::new(),
+        ignored: ignored_features(&document, &extensions_used),
         visits: 0,
         options,
     };
@@ -474,11 +510,190 @@ pub fn load(
     if loader.meshes.is_empty() {
         return Err(gltf_error(path, "no triangle meshes in the scene"));
     }
+    let mut ignored = std::mem::take(&mut loader.ignored);
+    if !loader.orthographic.is_empty() {
+        ignored.push(format!(
+            "orthographic {} {} (dofray renders perspective views only)",
+            plural(loader.orthographic.len(), "camera", "cameras"),
+            loader.orthographic.join(", ")
+        ));
+    }
+    if loader.extra_cameras > 0 {
+        ignored.push(format!(
+            "{} after the first perspective one",
+            plural(loader.extra_cameras, "camera", "cameras")
+        ));
+    }
+    let orthographic_camera = match loader.camera {
+        None => loader.orthographic.first().cloned(),
+        Some(_) => None,
+    };
     Ok(Model {
         meshes: loader.meshes,
         materials: loader.materials,
         camera: loader.camera,
+        orthographic_camera,
+        lights: loader.lights,
+        warnings: warning(path, &ignored).into_iter().collect(),
     })
+}
+
+/// `1 camera`, `2 cameras`.
+fn plural(n: usize, one: &str, many: &str) -> String {
+    if n == 1 {
+        format!("1 {one}")
+    } else {
+        format!("{n} {many}")
+    }
+}
+
+/// A named glTF object for messages: `light 1 "Spot"`.
+fn named(kind: &str, index: usize, name: Option<&str>) -> String {
+    match name {
+        Some(n) => format!("{kind} {index} {n:?}"),
+        None => format!("{kind} {index}"),
+    }
+}
+
+/// The one warning line of a file: what it uses that dofray ignores (`None` if nothing).
+fn warning(path: &Path, ignored: &[String]) -> Option<String> {
+    const SHOWN: usize = 12;
+    if ignored.is_empty() {
+        return None;
+    }
+    let mut list = ignored[..ignored.len().min(SHOWN)].join("; ");
+    if ignored.len() > SHOWN {
+        list.push_str(&format!("; and {} more", ignored.len() - SHOWN));
+    }
+    Some(format!(
+        "{}: ignored what dofray does not support: {list}",
+        shown(path)
+    ))
+}
+
+/// What the document uses that the loader does not honour, found before the node walk (the
+/// walk adds cameras and light ranges).
+fn ignored_features(document: &::gltf::Document, extensions_used: &[String]) -> Vec<String> {
+    use ::gltf::texture::MagFilter;
+    let mut out = Vec::new();
+    let unsupported: Vec<&str> = extensions_used
+        .iter()
+        .map(String::as_str)
+        .filter(|e| !SUPPORTED_EXTENSIONS.contains(e))
+        .collect();
+    if !unsupported.is_empty() {
+        out.push(format!("extensions {}", unsupported.join(", ")));
+    }
+    let scenes = document.scenes().len();
+    if scenes > 1 {
+        out.push(format!(
+            "{} other than the one rendered",
+            plural(scenes - 1, "scene", "scenes")
+        ));
+    }
+    let animations = document.animations().len();
+    if animations > 0 {
+        out.push(plural(animations, "animation", "animations"));
+    }
+    let skins = document.skins().len();
+    if skins > 0 {
+        out.push(format!(
+            "{} (meshes are drawn unskinned)",
+            plural(skins, "skin", "skins")
+        ));
+    }
+    let (mut morphs, mut lines, mut colours, mut uv_sets) = (Vec::new(), Vec::new(), false, false);
+    for mesh in document.meshes() {
+        for prim in mesh.primitives() {
+            if prim.morph_targets().next().is_some() && !morphs.contains(&mesh.index()) {
+                morphs.push(mesh.index());
+            }
+            if !matches!(
+                prim.mode(),
+                Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+            ) && !lines.contains(&mesh.index())
+            {
+                lines.push(mesh.index());
+            }
+            for (semantic, _) in prim.attributes() {
+                match semantic {
+                    ::gltf::Semantic::Colors(_) => colours = true,
+                    ::gltf::Semantic::TexCoords(n) if n != uv_set(&prim.material()) => {
+                        uv_sets = true
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    let list = |v: &[usize]| {
+        v.iter()
+            .map(usize::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if !morphs.is_empty() {
+        out.push(format!("morph targets (meshes {})", list(&morphs)));
+    }
+    if !lines.is_empty() {
+        out.push(format!(
+            "point and line primitives (meshes {})",
+            list(&lines)
+        ));
+    }
+    if colours {
+        out.push("vertex colours (COLOR_n)".into());
+    }
+    if uv_sets {
+        out.push("texture coordinate sets other than the one each primitive is loaded with".into());
+    }
+    // Samplers of the textures materials use: only wrapS is honoured (for both directions,
+    // MIRRORED_REPEAT as REPEAT), and lookups are always bilinear.
+    let mut samplers = Vec::new();
+    for material in document.materials() {
+        let pbr = material.pbr_metallic_roughness();
+        let textures = [
+            pbr.base_color_texture().map(|t| t.texture()),
+            material.emissive_texture().map(|t| t.texture()),
+            pbr.metallic_roughness_texture().map(|t| t.texture()),
+            material.normal_texture().map(|t| t.texture()),
+        ];
+        for texture in textures.into_iter().flatten() {
+            let sampler = texture.sampler();
+            let odd = sampler.wrap_s() != sampler.wrap_t()
+                || sampler.wrap_s() == WrappingMode::MirroredRepeat
+                || sampler.mag_filter() == Some(MagFilter::Nearest);
+            let key = sampler
+                .index()
+                .map_or_else(|| "default".to_string(), |i| i.to_string());
+            if odd && !samplers.contains(&key) {
+                samplers.push(key);
+            }
+        }
+        if material.occlusion_texture().is_some() {
+            push_once(&mut out, "occlusion textures");
+        }
+        if !material.double_sided() {
+            push_once(
+                &mut out,
+                "single-sided materials (doubleSided false: every surface is two-sided)",
+            );
+        }
+    }
+    if !samplers.is_empty() {
+        out.push(format!(
+            "sampler settings (samplers {}: wrapT, MIRRORED_REPEAT and NEAREST filtering; \
+             dofray wraps both directions by wrapS and filters bilinearly)",
+            samplers.join(", ")
+        ));
+    }
+    out
+}
+
+fn push_once(out: &mut Vec<String>, item: &str) {
+    if !out.iter().any(|o| o == item) {
+        out.push(item.to_string());
+    }
 }
 
 impl Loader<'_> {
@@ -508,26 +723,44 @@ impl Loader<'_> {
                     format!("node {}: singular or non-finite transform", node.index()),
                 )
             })?;
-        if self.camera.is_none()
-            && let Some(camera) = node.camera()
-            && let ::gltf::camera::Projection::Perspective(p) = camera.projection()
-        {
-            let eye = world.affine.transform_point3(Vec3::ZERO);
-            let forward = world
-                .affine
-                .transform_vector3(Vec3::NEG_Z)
-                .normalize_or_zero();
-            let up = world.affine.transform_vector3(Vec3::Y).normalize_or_zero();
-            let vfov_deg = p.yfov().to_degrees();
-            if eye.is_finite() && forward != Vec3::ZERO && vfov_deg > 0.0 && vfov_deg < 180.0 {
-                self.camera = Some(ModelCamera {
-                    eye,
-                    forward,
-                    up,
-                    vfov_deg,
-                    aspect: p.aspect_ratio(),
-                });
+        if let Some(camera) = node.camera() {
+            match camera.projection() {
+                ::gltf::camera::Projection::Perspective(_) if self.camera.is_some() => {
+                    self.extra_cameras += 1;
+                }
+                ::gltf::camera::Projection::Perspective(p) => {
+                    let eye = world.affine.transform_point3(Vec3::ZERO);
+                    let forward = world
+                        .affine
+                        .transform_vector3(Vec3::NEG_Z)
+                        .normalize_or_zero();
+                    let up = world.affine.transform_vector3(Vec3::Y).normalize_or_zero();
+                    let vfov_deg = p.yfov().to_degrees();
+                    if eye.is_finite()
+                        && forward != Vec3::ZERO
+                        && vfov_deg > 0.0
+                        && vfov_deg < 180.0
+                    {
+                        self.camera = Some(ModelCamera {
+                            eye,
+                            forward,
+                            up,
+                            vfov_deg,
+                            aspect: p.aspect_ratio(),
+                        });
+                    } else {
+                        self.extra_cameras += 1;
+                    }
+                }
+                ::gltf::camera::Projection::Orthographic(_) => {
+                    let name = named("camera", camera.index(), camera.name());
+                    self.orthographic
+                        .push(format!("{name} (node {})", node.index()));
+                }
             }
+        }
+        if let Some(light) = node.light() {
+            self.light(node, &light, &world)?;
         }
         if let Some(m) = node.mesh() {
             for prim in m.primitives() {
@@ -537,6 +770,102 @@ impl Loader<'_> {
         for child in node.children() {
             self.node(&child, &world, depth + 1)?;
         }
+        Ok(())
+    }
+
+    /// A KHR_lights_punctual light at `node` (world transform `world`): glTF lights shine
+    /// down the node's local -Z; candela (point, spot) and lux (directional) become W/sr and
+    /// W/m^2 by dividing by [`LUMENS_PER_WATT`], times the light's colour.
+    fn light(
+        &mut self,
+        node: &::gltf::Node,
+        light: &::gltf::khr_lights_punctual::Light,
+        world: &Transform,
+    ) -> Result<(), LoadError> {
+        use ::gltf::khr_lights_punctual::Kind;
+        let name = named("light", light.index(), light.name());
+        let fail = |message: String| LoadError::Gltf {
+            at: Location::file(self.path).with_key(format!(
+                "extensions.KHR_lights_punctual.lights[{}]",
+                light.index()
+            )),
+            message: format!("{name}: {message}"),
+        };
+        let color = Vec3::from(light.color());
+        if !(color.is_finite() && color.min_element() >= 0.0) {
+            return Err(fail(format!(
+                "color {} must be finite and >= 0",
+                short_vec(color)
+            )));
+        }
+        let intensity = light.intensity();
+        if !(intensity.is_finite() && intensity >= 0.0) {
+            return Err(fail(format!(
+                "intensity {} must be finite and >= 0",
+                short_number(intensity)
+            )));
+        }
+        let power = color * (intensity / LUMENS_PER_WATT);
+        if power.max_element() > MAX_LIGHT_VALUE {
+            return Err(fail(format!(
+                "intensity {} times color is {} W/sr or W/m^2 after dividing by {LUMENS_PER_WATT} \
+                 lm/W, more than the limit of 1e12",
+                short_number(intensity),
+                short_vec(power)
+            )));
+        }
+        if let Some(range) = light.range() {
+            self.ignored.push(format!(
+                "{name} range {} (dofray lights reach every distance, falling off as 1/d^2)",
+                short_number(range)
+            ));
+        }
+        let position = world.affine.transform_point3(Vec3::ZERO);
+        let direction = world
+            .affine
+            .transform_vector3(Vec3::NEG_Z)
+            .normalize_or_zero();
+        if !(position.is_finite() && direction.is_finite() && direction != Vec3::ZERO) {
+            return Err(fail(format!(
+                "node {}'s transform gives no finite position and direction",
+                node.index()
+            )));
+        }
+        self.lights.push(match light.kind() {
+            Kind::Point => Light::Point {
+                position,
+                intensity: power,
+            },
+            Kind::Directional => Light::Directional {
+                direction,
+                irradiance: power,
+            },
+            Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let right = std::f32::consts::FRAC_PI_2;
+                // The extension asks for inner < outer; Blender writes inner = outer for a
+                // spot without blend, a hard edge, which is accepted.
+                if !((0.0..=right).contains(&outer_cone_angle)
+                    && (0.0..=outer_cone_angle).contains(&inner_cone_angle))
+                {
+                    return Err(fail(format!(
+                        "spot cone angles innerConeAngle {} and outerConeAngle {} must satisfy \
+                         0 <= inner <= outer <= pi/2 (radians)",
+                        short_number(inner_cone_angle),
+                        short_number(outer_cone_angle)
+                    )));
+                }
+                Light::Spot {
+                    position,
+                    direction,
+                    intensity: power,
+                    inner_angle: inner_cone_angle,
+                    outer_angle: outer_cone_angle,
+                }
+            }
+        });
         Ok(())
     }
 

@@ -112,6 +112,10 @@ pub struct SceneDesc {
     /// Leave the background out of the image, with alpha = coverage
     /// ([`crate::render::RenderSettings::transparent`]).
     pub transparent: bool,
+    /// What the files the scene was loaded from use but dofray ignores (glTF extensions it
+    /// does not implement, light ranges, animations, ...): at most one line per file, naming
+    /// the file. Empty for built-in scenes.
+    pub warnings: Vec<String>,
 }
 
 /// Loads a scene: a built-in scene by name (see [`builtin::BUILTIN`]), a `.toml` scene file
@@ -351,6 +355,25 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
                 irradiance,
                 direction.is_finite() && direction.length_squared() > 0.0,
             ),
+            Light::Spot {
+                position,
+                direction,
+                intensity,
+                inner_angle,
+                outer_angle,
+            } => {
+                check_value(
+                    || format!("light {i}'s cone angles ({inner_angle}, {outer_angle} radians)"),
+                    (0.0..=std::f32::consts::FRAC_PI_2).contains(&outer_angle)
+                        && (0.0..=outer_angle).contains(&inner_angle),
+                    "0 <= inner <= outer <= pi / 2",
+                )?;
+                (
+                    position,
+                    intensity,
+                    point_ok(position) && direction.is_finite() && direction.length_squared() > 0.0,
+                )
+            }
         };
         check_value(
             || format!("light {i}'s position or direction ({place:?})"),

@@ -101,12 +101,21 @@ pub struct ModelMesh {
     pub material: Option<usize>,
 }
 
-/// What a mesh loader returns: meshes (already transformed), named materials and maybe a camera.
+/// What a mesh loader returns: meshes (already transformed), named materials, maybe a camera,
+/// the file's lights (glTF KHR_lights_punctual, in world space and dofray's radiometric units)
+/// and what the file uses that was ignored.
 #[derive(Debug, Clone, Default)]
 pub struct Model {
     pub meshes: Vec<ModelMesh>,
     pub materials: Vec<(String, Material)>,
+    /// The first perspective camera.
     pub camera: Option<ModelCamera>,
+    /// When the file has no perspective camera but an orthographic one: that camera, named
+    /// for messages (`camera 0 "Ortho" (node 2)`). dofray renders only perspective views.
+    pub orthographic_camera: Option<String>,
+    pub lights: Vec<Light>,
+    /// At most one line, naming the file and everything in it dofray ignored.
+    pub warnings: Vec<String>,
 }
 
 impl Model {
@@ -251,8 +260,9 @@ pub const DEFAULT_SENSOR_WIDTH_MM: f32 = 36.0;
 pub const MODEL_APERTURE_FRACTION: f32 = 0.02;
 
 /// A scene around a model file: the model's meshes and materials, the glTF camera if it has
-/// one (else a view framing the model), a small aperture focused on the bounds' centre, one
-/// key light, some ambient light and the default sky.
+/// one (else a view framing the model; a file whose only camera is orthographic is refused),
+/// a small aperture focused on the bounds' centre, the file's lights (else one key light),
+/// some ambient light and the default sky.
 pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
     if model.meshes.is_empty() {
         return Err(LoadError::Empty {
@@ -277,6 +287,18 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         at: Location::file(path),
         message: format!("{message}; scale the model down (a scene file can, with `scale`)"),
     };
+    if model.camera.is_none()
+        && let Some(ortho) = &model.orthographic_camera
+    {
+        return Err(LoadError::Gltf {
+            at: Location::file(path),
+            message: format!(
+                "its only camera, {ortho}, is orthographic, and dofray renders perspective \
+                 (thin-lens) views only; add a perspective camera to the file, or include the \
+                 model in a TOML scene, which frames it (or takes `[camera]` eye and look_at)"
+            ),
+        });
+    }
     match model.camera {
         None => {
             frame_checked(
@@ -350,7 +372,12 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         },
         materials,
         objects,
-        lights: vec![default_light((look_at - eye).normalize_or(Vec3::NEG_Z))],
+        // The file's own lights replace the key light.
+        lights: if model.lights.is_empty() {
+            vec![default_light((look_at - eye).normalize_or(Vec3::NEG_Z))]
+        } else {
+            model.lights
+        },
         ambient: Vec3::splat(0.15),
         background: default_background(),
         spp: None,
@@ -359,6 +386,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         interval_factor: None,
         tolerance: None,
         transparent: false,
+        warnings: model.warnings,
     })
 }
 

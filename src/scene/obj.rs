@@ -521,7 +521,7 @@ pub fn load(
     Ok(Model {
         meshes,
         materials,
-        camera: None,
+        ..Model::default()
     })
 }
 

@@ -1,0 +1,473 @@
+//! glTF as Blender exports it: KHR_lights_punctual lights (types, placement, photometric to
+//! radiometric conversion), required and unsupported extensions, the one warning per file,
+//! orthographic cameras, a TOML scene taking its camera from a glTF, and spot-light falloff.
+//! The assets in `tests/scene_assets/blender/` were written by Blender 4.2's own exporter
+//! (`scripts/make_blender_assets.py`).
+
+use std::f32::consts::PI;
+use std::path::{Path, PathBuf};
+
+use dofray::camera::{Focus, LensSpec};
+use dofray::embree::Device;
+use dofray::render::{Mode, NoProgress, RenderSettings, render};
+use dofray::scene::{self, LoadError, SceneDesc, World};
+use dofray::shade::{LUMENS_PER_WATT, Light, spot_falloff};
+use glam::Vec3;
+
+fn asset(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/scene_assets/blender")
+        .join(name)
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dofray-lights-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn load(path: &Path) -> Result<SceneDesc, LoadError> {
+    scene::load(path.to_str().unwrap())
+}
+
+fn toml_scene(test: &str, toml: &str) -> Result<SceneDesc, LoadError> {
+    let path = scratch(test).join("scene.toml");
+    std::fs::write(&path, toml).unwrap();
+    load(&path)
+}
+
+/// ortho.gltf's JSON, edited by `edit`, written next to a copy of its buffer.
+fn edited_ortho(test: &str, edit: impl FnOnce(&mut serde_json::Value)) -> PathBuf {
+    let dir = scratch(test);
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(asset("ortho.gltf")).unwrap()).unwrap();
+    edit(&mut json);
+    std::fs::copy(asset("ortho.bin"), dir.join("ortho.bin")).unwrap();
+    let path = dir.join("edited.gltf");
+    std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
+    path
+}
+
+fn near(a: Vec3, b: Vec3, eps: f32) -> bool {
+    (a - b).abs().max_element() <= eps
+}
+
+fn lights_by_kind(desc: &SceneDesc) -> (Vec<Light>, Vec<Light>, Vec<Light>) {
+    let (mut p, mut s, mut d) = (Vec::new(), Vec::new(), Vec::new());
+    for l in &desc.lights {
+        match l {
+            Light::Point { .. } => p.push(*l),
+            Light::Spot { .. } => s.push(*l),
+            Light::Directional { .. } => d.push(*l),
+        }
+    }
+    (p, s, d)
+}
+
+/// The lights Blender wrote (see the script): a 1000 W point light of colour (1, 0.85, 0.7) at
+/// Blender (-1, 2, 2.5), a 2000 W spot (spot_size 40 degrees, blend 0.25) at (3, -3, 4) aimed at
+/// (0, 0, 0.75), a strength-2 sun rotated (40, 0, 30) degrees; Blender's z-up becomes glTF's y-up
+/// as (x, z, -y).
+fn check_blender_lights(desc: &SceneDesc) {
+    assert_eq!(desc.lights.len(), 3, "{:?}", desc.lights);
+    let (points, spots, suns) = lights_by_kind(desc);
+    let Light::Point {
+        position,
+        intensity,
+    } = points[0]
+    else {
+        unreachable!()
+    };
+    assert!(
+        near(position, Vec3::new(-1.0, 2.5, -2.0), 1e-5),
+        "{position}"
+    );
+    // Blender: P / (4 pi) * 683 cd; dofray: / 683 -> P / (4 pi) W/sr, times the colour.
+    let w_sr = 1000.0 / (4.0 * PI);
+    assert!(
+        near(intensity, Vec3::new(1.0, 0.85, 0.7) * w_sr, 1e-3 * w_sr),
+        "{intensity}"
+    );
+    let Light::Spot {
+        position,
+        direction,
+        intensity,
+        inner_angle,
+        outer_angle,
+    } = spots[0]
+    else {
+        unreachable!()
+    };
+    assert!(near(position, Vec3::new(3.0, 4.0, 3.0), 1e-5), "{position}");
+    let aim = (Vec3::new(0.0, 0.75, 0.0) - position).normalize();
+    assert!(near(direction, aim, 1e-4), "{direction} vs {aim}");
+    let w_sr = 2000.0 / (4.0 * PI);
+    assert!(
+        near(intensity, Vec3::splat(w_sr), 1e-3 * w_sr),
+        "{intensity}"
+    );
+    assert!(
+        (outer_angle.to_degrees() - 20.0).abs() < 1e-3,
+        "{outer_angle}"
+    );
+    assert!(
+        (inner_angle.to_degrees() - 15.0).abs() < 1e-3,
+        "{inner_angle}"
+    );
+    let Light::Directional {
+        direction,
+        irradiance,
+    } = suns[0]
+    else {
+        unreachable!()
+    };
+    assert!(near(irradiance, Vec3::splat(2.0), 1e-5), "{irradiance}");
+    let (s40, c40) = (40f32.to_radians().sin(), 40f32.to_radians().cos());
+    let (s30, c30) = (0.5f32, 30f32.to_radians().cos());
+    let blender = Vec3::new(-s30 * s40, c30 * s40, -c40);
+    let expected = Vec3::new(blender.x, blender.z, -blender.y);
+    assert!(near(direction, expected, 1e-4), "{direction} vs {expected}");
+}
+
+#[test]
+fn blender_glb_lights_camera_and_required_extension_load() {
+    // Blender marks KHR_lights_punctual required; it loads.
+    let desc = load(&asset("lights.glb")).unwrap();
+    check_blender_lights(&desc);
+    assert!(desc.warnings.is_empty(), "{:?}", desc.warnings);
+    // Its camera, not a framing one: Blender (0, -8, 4) is glTF (0, 4, 8); aspect 4:3.
+    assert!(near(desc.camera.eye, Vec3::new(0.0, 4.0, 8.0), 1e-5));
+    assert!((desc.camera.vfov_deg - 0.5274237f32.to_degrees()).abs() < 1e-3);
+    assert_eq!((desc.camera.width, desc.camera.height), (640, 480));
+    // The glTF's lights replace the key light; the ambient stays.
+    assert_eq!(desc.ambient, Vec3::splat(0.15));
+}
+
+#[test]
+fn blender_gltf_with_a_separate_buffer_loads_the_same() {
+    let desc = load(&asset("lights.gltf")).unwrap();
+    check_blender_lights(&desc);
+}
+
+#[test]
+fn photometric_units_convert_with_683_lumens_per_watt() {
+    assert_eq!(LUMENS_PER_WATT, 683.0);
+    let path = edited_ortho("photometric", |j| {
+        j["extensions"]["KHR_lights_punctual"]["lights"] = serde_json::json!([
+            {"type": "point", "intensity": 683.0, "color": [1.0, 0.5, 0.25]},
+            {"type": "directional", "intensity": 1366.0},
+            {"type": "spot", "intensity": 6830.0, "spot": {"outerConeAngle": 0.5}}
+        ]);
+        let nodes = j["nodes"].as_array_mut().unwrap();
+        nodes.push(serde_json::json!({"extensions": {"KHR_lights_punctual": {"light": 1}}}));
+        nodes.push(
+            serde_json::json!({"extensions": {"KHR_lights_punctual": {"light": 2}},
+            "translation": [0.0, 3.0, 0.0]}),
+        );
+        let n = nodes.len();
+        j["scenes"][0]["nodes"]
+            .as_array_mut()
+            .unwrap()
+            .extend([serde_json::json!(n - 2), serde_json::json!(n - 1)]);
+        // Perspective camera, so the bare model loads.
+        j["cameras"][0] = serde_json::json!({"type": "perspective",
+            "perspective": {"yfov": 0.6, "znear": 0.1}});
+    });
+    let desc = load(&path).unwrap();
+    let (points, spots, suns) = lights_by_kind(&desc);
+    assert!(matches!(points[0], Light::Point { intensity, .. }
+        if near(intensity, Vec3::new(1.0, 0.5, 0.25), 1e-6)));
+    assert!(
+        matches!(suns[0], Light::Directional { irradiance, direction }
+        if near(irradiance, Vec3::splat(2.0), 1e-6) && near(direction, Vec3::NEG_Z, 1e-6))
+    );
+    // Spot defaults: inner 0; shining down the node's -Z.
+    assert!(
+        matches!(spots[0], Light::Spot { intensity, inner_angle, outer_angle, position, .. }
+        if near(intensity, Vec3::splat(10.0), 1e-5) && inner_angle == 0.0 && outer_angle == 0.5
+            && near(position, Vec3::new(0.0, 3.0, 0.0), 1e-6))
+    );
+}
+
+#[test]
+fn an_unsupported_required_extension_is_an_error_naming_it_and_the_file() {
+    let path = edited_ortho("required", |j| {
+        j["extensionsRequired"] =
+            serde_json::json!(["KHR_lights_punctual", "KHR_draco_mesh_compression"]);
+        j["extensionsUsed"] =
+            serde_json::json!(["KHR_lights_punctual", "KHR_draco_mesh_compression"]);
+    });
+    let e = load(&path).unwrap_err().to_string();
+    for part in [
+        "edited.gltf",
+        "KHR_draco_mesh_compression",
+        "extensionsRequired",
+        "KHR_lights_punctual",
+    ] {
+        assert!(e.contains(part), "{part:?} not in {e}");
+    }
+}
+
+#[test]
+fn an_orthographic_only_camera_is_refused_for_a_bare_model() {
+    let e = load(&asset("ortho.gltf")).unwrap_err().to_string();
+    for part in ["ortho.gltf", "orthographic", "\"Ortho\"", "perspective"] {
+        assert!(e.contains(part), "{part:?} not in {e}");
+    }
+}
+
+#[test]
+fn ignored_features_are_named_in_one_warning_per_file() {
+    let path = edited_ortho("warning", |j| {
+        j["extensionsUsed"] = serde_json::json!([
+            "KHR_lights_punctual",
+            "KHR_materials_clearcoat",
+            "EXT_mesh_gpu_instancing"
+        ]);
+        // A perspective camera beside the orthographic one: used, and the other skipped.
+        j["cameras"]
+            .as_array_mut()
+            .unwrap()
+            .push(serde_json::json!({"type": "perspective",
+            "perspective": {"yfov": 0.6, "znear": 0.1}}));
+        let nodes = j["nodes"].as_array_mut().unwrap();
+        nodes.push(serde_json::json!({"camera": 1, "translation": [0.0, 1.0, 5.0]}));
+        let n = nodes.len();
+        j["scenes"][0]["nodes"]
+            .as_array_mut()
+            .unwrap()
+            .push(serde_json::json!(n - 1));
+    });
+    let desc = load(&path).unwrap();
+    assert_eq!(desc.warnings.len(), 1, "{:?}", desc.warnings);
+    let w = &desc.warnings[0];
+    for part in [
+        "edited.gltf",
+        "KHR_materials_clearcoat",
+        "EXT_mesh_gpu_instancing",
+        "range 5",
+        "\"Ranged\"",
+        "orthographic",
+        "\"Ortho\"",
+    ] {
+        assert!(w.contains(part), "{part:?} not in {w}");
+    }
+    assert!(!w.contains('\n'), "{w}");
+    assert!(near(desc.camera.eye, Vec3::new(0.0, 1.0, 5.0), 1e-6));
+}
+
+#[test]
+fn a_toml_scene_adds_the_models_lights_and_its_warning() {
+    let ortho = asset("ortho.gltf");
+    let desc = toml_scene(
+        "toml-lights",
+        &format!(
+            "[[objects]]\ntype = \"mesh\"\nfile = {:?}\ntranslate = [0, 1, 0]\n",
+            ortho
+        ),
+    )
+    .unwrap();
+    // The model's light replaces the default key light, moved with the object.
+    assert_eq!(desc.lights.len(), 1);
+    assert!(matches!(desc.lights[0], Light::Point { position, .. }
+        if near(position, Vec3::new(1.0, 3.0, 1.0), 1e-5)));
+    assert_eq!(desc.warnings.len(), 1);
+    assert!(desc.warnings[0].contains("range 5"), "{:?}", desc.warnings);
+    // `lights = false`: the default key light instead; the file's [[lights]] and the model's
+    // add up.
+    let desc = toml_scene(
+        "toml-nolights",
+        &format!(
+            "[[objects]]\ntype = \"mesh\"\nfile = {:?}\nlights = false\n",
+            ortho
+        ),
+    )
+    .unwrap();
+    assert!(matches!(desc.lights[..], [Light::Directional { .. }]));
+    let desc = toml_scene(
+        "toml-both",
+        &format!(
+            "[[lights]]\ntype = \"spot\"\nposition = [0, 4, 0]\ndirection = [0, -1, 0]\n\
+             outer_angle = 30\ninner_angle = 20\n\n[[objects]]\ntype = \"mesh\"\nfile = {:?}\n",
+            ortho
+        ),
+    )
+    .unwrap();
+    assert_eq!(desc.lights.len(), 2);
+    assert!(
+        matches!(desc.lights[0], Light::Spot { inner_angle, outer_angle, intensity, .. }
+        if (inner_angle.to_degrees() - 20.0).abs() < 1e-4
+            && (outer_angle.to_degrees() - 30.0).abs() < 1e-4
+            && intensity == Vec3::splat(100.0))
+    );
+}
+
+#[test]
+fn toml_spot_lights_are_checked() {
+    let cases = [
+        (
+            "type = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\ninner_angle = 40\nouter_angle = 30",
+            "lights[0].inner_angle",
+        ),
+        (
+            "type = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, -1, 0]\nouter_angle = 95",
+            "lights[0].outer_angle",
+        ),
+        ("type = \"spot\"\nposition = [0, 1, 0]", "needs `direction`"),
+        (
+            "type = \"point\"\nposition = [0, 1, 0]\nouter_angle = 30",
+            "belongs to spot lights",
+        ),
+        (
+            "type = \"spot\"\nposition = [0, 1, 0]\ndirection = [0, 0, 0]",
+            "must not be zero",
+        ),
+    ];
+    for (i, (light, expected)) in cases.iter().enumerate() {
+        let toml = format!("[[lights]]\n{light}\n\n[[objects]]\ntype = \"sphere\"\nradius = 1\n");
+        let e = toml_scene(&format!("spot{i}"), &toml)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(expected) && e.contains("scene.toml"),
+            "{expected:?} not in {e}"
+        );
+    }
+}
+
+#[test]
+fn a_toml_scene_takes_its_camera_from_a_gltf_and_its_lens_on_top() {
+    let glb = asset("lights.glb");
+    let desc = toml_scene(
+        "camera",
+        &format!(
+            "[camera]\nf_number = 2.8\nfocus_distance = 6\n\n[[objects]]\ntype = \"mesh\"\n\
+             file = {glb:?}\ncamera = true\n"
+        ),
+    )
+    .unwrap();
+    let c = &desc.camera;
+    assert!(near(c.eye, Vec3::new(0.0, 4.0, 8.0), 1e-5), "{}", c.eye);
+    assert_eq!((c.width, c.height), (640, 480));
+    assert_eq!(c.focus, Focus::Distance(6.0));
+    // Blender's 50 mm lens on a 36 mm sensor: the focal length that keeps the glTF's yfov.
+    let LensSpec::Photographic {
+        focal_length_mm,
+        f_number,
+        ..
+    } = c.lens
+    else {
+        panic!("{:?}", c.lens)
+    };
+    assert!((focal_length_mm - 50.0).abs() < 0.05, "{focal_length_mm}");
+    assert_eq!(f_number, 2.8);
+    assert!((c.effective_vfov_deg() - 0.5274237f32.to_degrees()).abs() < 1e-2);
+    check_blender_lights(&desc);
+
+    // No perspective camera, a second camera, and view keys are errors.
+    let ortho = asset("ortho.gltf");
+    let e = toml_scene(
+        "camera-ortho",
+        &format!("[[objects]]\ntype = \"mesh\"\nfile = {ortho:?}\ncamera = true\n"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("objects[0].camera") && e.contains("orthographic"),
+        "{e}"
+    );
+    let e = toml_scene(
+        "camera-eye",
+        &format!("[camera]\neye = [0, 1, 5]\n\n[[objects]]\ntype = \"mesh\"\nfile = {glb:?}\ncamera = true\n"),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("camera.eye") && e.contains("camera = true"),
+        "{e}"
+    );
+    let e = toml_scene(
+        "camera-sphere",
+        "[[objects]]\ntype = \"sphere\"\nradius = 1\ncamera = true\n",
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("objects[0].camera"), "{e}");
+}
+
+#[test]
+fn spot_falloff_is_full_inside_zero_outside_and_smooth_between() {
+    let (inner, outer) = (20f32.to_radians(), 30f32.to_radians());
+    let spot = Light::Spot {
+        position: Vec3::new(0.0, 2.0, 0.0),
+        direction: Vec3::NEG_Y,
+        intensity: Vec3::splat(8.0),
+        inner_angle: inner,
+        outer_angle: outer,
+    };
+    // A point on the ground at angle `deg` from the axis.
+    let at = |deg: f32| Vec3::new(2.0 * deg.to_radians().tan(), 0.0, 0.0);
+    let lit = |deg: f32| {
+        let p = at(deg);
+        spot.sample(p).irradiance.x * (Vec3::new(0.0, 2.0, 0.0) - p).length_squared()
+    };
+    assert!((lit(0.0) - 8.0).abs() < 1e-4);
+    assert!((lit(19.0) - 8.0).abs() < 1e-4);
+    assert_eq!(lit(31.0), 0.0);
+    assert_eq!(lit(60.0), 0.0);
+    let mut last = 8.0;
+    for deg in [21.0, 23.0, 25.0, 27.0, 29.0] {
+        let v = lit(deg);
+        assert!(v > 0.0 && v < last, "{deg}: {v} after {last}");
+        last = v;
+    }
+    // The glTF reference: t = (cos a - cos outer) / (cos inner - cos outer), squared.
+    let t = (25f32.to_radians().cos() - outer.cos()) / (inner.cos() - outer.cos());
+    assert!((lit(25.0) - 8.0 * t * t).abs() < 1e-3);
+    // Equal angles: a hard edge.
+    assert_eq!(spot_falloff(0.95, 0.9, 0.9), 1.0);
+    assert_eq!(spot_falloff(0.85, 0.9, 0.9), 0.0);
+}
+
+#[test]
+fn a_blender_scene_renders_lit_by_its_lights() {
+    let mut desc = load(&asset("lights.glb")).unwrap();
+    desc.camera.width = 80;
+    desc.camera.height = 60;
+    desc.camera.lens = LensSpec::Pinhole;
+    let device = Device::new().unwrap();
+    let settings = RenderSettings {
+        mode: Mode::Dense,
+        spp: 1,
+        aa: 1,
+        seed: 1,
+        ..Default::default()
+    };
+    let sum = |desc: &SceneDesc| -> f32 {
+        let world = World::build(desc, &device).unwrap();
+        let camera = desc.camera.build(|_| None).unwrap();
+        let film = render(&world, &camera, &settings, &NoProgress).unwrap().0;
+        assert!(film.color.iter().all(|c| c.is_finite()));
+        film.color.iter().map(|c| c.x + c.y + c.z).sum()
+    };
+    let all = sum(&desc);
+    let without = |keep: fn(&Light) -> bool| {
+        let mut d = desc.clone();
+        d.lights.retain(keep);
+        sum(&d)
+    };
+    let no_spot = without(|l| !matches!(l, Light::Spot { .. }));
+    let no_point = without(|l| !matches!(l, Light::Point { .. }));
+    let none = without(|_| false);
+    assert!(none > 0.0, "ambient and sky alone are not black");
+    assert!(all > 1.5 * none, "{all} vs {none}");
+    assert!(
+        all > no_spot * 1.02,
+        "the spot lights something: {all} vs {no_spot}"
+    );
+    assert!(
+        all > no_point * 1.02,
+        "the point light lights something: {all} vs {no_point}"
+    );
+}
