@@ -1222,3 +1222,44 @@ fn transparent_renders_carry_coverage_alpha() {
     assert!(run.status.success(), "{}", stderr(&run));
     assert_eq!(image::open(&png).unwrap().color(), image::ColorType::Rgba8);
 }
+
+#[test]
+fn json_lists_the_warnings_of_the_files_loaded() {
+    let dir = scratch("warnings");
+    // Blender's orthographic-camera file (its point light has a `range`), in a scene with its
+    // own camera: both ignored features are named, once, in stderr and in the JSON.
+    let scene = dir.join("s.toml");
+    std::fs::write(
+        &scene,
+        format!(
+            "[image]\nwidth = 32\nheight = 24\n[camera]\neye = [6, 4, 6]\nlook_at = [0, 0, 0]\n\
+             [[objects]]\ntype = \"mesh\"\nfile = {:?}\n",
+            repo("tests/scene_assets/blender/ortho.gltf")
+        ),
+    )
+    .unwrap();
+    let out = dir.join("w.png");
+    let run = dofray(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+        "-q",
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let json: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let warnings = json["warnings"].as_array().expect("a warnings array");
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    let w = warnings[0].as_str().unwrap();
+    assert!(
+        w.contains("ortho.gltf") && w.contains("orthographic") && w.contains("range"),
+        "{w}"
+    );
+    assert_eq!(
+        stderr(&run).matches("warning: ").count(),
+        1,
+        "{}",
+        stderr(&run)
+    );
+}

@@ -673,12 +673,6 @@ fn ignored_features(document: &::gltf::Document, extensions_used: &[String]) -> 
         if material.occlusion_texture().is_some() {
             push_once(&mut out, "occlusion textures");
         }
-        if !material.double_sided() {
-            push_once(
-                &mut out,
-                "single-sided materials (doubleSided false: every surface is two-sided)",
-            );
-        }
     }
     if !samplers.is_empty() {
         out.push(format!(
