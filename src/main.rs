@@ -198,6 +198,12 @@ struct RenderArgs {
     /// alpha), EXRs a coverage A. Without it, alpha is 1 [default: the scene's, else off].
     #[arg(long)]
     transparent: bool,
+    /// Exposure in stops: radiance is scaled by 2^STOPS before anything is averaged or written
+    /// (PNG and EXR alike), as a camera's exposure would. Use it for scenes whose lights are
+    /// in physical units (a Blender light of P watts is P / (4 pi) W/sr: bright), e.g.
+    /// `--exposure -3` [default: 0].
+    #[arg(long, value_name = "STOPS", allow_negative_numbers = true)]
+    exposure: Option<f32>,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
     /// interval = max(2, k x CoC) in defocused regions, spp samples per defocused site (0.4 is
     /// the paper's; reproduces its table) [default: the scene's].
@@ -746,6 +752,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         settings.tolerance = a.tolerance.or(desc.tolerance);
     }
     settings.transparent = a.transparent || desc.transparent;
+    settings.exposure = a.exposure.unwrap_or(0.0);
     settings
         .validate()
         .map_err(|e| dofray::exit::UsageError(cli_message(&e)))?;
@@ -807,6 +814,7 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             "interval_factor": (settings.rule == SiteRule::Seed).then(|| json_f32(settings.interval_factor)),
             "paper_exact": a.paper_exact,
             "transparent": settings.transparent,
+            "exposure": json_f32(settings.exposure),
             "rounds": stats.rounds,
             "seed": settings.seed,
             "seconds": stats.seconds,
@@ -1232,6 +1240,10 @@ fn cli_message(e: &render::RenderError) -> String {
         render::RenderError::BadIntervalFactor(k) => {
             format!("--interval-factor must be a finite number > 0, got {k}")
         }
+        render::RenderError::BadExposure(e) => format!(
+            "--exposure must be a finite number of stops from -{max} to {max}, got {e}",
+            max = render::RenderSettings::MAX_EXPOSURE
+        ),
         render::RenderError::BadTolerance(t) => format!(
             "--tolerance must be a finite number > 0 (8-bit sRGB code values, e.g. 1), got {t}"
         ),

@@ -1263,3 +1263,27 @@ fn json_lists_the_warnings_of_the_files_loaded() {
         stderr(&run)
     );
 }
+
+#[test]
+fn exposure_is_a_flag_in_stops_and_checked() {
+    let dir = scratch("exposure");
+    let out = dir.join("e.png");
+    let o = out.to_str().unwrap();
+    let base = [
+        "render", "-o", o, "--width", "40", "--spp", "4", "--json", "-q",
+    ];
+    let run = dofray(&[&base[..], &["--exposure", "-1.5"]].concat());
+    assert!(run.status.success(), "{}", stderr(&run));
+    let json: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    assert_eq!(json["exposure"], -1.5);
+    for bad in ["nan", "100", "x"] {
+        let run = dofray(&[&base[..], &["--exposure", bad]].concat());
+        assert_eq!(
+            run.status.code(),
+            Some(2),
+            "--exposure {bad}: {}",
+            stderr(&run)
+        );
+        assert!(stderr(&run).contains("--exposure"), "{}", stderr(&run));
+    }
+}

@@ -183,3 +183,28 @@ fn adaptive_checks_coverage_where_colour_cannot_tell() {
     let interpolated = adaptive.samples.iter().filter(|&&n| n == 0).count();
     assert!(interpolated > 0, "nothing was interpolated");
 }
+
+#[test]
+fn exposure_scales_radiance_by_powers_of_two() {
+    let desc = sphere_scene("exposure", "aperture_radius = 0.25\nfocus_distance = 9");
+    let base = render_with(&desc, &settings(Mode::Dense, false));
+    let brighter = render_with(
+        &desc,
+        &RenderSettings {
+            exposure: 2.0,
+            ..settings(Mode::Dense, false)
+        },
+    );
+    // Same samples, each scaled by 4 (exact in binary floating point).
+    for (a, b) in base.color.iter().zip(&brighter.color) {
+        assert_eq!(*a * 4.0, *b);
+    }
+    assert_eq!(base.alpha, brighter.alpha);
+    for bad in [f32::NAN, f32::INFINITY, 65.0, -65.0] {
+        let s = RenderSettings {
+            exposure: bad,
+            ..Default::default()
+        };
+        assert!(s.validate().is_err(), "exposure {bad} accepted");
+    }
+}

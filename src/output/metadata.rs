@@ -75,6 +75,7 @@ impl Metadata {
         m.push("dofray:aa", settings.aa);
         m.push("dofray:seed", settings.seed);
         m.push("dofray:transparent", settings.transparent);
+        m.push("dofray:exposure", settings.exposure);
         m.push(
             "dofray:pixel_filter",
             format!(

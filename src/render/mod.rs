@@ -108,6 +108,10 @@ pub struct RenderSettings {
     /// that miss contribute black, so [`Film::color`] is premultiplied by [`Film::alpha`], the
     /// coverage, and the render composites over a plate. Otherwise alpha is 1 everywhere.
     pub transparent: bool,
+    /// Exposure in stops: every sample's radiance is scaled by 2^exposure before it is
+    /// averaged, so the error-controlled rule's tolerance is measured in the exposed image's
+    /// code values (as a camera's exposure would be). 0 leaves radiance as it is.
+    pub exposure: f32,
 }
 
 impl Default for RenderSettings {
@@ -127,6 +131,7 @@ impl Default for RenderSettings {
             bounces: 1,
             record_rays: false,
             transparent: false,
+            exposure: 0.0,
         }
     }
 }
@@ -146,6 +151,8 @@ pub enum RenderError {
     BadIntervalFactor(f32),
     #[error("max interval must be a power of two >= 1, got {0}")]
     BadMaxInterval(u32),
+    #[error("exposure must be a finite number of stops from -{max} to {max}, got {0}", max = RenderSettings::MAX_EXPOSURE)]
+    BadExposure(f32),
     /// The last line of defence: input checks should make this impossible.
     #[error(
         "the render produced {count} pixels that are not finite numbers (the first at x = {x}, \
@@ -158,6 +165,8 @@ impl RenderSettings {
     /// The most samples per site `spp` and `aa` accept (2^16: far beyond convergence for
     /// any image, few enough that a typo cannot start a render of days).
     pub const MAX_SAMPLES: u32 = 1 << 16;
+    /// The largest exposure, in stops either way.
+    pub const MAX_EXPOSURE: f32 = 64.0;
 
     /// The tolerance when none is given: 4 / sqrt(spp) code values (1 at 16 spp), so the
     /// accepted error shrinks with the noise a site has at `spp` samples.
@@ -191,6 +200,9 @@ impl RenderSettings {
         }
         if !self.max_interval.is_power_of_two() {
             return Err(RenderError::BadMaxInterval(self.max_interval));
+        }
+        if !self.exposure.is_finite() || self.exposure.abs() > Self::MAX_EXPOSURE {
+            return Err(RenderError::BadExposure(self.exposure));
         }
         Ok(())
     }

@@ -206,6 +206,7 @@ impl SiteShader<'_> {
         );
         let filter = self.settings.filter;
         let transparent = self.settings.transparent;
+        let scale = self.settings.exposure.exp2();
         for lane in 0..b.len {
             let hit = t_hit[lane].is_finite();
             if transparent && !hit {
@@ -218,7 +219,7 @@ impl SiteShader<'_> {
                 let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
                 filter.weight(lens, self.camera.aperture.anamorphic)
             };
-            estimates[b.pixel[lane]].add(radiance[lane], w, hit);
+            estimates[b.pixel[lane]].add(radiance[lane] * scale, w, hit);
         }
     }
 }
