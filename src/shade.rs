@@ -42,54 +42,54 @@ pub struct ImageTexture {
 }
 
 impl ImageTexture {
-    fn texel(&self, x: i64, y: i64) -> Vec3 {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let (x, y) = match self.wrap {
-            Wrap::Repeat => (x.rem_euclid(w), y.rem_euclid(h)),
-            Wrap::Clamp => (x.clamp(0, w - 1), y.clamp(0, h - 1)),
-        };
-        self.texels[(y * w + x) as usize]
-    }
-
-    /// Bilinear lookup; v points up, so v = 0 is the bottom row.
-    pub fn sample(&self, uv: Vec2) -> Vec3 {
+    /// The texels a bilinear lookup at `uv` blends (indices of top-left, top-right,
+    /// bottom-left, bottom-right, wrapped or clamped) and the blend fractions across and
+    /// down; `None` for non-finite coordinates. v points up, so v = 0 is the bottom row.
+    fn footprint(&self, uv: Vec2) -> Option<([usize; 4], f32, f32)> {
         let x = uv.x * self.width as f32 - 0.5;
         let y = (1.0 - uv.y) * self.height as f32 - 0.5;
         if !(x.is_finite() && y.is_finite()) {
-            return Vec3::ZERO;
+            return None;
         }
         let (x0, y0) = (floor(x), floor(y));
         let (fx, fy) = (x - x0, y - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = self.texel(x0, y0).lerp(self.texel(x0 + 1, y0), fx);
-        let bottom = self.texel(x0, y0 + 1).lerp(self.texel(x0 + 1, y0 + 1), fx);
+        let (w, h) = (self.width as i64, self.height as i64);
+        let index = |x: i64, y: i64| {
+            let (x, y) = match self.wrap {
+                Wrap::Repeat => (x.rem_euclid(w), y.rem_euclid(h)),
+                Wrap::Clamp => (x.clamp(0, w - 1), y.clamp(0, h - 1)),
+            };
+            (y * w + x) as usize
+        };
+        let corners = [
+            index(x0, y0),
+            index(x0 + 1, y0),
+            index(x0, y0 + 1),
+            index(x0 + 1, y0 + 1),
+        ];
+        Some((corners, fx, fy))
+    }
+
+    /// Bilinear lookup of the colour.
+    pub fn sample(&self, uv: Vec2) -> Vec3 {
+        let Some(([a, b, c, d], fx, fy)) = self.footprint(uv) else {
+            return Vec3::ZERO;
+        };
+        let t = &self.texels;
+        let top = t[a].lerp(t[b], fx);
+        let bottom = t[c].lerp(t[d], fx);
         top.lerp(bottom, fy)
     }
 
     /// Bilinear lookup of the alpha channel (1 for images without one), as [`Self::sample`].
     pub fn sample_alpha(&self, uv: Vec2) -> f32 {
-        let Some(alpha) = &self.alpha else {
+        let (Some(alpha), Some(([a, b, c, d], fx, fy))) = (&self.alpha, self.footprint(uv)) else {
             return 1.0;
-        };
-        let x = uv.x * self.width as f32 - 0.5;
-        let y = (1.0 - uv.y) * self.height as f32 - 0.5;
-        if !(x.is_finite() && y.is_finite()) {
-            return 1.0;
-        }
-        let (x0, y0) = (floor(x), floor(y));
-        let (fx, fy) = (x - x0, y - y0);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let (w, h) = (self.width as i64, self.height as i64);
-        let at = |x: i64, y: i64| {
-            let (x, y) = match self.wrap {
-                Wrap::Repeat => (x.rem_euclid(w), y.rem_euclid(h)),
-                Wrap::Clamp => (x.clamp(0, w - 1), y.clamp(0, h - 1)),
-            };
-            alpha[(y * w + x) as usize]
         };
         let lerp = |a: f32, b: f32, t: f32| a + (b - a) * t;
-        let top = lerp(at(x0, y0), at(x0 + 1, y0), fx);
-        let bottom = lerp(at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx);
+        let top = lerp(alpha[a], alpha[b], fx);
+        let bottom = lerp(alpha[c], alpha[d], fx);
         lerp(top, bottom, fy)
     }
 }
@@ -317,14 +317,16 @@ pub struct Surface {
 }
 
 /// The mapping of glTF metallic-roughness onto dofray's material (see docs/scene-format.md):
-/// (diffuse, specular, shininess, mirror) for base colour `base`, metalness `metallic` and
-/// perceptual roughness `roughness` (both in [0, 1]).
-pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> (Vec3, Vec3, f32, f32) {
+/// the surface of base colour `base`, metalness `metallic` and perceptual roughness
+/// `roughness` (both in [0, 1]).
+pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> Surface {
     let alpha = (roughness * roughness).max(1e-3);
-    let shininess = (2.0 / (alpha * alpha) - 2.0).clamp(1.0, 10_000.0);
-    let specular = Vec3::splat(0.04).lerp(base, metallic) * (1.0 - roughness);
-    let mirror = metallic * (1.0 - roughness) * (1.0 - roughness);
-    (base * (1.0 - metallic), specular, shininess, mirror)
+    Surface {
+        albedo: base * (1.0 - metallic),
+        specular: Vec3::splat(0.04).lerp(base, metallic) * (1.0 - roughness),
+        shininess: (2.0 / (alpha * alpha) - 2.0).clamp(1.0, 10_000.0),
+        mirror: metallic * (1.0 - roughness) * (1.0 - roughness),
+    }
 }
 
 impl Material {
@@ -354,14 +356,7 @@ impl Material {
                 let t = mr.texture.sample(uv);
                 let metallic = (mr.metallic * t.z).clamp(0.0, 1.0);
                 let roughness = (mr.roughness * t.y).clamp(0.0, 1.0);
-                let (albedo, specular, shininess, mirror) =
-                    pbr_params(mr.base.sample(uv), metallic, roughness);
-                Surface {
-                    albedo,
-                    specular,
-                    shininess,
-                    mirror,
-                }
+                pbr_params(mr.base.sample(uv), metallic, roughness)
             }
         }
     }
@@ -415,6 +410,43 @@ pub fn spot_falloff(cos_angle: f32, cos_inner: f32, cos_outer: f32) -> f32 {
     t * t
 }
 
+/// A spot light's cone as its falloff uses it.
+#[derive(Debug, Clone, Copy)]
+pub struct Cone {
+    /// Unit direction the spot points in.
+    pub axis: Vec3,
+    pub cos_inner: f32,
+    pub cos_outer: f32,
+}
+
+impl Cone {
+    /// [`spot_falloff`] at a point that sees the light in unit direction `to_light`.
+    #[inline]
+    pub fn falloff(&self, to_light: Vec3) -> f32 {
+        spot_falloff(-to_light.dot(self.axis), self.cos_inner, self.cos_outer)
+    }
+}
+
+/// A light at a position: its position, its intensity, and for a spot its cone.
+#[derive(Debug, Clone, Copy)]
+pub struct Positional {
+    pub position: Vec3,
+    pub intensity: Vec3,
+    pub cone: Option<Cone>,
+}
+
+impl Positional {
+    /// The irradiance (before the cosine term) at squared distance `dist2`, seen in unit
+    /// direction `to_light`.
+    #[inline]
+    pub fn irradiance(&self, to_light: Vec3, dist2: f32) -> Vec3 {
+        match self.cone {
+            None => self.intensity / dist2,
+            Some(cone) => self.intensity * (cone.falloff(to_light) / dist2),
+        }
+    }
+}
+
 /// What a shadow ray needs to know about a light as seen from a point.
 #[derive(Debug, Clone, Copy)]
 pub struct LightSample {
@@ -427,48 +459,59 @@ pub struct LightSample {
 }
 
 impl Light {
-    pub fn sample(&self, p: Vec3) -> LightSample {
+    /// Position, intensity and cone of a point or spot light; None for a directional light.
+    pub fn positional(&self) -> Option<Positional> {
         match *self {
             Self::Point {
                 position,
                 intensity,
-            } => {
-                let d = position - p;
-                let dist2 = d.length_squared().max(1e-12);
-                let distance = dist2.sqrt();
-                LightSample {
-                    dir: d / distance,
-                    distance,
-                    irradiance: intensity / dist2,
-                }
-            }
-            Self::Directional {
-                direction,
-                irradiance,
-            } => LightSample {
-                dir: -direction.normalize(),
-                distance: f32::INFINITY,
-                irradiance,
-            },
+            } => Some(Positional {
+                position,
+                intensity,
+                cone: None,
+            }),
             Self::Spot {
                 position,
                 direction,
                 intensity,
                 inner_angle,
                 outer_angle,
-            } => {
-                let d = position - p;
-                let dist2 = d.length_squared().max(1e-12);
-                let distance = dist2.sqrt();
-                let dir = d / distance;
-                let axis = direction.normalize_or_zero();
-                let falloff = spot_falloff(-dir.dot(axis), inner_angle.cos(), outer_angle.cos());
-                LightSample {
-                    dir,
-                    distance,
-                    irradiance: intensity * (falloff / dist2),
-                }
-            }
+            } => Some(Positional {
+                position,
+                intensity,
+                cone: Some(Cone {
+                    axis: direction.normalize_or_zero(),
+                    cos_inner: inner_angle.cos(),
+                    cos_outer: outer_angle.cos(),
+                }),
+            }),
+            Self::Directional { .. } => None,
+        }
+    }
+
+    pub fn sample(&self, p: Vec3) -> LightSample {
+        if let Some(light) = self.positional() {
+            let d = light.position - p;
+            let dist2 = d.length_squared().max(1e-12);
+            let distance = dist2.sqrt();
+            let dir = d / distance;
+            return LightSample {
+                dir,
+                distance,
+                irradiance: light.irradiance(dir, dist2),
+            };
+        }
+        let Self::Directional {
+            direction,
+            irradiance,
+        } = *self
+        else {
+            unreachable!("every light but a directional one has a position")
+        };
+        LightSample {
+            dir: -direction.normalize(),
+            distance: f32::INFINITY,
+            irradiance,
         }
     }
 }

@@ -3,6 +3,8 @@
 //! any thread count and packet width), metallic-roughness textures and normal maps. Scenes are
 //! TOML files around small glTF quads written by the tests.
 
+mod scene_assets; // for its base64 encoder
+
 use std::io::Cursor;
 use std::path::PathBuf;
 
@@ -18,27 +20,6 @@ fn scratch(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
-}
-
-fn base64(bytes: &[u8]) -> String {
-    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    let mut out = String::new();
-    for chunk in bytes.chunks(3) {
-        let b = [
-            chunk[0],
-            *chunk.get(1).unwrap_or(&0),
-            *chunk.get(2).unwrap_or(&0),
-        ];
-        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
-        for i in 0..4 {
-            if i <= chunk.len() {
-                out.push(A[(n >> (18 - 6 * i) & 63) as usize] as char);
-            } else {
-                out.push('=');
-            }
-        }
-    }
-    out
 }
 
 /// A PNG of `w` x `h` RGBA texels from `f(x, y)` (y = 0 is the top row).
@@ -83,11 +64,11 @@ fn quad_gltf(material: serde_json::Value, images: &[Vec<u8>]) -> String {
         "materials": [material],
         "textures": (0..images.len()).map(|i| json!({"source": i})).collect::<Vec<_>>(),
         "images": images.iter().map(|b| json!({
-            "uri": format!("data:image/png;base64,{}", base64(b))
+            "uri": format!("data:image/png;base64,{}", scene_assets::base64(b))
         })).collect::<Vec<_>>(),
         "buffers": [{
             "byteLength": buf.len(),
-            "uri": format!("data:application/octet-stream;base64,{}", base64(&buf))
+            "uri": format!("data:application/octet-stream;base64,{}", scene_assets::base64(&buf))
         }],
         "bufferViews": [
             {"buffer": 0, "byteOffset": 0, "byteLength": 48},
@@ -387,7 +368,7 @@ fn with_tangents(gltf: &str, t: [f32; 4]) -> String {
     let bytes: Vec<u8> = (0..4).flat_map(|_| t).flat_map(f32::to_le_bytes).collect();
     doc["buffers"].as_array_mut().unwrap().push(json!({
         "byteLength": bytes.len(),
-        "uri": format!("data:application/octet-stream;base64,{}", base64(&bytes))
+        "uri": format!("data:application/octet-stream;base64,{}", scene_assets::base64(&bytes))
     }));
     doc["bufferViews"]
         .as_array_mut()

@@ -75,15 +75,20 @@ impl TriangleMesh {
         })
     }
 
-    /// Per-vertex shading normals (one per vertex, finite; normalised here).
-    pub fn with_normals(mut self, normals: Vec<[f32; 3]>) -> Result<Self> {
-        if normals.len() != self.vertex_count() {
+    /// Checks that an attribute has one entry per vertex.
+    fn check_per_vertex(&self, len: usize, what: &str) -> Result<()> {
+        if len != self.vertex_count() {
             return Err(EmbreeError::InvalidGeometry(format!(
-                "{} normals for {} vertices",
-                normals.len(),
+                "{len} {what} for {} vertices",
                 self.vertex_count()
             )));
         }
+        Ok(())
+    }
+
+    /// Per-vertex shading normals (one per vertex, finite; normalised here).
+    pub fn with_normals(mut self, normals: Vec<[f32; 3]>) -> Result<Self> {
+        self.check_per_vertex(normals.len(), "normals")?;
         check_finite(normals.as_flattened(), "normal", 3)?;
         let mut normals = normals;
         for n in &mut normals {
@@ -95,13 +100,7 @@ impl TriangleMesh {
 
     /// Per-vertex texture coordinates (one per vertex, finite).
     pub fn with_uvs(mut self, uvs: Vec<[f32; 2]>) -> Result<Self> {
-        if uvs.len() != self.vertex_count() {
-            return Err(EmbreeError::InvalidGeometry(format!(
-                "{} UVs for {} vertices",
-                uvs.len(),
-                self.vertex_count()
-            )));
-        }
+        self.check_per_vertex(uvs.len(), "UVs")?;
         check_finite(uvs.as_flattened(), "UV", 2)?;
         self.uvs = Some(Arc::new(uvs));
         Ok(self)
@@ -110,13 +109,7 @@ impl TriangleMesh {
     /// Per-vertex tangents (one per vertex, finite): xyz is normalised here, w becomes the
     /// sign of the bitangent (`cross(normal, tangent) * w`).
     pub fn with_tangents(mut self, tangents: Vec<[f32; 4]>) -> Result<Self> {
-        if tangents.len() != self.vertex_count() {
-            return Err(EmbreeError::InvalidGeometry(format!(
-                "{} tangents for {} vertices",
-                tangents.len(),
-                self.vertex_count()
-            )));
-        }
+        self.check_per_vertex(tangents.len(), "tangents")?;
         check_finite(tangents.as_flattened(), "tangent", 4)?;
         let mut tangents = tangents;
         for t in &mut tangents {

@@ -130,21 +130,11 @@ impl SceneBuilder {
         filter: Option<Arc<dyn HitFilter>>,
     ) -> Result<GeometryId> {
         let (vertices, vertex_count, indices, triangle_count) = mesh.raw_buffers();
-        let filters = &mut self.filters;
-        Self::attach_to(
-            &self.handle,
-            &mut self.geometries,
-            &self.device,
-            self.quality,
+        self.attach(
             Geometry::Mesh(mesh),
             sys::RTC_GEOMETRY_TYPE_TRIANGLE,
+            filter,
             |geom| {
-                if let Some(filter) = filter {
-                    // SAFETY: geom is live and not yet committed; the box is kept in the
-                    // builder, then the Scene, whose field order drops it after the scene
-                    // handle is released.
-                    filters.push(unsafe { filter::install(geom, filter) });
-                }
                 // SAFETY: both buffers are owned by the Geometry that this builder (then the Scene)
                 // keeps until after the scene handle is released; each is padded by one element so
                 // Embree's 16-byte loads of the last item stay in bounds; strides match the layouts.
@@ -180,6 +170,7 @@ impl SceneBuilder {
         self.attach(
             Geometry::Spheres(spheres),
             sys::RTC_GEOMETRY_TYPE_SPHERE_POINT,
+            None,
             |geom| {
                 // SAFETY: as in add_mesh; float4 items are 16 bytes, so no padding is needed.
                 unsafe {
@@ -198,41 +189,22 @@ impl SceneBuilder {
         )
     }
 
+    /// Creates a geometry of `kind`, lets `set_buffers` share its buffers with Embree,
+    /// installs `filter` (if any) for its candidate hits, and attaches it to the scene.
     fn attach(
         &mut self,
         geometry: Geometry,
         kind: sys::RTCGeometryType,
+        filter: Option<Arc<dyn HitFilter>>,
         set_buffers: impl FnOnce(sys::RTCGeometry),
     ) -> Result<GeometryId> {
-        Self::attach_to(
-            &self.handle,
-            &mut self.geometries,
-            &self.device,
-            self.quality,
-            geometry,
-            kind,
-            set_buffers,
-        )
-    }
-
-    /// [`SceneBuilder::attach`] over the builder's fields, so that `set_buffers` may borrow
-    /// the others (the filters).
-    fn attach_to(
-        handle: &SceneHandle,
-        geometries: &mut Vec<Geometry>,
-        device: &Device,
-        quality: BuildQuality,
-        geometry: Geometry,
-        kind: sys::RTCGeometryType,
-        set_buffers: impl FnOnce(sys::RTCGeometry),
-    ) -> Result<GeometryId> {
-        let id = u32::try_from(geometries.len())
+        let id = u32::try_from(self.geometries.len())
             .ok()
             .filter(|&id| id != sys::RTC_INVALID_GEOMETRY_ID)
             .ok_or_else(|| EmbreeError::InvalidGeometry("too many geometries".into()))?;
         // SAFETY: live device; the geometry handle is released below on every path.
-        let geom = unsafe { sys::rtcNewGeometry(device.raw(), kind) };
-        if let Err(e) = device.check("rtcNewGeometry") {
+        let geom = unsafe { sys::rtcNewGeometry(self.device.raw(), kind) };
+        if let Err(e) = self.device.check("rtcNewGeometry") {
             if !geom.is_null() {
                 // SAFETY: geom came from rtcNewGeometry and is released once.
                 unsafe { sys::rtcReleaseGeometry(geom) };
@@ -240,17 +212,22 @@ impl SceneBuilder {
             return Err(e);
         }
         set_buffers(geom);
+        if let Some(filter) = filter {
+            // SAFETY: geom is live and not yet committed; the box is kept in the builder, then
+            // the Scene, whose field order drops it after the scene handle is released.
+            self.filters.push(unsafe { filter::install(geom, filter) });
+        }
         // SAFETY: geom is live with its buffers set; the scene takes its own reference when
         // attaching, so releasing ours afterwards is correct.
         unsafe {
-            sys::rtcSetGeometryBuildQuality(geom, quality.raw());
+            sys::rtcSetGeometryBuildQuality(geom, self.quality.raw());
             sys::rtcCommitGeometry(geom);
-            sys::rtcAttachGeometryByID(handle.0, geom, id);
+            sys::rtcAttachGeometryByID(self.handle.0, geom, id);
             sys::rtcReleaseGeometry(geom);
         }
         // Keep the Rust-side data even on error: Embree may still reference its buffers.
-        geometries.push(geometry);
-        device.check("attaching geometry")?;
+        self.geometries.push(geometry);
+        self.device.check("attaching geometry")?;
         Ok(GeometryId(id))
     }
 
@@ -753,6 +730,7 @@ mod tests {
             .attach(
                 Geometry::Spheres(Spheres::new([(Vec3::ONE, 1.0)]).unwrap()),
                 9999,
+                None,
                 |_| panic!("no buffers are set when rtcNewGeometry fails"),
             )
             .unwrap_err();

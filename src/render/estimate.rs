@@ -106,10 +106,17 @@ impl Estimate {
             return f32::INFINITY;
         }
         let a = f64::from(self.coverage());
-        let n = f64::from(self.n);
-        let var = a * (1.0 - a) * n / (n - 1.0);
+        (255.0 * self.error_of_mean(a * (1.0 - a))) as f32
+    }
+
+    /// The standard error of the weighted mean of samples whose variance (uncorrected) is
+    /// `var`; needs two samples or more.
+    fn error_of_mean(&self, var: f64) -> f64 {
         let (w, w2) = (f64::from(self.w), f64::from(self.w2));
-        (255.0 * (var * w2 / (w * w)).sqrt()) as f32
+        let n = f64::from(self.n);
+        // Bessel-corrected, then the variance of a weighted mean.
+        let var = var * n / (n - 1.0);
+        (var * w2 / (w * w)).sqrt()
     }
 
     /// Standard error of the mean's luminance, linear units; infinite with fewer than two
@@ -118,12 +125,9 @@ impl Estimate {
         if self.n < 2 || self.w <= 0.0 {
             return f32::INFINITY;
         }
-        let (w, w2) = (f64::from(self.w), f64::from(self.w2));
+        let w = f64::from(self.w);
         let mean = self.wy / w;
-        let n = f64::from(self.n);
-        // Weighted sample variance (Bessel-corrected), then the variance of a weighted mean.
-        let var = ((self.wy2 / w - mean * mean).max(0.0)) * n / (n - 1.0);
-        (var * w2 / (w * w)).sqrt() as f32
+        self.error_of_mean((self.wy2 / w - mean * mean).max(0.0)) as f32
     }
 
     /// [`Estimate::std_error`] in code values: how far one standard error above the mean

@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use crate::embree::{Geometry, Hit, LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::scene::World;
-use crate::shade::{self, Light, LightSample, Surface, SurfacePoints16};
+use crate::shade::{self, LightSample, Surface, SurfacePoints16};
 
 /// Rays traced, by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -311,11 +311,9 @@ pub fn trace_and_shade(
     let mut irradiance = [[0.0f32; LANES]; 3];
     for light in &world.lights {
         // Light::sample, written out over all lanes.
-        match *light {
-            Light::Point {
-                position,
-                intensity,
-            } => {
+        match light.positional() {
+            Some(light) => {
+                let position = light.position;
                 for lane in 0..LANES {
                     let d = [
                         position.x - pos[0][lane],
@@ -324,41 +322,16 @@ pub fn trace_and_shade(
                     ];
                     let dist2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).max(1e-12);
                     let dist = dist2.sqrt();
-                    for k in 0..3 {
-                        to_light[k][lane] = d[k] / dist;
-                        irradiance[k][lane] = intensity[k] / dist2;
-                    }
-                    distance[lane] = dist;
-                }
-            }
-            Light::Spot {
-                position,
-                direction,
-                intensity,
-                inner_angle,
-                outer_angle,
-            } => {
-                let axis = direction.normalize_or_zero();
-                let (cos_inner, cos_outer) = (inner_angle.cos(), outer_angle.cos());
-                for lane in 0..LANES {
-                    let d = [
-                        position.x - pos[0][lane],
-                        position.y - pos[1][lane],
-                        position.z - pos[2][lane],
-                    ];
-                    let dist2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).max(1e-12);
-                    let dist = dist2.sqrt();
-                    let l = [d[0] / dist, d[1] / dist, d[2] / dist];
-                    let cos = -(l[0] * axis.x + l[1] * axis.y + l[2] * axis.z);
-                    let scale = shade::spot_falloff(cos, cos_inner, cos_outer) / dist2;
+                    let l = Vec3::new(d[0] / dist, d[1] / dist, d[2] / dist);
+                    let e = light.irradiance(l, dist2);
                     for k in 0..3 {
                         to_light[k][lane] = l[k];
-                        irradiance[k][lane] = intensity[k] * scale;
+                        irradiance[k][lane] = e[k];
                     }
                     distance[lane] = dist;
                 }
             }
-            Light::Directional { .. } => {
+            None => {
                 let ls = light.sample(Vec3::ZERO);
                 for k in 0..3 {
                     to_light[k] = [ls.dir[k]; LANES];

@@ -1074,13 +1074,15 @@ impl Loader<'_> {
         } else {
             1.0
         };
-        let (dimmed, specular, shininess, mirror) = pbr_params(base, metallic, roughness);
+        // Constant metalness and roughness: the surface at the factors, the base colour's
+        // texture (if any) tinted by the dimmed colour.
+        let surface = pbr_params(base, metallic, roughness);
         let diffuse = match &base_image {
             Some(image) => Texture::Image {
                 image: image.clone(),
-                tint: dimmed,
+                tint: surface.albedo,
             },
-            None => Texture::Constant(dimmed),
+            None => Texture::Constant(surface.albedo),
         };
         // A metallic-roughness texture on the mesh's texture coordinates makes metalness and
         // roughness vary per hit; one on another set is ignored (the factors apply).
@@ -1174,9 +1176,9 @@ impl Loader<'_> {
             name,
             Material {
                 diffuse,
-                specular,
-                shininess,
-                mirror,
+                specular: surface.specular,
+                shininess: surface.shininess,
+                mirror: surface.mirror,
                 emission,
                 emission_texture,
                 maps,

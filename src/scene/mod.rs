@@ -188,9 +188,10 @@ fn blend_coin(hit: &CandidateHit) -> f32 {
 
 impl HitFilter for AlphaFilter {
     fn accept(&self, hit: &CandidateHit) -> bool {
-        let Some(Some(alpha)) = self.materials.of(hit.prim).map(|m| self.alphas.get(m)) else {
-            return true;
-        };
+        let alpha = self
+            .materials
+            .of(hit.prim)
+            .and_then(|m| self.alphas.get(m)?.as_ref());
         let Some(alpha) = alpha else {
             return true;
         };
@@ -341,6 +342,7 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
             )?;
         }
     }
+    let direction_ok = |d: Vec3| d.is_finite() && d.length_squared() > 0.0;
     for (i, light) in desc.lights.iter().enumerate() {
         let (place, power, place_ok) = match *light {
             Light::Point {
@@ -350,11 +352,7 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
             Light::Directional {
                 direction,
                 irradiance,
-            } => (
-                direction,
-                irradiance,
-                direction.is_finite() && direction.length_squared() > 0.0,
-            ),
+            } => (direction, irradiance, direction_ok(direction)),
             Light::Spot {
                 position,
                 direction,
@@ -371,7 +369,7 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
                 (
                     position,
                     intensity,
-                    point_ok(position) && direction.is_finite() && direction.length_squared() > 0.0,
+                    point_ok(position) && direction_ok(direction),
                 )
             }
         };
@@ -576,13 +574,6 @@ impl World {
             }
         }
         // normalize_or_zero, as glam evaluates it, in every lane.
-        let lane_hit = |lane: usize| {
-            if self.normal_mapped {
-                packet.hit(lane)
-            } else {
-                None
-            }
-        };
         let mut unit = [[0.0f32; LANES]; 3];
         for lane in 0..LANES {
             let (x, y, z) = (raw[0][lane], raw[1][lane], raw[2][lane]);
@@ -602,39 +593,53 @@ impl World {
             } else {
                 Vec3::new(unit[0][lane], unit[1][lane], unit[2][lane])
             };
-            out.uv[lane] = if sphere & (1 << lane) != 0 {
+            let (uv, mesh_hit) = if sphere & (1 << lane) != 0 {
                 let d = normal;
-                Vec2::new(
+                let uv = Vec2::new(
                     0.5 + d.z.atan2(d.x) / TAU,
                     0.5 + d.y.clamp(-1.0, 1.0).asin() / PI,
-                )
+                );
+                (uv, None)
             } else {
                 let hit = packet.hit(lane).expect("lanes in `hits` hit");
                 let Geometry::Mesh(m) = self.scene.geometry(hit.geometry) else {
                     unreachable!("non-sphere lanes hit meshes")
                 };
-                m.uv(hit.prim, hit.u, hit.v)
-                    .unwrap_or(Vec2::new(pos[0][lane], pos[2][lane]))
+                let uv = m
+                    .uv(hit.prim, hit.u, hit.v)
+                    .unwrap_or(Vec2::new(pos[0][lane], pos[2][lane]));
+                (uv, Some(hit))
             };
+            out.uv[lane] = uv;
             let view = Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
-            let normal = match self.normal_map(lane_hit(lane), out.uv[lane]) {
-                Some((base, bumped)) if base.dot(view) > 0.0 => -bumped,
-                Some((_, bumped)) => bumped,
-                None if normal.dot(view) > 0.0 => -normal,
-                None => normal,
-            };
+            let normal = self.facing_normal(mesh_hit.as_ref(), uv, normal, view);
             for k in 0..3 {
                 out.normal[k][lane] = normal[k];
             }
         }
     }
 
+    /// The shading `normal` of a hit (`hit`: on a mesh, else None) turned to face against
+    /// `view`: normal-mapped where the material has a normal map, the unperturbed normal then
+    /// deciding the side.
+    fn facing_normal(&self, hit: Option<&Hit>, uv: Vec2, normal: Vec3, view: Vec3) -> Vec3 {
+        let bump = match hit {
+            Some(hit) if self.normal_mapped => self.normal_map(hit, uv),
+            _ => None,
+        };
+        let (base, normal) = bump.unwrap_or((normal, normal));
+        if base.dot(view) > 0.0 {
+            -normal
+        } else {
+            normal
+        }
+    }
+
     /// For a hit on a mesh with tangents whose material has a normal map: the unperturbed unit
     /// normal (interpolated, else the face normal in winding order, which the tangents'
     /// handedness refers to) and the normal-mapped one. `None` otherwise.
-    fn normal_map(&self, hit: Option<Hit>, uv: Vec2) -> Option<(Vec3, Vec3)> {
-        let hit = hit?;
-        let map = self.material(&hit).maps.normal.as_ref()?;
+    fn normal_map(&self, hit: &Hit, uv: Vec2) -> Option<(Vec3, Vec3)> {
+        let map = self.material(hit).maps.normal.as_ref()?;
         let Geometry::Mesh(m) = self.scene.geometry(hit.geometry) else {
             return None;
         };
@@ -674,17 +679,7 @@ impl World {
                 (n, uv)
             }
         };
-        let bump = if self.normal_mapped {
-            self.normal_map(Some(*hit), uv)
-        } else {
-            None
-        };
-        let normal = match bump {
-            Some((base, bumped)) if base.dot(ray.dir) > 0.0 => -bumped,
-            Some((_, bumped)) => bumped,
-            None if normal.dot(ray.dir) > 0.0 => -normal,
-            None => normal,
-        };
+        let normal = self.facing_normal(Some(hit), uv, normal, ray.dir);
         SurfacePoint {
             position,
             normal,
