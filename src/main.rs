@@ -317,17 +317,7 @@ fn parse_exr_compression(s: &str) -> Result<output::ExrCompression, String> {
 fn parse_spot(s: &str) -> Result<Light, String> {
     const USAGE: &str = "expected spot:X,Y,Z:DX,DY,DZ[:INTENSITY[:OUTER[:INNER]]] (cone \
                          half-angles in degrees), e.g. spot:0,5,0:0,-1,0:200:30:20";
-    let number = |v: &str| match v.trim().parse::<f32>() {
-        Ok(n) if n.is_finite() => Ok(n),
-        _ => Err(format!("{v:?} is not a finite number")),
-    };
-    let vector = |v: &str| -> Result<Vec3, String> {
-        let c: Vec<f32> = v.split(',').map(number).collect::<Result<_, _>>()?;
-        match c[..] {
-            [x, y, z] => Ok(Vec3::new(x, y, z)),
-            _ => Err(format!("expected three numbers X,Y,Z, got {v:?}; {USAGE}")),
-        }
-    };
+    let vector = |v: &str| xyz(v).map_err(|e| format!("{e}; {USAGE}"));
     let parts: Vec<&str> = s.split(':').skip(1).collect();
     if !(2..=5).contains(&parts.len()) {
         return Err(USAGE.into());
@@ -362,6 +352,23 @@ fn parse_spot(s: &str) -> Result<Light, String> {
     })
 }
 
+/// A finite number of a `--light` argument.
+fn number(v: &str) -> Result<f32, String> {
+    match v.trim().parse::<f32>() {
+        Ok(n) if n.is_finite() => Ok(n),
+        _ => Err(format!("{v:?} is not a finite number")),
+    }
+}
+
+/// `X,Y,Z` of a `--light` argument.
+fn xyz(v: &str) -> Result<Vec3, String> {
+    let c: Vec<f32> = v.split(',').map(number).collect::<Result<_, _>>()?;
+    match c[..] {
+        [x, y, z] => Ok(Vec3::new(x, y, z)),
+        _ => Err(format!("expected three coordinates X,Y,Z, got {v:?}")),
+    }
+}
+
 fn parse_light(s: &str) -> Result<Light, String> {
     if s.starts_with("spot:") {
         return parse_spot(s);
@@ -371,14 +378,7 @@ fn parse_light(s: &str) -> Result<Light, String> {
     let xyz = parts
         .next()
         .ok_or("expected KIND:X,Y,Z[:POWER], e.g. point:0,5,0:100 or sun:-1,-2,1")?;
-    let number = |v: &str| match v.trim().parse::<f32>() {
-        Ok(n) if n.is_finite() => Ok(n),
-        _ => Err(format!("{v:?} is not a finite number")),
-    };
-    let v: Vec<f32> = xyz.split(',').map(number).collect::<Result<_, _>>()?;
-    let [x, y, z] = v[..] else {
-        return Err(format!("expected three coordinates X,Y,Z, got {xyz:?}"));
-    };
+    let p = self::xyz(xyz)?;
     let power = parts.next().map(number).transpose()?;
     if parts.next().is_some() {
         return Err("expected at most KIND:X,Y,Z:POWER".into());
@@ -386,7 +386,6 @@ fn parse_light(s: &str) -> Result<Light, String> {
     if power.is_some_and(|p| p < 0.0) {
         return Err("the light's power must be >= 0".into());
     }
-    let p = Vec3::new(x, y, z);
     match kind {
         "point" => Ok(Light::Point {
             position: p,

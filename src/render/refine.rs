@@ -454,12 +454,12 @@ pub fn refine(
         let limit = SAMPLING_SHARE * tolerance;
         // A site that looks converged by its variance must also not be missing a highlight
         // seen nearby; the peaks map is only built when some site is in that position.
+        // Noisier than the limit: the colour, or with transparency the coverage.
+        let noisy =
+            |p: usize| traced.se[p] > limit || (s.transparent && traced.se_alpha[p] > limit);
         let calm = |p: usize| {
             let n = traced.est[p].n;
-            n > 0
-                && n < target(p)
-                && traced.se[p] <= limit
-                && !(s.transparent && traced.se_alpha[p] > limit)
+            n > 0 && n < target(p) && !noisy(p)
         };
         let peaks = pending
             .iter()
@@ -469,8 +469,7 @@ pub fn refine(
         for p in pending.drain(..) {
             let e = &traced.est[p];
             let unsure = || {
-                traced.se[p] > limit
-                    || (s.transparent && traced.se_alpha[p] > limit)
+                noisy(p)
                     || peaks
                         .as_ref()
                         .is_some_and(|k| e.unseen_code(k.near(p, reach[p])) > limit)
