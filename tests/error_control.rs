@@ -234,8 +234,15 @@ fn the_samples_map_records_what_was_traced() {
     let (world, camera) = setup(&desc);
     let (film, stats) = draw(&world, &camera, RenderSettings::default());
     let traced: u64 = film.samples.iter().map(|&n| u64::from(n)).sum();
-    // Every sample is one primary ray (the depth pass adds one per pixel).
-    assert_eq!(traced + 100 * 75, stats.rays.primary);
+    // Every sample is one primary ray (the depth pass adds one per pixel). Buckets refine
+    // apart, so the sites on the column and row two buckets share may be traced by both: at
+    // most 129 of every 64 x 64 pixels (3%).
+    let counted = traced + 100 * 75;
+    assert!(
+        counted <= stats.rays.primary && stats.rays.primary <= counted + counted * 129 / 4096,
+        "{counted} samples, {} primary rays",
+        stats.rays.primary
+    );
     assert!(film.samples.iter().all(|&n| n <= 16));
     assert!(film.samples.contains(&0), "some pixels were interpolated");
     assert!(film.samples.contains(&16) && film.samples.contains(&4));

@@ -50,6 +50,21 @@ impl Film {
         self.alpha = rgba.iter().map(|c| c.w).collect();
     }
 
+    /// The pixels of `region` (which must lie inside the film) as a film of its own.
+    pub fn crop(&self, region: &super::Region) -> Film {
+        let w = self.width;
+        Film {
+            width: region.width() as usize,
+            height: region.height() as usize,
+            color: region.crop(&self.color, w),
+            alpha: region.crop(&self.alpha, w),
+            depth: region.crop(&self.depth, w),
+            coc: region.crop(&self.coc, w),
+            interval: region.crop(&self.interval, w),
+            samples: region.crop(&self.samples, w),
+        }
+    }
+
     /// The colour as `[f32; 3]` pixels (for metrics and writers).
     pub fn rgb(&self) -> Vec<[f32; 3]> {
         self.color.iter().map(|c| c.to_array()).collect()

@@ -25,6 +25,7 @@ pub mod film;
 pub mod interpolate;
 pub mod maps;
 pub mod refine;
+pub mod region;
 pub mod site;
 pub mod trace;
 
@@ -39,6 +40,7 @@ use crate::sampler::LensFilter;
 use crate::scene::World;
 use estimate::Estimate;
 pub use film::Film;
+pub use region::{Region, RegionError};
 pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 
@@ -153,6 +155,8 @@ pub enum RenderError {
     BadMaxInterval(u32),
     #[error("exposure must be a finite number of stops from -{max} to {max}, got {0}", max = RenderSettings::MAX_EXPOSURE)]
     BadExposure(f32),
+    #[error(transparent)]
+    BadRegion(#[from] RegionError),
     /// The last line of defence: input checks should make this impossible.
     #[error(
         "the render produced {count} pixels that are not finite numbers (the first at x = {x}, \
@@ -323,30 +327,26 @@ fn depth_pass(
 }
 
 /// Pinhole, dense, and adaptive with the seed's rule: fills `film.samples` (0 where the
-/// pixel will be interpolated) and, for adaptive, `film.interval`; returns the site mask
-/// when some pixels are interpolated.
+/// pixel will be interpolated, or is not needed for `region`) and, for adaptive,
+/// `film.interval`; returns the site mask when some pixels are interpolated.
 fn fixed_sites(
     settings: &RenderSettings,
     film: &mut Film,
-    stats: &mut RenderStats,
+    blurred: &[bool],
+    region: &Region,
 ) -> Option<Vec<bool>> {
     let (w, h) = (film.width, film.height);
-    if settings.mode == Mode::Pinhole {
-        film.samples = vec![settings.aa; w * h];
-        return None;
-    }
-    let blurred = maps::blurred(&film.coc, w, h);
     let per_site = |p: usize| {
-        if blurred[p] {
-            settings.spp
-        } else {
+        if settings.mode == Mode::Pinhole || !blurred[p] {
             settings.aa
+        } else {
+            settings.spp
         }
     };
+    // The pixels the region needs traced: its own, and the sites its pixels interpolate from.
+    let mut need = vec![false; w * h];
     let mut sites = None;
-    film.samples = if settings.mode == Mode::Dense {
-        (0..w * h).map(per_site).collect()
-    } else {
+    if settings.mode == Mode::Adaptive {
         film.interval = maps::interval_map(
             &film.coc,
             w,
@@ -356,15 +356,25 @@ fn fixed_sites(
             settings.max_interval,
         );
         let mask = maps::site_mask(&film.interval, w, h);
-        let samples = (0..w * h)
-            .map(|p| if mask[p] { per_site(p) } else { 0 })
-            .collect();
+        for y in region.y0 as usize..region.y1 as usize {
+            for x in region.x0 as usize..region.x1 as usize {
+                let (x0, x1) = maps::cell(x, film.interval[y * w + x], w);
+                let (y0, y1) = maps::cell(y, film.interval[y * w + x], h);
+                for p in [y0 * w + x0, y0 * w + x1, y1 * w + x0, y1 * w + x1] {
+                    need[p] |= mask[p];
+                }
+                need[y * w + x] |= mask[y * w + x];
+            }
+        }
         sites = Some(mask);
-        samples
-    };
-    stats.defocused_sites = (0..w * h)
-        .filter(|&p| blurred[p] && film.samples[p] > 0)
-        .count() as u64;
+    } else {
+        for y in region.y0 as usize..region.y1 as usize {
+            need[y * w + region.x0 as usize..y * w + region.x1 as usize].fill(true);
+        }
+    }
+    film.samples = (0..w * h)
+        .map(|p| if need[p] { per_site(p) } else { 0 })
+        .collect();
     sites
 }
 
@@ -375,7 +385,24 @@ pub fn render(
     settings: &RenderSettings,
     progress: &dyn Progress,
 ) -> Result<(Film, RenderStats), RenderError> {
+    let full = Region::full(camera.width, camera.height);
+    render_region(world, camera, settings, &full, progress)
+}
+
+/// Renders the pixels of `region` only, bit for bit as [`render`] renders them: the film is
+/// the region's size. The depth pass still covers the whole frame (one ray per pixel: the
+/// maps every decision starts from), and sites outside the region are traced only where the
+/// region's pixels interpolate from them. Statistics count the region's pixels and the rays
+/// traced for it.
+pub fn render_region(
+    world: &World,
+    camera: &Camera,
+    settings: &RenderSettings,
+    region: &Region,
+    progress: &dyn Progress,
+) -> Result<(Film, RenderStats), RenderError> {
     settings.validate()?;
+    region.check(camera.width, camera.height)?;
     let start = Instant::now();
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut film = Film::new(w, h);
@@ -394,20 +421,17 @@ pub fn render(
         settings,
         pixel_filter: &pixel_filter,
     };
+    let blurred = maps::blurred(&film.coc, w, h);
     if settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error {
         // Maps, sites and interpolation interleave in rounds: timed as shading.
-        let blurred = maps::blurred(&film.coc, w, h);
-        let refined = refine::refine(&shader, &film.coc, &blurred, progress, &mut tally);
-        stats.defocused_sites = (0..w * h)
-            .filter(|&p| blurred[p] && refined.samples[p] > 0)
-            .count() as u64;
+        let refined = refine::refine(&shader, &film.coc, &blurred, region, progress, &mut tally);
         stats.rounds = refined.rounds;
         film.set_rgba(&refined.color);
         film.interval = refined.interval;
         film.samples = refined.samples;
         stats.sites_seconds = phase.elapsed().as_secs_f64();
     } else {
-        let sites = fixed_sites(settings, &mut film, &mut stats);
+        let sites = fixed_sites(settings, &mut film, &blurred, region);
         stats.maps_seconds = phase.elapsed().as_secs_f64();
         let phase = Instant::now();
         progress.start(settings.mode.name(), h as u64);
@@ -423,19 +447,28 @@ pub fn render(
         film.set_rgba(&rgba);
         stats.interpolate_seconds = phase.elapsed().as_secs_f64();
     }
+    let (film, blurred) = if *region == Region::full(camera.width, camera.height) {
+        (film, blurred)
+    } else {
+        (film.crop(region), region.crop(&blurred, w))
+    };
     let bad = |c: &glam::Vec3| !c.is_finite();
     if let Some(first) = film.color.iter().position(bad) {
         return Err(RenderError::NonFinite {
             count: film.color.iter().filter(|c| bad(c)).count(),
-            x: first % w,
-            y: first / w,
+            x: first % film.width + region.x0 as usize,
+            y: first / film.width + region.y0 as usize,
         });
     }
+    let mut film = film;
     if !settings.transparent {
         // The background is part of the picture: every pixel is opaque.
         film.alpha.fill(1.0);
     }
     stats.sample_sites = film.samples.iter().filter(|&&n| n > 0).count() as u64;
+    stats.defocused_sites = (film.samples.iter().zip(&blurred))
+        .filter(|&(&n, &b)| b && n > 0 && settings.mode != Mode::Pinhole)
+        .count() as u64;
     progress.finish();
     stats.rays = tally.counts;
     stats.ray_log = tally.log;

@@ -213,17 +213,11 @@ impl Traced {
 
     /// Recomputes the cached values of the pixels in `changed`.
     fn update(&mut self, changed: &[usize]) {
-        let fresh: Vec<(f32, f32, Vec3)> = changed
-            .par_iter()
-            .map(|&p| {
-                let e = &self.est[p];
-                (e.std_error_code(), e.coverage_error_code(), code3(e.mean()))
-            })
-            .collect();
-        for (&p, (se, se_alpha, code)) in changed.iter().zip(fresh) {
-            self.se[p] = se;
-            self.se_alpha[p] = se_alpha;
-            self.code[p] = code;
+        for &p in changed {
+            let e = &self.est[p];
+            self.se[p] = e.std_error_code();
+            self.se_alpha[p] = e.coverage_error_code();
+            self.code[p] = code3(e.mean());
         }
     }
 
@@ -253,7 +247,8 @@ fn mark_needed(need: &mut [bool], pending: &mut Vec<usize>, cell: &Cell, width: 
     }
 }
 
-/// The pixels of a cell (half-open: its right and bottom corners belong to the next cell).
+/// The pixels of a cell within `width` x `height` (half-open: its right and bottom corners
+/// belong to the next cell).
 fn cell_pixels(c: &Cell, width: usize, height: usize) -> impl Iterator<Item = (usize, usize)> {
     let s = c.size as usize;
     (c.y0..(c.y0 + s).min(height))
@@ -273,7 +268,7 @@ fn failed_cells(
     alpha: bool,
 ) -> Vec<(Cell, u32)> {
     cells
-        .par_iter()
+        .iter()
         .filter_map(|cell| {
             let mut worst = 0.0f32;
             for qy in cell.y0..=cell.y1 {
@@ -312,19 +307,20 @@ fn failed_cells(
         .collect()
 }
 
-/// Lowers the interval of every pixel in each failed cell to the one its split asks for;
-/// marks the new cells' corners and centres as needed and lists the new cells.
+/// Lowers the interval of every (owned) pixel in each failed cell of bucket `b` to the one
+/// its split asks for; marks the new cells' corners and centres as needed and lists the new
+/// cells.
 fn split(
     interval: &mut [u32],
     need: &mut [bool],
     pending: &mut Vec<usize>,
     cells: &[(Cell, u32)],
-    width: usize,
-    height: usize,
+    b: &Bucket,
 ) -> Vec<Cell> {
+    let (width, height) = (b.w, b.h);
     let mut new_cells = Vec::new();
     for &(c, to) in cells {
-        for (x, y) in cell_pixels(&c, width, height) {
+        for (x, y) in cell_pixels(&c, b.owned_w, b.owned_h) {
             let v = &mut interval[y * width + x];
             if *v == c.size {
                 *v = to;
@@ -339,14 +335,14 @@ fn split(
     new_cells
 }
 
-/// The cells whose closure holds pixel p: those of p and of its left, upper and upper-left
-/// neighbours.
-fn cells_around(
+/// The bucket's cells whose closure holds pixel p: those of p and of its left, upper and
+/// upper-left neighbours that the bucket owns.
+fn cells_around<'a>(
     p: usize,
-    interval: &[u32],
-    width: usize,
-    height: usize,
-) -> impl Iterator<Item = Cell> + '_ {
+    interval: &'a [u32],
+    b: &'a Bucket,
+) -> impl Iterator<Item = Cell> + 'a {
+    let (width, height) = (b.w, b.h);
     let (x, y) = (p % width, p / width);
     [
         (x, y),
@@ -355,7 +351,7 @@ fn cells_around(
         (x.wrapping_sub(1), y.wrapping_sub(1)),
     ]
     .into_iter()
-    .filter(move |&(rx, ry)| rx < width && ry < height)
+    .filter(move |&(rx, ry)| b.owns(rx, ry))
     .map(move |(rx, ry)| Cell::of(rx, ry, interval[ry * width + rx], width, height))
     .filter(move |c| c.size >= 2 && c.contains(x, y))
 }
@@ -409,17 +405,131 @@ impl Peaks {
     }
 }
 
-/// Renders with the error-controlled rule, given the CoC map and which pixels blur reaches.
+/// A bucket of the image: the square of `size` pixels whose top left is (x0, y0), plus the
+/// column and row beyond it that its cells' right and bottom corners lie on (its closure).
+/// Cells never cross a bucket (they are at most `max_interval` across and aligned to their
+/// size), so each bucket refines on its own, from the frame's maps and its own samples only.
+#[derive(Debug, Clone, Copy)]
+struct Bucket {
+    x0: usize,
+    y0: usize,
+    /// The closure's size (the owned pixels plus the shared column and row, inside the image).
+    w: usize,
+    h: usize,
+    /// The pixels the bucket interpolates: `owned_w` x `owned_h` from its top left.
+    owned_w: usize,
+    owned_h: usize,
+}
+
+impl Bucket {
+    fn new(x0: usize, y0: usize, size: usize, width: usize, height: usize) -> Self {
+        Self {
+            x0,
+            y0,
+            w: (size + 1).min(width - x0),
+            h: (size + 1).min(height - y0),
+            owned_w: size.min(width - x0),
+            owned_h: size.min(height - y0),
+        }
+    }
+
+    fn owns(&self, x: usize, y: usize) -> bool {
+        x < self.owned_w && y < self.owned_h
+    }
+
+    /// The closure's part of a full-frame map.
+    fn slice<T: Copy>(&self, full: &[T], width: usize) -> Vec<T> {
+        (self.y0..self.y0 + self.h)
+            .flat_map(|y| {
+                full[y * width + self.x0..y * width + self.x0 + self.w]
+                    .iter()
+                    .copied()
+            })
+            .collect()
+    }
+}
+
+/// The frame-wide maps every bucket reads (all from the depth pass).
+struct Maps<'a> {
+    blurred: &'a [bool],
+    start: Vec<u32>,
+    reach: Vec<u8>,
+}
+
+/// Renders with the error-controlled rule, given the CoC map and which pixels blur reaches,
+/// the pixels of `region` (and of the buckets around them; the rest of the returned maps is
+/// left empty: colour 0, no samples).
+///
+/// The image is worked on in buckets of `max_interval` pixels, each refined on its own (in
+/// parallel): a pixel's value depends only on the frame's depth pass and its bucket's
+/// samples, so any region of the image renders to the same pixels as the whole frame.
 pub fn refine(
     shader: &SiteShader,
     coc: &[f32],
     blurred: &[bool],
+    region: &super::Region,
     progress: &dyn Progress,
     tally: &mut Tally,
 ) -> Refined {
     let s = shader.settings;
     let (width, height) = (shader.camera.width as usize, shader.camera.height as usize);
+    let maps = Maps {
+        blurred,
+        start: maps::start_intervals(coc, width, height, start_k(s.tolerance()), s.max_interval),
+        reach: reach_levels(coc, s.max_interval),
+    };
+    let size = s.max_interval as usize;
+    let buckets: Vec<Bucket> = (0..height)
+        .step_by(size)
+        .flat_map(|y0| (0..width).step_by(size).map(move |x0| (x0, y0)))
+        .filter(|&(x0, y0)| {
+            let r = region;
+            (x0 as u32) < r.x1
+                && r.x0 < (x0 + size) as u32
+                && (y0 as u32) < r.y1
+                && r.y0 < (y0 + size) as u32
+        })
+        .map(|(x0, y0)| Bucket::new(x0, y0, size, width, height))
+        .collect();
+    progress.start("adaptive", buckets.len() as u64);
+    let done: Vec<(Bucket, Refined, Tally)> = buckets
+        .par_iter()
+        .map(|b| {
+            let mut local = Tally::new(s.record_rays);
+            let refined = refine_bucket(shader, &maps, b, &mut local);
+            progress.advance(1);
+            (*b, refined, local)
+        })
+        .collect();
+    let mut out = Refined {
+        color: vec![Vec4::ZERO; width * height],
+        interval: maps.start.clone(),
+        samples: vec![0; width * height],
+        rounds: 0,
+    };
+    for (b, refined, local) in done {
+        for y in 0..b.owned_h {
+            for x in 0..b.owned_w {
+                let (p, q) = ((b.y0 + y) * width + b.x0 + x, y * b.w + x);
+                out.color[p] = refined.color[q];
+                out.interval[p] = refined.interval[q];
+                out.samples[p] = refined.samples[q];
+            }
+        }
+        out.rounds = out.rounds.max(refined.rounds);
+        tally.merge(local);
+    }
+    out
+}
+
+/// The error-controlled rule inside one bucket; the result covers the bucket's closure, of
+/// which the owned pixels are final.
+fn refine_bucket(shader: &SiteShader, maps: &Maps, b: &Bucket, tally: &mut Tally) -> Refined {
+    let s = shader.settings;
+    let full_width = shader.camera.width as usize;
+    let (width, height) = (b.w, b.h);
     let tolerance = s.tolerance();
+    let blurred = b.slice(maps.blurred, full_width);
     let target = |p: usize| if blurred[p] { s.spp } else { s.aa };
     let first = |p: usize| {
         if blurred[p] {
@@ -428,16 +538,15 @@ pub fn refine(
             s.aa
         }
     };
-    let mut interval =
-        maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval);
-    let mut traced = Traced::new(width * height);
-    let reach = reach_levels(coc, s.max_interval);
+    let mut interval = b.slice(&maps.start, full_width);
+    let reach = b.slice(&maps.reach, full_width);
     let top_reach = reach.iter().copied().max().unwrap_or(1);
+    let mut traced = Traced::new(width * height);
     let mut need = vec![false; width * height];
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
     let mut pending = Vec::new();
-    for y in 0..height {
-        for x in 0..width {
+    for y in 0..b.owned_h {
+        for x in 0..b.owned_w {
             let cell = Cell::of(x, y, interval[y * width + x], width, height);
             mark_needed(&mut need, &mut pending, &cell, width);
         }
@@ -447,6 +556,7 @@ pub fn refine(
     let mut to = from.clone();
     // Cells resized by the last split: their checks must run again even if no point changed.
     let mut resized: Vec<Cell> = Vec::new();
+    let mut scratch = super::SiteScratch::new();
     let mut rounds = 0;
     loop {
         pending.sort_unstable();
@@ -488,8 +598,19 @@ pub fn refine(
             break;
         }
         rounds += 1;
-        progress.start(&format!("adaptive, round {rounds}"), height as u64);
-        shader.shade_rows(&from, &to, &mut traced.est, progress, tally);
+        for y in 0..height {
+            let row = y * width..(y + 1) * width;
+            if from[row.clone()] != to[row.clone()] {
+                shader.shade_row(
+                    (b.x0, b.y0 + y),
+                    &from[row.clone()],
+                    &to[row.clone()],
+                    &mut traced.est[row],
+                    &mut scratch,
+                    tally,
+                );
+            }
+        }
         traced.update(&work);
         // Check every cell a new sample or a split touched.
         let mut dirty = std::mem::take(&mut resized);
@@ -498,30 +619,22 @@ pub fn refine(
             if traced.est[p].n < target(p) {
                 pending.push(p);
             }
-            dirty.extend(cells_around(p, &interval, width, height));
+            dirty.extend(cells_around(p, &interval, b));
         }
         dirty.sort_unstable();
         dirty.dedup();
         let mut failed = failed_cells(&traced, &dirty, width, tolerance, s.transparent);
         failed.sort_unstable();
-        resized = split(
-            &mut interval,
-            &mut need,
-            &mut pending,
-            &failed,
-            width,
-            height,
-        );
+        resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
     let color = (0..width * height)
-        .into_par_iter()
         .map(|p| {
             let e = &traced.est[p];
-            if e.n > 0 {
+            let (x, y) = (p % width, p / width);
+            if e.n > 0 || !b.owns(x, y) {
                 return e.mean_rgba();
             }
-            let (x, y) = (p % width, p / width);
             let cell = Cell::of(x, y, interval[p], width, height);
             let centre = cell.centre();
             interpolate_at(&traced, width, &cell, (x, y), centre)
@@ -586,13 +699,13 @@ mod tests {
         interval[0] = 4; // a finer pixel inside the same square keeps its interval
         let mut need = vec![false; w * h];
         let mut pending = Vec::new();
+        let bucket = Bucket::new(0, 0, 64, w, h);
         let new_cells = split(
             &mut interval,
             &mut need,
             &mut pending,
             &[(Cell::of(1, 1, 8, w, h), 4)],
-            w,
-            h,
+            &bucket,
         );
         assert!(
             new_cells.contains(&Cell::of(5, 1, 4, w, h)),

@@ -52,7 +52,7 @@ impl SiteScratch {
 #[derive(Default)]
 struct Batch {
     len: usize,
-    /// The pixel (column) each sample belongs to.
+    /// The estimate (index in the row run being shaded) each sample belongs to.
     pixel: [usize; LANES],
     film_x: [f32; LANES],
     film_y: [f32; LANES],
@@ -81,7 +81,7 @@ impl SiteShader<'_> {
             .map_init(SiteScratch::new, |scratch, (y, (row, (from, to)))| {
                 let mut local = Tally::new(record);
                 if from != to {
-                    self.shade_row(y, from, to, row, scratch, &mut local);
+                    self.shade_row((0, y), from, to, row, scratch, &mut local);
                 }
                 progress.advance(1);
                 local
@@ -92,29 +92,31 @@ impl SiteShader<'_> {
         }
     }
 
-    /// Adds samples `from[x] .. to[x]` of pixel (x, y) to `estimates[x]` for every pixel of row
-    /// `y` (none where `to[x] <= from[x]`). A pixel's samples are the same whichever call
-    /// takes them, so an estimate refined in several calls equals one made in a single call.
+    /// Adds samples `from[i] .. to[i]` of pixel (x0 + i, y) to `estimates[i]` for every pixel
+    /// of a run of row `y` starting at column `x0` (none where `to[i] <= from[i]`). A pixel's
+    /// samples are the same whichever call takes them, so an estimate refined in several calls
+    /// (or in a window of the image) equals one made in a single call.
     pub fn shade_row(
         &self,
-        y: usize,
+        (x0, y): (usize, usize),
         from: &[u32],
         to: &[u32],
         estimates: &mut [Estimate],
         scratch: &mut SiteScratch,
         tally: &mut Tally,
     ) {
-        let width = estimates.len();
+        let width = self.camera.width as usize;
         scratch.batch.len = 0;
-        for (x, (&start, &end)) in from.iter().zip(to).enumerate() {
+        for (i, (&start, &end)) in from.iter().zip(to).enumerate() {
             if end <= start {
                 continue;
             }
+            let x = x0 + i;
             let sampler = PixelSampler::new(self.settings.seed, (y * width + x) as u64);
             // Samples are made 16 at a time (batched, bit for bit the single-sample values)
             // and queued; a pixel with 16 or more fills whole packets of its own.
             for first in (start..end).step_by(LANES) {
-                let chunk = self.chunk(&sampler, (x, y), first);
+                let chunk = self.chunk(&sampler, (x, y), i, first);
                 let count = (end - first).min(LANES as u32) as usize;
                 if count == LANES {
                     // A whole packet of one pixel's coherent rays: traced at once, while any
@@ -129,7 +131,7 @@ impl SiteShader<'_> {
                     b.film_y[slot] = chunk.film_y[lane];
                     b.lens_x[slot] = chunk.lens_x[lane];
                     b.lens_y[slot] = chunk.lens_y[lane];
-                    b.pixel[slot] = x;
+                    b.pixel[slot] = i;
                     b.len += 1;
                     if b.len == LANES {
                         self.flush(scratch, estimates, tally);
@@ -142,10 +144,16 @@ impl SiteShader<'_> {
         }
     }
 
-    /// Samples `first .. first + 16` of pixel (x, y): film positions drawn from the pixel
-    /// filter around the pixel centre and lens positions on the aperture (all at its centre
-    /// for a pinhole camera).
-    fn chunk(&self, sampler: &PixelSampler, (x, y): (usize, usize), first: u32) -> Batch {
+    /// Samples `first .. first + 16` of pixel (x, y), for estimate `slot`: film positions drawn
+    /// from the pixel filter around the pixel centre and lens positions on the aperture (all
+    /// at its centre for a pinhole camera).
+    fn chunk(
+        &self,
+        sampler: &PixelSampler,
+        (x, y): (usize, usize),
+        slot: usize,
+        first: u32,
+    ) -> Batch {
         let (u, v) = sampler.get16(first);
         let (pu, pv) = sampler.get_pixel16(first);
         // Pinhole mode samples the pixel only: every ray leaves the lens centre.
@@ -158,7 +166,7 @@ impl SiteShader<'_> {
         let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
         Batch {
             len: LANES,
-            pixel: [x; LANES],
+            pixel: [slot; LANES],
             film_x: pu.map(|u| cx + f.offset(u)),
             film_y: pv.map(|v| cy + f.offset(v)),
             lens_x,

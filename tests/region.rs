@@ -1,0 +1,178 @@
+//! Regions and tiles: any window of the image renders to the same pixels, bit for bit, as the
+//! whole frame, in every mode and under both adaptive rules, so tiles rendered apart (on
+//! other machines) assemble into exactly the full render.
+
+use dofray::camera::Camera;
+use dofray::embree::Device;
+use dofray::render::{
+    Film, Mode, NoProgress, Region, RenderSettings, SiteRule, render, render_region,
+};
+use dofray::scene::{World, builtin};
+
+fn paper(width: u32, height: u32) -> (World, Camera) {
+    let mut desc = builtin::paper();
+    desc.camera.width = width;
+    desc.camera.height = height;
+    let device = Device::new().unwrap();
+    let world = World::build(&desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    (world, camera)
+}
+
+fn settings() -> Vec<(&'static str, RenderSettings)> {
+    let base = RenderSettings {
+        seed: 5,
+        ..Default::default()
+    };
+    vec![
+        ("adaptive, error rule", base.clone()),
+        (
+            "adaptive, error rule, transparent, tight",
+            RenderSettings {
+                transparent: true,
+                tolerance: Some(0.5),
+                spp: 32,
+                ..base.clone()
+            },
+        ),
+        (
+            "adaptive, seed rule",
+            RenderSettings {
+                rule: SiteRule::Seed,
+                ..base.clone()
+            },
+        ),
+        (
+            "adaptive, paper exact",
+            RenderSettings {
+                rule: SiteRule::Seed,
+                paper_exact: true,
+                ..base.clone()
+            },
+        ),
+        (
+            "dense",
+            RenderSettings {
+                mode: Mode::Dense,
+                ..base.clone()
+            },
+        ),
+        (
+            "pinhole",
+            RenderSettings {
+                mode: Mode::Pinhole,
+                ..base
+            },
+        ),
+    ]
+}
+
+/// Every buffer of `tile` equals the same window of `full`, bit for bit.
+fn assert_window(full: &Film, tile: &Film, r: &Region, what: &str) {
+    assert_eq!(
+        (tile.width, tile.height),
+        (r.width() as usize, r.height() as usize)
+    );
+    for y in 0..tile.height {
+        for x in 0..tile.width {
+            let (p, q) = (
+                (y + r.y0 as usize) * full.width + x + r.x0 as usize,
+                y * tile.width + x,
+            );
+            let same = full.color[p].to_array().map(f32::to_bits)
+                == tile.color[q].to_array().map(f32::to_bits)
+                && full.alpha[p].to_bits() == tile.alpha[q].to_bits()
+                && full.depth[p].to_bits() == tile.depth[q].to_bits()
+                && full.coc[p].to_bits() == tile.coc[q].to_bits()
+                && full.interval[p] == tile.interval[q]
+                && full.samples[p] == tile.samples[q];
+            assert!(
+                same,
+                "{what}: region {r}, pixel ({}, {}): full {:?} a {} n {} i {}, region {:?} a {} n {} i {}",
+                x + r.x0 as usize,
+                y + r.y0 as usize,
+                full.color[p],
+                full.alpha[p],
+                full.samples[p],
+                full.interval[p],
+                tile.color[q],
+                tile.alpha[q],
+                tile.samples[q],
+                tile.interval[q],
+            );
+        }
+    }
+}
+
+#[test]
+fn regions_render_the_same_pixels_as_the_whole_frame() {
+    // 200 x 150: buckets of 64 leave partial ones at the right and bottom.
+    let (world, camera) = paper(200, 150);
+    let regions = [
+        "0,0,200,150",
+        "0,0,64,64",
+        "37,21,131,99",
+        "63,63,65,65",
+        "199,149,200,150",
+        "128,0,200,150",
+        "5,70,190,71",
+    ]
+    .map(|s| s.parse::<Region>().unwrap());
+    for (what, s) in settings() {
+        let (full, full_stats) = render(&world, &camera, &s, &NoProgress).unwrap();
+        for r in &regions {
+            let (tile, stats) = render_region(&world, &camera, &s, r, &NoProgress).unwrap();
+            assert_window(&full, &tile, r, what);
+            assert!(stats.rays.total() <= full_stats.rays.total() || r.width() == 200);
+        }
+    }
+}
+
+#[test]
+fn a_tile_grid_reassembles_into_the_full_render_at_any_thread_count() {
+    let (world, camera) = paper(160, 120);
+    for (what, s) in settings().into_iter().take(3) {
+        let (full, _) = render(&world, &camera, &s, &NoProgress).unwrap();
+        let tiles = Region::grid(160, 120, 3, 2).unwrap();
+        for (i, r) in tiles.iter().enumerate() {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(1 + i % 2)
+                .build()
+                .unwrap();
+            let (tile, _) = pool
+                .install(|| render_region(&world, &camera, &s, r, &NoProgress))
+                .unwrap();
+            assert_window(&full, &tile, r, what);
+        }
+    }
+}
+
+#[test]
+fn a_region_costs_less_than_the_frame() {
+    let (world, camera) = paper(256, 192);
+    let s = RenderSettings::default();
+    let (_, full) = render(&world, &camera, &s, &NoProgress).unwrap();
+    let quarter = Region::grid(256, 192, 2, 2).unwrap()[3];
+    let (_, part) = render_region(&world, &camera, &s, &quarter, &NoProgress).unwrap();
+    // The depth pass is the whole frame's; the rest is the quarter's (plus its closure).
+    let depth_rays = 256 * 192;
+    let shaded = |n: u64| n - depth_rays;
+    assert!(
+        shaded(part.rays.primary) < shaded(full.rays.primary) / 2,
+        "{} of {}",
+        part.rays.primary,
+        full.rays.primary
+    );
+    assert!(part.sample_sites < full.sample_sites);
+}
+
+#[test]
+fn regions_outside_the_image_are_refused() {
+    let (world, camera) = paper(64, 48);
+    let s = RenderSettings::default();
+    for r in ["0,0,65,48", "0,40,64,49"] {
+        let r: Region = r.parse().unwrap();
+        let err = render_region(&world, &camera, &s, &r, &NoProgress).unwrap_err();
+        assert!(err.to_string().contains("beyond the 64x48 image"), "{err}");
+    }
+}
