@@ -13,11 +13,17 @@
 # - never more tasks at once than the machine has CPUs (one core each: 2 here), and more
 #   than one at once on a machine of 2 or more;
 # - the dependent job ran after all of them and saw their files.
-# Stops the cluster on exit, pass or fail. Exit 0: passed; 3: Slurm cannot run here (SKIP);
+# Stops the cluster on exit, pass or fail (a WORKDIR it made itself is removed after a pass). Exit 0: passed; 3: Slurm cannot run here (SKIP);
 # anything else: failed.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
-work=${1:-$(mktemp -d /tmp/dofray-slurm-selftest.XXXXXX)}
+made=""
+if [ $# -ge 1 ]; then
+  work=$1
+else
+  work=$(mktemp -d /tmp/dofray-slurm-selftest.XXXXXX)
+  made=1 # removed again after a pass
+fi
 mkdir -p "$work"
 work=$(cd "$work" && pwd)
 cluster="$work/cluster"
@@ -25,7 +31,7 @@ cluster="$work/cluster"
 rc=0
 bash "$here/cluster.sh" start "$cluster" || rc=$?
 [ "$rc" = 0 ] || exit "$rc"
-trap 'bash "$here/cluster.sh" stop "$cluster" >/dev/null || true' EXIT
+trap 'cd / && bash "$here/cluster.sh" stop "$cluster" >/dev/null || true' EXIT
 # shellcheck disable=SC1091
 . "$cluster/env.sh"
 
@@ -119,4 +125,9 @@ echo "at most $most array tasks ran at once ($cpus CPUs)"
 [ "$cpus" -lt 2 ] || [ "$most" -ge 2 ] || fail "tasks ran one at a time on $cpus CPUs"
 [ "$most" -le "$cpus" ] || fail "$most tasks ran at once on $cpus CPUs"
 
-echo "slurm selftest: 1 passed, 0 failed (array of 4 + dependent job, variables, cwd, PATH, concurrency)"
+echo "PASS: Slurm self-test (4-task array and a dependent job: array variables, cwd, PATH, at most $most at once)"
+if [ -n "$made" ]; then
+  cd /
+  bash "$here/cluster.sh" stop "$cluster" >/dev/null
+  rm -rf "$work"
+fi
