@@ -13,7 +13,7 @@
 # - never more tasks at once than the machine has CPUs (one core each: 2 here), and more
 #   than one at once on a machine of 2 or more;
 # - the dependent job ran after all of them and saw their files.
-# Stops the cluster on exit, pass or fail (a WORKDIR it made itself is removed after a pass). Exit 0: passed; 3: Slurm cannot run here (SKIP);
+# Stops the cluster on exit, pass or fail (a WORKDIR it made itself is removed after a pass or a skip). Exit 0: passed; 3: Slurm cannot run here (SKIP);
 # anything else: failed.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
@@ -30,7 +30,10 @@ cluster="$work/cluster"
 
 rc=0
 bash "$here/cluster.sh" start "$cluster" || rc=$?
-[ "$rc" = 0 ] || exit "$rc"
+if [ "$rc" != 0 ]; then
+  [ -z "$made" ] || rm -rf "$work"
+  exit "$rc"
+fi
 trap 'cd / && bash "$here/cluster.sh" stop "$cluster" >/dev/null || true' EXIT
 # shellcheck disable=SC1091
 . "$cluster/env.sh"
