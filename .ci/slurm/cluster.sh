@@ -13,16 +13,18 @@
 #   apt-get install -y --no-install-recommends slurmctld slurmd slurm-client munge
 # slurm-wlm is only a metapackage of those three Slurm packages; its recommends (the
 # slurm-wlm-plugins set: ipmi, rsmi, hdf5, influxdb, ...) are not needed. Their postinst
-# scripts do not start any daemon where no init system runs (invoke-rc.d asks policy-rc.d,
-# or finds no runlevel) and munge's generates /etc/munge/munge.key, which this script does
-# not use: the cluster has its own key, socket, state, logs and pid files, all under DIR,
-# so it clashes with no system munged or Slurm.
+# scripts try to start munge, slurmd and slurmctld through invoke-rc.d; in this container
+# policy-rc.d (exit 101) denies it, so nothing runs after the install. munge's postinst
+# also makes /etc/munge/munge.key, which this script does not use: the cluster has its own
+# key, socket, state, logs and pid files, all under DIR, so it clashes with no system
+# munged or Slurm (and would still start if the packages' services were running).
 #
-# What the configuration has to say so that Slurm runs in a container with no systemd and
-# no cgroup controllers of its own:
-# - ProctrackType=proctrack/linuxproc and TaskPlugin=task/none: no cgroups (the default
-#   proctrack/cgroup wants a writable cgroup tree, and task/affinity wants to pin CPUs);
-#   JobAcctGatherType=jobacct_gather/none and no accounting (no slurmdbd).
+# What the configuration has to say so that Slurm runs in a container with no systemd:
+# - ProctrackType=proctrack/linuxproc and TaskPlugin=task/none: no cgroups. (Tried here:
+#   with proctrack/cgroup slurmd starts but every job step fails, "cgroup namespace
+#   'freezer' not mounted ... Plugin initialization failed", although /sys/fs/cgroup/freezer
+#   is listed as mounted.) JobAcctGatherType=jobacct_gather/none and no accounting
+#   (AccountingStorageType=accounting_storage/none: no slurmdbd).
 # - SlurmctldHost=NAME(127.0.0.1) and NodeAddr=127.0.0.1: the node name is the host's
 #   short name (slurmd finds its NodeName by it) but no name has to resolve to an address
 #   of this machine: everything talks over the loopback.
@@ -33,8 +35,13 @@
 # - Ports: the first free pair from 6817/6818 up (another cluster on this host keeps its).
 # - Scheduling: select/cons_tres with CR_Core, so a job that asks for one CPU takes one core
 #   and at most as many one-CPU tasks run at once as the node has cores.
-# - SchedulerParameters=sched_interval (and a short SchedulerTimeSlice) so that queued array
-#   tasks start within a second of a core freeing, not on the minute.
+# - SchedulerParameters=sched_interval=1: the main scheduling loop every second instead of
+#   every minute, so that pending work is not left waiting for it in a short test.
+# Harmless errors in the logs: slurmd and slurmctld load every MPI plugin at start and log
+# that mpi/pmix cannot find libpmix (not installed; MpiDefault=none); munged logs
+# "Unauthorized credential for client UID=0 GID=0" now and then (Slurm decoding a
+# credential restricted to another uid; jobs run regardless: dun/munge issue 120);
+# slurmctld reports missing state files on its first start (-i, an empty StateSaveLocation).
 set -euo pipefail
 
 usage() {
@@ -180,9 +187,9 @@ EOF
   mungekey --create --bits=1024 --keyfile="$dir/munge-key/munge.key" >/dev/null 2>&1 ||
     dd if=/dev/urandom of="$dir/munge-key/munge.key" bs=128 count=1 status=none
   chmod 0400 "$dir/munge-key/munge.key"
-  # munged runs as root here, like the other daemons (--force: munged warns about running
-  # as root and about /tmp's permissions when DIR is below it; the key stays 0400 in a 0700
-  # directory).
+  # munged runs as root here, like the other daemons. --force: munged refuses insecure
+  # permissions on the directories above its files (e.g. a group-writable parent of DIR);
+  # with it, it only warns. The key stays 0400 in a 0700 directory either way.
   munged --force \
     --key-file="$dir/munge-key/munge.key" \
     --socket="$dir/munge/munge.socket.2" \
