@@ -554,9 +554,9 @@ mod tests {
             text.contains("1000001 frames") && text.contains("1000000"),
             "{text}"
         );
-        let text = error("a,,b").to_string();
+        let text = error("1,,b").to_string();
         assert!(
-            text.starts_with("item 2 of the frame list `a,,b` is empty"),
+            text.starts_with("item 2 of the frame list `1,,b` is empty"),
             "{text}"
         );
     }
