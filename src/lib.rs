@@ -15,6 +15,7 @@ pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 /// `DOFRAY_GIT_COMMIT` environment variable), or `"unknown"` when built outside a git checkout.
 pub const GIT_COMMIT: &str = env!("DOFRAY_GIT_COMMIT");
 
+pub mod batch;
 pub mod bench;
 pub mod camera;
 // The only module with FFI; its unsafe blocks are documented (clippy::undocumented_unsafe_blocks).
