@@ -63,6 +63,7 @@ fn scene(
         tolerance: None,
         transparent: false,
         warnings: Vec::new(),
+        animation: None,
     }
 }
 

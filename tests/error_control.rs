@@ -115,6 +115,7 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
         tolerance: None,
         transparent: false,
         warnings: Vec::new(),
+        animation: None,
     };
     let (world, camera) = setup(&desc);
     let coc = camera.coc_px(5.0);

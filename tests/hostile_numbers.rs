@@ -131,6 +131,7 @@ fn wall_scene(z: f32, material: Material) -> SceneDesc {
         tolerance: None,
         transparent: false,
         warnings: Vec::new(),
+        animation: None,
     }
 }
 

@@ -185,6 +185,7 @@ fn rendered_blur_disc_matches_coc_px() {
         tolerance: None,
         transparent: false,
         warnings: Vec::new(),
+        animation: None,
     };
     let (world, camera) = setup(&desc);
     let settings = RenderSettings {
@@ -312,6 +313,7 @@ fn mirror_reflects_one_bounce() {
         tolerance: None,
         transparent: false,
         warnings: Vec::new(),
+        animation: None,
     };
     let (world, camera) = setup(&desc);
     let pinhole = |bounces| RenderSettings {

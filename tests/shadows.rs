@@ -50,6 +50,7 @@ fn scene(camera: CameraSpec, objects: Vec<Object>, light: Vec3, intensity: f32) 
         tolerance: None,
         transparent: false,
         warnings: Vec::new(),
+        animation: None,
     }
 }
 

@@ -122,5 +122,6 @@ pub fn paper() -> SceneDesc {
         tolerance: None,
         transparent: false,
         warnings: Vec::new(),
+        animation: None,
     }
 }

@@ -10,11 +10,12 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use glam::{Mat3, Vec3};
+use glam::{DVec3, Mat3, Vec3};
 use serde::Deserialize;
 use serde::de::{self, Deserializer, SeqAccess, Unexpected, Visitor};
 use toml::Spanned;
 
+use super::animation::{Animation, FocusTrack, Interpolation, Key, Track, Tracks, Value};
 use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
 use super::model::{
@@ -210,6 +211,10 @@ fn v3(v: V3) -> Vec3 {
     Vec3::new(v[0].0, v[1].0, v[2].0)
 }
 
+fn dv3(v: V3) -> DVec3 {
+    v3(v).as_dvec3()
+}
+
 /// A colour: a number (grey) or `[r, g, b]`, linear, each >= 0.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Color(Vec3);
@@ -337,6 +342,7 @@ struct RawScene {
     materials: Vec<Spanned<RawMaterial>>,
     #[serde(default)]
     objects: Vec<Spanned<RawObject>>,
+    animation: Option<Spanned<RawAnimation>>,
 }
 
 #[derive(Deserialize)]
@@ -377,6 +383,34 @@ struct RawCamera {
     blades: Option<Spanned<Whole>>,
     blade_rotation: Option<Finite>,
     anamorphic: Option<Positive>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawAnimation {
+    fps: Option<Positive>,
+    frame_start: Option<Spanned<i64>>,
+    frame_end: Option<Spanned<i64>>,
+    interpolation: Option<Interpolation>,
+    #[serde(default)]
+    key: Vec<Spanned<RawKey>>,
+}
+
+/// One `[[animation.key]]`: a frame and the values some parameters take there.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawKey {
+    frame: Spanned<i64>,
+    interpolation: Option<Interpolation>,
+    eye: Option<Spanned<V3>>,
+    look_at: Option<Spanned<V3>>,
+    up: Option<Spanned<V3>>,
+    vfov: Option<Spanned<Fov>>,
+    focal_length_mm: Option<Spanned<Positive>>,
+    f_number: Option<Spanned<Positive>>,
+    aperture_radius: Option<Spanned<NonNeg>>,
+    focus_distance: Option<Spanned<FocusDistance>>,
+    focus_point: Option<Spanned<V3>>,
 }
 
 #[derive(Deserialize)]
@@ -987,6 +1021,11 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         };
         return Err(ctx.invalid(span, key, e.to_string()));
     }
+    // Without a focus key, the focus is on look_at, and follows it when it is animated.
+    let focus_on_look_at = !raw.camera.as_ref().is_some_and(|c| {
+        let c = c.get_ref();
+        c.focus_distance.is_some() || c.focus_point.is_some() || c.focus_pixel.is_some()
+    });
     let camera = camera(
         ctx,
         raw.camera,
@@ -996,6 +1035,10 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         &origins,
         model_camera.as_ref(),
     )?;
+    let animation = raw
+        .animation
+        .map(|a| animation(ctx, a, &camera, focus_on_look_at))
+        .transpose()?;
 
     // Lights and environment: the file's, else the default key light unless a model brings
     // lights; plus the models' lights.
@@ -1085,6 +1128,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         tolerance,
         transparent: render.transparent.unwrap_or(false),
         warnings,
+        animation,
     })
 }
 
@@ -1315,30 +1359,20 @@ fn camera(
         .next()
         .unwrap_or(table_span.clone())
     };
-    let view = (look_at - eye).length_squared();
-    if view == 0.0 || !view.is_finite() {
-        let (span, key) = match (&raw.look_at, &raw.eye) {
-            (Some(l), _) => (l.span(), "camera.look_at"),
-            (None, Some(e)) => (e.span(), "camera.eye"),
-            (None, None) => (camera_span(), "camera.look_at"),
-        };
-        let message = if view == 0.0 {
-            "`look_at` must differ from `eye`"
-        } else {
-            "`eye` and `look_at` are too far apart: the distance between them is beyond the \
-             range of 32-bit floats"
-        };
-        return Err(ctx.invalid(span, key, message));
-    }
-    if (look_at - eye).cross(up).length_squared()
-        <= 1e-12 * (look_at - eye).length_squared() * up.length_squared()
-    {
-        let span = raw.up.as_ref().map_or(camera_span(), |u| u.span());
-        return Err(ctx.invalid(
-            span,
-            "camera.up",
-            "`up` must not be zero or parallel to the view direction (eye to look_at)",
-        ));
+    match view_problem(eye, look_at, up) {
+        None => {}
+        Some(("up", message)) => {
+            let span = raw.up.as_ref().map_or(camera_span(), |u| u.span());
+            return Err(ctx.invalid(span, "camera.up", message));
+        }
+        Some((_, message)) => {
+            let (span, key) = match (&raw.look_at, &raw.eye) {
+                (Some(l), _) => (l.span(), "camera.look_at"),
+                (None, Some(e)) => (e.span(), "camera.eye"),
+                (None, None) => (camera_span(), "camera.look_at"),
+            };
+            return Err(ctx.invalid(span, key, message));
+        }
     }
 
     // Lens: at most one parameterisation.
@@ -1458,13 +1492,9 @@ fn camera(
         Focus::Point(look_at)
     };
     if let Focus::Point(p) = focus {
-        if (p - eye).dot(look_at - eye) <= 0.0 {
+        if !in_front(eye, look_at, p) {
             let span = raw.focus_point.as_ref().map_or(camera_span(), |s| s.span());
-            return Err(ctx.invalid(
-                span,
-                "camera.focus_point",
-                "the point in focus must be in front of the camera",
-            ));
+            return Err(ctx.invalid(span, "camera.focus_point", BEHIND));
         }
     }
     let blades = raw.blades.as_ref().map_or(0, |b| b.get_ref().0);
@@ -1490,6 +1520,404 @@ fn camera(
             anamorphic: raw.anamorphic.map_or(1.0, |a| a.0),
         },
     })
+}
+
+/// What is wrong with a view, if anything: the key to blame (`look_at` or `up`) and why.
+fn view_problem(eye: Vec3, look_at: Vec3, up: Vec3) -> Option<(&'static str, &'static str)> {
+    let view = (look_at - eye).length_squared();
+    if view == 0.0 {
+        Some(("look_at", "`look_at` must differ from `eye`"))
+    } else if !view.is_finite() {
+        Some((
+            "look_at",
+            "`eye` and `look_at` are too far apart: the distance between them is beyond the \
+             range of 32-bit floats",
+        ))
+    } else if (look_at - eye).cross(up).length_squared()
+        <= 1e-12 * view * up.length_squared()
+    {
+        Some((
+            "up",
+            "`up` must not be zero or parallel to the view direction (eye to look_at)",
+        ))
+    } else {
+        None
+    }
+}
+
+/// Whether the point `p` is in front of a camera at `eye` looking at `look_at`.
+fn in_front(eye: Vec3, look_at: Vec3, p: Vec3) -> bool {
+    (p - eye).dot(look_at - eye) > 0.0
+}
+
+const BEHIND: &str = "the point in focus must be in front of the camera";
+
+/// The largest frame number (either sign) a scene may give.
+const MAX_FRAME: i64 = 1_000_000_000;
+/// The most frames a shot may have (every one is checked when the file is loaded).
+const MAX_SHOT_FRAMES: i64 = 1_000_000;
+
+/// Where one parameter's key is written: its frame, its `[[animation.key]]` index and the span
+/// of its value.
+struct Place {
+    frame: i64,
+    index: usize,
+    span: Range<usize>,
+}
+
+/// The keys of one parameter and where they are written (in frame order).
+type Places = Vec<(&'static str, Vec<Place>)>;
+
+/// The track of parameter `name` from the keys that set it (`value` reads it from a key, in
+/// the space it is interpolated in), or None when no key does; records where its keys are.
+fn track<T: Value>(
+    ctx: &Ctx,
+    keys: &[Spanned<RawKey>],
+    default: Interpolation,
+    name: &'static str,
+    value: impl Fn(&RawKey) -> Option<(Range<usize>, T)>,
+    places: &mut Places,
+) -> Result<Option<Track<T>>, LoadError> {
+    let (mut found, mut spots) = (Vec::new(), Vec::<Place>::new());
+    for (index, k) in keys.iter().enumerate() {
+        let k = k.get_ref();
+        let Some((span, value)) = value(k) else {
+            continue;
+        };
+        let frame = *k.frame.get_ref();
+        if let Some(first) = spots.iter().find(|p| p.frame == frame) {
+            return Err(ctx.invalid(
+                span,
+                format!("animation.key[{index}].{name}"),
+                format!(
+                    "`{name}` is keyed twice at frame {frame} (animation.key[{}] keys it there \
+                     too); a parameter has at most one key per frame",
+                    first.index
+                ),
+            ));
+        }
+        found.push(Key {
+            frame,
+            value,
+            interpolation: k.interpolation.unwrap_or(default),
+        });
+        spots.push(Place { frame, index, span });
+    }
+    if !spots.is_empty() {
+        spots.sort_by_key(|p| p.frame);
+        places.push((name, spots));
+    }
+    // Frames are unique, so this fails only without keys.
+    Ok(Track::new(found).ok())
+}
+
+/// The keys of `name`, if it is animated.
+fn keys_of<'a>(places: &'a Places, name: &str) -> Option<&'a [Place]> {
+    places
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, p)| p.as_slice())
+}
+
+/// The `[animation]` table: its tracks, checked against the camera's lens, and every frame of
+/// the shot checked for a valid view. `focus_on_look_at`: the camera's focus is its `look_at`
+/// by default (no focus key in `[camera]`), so without focus keys it follows an animated
+/// `look_at`.
+fn animation(
+    ctx: &Ctx,
+    raw: Spanned<RawAnimation>,
+    camera: &CameraSpec,
+    focus_on_look_at: bool,
+) -> Result<Animation, LoadError> {
+    let table = raw.span();
+    let raw = raw.into_inner();
+    let frame_ok = |v: &Spanned<i64>, key: String| {
+        if v.get_ref().abs() <= MAX_FRAME {
+            Ok(*v.get_ref())
+        } else {
+            Err(ctx.invalid(
+                v.span(),
+                key,
+                "a frame number from -1000000000 to 1000000000",
+            ))
+        }
+    };
+    for (i, k) in raw.key.iter().enumerate() {
+        let key = k.get_ref();
+        frame_ok(&key.frame, format!("animation.key[{i}].frame"))?;
+        let sets = [
+            key.eye.is_some(),
+            key.look_at.is_some(),
+            key.up.is_some(),
+            key.vfov.is_some(),
+            key.focal_length_mm.is_some(),
+            key.f_number.is_some(),
+            key.aperture_radius.is_some(),
+            key.focus_distance.is_some(),
+            key.focus_point.is_some(),
+        ];
+        if !sets.contains(&true) {
+            return Err(ctx.invalid(
+                k.span(),
+                format!("animation.key[{i}]"),
+                "a key sets no parameter: give at least one of eye, look_at, up, vfov, \
+                 focal_length_mm, f_number, aperture_radius, focus_distance, focus_point",
+            ));
+        }
+    }
+    let key_frames = || raw.key.iter().map(|k| *k.get_ref().frame.get_ref());
+    let range_end = |v: &Option<Spanned<i64>>, key: &str, default: Option<i64>| match v {
+        Some(v) => frame_ok(v, format!("animation.{key}")),
+        None => default.ok_or_else(|| {
+            ctx.invalid(
+                table.clone(),
+                format!("animation.{key}"),
+                "an animation without keys needs `frame_start` and `frame_end`",
+            )
+        }),
+    };
+    let frame_start = range_end(&raw.frame_start, "frame_start", key_frames().min())?;
+    let frame_end = range_end(&raw.frame_end, "frame_end", key_frames().max())?;
+    if frame_end < frame_start || frame_end - frame_start >= MAX_SHOT_FRAMES {
+        let span = raw
+            .frame_end
+            .as_ref()
+            .or(raw.frame_start.as_ref())
+            .map_or(table.clone(), |s| s.span());
+        return Err(ctx.invalid(
+            span,
+            "animation.frame_end",
+            format!(
+                "`frame_end` ({frame_end}) must be at least `frame_start` ({frame_start}), and \
+                 a shot has at most 1000000 frames"
+            ),
+        ));
+    }
+
+    let default = raw.interpolation.unwrap_or_default();
+    let keys = &raw.key;
+    let mut places = Places::new();
+    let point = |v: &Option<Spanned<V3>>| v.as_ref().map(|v| (v.span(), dv3(*v.get_ref())));
+    let tracks = Tracks {
+        eye: track(ctx, keys, default, "eye", |k| point(&k.eye), &mut places)?,
+        look_at: track(ctx, keys, default, "look_at", |k| point(&k.look_at), &mut places)?,
+        up: track(ctx, keys, default, "up", |k| point(&k.up), &mut places)?,
+        vfov: track(
+            ctx,
+            keys,
+            default,
+            "vfov",
+            |k| k.vfov.as_ref().map(|v| (v.span(), v.get_ref().0 as f64)),
+            &mut places,
+        )?,
+        focal_length_mm: track(
+            ctx,
+            keys,
+            default,
+            "focal_length_mm",
+            |k| {
+                let v = k.focal_length_mm.as_ref()?;
+                Some((v.span(), v.get_ref().0 as f64))
+            },
+            &mut places,
+        )?,
+        ln_f_number: track(
+            ctx,
+            keys,
+            default,
+            "f_number",
+            |k| {
+                let v = k.f_number.as_ref()?;
+                Some((v.span(), (v.get_ref().0 as f64).ln()))
+            },
+            &mut places,
+        )?,
+        aperture_radius: track(
+            ctx,
+            keys,
+            default,
+            "aperture_radius",
+            |k| {
+                let v = k.aperture_radius.as_ref()?;
+                Some((v.span(), v.get_ref().0 as f64))
+            },
+            &mut places,
+        )?,
+        focus: None,
+    };
+    // Focus distances in dioptres (inf is 0).
+    let dioptres = track(
+        ctx,
+        keys,
+        default,
+        "focus_distance",
+        |k| {
+            let v = k.focus_distance.as_ref()?;
+            Some((v.span(), 1.0 / v.get_ref().0 as f64))
+        },
+        &mut places,
+    )?;
+    let focus_point = track(
+        ctx,
+        keys,
+        default,
+        "focus_point",
+        |k| point(&k.focus_point),
+        &mut places,
+    )?;
+    let first_key = |name: &str| {
+        let spots = keys_of(&places, name)?;
+        spots.iter().min_by_key(|p| p.index)
+    };
+    let lens_conflict = |name: &str, message: String| match first_key(name) {
+        Some(p) => Err(ctx.invalid(
+            p.span.clone(),
+            format!("animation.key[{}].{name}", p.index),
+            message,
+        )),
+        None => Ok(()),
+    };
+    let lens = match camera.lens {
+        LensSpec::Pinhole => "a pinhole (no lens key, or `aperture_radius = 0`)",
+        LensSpec::Aperture { .. } => "an aperture radius (`aperture_radius`)",
+        LensSpec::Photographic { .. } => "photographic (`f_number`)",
+        LensSpec::Seed { .. } => "the seed's (`sharp_range` and `spread`)",
+    };
+    if !matches!(camera.lens, LensSpec::Photographic { .. }) {
+        for name in ["f_number", "focal_length_mm"] {
+            lens_conflict(
+                name,
+                format!(
+                    "`{name}` animates a photographic lens, but the [camera] lens is {lens}; \
+                     give `f_number` in [camera]{}",
+                    if matches!(camera.lens, LensSpec::Seed { .. }) {
+                        ""
+                    } else {
+                        " or animate `aperture_radius`"
+                    }
+                ),
+            )?;
+        }
+    } else {
+        lens_conflict(
+            "vfov",
+            "a photographic lens (`f_number` in [camera]) sets the field of view from \
+             focal_length_mm and sensor_width_mm; animate `focal_length_mm` instead of `vfov`"
+                .into(),
+        )?;
+    }
+    if !matches!(camera.lens, LensSpec::Aperture { .. } | LensSpec::Pinhole) {
+        lens_conflict(
+            "aperture_radius",
+            format!(
+                "`aperture_radius` animates an aperture-radius lens (or a pinhole), but the \
+                 [camera] lens is {lens}{}",
+                if matches!(camera.lens, LensSpec::Photographic { .. }) {
+                    "; animate `f_number` instead"
+                } else {
+                    ""
+                }
+            ),
+        )?;
+    }
+    if let (Some(d), Some(p)) = (first_key("focus_distance"), first_key("focus_point")) {
+        let ((later, name), other) = if d.index > p.index {
+            ((d, "focus_distance"), p)
+        } else {
+            ((p, "focus_point"), d)
+        };
+        return Err(ctx.invalid(
+            later.span.clone(),
+            format!("animation.key[{}].{name}", later.index),
+            format!(
+                "`focus_distance` and `focus_point` are both keyed (animation.key[{}] keys the \
+                 other); animate one of them",
+                other.index
+            ),
+        ));
+    }
+    let focus = match (dioptres, focus_point) {
+        (Some(d), _) => Some(FocusTrack::Dioptres(d)),
+        (None, Some(p)) => Some(FocusTrack::Point(p)),
+        (None, None) if focus_on_look_at => tracks.look_at.clone().map(FocusTrack::Point),
+        (None, None) => None,
+    };
+    let animation = Animation {
+        fps: raw.fps.map_or(24.0, |f| f.0),
+        frame_start,
+        frame_end,
+        tracks: Tracks { focus, ..tracks },
+    };
+    check_frames(ctx, &animation, camera, &places, table)?;
+    Ok(animation)
+}
+
+/// Checks the camera of every frame of the shot: a valid view, the point in focus in front,
+/// and whatever [`CameraSpec::build`] checks; the first bad frame is reported at the key of
+/// the parameter most likely to blame that is animated (the last of its keys at or before the
+/// frame, else its first), else at the `[animation]` table.
+fn check_frames(
+    ctx: &Ctx,
+    animation: &Animation,
+    camera: &CameraSpec,
+    places: &Places,
+    table: Range<usize>,
+) -> Result<(), LoadError> {
+    for frame in animation.frames() {
+        let mut c = camera.clone();
+        animation.apply(&mut c, frame as f64);
+        let (suspects, message): (&[&str], String) =
+            if let Some((key, message)) = view_problem(c.eye, c.look_at, c.up) {
+                let suspects: &[&str] = if key == "up" {
+                    &["up", "eye", "look_at"]
+                } else {
+                    &["look_at", "eye"]
+                };
+                let shown = format!(
+                    "{message} (eye {}, look_at {}, up {})",
+                    short_vec(c.eye),
+                    short_vec(c.look_at),
+                    short_vec(c.up)
+                );
+                (suspects, shown)
+            } else if matches!(c.focus, Focus::Point(p) if !in_front(c.eye, c.look_at, p)) {
+                (&["focus_point", "eye", "look_at"], BEHIND.into())
+            } else {
+                match c.build(|_| Some(1.0)) {
+                    Ok(_) => continue,
+                    Err(e) => {
+                        let suspects: &[&str] = match &e {
+                            crate::camera::CameraError::Invalid { name, .. } => match *name {
+                                "vfov_deg" => &["vfov", "focal_length_mm"],
+                                "focal_length_mm" => &["focal_length_mm"],
+                                "f_number" => &["f_number"],
+                                "aperture radius" => {
+                                    &["aperture_radius", "f_number", "focal_length_mm", "eye"]
+                                }
+                                "focus distance" => &["focus_distance", "focus_point"],
+                                _ => &["eye", "look_at", "up"],
+                            },
+                            _ => &[],
+                        };
+                        (suspects, e.to_string())
+                    }
+                }
+            };
+        let (span, key) = suspects
+            .iter()
+            .find_map(|&name| {
+                let spots = keys_of(places, name)?;
+                let p = spots
+                    .iter()
+                    .rev()
+                    .find(|p| p.frame <= frame)
+                    .unwrap_or(&spots[0]);
+                Some((p.span.clone(), format!("animation.key[{}].{name}", p.index)))
+            })
+            .unwrap_or((table, "animation".into()));
+        return Err(ctx.invalid(span, key, format!("at frame {frame}: {message}")));
+    }
+    Ok(())
 }
 
 fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<Light, LoadError> {

@@ -1,6 +1,7 @@
 //! Scene descriptions (what to render) and the world built from them (Embree geometry plus
 //! the materials and lights that shade its hits).
 
+pub mod animation;
 pub mod builtin;
 pub mod error;
 pub mod file;
@@ -10,6 +11,7 @@ pub mod model;
 pub mod obj;
 pub mod texture;
 
+pub use animation::{Animation, Interpolation};
 pub use error::{LoadError, Location};
 pub use input::LoadOptions;
 
@@ -116,6 +118,10 @@ pub struct SceneDesc {
     /// does not implement, light ranges, animations, ...): at most one line per file, naming
     /// the file. Empty for built-in scenes.
     pub warnings: Vec<String>,
+    /// The camera animation of a scene file's `[animation]` table (None for built-in scenes,
+    /// bare models and files without one). `camera` is the `[camera]` table as written; apply
+    /// the animation to a copy of it for each frame.
+    pub animation: Option<Animation>,
 }
 
 /// Loads a scene: a built-in scene by name (see [`builtin::BUILTIN`]), a `.toml` scene file

@@ -387,6 +387,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         tolerance: None,
         transparent: false,
         warnings: model.warnings,
+        animation: None,
     })
 }
 
