@@ -124,7 +124,7 @@ pub fn frame_range(start: i64, end: i64, step: i64) -> Result<Vec<i64>, FrameSpe
     } else {
         format!("{start}..{end}x{step}")
     };
-    let span = Span::new(&item, start, end, step, "..")?;
+    let span = Span::new(&item, (start, end, step), "..", 'x')?;
     let total = span.count();
     check_total(&item, total)?;
     Ok(expand(&[span], total))
@@ -139,8 +139,14 @@ struct Span {
 }
 
 impl Span {
-    /// Checks a range written as `item` (`sep` is its separator, for the suggestion).
-    fn new(item: &str, start: i64, end: i64, step: i64, sep: &str) -> Result<Span, FrameSpecError> {
+    /// Checks the range `(start, end, step)` written as `item`; `sep` (`-` or `..`) and `mark`
+    /// (`x` or `:`, before the step) are its notation, for the suggestion.
+    fn new(
+        item: &str,
+        (start, end, step): (i64, i64, i64),
+        sep: &str,
+        mark: char,
+    ) -> Result<Span, FrameSpecError> {
         if step < 1 {
             return Err(FrameSpecError::BadStep {
                 item: item.to_string(),
@@ -151,7 +157,7 @@ impl Span {
             let step = if step == 1 {
                 String::new()
             } else {
-                format!("x{step}")
+                format!("{mark}{step}")
             };
             return Err(FrameSpecError::Backwards {
                 item: item.to_string(),
@@ -222,9 +228,10 @@ fn parse_item(item: &str) -> Result<Span, FrameSpecError> {
     rest = rest.trim_start();
     let end = take_int(item, &mut rest)?.ok_or_else(invalid)?;
     rest = rest.trim_start();
-    let step = match rest.strip_prefix(['x', ':']) {
-        Some(r) => {
-            rest = r.trim_start();
+    let mark = rest.chars().next().filter(|c| matches!(c, 'x' | ':'));
+    let step = match mark {
+        Some(mark) => {
+            rest = rest[mark.len_utf8()..].trim_start();
             let step = take_int(item, &mut rest)?.ok_or_else(invalid)?;
             rest = rest.trim_start();
             step
@@ -234,7 +241,7 @@ fn parse_item(item: &str) -> Result<Span, FrameSpecError> {
     if !rest.is_empty() {
         return Err(invalid());
     }
-    Span::new(item, start, end, step, sep)
+    Span::new(item, (start, end, step), sep, mark.unwrap_or('x'))
 }
 
 /// Takes an integer (an optional `-`, then ASCII digits) from the front of `rest`. `None` when
@@ -416,6 +423,13 @@ mod tests {
             FrameSpecError::Backwards {
                 item: "10..1x3".into(),
                 suggestion: "1..10x3".into()
+            }
+        );
+        assert_eq!(
+            error("10-1:3"),
+            FrameSpecError::Backwards {
+                item: "10-1:3".into(),
+                suggestion: "1-10:3".into()
             }
         );
         assert_eq!(

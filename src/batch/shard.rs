@@ -600,21 +600,14 @@ mod tests {
             max: 7,
             step: 2,
         };
-        assert_eq!(
-            slurm_env("4", "1", "7", "2", "4"),
-            Err(outside(4)),
-            "between two indices"
-        );
-        assert_eq!(
-            slurm_env("0", "1", "7", "2", "4"),
-            Err(outside(0)),
-            "below MIN"
-        );
-        assert_eq!(
-            slurm_env("9", "1", "7", "2", "4"),
-            Err(outside(9)),
-            "above MAX"
-        );
+        for (id, why) in [
+            (4, "between two indices"),
+            (0, "below MIN"),
+            (9, "above MAX"),
+        ] {
+            let got = slurm_env(&id.to_string(), "1", "7", "2", "4");
+            assert_eq!(got, Err(outside(id)), "{why}");
+        }
         assert_eq!(
             slurm_env("3", "5", "1", "1", "1"),
             Err(ShardError::SlurmOutside {
@@ -649,67 +642,42 @@ mod tests {
         }
     }
 
+    /// Asserts that `got` is a `Malformed` error naming `variable` and `value`.
+    #[track_caller]
+    fn assert_malformed(
+        got: Result<Option<(Shard, ShardSource)>, ShardError>,
+        variable: &str,
+        value: &str,
+    ) {
+        match got {
+            Err(ShardError::Malformed {
+                variable: v,
+                value: val,
+                ..
+            }) => {
+                assert_eq!((v, val.as_str()), (variable, value));
+            }
+            other => panic!("{variable}={value}: {other:?}"),
+        }
+    }
+
     #[test]
     fn malformed_numbers_name_the_variable_and_value() {
-        let cases = [
-            (
-                slurm_env("three", "0", "9", "1", "10"),
-                SLURM_ARRAY_TASK_ID,
-                "three",
-            ),
-            (
-                slurm_env("3", "-1", "9", "1", "10"),
-                SLURM_ARRAY_TASK_MIN,
-                "-1",
-            ),
-            (
-                slurm_env("3", "0", "9x", "1", "10"),
-                SLURM_ARRAY_TASK_MAX,
-                "9x",
-            ),
-            (
-                slurm_env("3", "0", "9", "0", "10"),
-                SLURM_ARRAY_TASK_STEP,
-                "0",
-            ),
-            (
-                slurm_env("3", "0", "9", "1", "0"),
-                SLURM_ARRAY_TASK_COUNT,
-                "0",
-            ),
-            (
-                slurm_env("3", "0", "9", "1", "99999999999"),
-                SLURM_ARRAY_TASK_COUNT,
-                "99999999999",
-            ),
-            (
-                env(&[(JOB_COMPLETION_INDEX, "1.5"), (DOFRAY_SHARD_COUNT, "4")]),
-                JOB_COMPLETION_INDEX,
-                "1.5",
-            ),
-            (
-                env(&[(JOB_COMPLETION_INDEX, "1"), (DOFRAY_SHARD_COUNT, "four")]),
-                DOFRAY_SHARD_COUNT,
-                "four",
-            ),
-            (
-                env(&[(JOB_COMPLETION_INDEX, "1"), (DOFRAY_SHARD_COUNT, "0")]),
-                DOFRAY_SHARD_COUNT,
-                "0",
-            ),
-        ];
-        for (got, variable, value) in cases {
-            match got {
-                Err(ShardError::Malformed {
-                    variable: v,
-                    value: val,
-                    ..
-                }) => {
-                    assert_eq!((v, val.as_str()), (variable, value));
-                }
-                other => panic!("{variable}={value}: {other:?}"),
-            }
-        }
+        use {SLURM_ARRAY_TASK_COUNT as COUNT, SLURM_ARRAY_TASK_ID as ID};
+        use {SLURM_ARRAY_TASK_MAX as MAX, SLURM_ARRAY_TASK_MIN as MIN};
+        assert_malformed(slurm_env("three", "0", "9", "1", "10"), ID, "three");
+        assert_malformed(slurm_env("3", "-1", "9", "1", "10"), MIN, "-1");
+        assert_malformed(slurm_env("3", "0", "9x", "1", "10"), MAX, "9x");
+        let step_0 = slurm_env("3", "0", "9", "0", "10");
+        assert_malformed(step_0, SLURM_ARRAY_TASK_STEP, "0");
+        assert_malformed(slurm_env("3", "0", "9", "1", "0"), COUNT, "0");
+        let huge = "99999999999";
+        assert_malformed(slurm_env("3", "0", "9", "1", huge), COUNT, huge);
+        let k8s = |index, count| env(&[(JOB_COMPLETION_INDEX, index), (DOFRAY_SHARD_COUNT, count)]);
+        assert_malformed(k8s("1.5", "4"), JOB_COMPLETION_INDEX, "1.5");
+        assert_malformed(k8s("1", "four"), DOFRAY_SHARD_COUNT, "four");
+        assert_malformed(k8s("1", "0"), DOFRAY_SHARD_COUNT, "0");
+        assert_malformed(k8s("+1", "2"), JOB_COMPLETION_INDEX, "+1");
         assert_eq!(
             slurm_env("x", "0", "9", "1", "10").unwrap_err().to_string(),
             "the environment variable SLURM_ARRAY_TASK_ID is `x`, but it must be a whole number \
