@@ -166,6 +166,14 @@ fn kind_of(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
     if let Some(e) = e.downcast_ref::<OutputError>() {
         return Some(output_kind(e));
     }
+    if let Some(e) = e.downcast_ref::<crate::output::merge::MergeError>() {
+        return Some(match e {
+            crate::output::merge::MergeError::Output(e) => output_kind(e),
+            crate::output::merge::MergeError::NoTiles
+            | crate::output::merge::MergeError::OutputFormat { .. } => ErrorKind::Usage,
+            _ => ErrorKind::BadInput,
+        });
+    }
     if let Some(e) = e.downcast_ref::<BenchError>() {
         return Some(match e {
             BenchError::Render(e) => render_kind(e),

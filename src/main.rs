@@ -7,12 +7,13 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
+use dofray::batch::shard::Shard;
 use dofray::bench::{self, BenchConfig, equal_error};
 use dofray::camera::{Camera, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::filter::{PixelFilter, PixelFilterKind};
 use dofray::output;
-use dofray::render::{self, Mode, Progress, RenderSettings, SiteRule};
+use dofray::render::{self, Mode, Progress, Region, RenderSettings, SiteRule};
 use dofray::sampler::LensFilter;
 use dofray::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
 use dofray::scene::{SceneDesc, World, builtin};
@@ -62,6 +63,11 @@ enum Command {
     /// --out it draws equal-error.png there: PSNR against seconds, both curves, guides at the
     /// levels. Example: dofray bench paper --equal-error --ladder 4,16,64 --out bench/
     Bench(BenchArgs),
+    /// Assemble tiles rendered with --region or --tiles into one image, checking that they
+    /// are tiles of one render (same scene, settings and versions) that cover the image
+    /// exactly once. The pixels are copied as stored: the result is bit for bit the image
+    /// one render would have written. Example: dofray merge out/still.tile-*.exr -o still.exr
+    Merge(MergeArgs),
     /// List the built-in scenes.
     Scenes,
 }
@@ -235,10 +241,74 @@ struct RenderArgs {
     /// b44, b44a (half channels only), dwaa, dwab (lossy DCT on the colour) [default: zip].
     #[arg(long, value_name = "METHOD", value_parser = parse_exr_compression)]
     exr_compression: Option<output::ExrCompression>,
-    /// Print a JSON summary on stdout.
+    /// Frames to render: a list of frames and ranges, e.g. 1-48, 1-240x2 (every other
+    /// frame), 1,5,10..20 (Blender's ..) or -5--1. Each frame's camera and lens come from the
+    /// scene's [animation] (docs/scene-format.md). Several frames need a frame pattern in -o:
+    /// a run of # becomes the zero-padded frame number (shot_####.exr -> shot_0007.exr).
+    /// Without --frames, -s/-e/-j, an -o with a pattern renders the scene's whole frame range,
+    /// and one without renders its first frame.
+    #[arg(long, short = 'f', value_name = "LIST", conflicts_with_all = ["frame_start", "frame_end", "frame_jump"])]
+    frames: Option<String>,
+    /// First frame of a range (Blender's -s) [default: the scene's frame_start].
+    #[arg(long, short = 's', value_name = "N", allow_negative_numbers = true)]
+    frame_start: Option<i64>,
+    /// Last frame of a range (Blender's -e) [default: the scene's frame_end].
+    #[arg(long, short = 'e', value_name = "N", allow_negative_numbers = true)]
+    frame_end: Option<i64>,
+    /// Frame step of a range (Blender's -j) [default: 1].
+    #[arg(long, short = 'j', value_name = "N")]
+    frame_jump: Option<i64>,
+    /// Skip every frame (or tile) whose output file exists. Outputs are written to a
+    /// temporary file and renamed, so a file that exists is complete: re-running a killed
+    /// job with --skip-existing renders only what is missing.
+    #[arg(long, conflicts_with = "no_overwrite")]
+    skip_existing: bool,
+    /// Refuse to replace an existing output: that frame fails (the others still render).
+    #[arg(long)]
+    no_overwrite: bool,
+    /// Stop at the first frame that fails instead of going on to the others (a run with a
+    /// failure exits non-zero either way).
+    #[arg(long)]
+    fail_fast: bool,
+    /// Render only the pixels x0..x1, y0..y1 (x1, y1 excluded) of the image, bit for bit as the
+    /// full render has them, into a tile file that records its place (EXR: as its data
+    /// window); `dofray merge` assembles tiles. E.g. --region 0,0,320,240.
+    #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_region, conflicts_with = "tiles")]
+    region: Option<Region>,
+    /// Render the image as COLUMNSxROWS tiles (e.g. 4x4), each written as its own file next
+    /// to -o (still.exr -> still.tile-000.exr, ...), then merged into -o and removed. With
+    /// --skip-existing a killed run resumes from the tiles already written; on a farm
+    /// (--shard or a scheduler's array) each worker renders its share of the tiles and
+    /// `dofray merge` assembles them.
+    #[arg(long, value_name = "COLSxROWS", value_parser = parse_grid)]
+    tiles: Option<(u32, u32)>,
+    /// Render only share I of N (0 <= I < N) of the frames, or of the tiles: jobs I, I + N,
+    /// I + 2N, ... Without it, Slurm job arrays (SLURM_ARRAY_TASK_ID with
+    /// SLURM_ARRAY_TASK_MIN/MAX/COUNT/STEP) and Kubernetes Indexed Jobs (JOB_COMPLETION_INDEX
+    /// with DOFRAY_SHARD_COUNT set to the completions) choose it; docs/farm.md.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard)]
+    shard: Option<Shard>,
+    /// Print a JSON summary on stdout (for frames, tiles or shards: one object with an entry
+    /// per job).
     #[arg(long)]
     json: bool,
     /// No progress bar and no summary line.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct MergeArgs {
+    /// The tile files (dofray render --region or --tiles), all EXR or all PNG.
+    #[arg(required = true, num_args = 1..)]
+    tiles: Vec<PathBuf>,
+    /// The assembled image, in the tiles' format.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    json: bool,
+    /// No summary line.
     #[arg(long, short)]
     quiet: bool,
 }
@@ -306,6 +376,19 @@ fn parse_pixel(s: &str) -> Result<(u32, u32), String> {
     let (x, y) = s.split_once(',').ok_or("expected X,Y (e.g. 320,240)")?;
     let parse = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("{v:?}: {e}"));
     Ok((parse(x)?, parse(y)?))
+}
+
+fn parse_region(s: &str) -> Result<Region, String> {
+    s.parse()
+        .map_err(|e: dofray::render::RegionError| e.to_string())
+}
+
+fn parse_grid(s: &str) -> Result<(u32, u32), String> {
+    dofray::render::region::parse_grid(s).map_err(|e| e.to_string())
+}
+
+fn parse_shard(s: &str) -> Result<Shard, String> {
+    Shard::parse(s).map_err(|e| e.to_string())
 }
 
 fn parse_exr_compression(s: &str) -> Result<output::ExrCompression, String> {
@@ -442,9 +525,8 @@ impl Progress for Bar {
     }
 }
 
-/// Applies command-line overrides of size and lens to the scene's camera.
-fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
-    let cam = &mut desc.camera;
+/// Applies command-line overrides of size and lens to a camera of the scene.
+fn apply_camera_overrides(cam: &mut dofray::camera::CameraSpec, a: &SceneArgs) -> Result<()> {
     for (name, v) in [("--width", a.width), ("--height", a.height)] {
         if v == Some(0) {
             usage!("{name} must be at least 1 pixel");
@@ -595,6 +677,11 @@ fn apply_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     if let Some(r) = a.anamorphic {
         cam.aperture.anamorphic = r;
     }
+    Ok(())
+}
+
+/// Applies command-line overrides of the lights.
+fn apply_light_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
     if !a.lights.is_empty() {
         desc.lights = a.lights.clone();
     }
@@ -623,11 +710,13 @@ fn lens_flags_given(a: &SceneArgs) -> bool {
         || a.anamorphic.is_some()
 }
 
-/// A scene ready to render: its description, the Embree world and the camera.
+/// A scene ready to render: its description (lights and, for the first frame, camera as the
+/// flags set them), the Embree world, and the camera as the scene gave it (each frame's
+/// camera is made from it: [`Prepared::camera`]).
 struct Prepared {
     desc: SceneDesc,
+    base_camera: dofray::camera::CameraSpec,
     world: World,
-    camera: Camera,
     pool: rayon::ThreadPool,
 }
 
@@ -650,9 +739,10 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
     for warning in &desc.warnings {
         eprintln!("warning: {warning}");
     }
-    // The scene's own autofocus pixel and size, for messages after --width/--height moved it.
-    let scene_focus = (desc.camera.focus, desc.camera.width, desc.camera.height);
-    apply_overrides(&mut desc, a)?;
+    let base_camera = desc.camera.clone();
+    apply_light_overrides(&mut desc, a)?;
+    // The flags are checked once, before anything is built.
+    apply_camera_overrides(&mut desc.camera, a)?;
     dofray::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
     let threads = a.threads.map(usize::from);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -667,10 +757,30 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
     .context("cannot create the Embree device")?;
     let world =
         World::build(&desc, &device).with_context(|| format!("invalid scene {}", desc.name))?;
-    let forward = (desc.camera.look_at - desc.camera.eye).normalize_or_zero();
-    let camera = desc
-        .camera
-        .build(|ray| {
+    Ok(Prepared {
+        desc,
+        base_camera,
+        world,
+        pool,
+    })
+}
+
+impl Prepared {
+    /// The camera at `frame` (the scene's animation evaluated there; `None`: the scene's
+    /// first frame), with the flags' overrides on top.
+    fn camera(&self, a: &SceneArgs, frame: Option<i64>) -> Result<Camera> {
+        let mut spec = self.base_camera.clone();
+        if let Some(animation) = &self.desc.animation {
+            let frame = frame.unwrap_or(*animation.frames().start());
+            animation.apply(&mut spec, frame as f64);
+        }
+        // The scene's own autofocus pixel and size, for messages after --width/--height moved it.
+        let scene_focus = (spec.focus, spec.width, spec.height);
+        apply_camera_overrides(&mut spec, a)?;
+        dofray::limits::check_image_memory(spec.width, spec.height)?;
+        let forward = (spec.look_at - spec.eye).normalize_or_zero();
+        let world = &self.world;
+        spec.build(|ray| {
             world
                 .scene
                 .intersect1(ray)
@@ -685,7 +795,7 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
                 message: format!(
                     "the scene's autofocus pixel ({x0}, {y0}) of its {w0}x{h0} image (({x}, \
                      {y}) at {}x{}) sees no surface to focus on",
-                    desc.camera.width, desc.camera.height
+                    spec.width, spec.height
                 ),
             }),
             // The lens or focus came from the flags: the command line asked for this camera.
@@ -695,16 +805,12 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
             }),
             (e, _) => anyhow::Error::new(e),
         })
-        .context("invalid camera")?;
-    Ok(Prepared {
-        desc,
-        world,
-        camera,
-        pool,
-    })
+        .context("invalid camera")
+    }
 }
 
-fn run_render(a: &RenderArgs) -> Result<()> {
+/// The render settings the flags and the scene ask for.
+fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<RenderSettings> {
     let mut settings = RenderSettings {
         mode: a.mode,
         paper_exact: a.paper_exact,
@@ -712,24 +818,6 @@ fn run_render(a: &RenderArgs) -> Result<()> {
         filter: a.filter,
         ..Default::default()
     };
-    output::clean_up_on_signals(a.json)?;
-    // EXR-only flags would be silently ignored for a PNG.
-    if (a.exr_half || a.exr_compression.is_some())
-        && output::ImageFormat::from_path(&a.output).is_ok_and(|f| f == output::ImageFormat::Png)
-    {
-        usage!(
-            "--exr-half and --exr-compression apply to .exr output only, and -o {} is a PNG",
-            a.output.display()
-        );
-    }
-    // Image and AOV targets checked, --aov-dir created, before rendering.
-    output::check_render_outputs(&a.output, a.aov_dir.as_deref())?;
-    let Prepared {
-        desc,
-        world,
-        camera,
-        pool,
-    } = prepare(&a.scene)?;
     settings.spp = a.spp.or(desc.spp).unwrap_or(16);
     settings.aa = a.aa.or(desc.aa).unwrap_or(4);
     settings.pixel_filter = match (a.pixel_filter, desc.pixel_filter) {
@@ -755,27 +843,340 @@ fn run_render(a: &RenderArgs) -> Result<()> {
     settings
         .validate()
         .map_err(|e| dofray::exit::UsageError(cli_message(&e)))?;
+    Ok(settings)
+}
+
+/// The frames the flags (or, for a frame pattern, the scene's animation) ask for; `None` for
+/// a single image.
+fn frame_list(a: &RenderArgs, desc: &SceneDesc) -> Result<Option<Vec<i64>>> {
+    use dofray::batch::{frames, pattern};
+    let range = desc.animation.as_ref().map(|an| an.frames());
+    let frames = if let Some(spec) = &a.frames {
+        Some(
+            frames::parse_frames(spec)
+                .map_err(|e| dofray::exit::UsageError(format!("--frames: {e}")))?,
+        )
+    } else if a.frame_start.is_some() || a.frame_end.is_some() || a.frame_jump.is_some() {
+        let start = match (a.frame_start, &range) {
+            (Some(s), _) => s,
+            (None, Some(r)) => *r.start(),
+            (None, None) => usage!(
+                "-e/--frame-end and -j/--frame-jump need -s/--frame-start: the scene has no \
+                 [animation] with a frame range"
+            ),
+        };
+        let end = a
+            .frame_end
+            .or(range.as_ref().map(|r| *r.end()))
+            .unwrap_or(start);
+        Some(
+            frames::frame_range(start, end, a.frame_jump.unwrap_or(1))
+                .map_err(|e| dofray::exit::UsageError(e.to_string()))?,
+        )
+    } else if pattern::has_frame_pattern(&a.output) {
+        match range {
+            Some(r) => Some(r.collect()),
+            None => usage!(
+                "-o {} has a frame pattern, but the scene has no [animation]: give the frames \
+                 with --frames (e.g. --frames 1-48)",
+                a.output.display()
+            ),
+        }
+    } else {
+        None
+    };
+    if let Some(list) = &frames
+        && list.len() > 1
+        && !pattern::has_frame_pattern(&a.output)
+    {
+        usage!(
+            "{} frames would all be written to -o {}: put the frame number in the name with \
+             #### (e.g. -o out/shot_####.exr)",
+            list.len(),
+            a.output.display()
+        );
+    }
+    Ok(frames)
+}
+
+/// This run's share of the work: --shard, else the scheduler's environment.
+fn shard(a: &RenderArgs) -> Result<Option<(Shard, String)>> {
+    if let Some(s) = a.shard {
+        return Ok(Some((s, "--shard".into())));
+    }
+    let found = Shard::from_env(|k| std::env::var(k).ok())
+        .map_err(|e| dofray::exit::UsageError(e.to_string()))?;
+    Ok(found.map(|(s, source)| (s, source.to_string())))
+}
+
+/// What became of one job.
+enum Outcome {
+    Rendered(serde_json::Value),
+    Skipped,
+    Failed(anyhow::Error),
+}
+
+fn run_render(a: &RenderArgs) -> Result<ExitCode> {
+    use dofray::batch::jobs;
+    output::clean_up_on_signals(a.json)?;
+    // EXR-only flags would be silently ignored for a PNG.
+    if (a.exr_half || a.exr_compression.is_some())
+        && output::ImageFormat::from_path(&a.output).is_ok_and(|f| f == output::ImageFormat::Png)
+    {
+        usage!(
+            "--exr-half and --exr-compression apply to .exr output only, and -o {} is a PNG",
+            a.output.display()
+        );
+    }
+    let p = prepare(&a.scene)?;
+    let settings = render_settings(a, &p.desc)?;
+    let frames = frame_list(a, &p.desc)?;
+    let (width, height) = (p.desc.camera.width, p.desc.camera.height);
+    let tiles = match (a.tiles, a.region) {
+        (Some((columns, rows)), _) => Some(
+            Region::grid(width, height, columns, rows)
+                .map_err(|e| dofray::exit::UsageError(format!("--tiles: {e}")))?,
+        ),
+        (None, Some(r)) => {
+            r.check(width, height)
+                .map_err(|e| dofray::exit::UsageError(format!("--region: {e}")))?;
+            None
+        }
+        (None, None) => None,
+    };
+    let shard = shard(a)?;
+    let sequence = frames.is_some() || tiles.is_some() || shard.is_some();
+    if sequence && a.aov_dir.is_some() {
+        usage!(
+            "--aov-dir writes the maps of one image; with frames, tiles or shards write EXR \
+             outputs, which carry depth, interval and samples as passes"
+        );
+    }
+    let all = jobs::plan(&a.output, frames.as_deref(), tiles.as_deref());
+    let mine = match &shard {
+        Some((s, source)) => {
+            if !a.quiet && !a.json {
+                eprintln!(
+                    "shard {s} ({source}): {} of {} jobs",
+                    s.pick(&all).len(),
+                    all.len()
+                );
+            }
+            s.pick(&all)
+        }
+        None => all.clone(),
+    };
+    if !sequence {
+        // One image: its targets (and --aov-dir) are checked before rendering.
+        output::check_render_outputs(&a.output, a.aov_dir.as_deref())?;
+        let job = &mine[0];
+        refuse_existing(a, &job.output)?;
+        let summary = render_job(a, &p, &settings, job)?;
+        if a.json {
+            println!("{summary}");
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+
+    // Like Blender, a sequence's output folders are made (every job's, before any renders:
+    // a folder that cannot be made fails the run once, not every frame).
+    for job in &mine {
+        if let Some(dir) = job.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|source| output::OutputError::Io {
+                path: dir.to_path_buf(),
+                source,
+            })?;
+        }
+    }
+    let start = std::time::Instant::now();
+    let mut results = Vec::new();
+    let mut first_failure: Option<dofray::exit::ErrorKind> = None;
+    for (i, job) in mine.iter().enumerate() {
+        let label = job.label();
+        let outcome = if a.skip_existing && (job.output.is_file() || job.image.is_file()) {
+            Outcome::Skipped
+        } else {
+            match refuse_existing(a, &job.output).and_then(|()| {
+                output::check_render_outputs(&job.output, None)?;
+                render_job(a, &p, &settings, job)
+            }) {
+                Ok(summary) => Outcome::Rendered(summary),
+                Err(e) => Outcome::Failed(e),
+            }
+        };
+        let (status, detail) = match outcome {
+            Outcome::Rendered(summary) => ("rendered", summary),
+            Outcome::Skipped => {
+                if !a.quiet && !a.json {
+                    eprintln!("{label}: {} exists, skipped", job.output.display());
+                }
+                ("skipped", serde_json::json!({}))
+            }
+            Outcome::Failed(e) => {
+                let kind = dofray::exit::classify_anyhow(&e);
+                eprintln!("error: {label}: {e:#}");
+                first_failure.get_or_insert(kind);
+                (
+                    "failed",
+                    serde_json::json!({ "error": {
+                        "kind": kind.name(),
+                        "message": format!("{e:#}"),
+                        "exit_code": kind.exit_code(),
+                    }}),
+                )
+            }
+        };
+        let mut entry = serde_json::json!({
+            "frame": job.frame,
+            "tile": job.tile.map(|t| t.index),
+            "region": job.tile.map(|t| t.region.to_string()),
+            "output": job.output,
+            "status": status,
+        });
+        if let (Some(entry), Some(detail)) = (entry.as_object_mut(), detail.as_object()) {
+            for (k, v) in detail {
+                entry.entry(k.clone()).or_insert(v.clone());
+            }
+        }
+        results.push(entry);
+        if first_failure.is_some() && a.fail_fast {
+            eprintln!(
+                "stopping after the failure (--fail-fast): {} of {} jobs not run",
+                mine.len() - i - 1,
+                mine.len()
+            );
+            break;
+        }
+    }
+
+    // Tiles of a frame are assembled here when this run rendered all of them (no shard).
+    let mut merged = Vec::new();
+    if tiles.is_some() && shard.is_none() && first_failure.is_none() {
+        for (image, parts) in jobs::by_image(&mine) {
+            if image.is_file() && parts.iter().all(|t| !t.output.is_file()) {
+                continue; // skipped whole: the image exists
+            }
+            let paths: Vec<PathBuf> = parts.iter().map(|t| t.output.clone()).collect();
+            match output::merge::merge(&paths, &image) {
+                Ok(m) => {
+                    for path in &paths {
+                        let _ = std::fs::remove_file(path);
+                    }
+                    if !a.quiet && !a.json {
+                        eprintln!("{}: merged {} tiles", image.display(), m.tiles);
+                    }
+                    merged.push(image.clone());
+                }
+                Err(e) => {
+                    let e = anyhow::Error::new(e);
+                    let kind = dofray::exit::classify_anyhow(&e);
+                    eprintln!("error: {}: {e:#}", image.display());
+                    first_failure.get_or_insert(kind);
+                }
+            }
+        }
+    }
+    let count = |s: &str| results.iter().filter(|r| r["status"] == s).count();
+    let (rendered, skipped, failed) = (count("rendered"), count("skipped"), count("failed"));
+    if a.json {
+        let mut summary = serde_json::json!({
+            "schema_version": dofray::exit::SCHEMA_VERSION,
+            "dofray_version": dofray::VERSION,
+            "git_commit": dofray::GIT_COMMIT,
+            "scene": p.desc.name,
+            "output": a.output,
+            "shard": shard.as_ref().map(|(s, _)| s.to_string()),
+            "shard_source": shard.as_ref().map(|(_, source)| source),
+            "jobs": all.len(),
+            "rendered": rendered,
+            "skipped": skipped,
+            "failed": failed,
+            "not_run": mine.len() - results.len(),
+            "merged": merged,
+            "seconds": start.elapsed().as_secs_f64(),
+            "frames": results,
+            "warnings": p.desc.warnings,
+        });
+        if let (Some(kind), Some(map)) = (first_failure, summary.as_object_mut()) {
+            map.insert(
+                "error".into(),
+                serde_json::json!({
+                    "kind": kind.name(),
+                    "message": format!("{failed} of {} jobs failed", mine.len()),
+                    "exit_code": kind.exit_code(),
+                }),
+            );
+        }
+        println!("{summary}");
+    } else if !a.quiet {
+        eprintln!(
+            "{rendered} rendered, {skipped} skipped, {failed} failed of {} jobs in {:.1} s",
+            mine.len(),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    Ok(match first_failure {
+        Some(kind) => ExitCode::from(kind.exit_code()),
+        None => ExitCode::SUCCESS,
+    })
+}
+
+/// With --no-overwrite, an existing output is an error.
+fn refuse_existing(a: &RenderArgs, path: &Path) -> Result<()> {
+    if a.no_overwrite && path.exists() {
+        return Err(anyhow::Error::new(dofray::exit::KindError {
+            kind: dofray::exit::ErrorKind::Io,
+            message: format!(
+                "{} exists and --no-overwrite refuses to replace it",
+                path.display()
+            ),
+        }));
+    }
+    Ok(())
+}
+
+/// Renders one job (a frame, a tile of one, or the single image) and writes it; returns its
+/// JSON summary.
+fn render_job(
+    a: &RenderArgs,
+    p: &Prepared,
+    settings: &RenderSettings,
+    job: &dofray::batch::jobs::Job,
+) -> Result<serde_json::Value> {
+    let camera = p.camera(&a.scene, job.frame)?;
+    let region = job
+        .tile
+        .map(|t| t.region)
+        .or(a.region)
+        .unwrap_or(Region::full(camera.width, camera.height));
     let bar = Bar::new(a.quiet || a.json);
-    let (film, stats) = pool.install(|| render::render(&world, &camera, &settings, &bar))?;
+    let (film, stats) = p
+        .pool
+        .install(|| render::render_region(&p.world, &camera, settings, &region, &bar))?;
 
     // The scene's file, when it is one, is recorded and hashed in the image's metadata.
     let scene_file = Path::new(&a.scene.scene);
-    let metadata = output::Metadata::for_render(
-        &desc.name,
+    let mut metadata = output::Metadata::for_render(
+        &p.desc.name,
         scene_file.is_file().then_some(scene_file),
         &camera,
-        &settings,
+        settings,
         &stats,
-        &world.scene.device().embree_version(),
+        &p.world.scene.device().embree_version(),
     );
+    if let Some(frame) = job.frame {
+        metadata.push("dofray:frame", frame);
+    }
+    let full = Region::full(camera.width, camera.height);
     let options = output::WriteOptions {
         metadata,
         png_16bit: a.png_16,
         png_alpha: settings.transparent,
         exr_half: a.exr_half,
         exr_compression: a.exr_compression.unwrap_or_default(),
+        region: (region != full).then_some((region, (camera.width, camera.height))),
     };
-    output::write_film_with(&a.output, &film, &options)?;
+    output::write_film_with(&job.output, &film, &options)?;
     if let Some(dir) = &a.aov_dir {
         let (w, h) = (film.width, film.height);
         let depth = output::depth_picture(&film);
@@ -793,53 +1194,10 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             &output::samples_picture(&film),
         )?;
     }
-    if a.json {
-        let summary = serde_json::json!({
-            "schema_version": dofray::exit::SCHEMA_VERSION,
-            "dofray_version": dofray::VERSION,
-            "git_commit": dofray::GIT_COMMIT,
-            "scene": desc.name,
-            "output": a.output,
-            "mode": a.mode.name(),
-            "width": film.width,
-            "height": film.height,
-            "spp": settings.spp,
-            "aa": settings.aa,
-            "pixel_filter": settings.pixel_filter.kind,
-            "pixel_filter_width": json_f32(settings.pixel_filter.width),
-            "rule": settings.rule,
-            "tolerance": (settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error)
-                .then(|| json_f32(settings.tolerance())),
-            "interval_factor": (settings.rule == SiteRule::Seed).then(|| json_f32(settings.interval_factor)),
-            "paper_exact": a.paper_exact,
-            "transparent": settings.transparent,
-            "exposure": json_f32(settings.exposure),
-            "rounds": stats.rounds,
-            "seed": settings.seed,
-            "seconds": stats.seconds,
-            "pinhole_seconds": stats.pinhole_seconds,
-            "maps_seconds": stats.maps_seconds,
-            "sites_seconds": stats.sites_seconds,
-            "interpolate_seconds": stats.interpolate_seconds,
-            "rays": stats.rays.total(),
-            "primary_rays": stats.rays.primary,
-            "shadow_rays": stats.rays.shadow,
-            "secondary_rays": stats.rays.secondary,
-            "sample_sites": stats.sample_sites,
-            "defocused_sites": stats.defocused_sites,
-            "mrays_per_s": stats.mrays_per_s(),
-            "aperture_radius": json_f32(camera.aperture_radius),
-            "focus_distance": json_f32(camera.focus_distance),
-            "threads": pool.current_num_threads(),
-            "process_threads": dofray::limits::process_threads(),
-            "embree": embree_json(&world.scene),
-            "warnings": desc.warnings,
-        });
-        println!("{summary}");
-    } else if !a.quiet {
+    if !a.quiet && !a.json {
         eprintln!(
             "{}: {} {}x{} in {:.2} s, {} rays ({:.1} Mrays/s), {} sample sites",
-            a.output.display(),
+            job.output.display(),
             a.mode.name(),
             film.width,
             film.height,
@@ -847,6 +1205,80 @@ fn run_render(a: &RenderArgs) -> Result<()> {
             stats.rays.total(),
             stats.mrays_per_s(),
             stats.sample_sites
+        );
+    }
+    Ok(serde_json::json!({
+        "schema_version": dofray::exit::SCHEMA_VERSION,
+        "dofray_version": dofray::VERSION,
+        "git_commit": dofray::GIT_COMMIT,
+        "scene": p.desc.name,
+        "output": job.output,
+        "frame": job.frame,
+        "region": (region != full).then(|| region.to_string()),
+        "mode": a.mode.name(),
+        "width": film.width,
+        "height": film.height,
+        "spp": settings.spp,
+        "aa": settings.aa,
+        "pixel_filter": settings.pixel_filter.kind,
+        "pixel_filter_width": json_f32(settings.pixel_filter.width),
+        "rule": settings.rule,
+        "tolerance": (settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error)
+            .then(|| json_f32(settings.tolerance())),
+        "interval_factor": (settings.rule == SiteRule::Seed).then(|| json_f32(settings.interval_factor)),
+        "paper_exact": a.paper_exact,
+        "transparent": settings.transparent,
+        "exposure": json_f32(settings.exposure),
+        "rounds": stats.rounds,
+        "seed": settings.seed,
+        "seconds": stats.seconds,
+        "pinhole_seconds": stats.pinhole_seconds,
+        "maps_seconds": stats.maps_seconds,
+        "sites_seconds": stats.sites_seconds,
+        "interpolate_seconds": stats.interpolate_seconds,
+        "rays": stats.rays.total(),
+        "primary_rays": stats.rays.primary,
+        "shadow_rays": stats.rays.shadow,
+        "secondary_rays": stats.rays.secondary,
+        "sample_sites": stats.sample_sites,
+        "defocused_sites": stats.defocused_sites,
+        "mrays_per_s": stats.mrays_per_s(),
+        "aperture_radius": json_f32(camera.aperture_radius),
+        "focus_distance": json_f32(camera.focus_distance),
+        "threads": p.pool.current_num_threads(),
+        "process_threads": dofray::limits::process_threads(),
+        "embree": embree_json(&p.world.scene),
+        "warnings": p.desc.warnings,
+    }))
+}
+
+fn run_merge(a: &MergeArgs) -> Result<()> {
+    output::clean_up_on_signals(a.json)?;
+    let merged = output::merge::merge(&a.tiles, &a.output)?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "schema_version": dofray::exit::SCHEMA_VERSION,
+                "dofray_version": dofray::VERSION,
+                "git_commit": dofray::GIT_COMMIT,
+                "output": a.output,
+                "width": merged.width,
+                "height": merged.height,
+                "tiles": merged.tiles,
+                "seconds": merged.seconds,
+                "rays": merged.rays,
+            })
+        );
+    } else if !a.quiet {
+        eprintln!(
+            "{}: {}x{} from {} tiles ({:.2} s of rendering, {} rays)",
+            a.output.display(),
+            merged.width,
+            merged.height,
+            merged.tiles,
+            merged.seconds,
+            merged.rays
         );
     }
     Ok(())
@@ -879,8 +1311,9 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
             .with_context(|| format!("cannot create --out directory {}", dir.display()))?;
     }
     let p = prepare(&a.scene)?;
+    let camera = p.camera(&a.scene, None)?;
     if a.equal_error {
-        return run_equal_error(a, &p);
+        return run_equal_error(a, &p, &camera);
     }
     let config = BenchConfig {
         spp: a.spp.or(p.desc.spp).unwrap_or(16),
@@ -906,7 +1339,7 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
     let bar = Bar::new(a.quiet || a.json);
     let (report, images) = p
         .pool
-        .install(|| bench::run(&p.desc, &p.world, &p.camera, &config, &bar))?;
+        .install(|| bench::run(&p.desc, &p.world, &camera, &config, &bar))?;
     // Images first: a failure then reports one JSON object (the error), never two.
     if let Some(dir) = &a.out {
         write_bench_images(dir, &report, &images)?;
@@ -919,7 +1352,7 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-fn run_equal_error(a: &BenchArgs, p: &Prepared) -> Result<()> {
+fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> Result<()> {
     let max = RenderSettings::MAX_SAMPLES;
     for (flag, n) in [("--aa", a.aa), ("--reference-spp", Some(a.reference_spp))] {
         if let Some(n) = n
@@ -964,7 +1397,7 @@ fn run_equal_error(a: &BenchArgs, p: &Prepared) -> Result<()> {
     let bar = Bar::new(a.quiet || a.json);
     let mut report = p
         .pool
-        .install(|| equal_error::run(&p.desc, &p.world, &p.camera, &config, &bar))?;
+        .install(|| equal_error::run(&p.desc, &p.world, camera, &config, &bar))?;
     if let Some(dir) = &a.out {
         equal_error::write_plot(&mut report, dir)?;
     }
@@ -1338,16 +1771,17 @@ fn main() -> ExitCode {
     };
     let (result, json) = match &cli.command {
         Command::Render(a) => (run_render(a), a.json),
-        Command::Bench(a) => (run_bench(a), a.json),
+        Command::Bench(a) => (run_bench(a).map(|()| ExitCode::SUCCESS), a.json),
+        Command::Merge(a) => (run_merge(a).map(|()| ExitCode::SUCCESS), a.json),
         Command::Scenes => {
             for (name, about) in builtin::BUILTIN {
                 println!("{name:<10} {about}");
             }
-            (Ok(()), false)
+            (Ok(ExitCode::SUCCESS), false)
         }
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) => report_error(dofray::exit::classify_anyhow(&e), &format!("{e:#}"), json),
     }
 }

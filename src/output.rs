@@ -26,6 +26,7 @@
 
 pub mod atomic;
 pub mod exr;
+pub mod merge;
 pub mod metadata;
 pub mod png;
 pub mod target;
@@ -34,6 +35,7 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
+use crate::render::Region;
 use crate::render::film::Film;
 pub use atomic::{TempFile, clean_up_on_signals};
 pub use exr::{CompressionError, ExrCompression};
@@ -146,6 +148,10 @@ pub struct WriteOptions {
     pub exr_half: bool,
     /// EXR: how pixels are compressed (ZIP, lossless, by default).
     pub exr_compression: ExrCompression,
+    /// The film is this region of an image of this size (a tile of it): EXR places it with
+    /// its data window; both formats record it in the metadata (`dofray:region`, which
+    /// [`merge`] reads).
+    pub region: Option<(Region, (u32, u32))>,
 }
 
 /// Writes `film` to `path` in the format its extension names (see the module documentation).
@@ -161,6 +167,15 @@ pub fn write_film_with(
 ) -> Result<(), OutputError> {
     let format = ImageFormat::from_path(path)?;
     check_film(path, film)?;
+    let mut tile_metadata;
+    let options = match options.region {
+        Some((region, _)) => {
+            tile_metadata = options.clone();
+            tile_metadata.metadata.push("dofray:region", region);
+            &tile_metadata
+        }
+        None => options,
+    };
     match format {
         ImageFormat::Png => {
             let (sixteen, alpha) = (options.png_16bit, options.png_alpha);
@@ -178,6 +193,7 @@ pub fn write_film_with(
             let exr_options = exr::ExrOptions {
                 half: options.exr_half,
                 compression: options.exr_compression,
+                region: options.region,
             };
             exr::write_exr(path, film, &options.metadata, exr_options)
         }

@@ -12,6 +12,7 @@
 //!   or read from a Slurm job array or a Kubernetes Indexed Job.
 
 pub mod frames;
+pub mod jobs;
 pub mod pattern;
 pub mod shard;
 

@@ -22,6 +22,7 @@ use ::exr::prelude::*;
 
 use super::atomic::write_atomic;
 use super::{Metadata, OutputError, target};
+use crate::render::Region;
 use crate::render::film::Film;
 
 /// The view layer every pass belongs to: Blender's default view layer name.
@@ -149,6 +150,15 @@ impl ExrCompression {
         }
     }
 
+    /// The method a file was written with, when it is one dofray writes.
+    pub(crate) fn from_exr(c: Compression) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| match (m.to_exr(), c) {
+            (Compression::DWAA(_), Compression::DWAA(_))
+            | (Compression::DWAB(_), Compression::DWAB(_)) => true,
+            (a, b) => a == b,
+        })
+    }
+
     /// All names, comma-separated, for messages.
     fn names() -> String {
         Self::ALL.map(Self::name).join(", ")
@@ -209,6 +219,10 @@ pub struct ExrOptions {
     /// passes stay 32-bit.
     pub half: bool,
     pub compression: ExrCompression,
+    /// The film is this region of a larger image of this size (a tile): the file's data
+    /// window is the region and its display window the whole image, as OpenEXR places tiles
+    /// and crops.
+    pub region: Option<(Region, (u32, u32))>,
 }
 
 /// Writes `film` as an EXR (see the module documentation), atomically. The film's buffers
@@ -253,6 +267,26 @@ pub(super) fn write_exr(
             film.samples.iter().map(|&s| s as f32).collect(),
         ),
     ]);
+    let size = (film.width, film.height);
+    let image = layer_image(
+        channels,
+        size,
+        options.region,
+        metadata,
+        options.compression,
+    );
+    write_image(path, &image)
+}
+
+/// One layer of `channels` (any order) of `size` pixels with dofray's attributes, placed as
+/// `region` says (else at the origin of an image of its own size).
+pub(super) fn layer_image(
+    channels: SmallVec<[AnyChannel<FlatSamples>; 4]>,
+    size: (usize, usize),
+    region: Option<(Region, (u32, u32))>,
+    metadata: &Metadata,
+    compression: ExrCompression,
+) -> Image<Layer<AnyChannels<FlatSamples>>> {
     let mut attributes = LayerAttributes {
         software_name: Some(Text::from(
             format!("dofray {}", env!("CARGO_PKG_VERSION")).as_str(),
@@ -273,18 +307,36 @@ pub(super) fn write_exr(
             attributes.other.insert(k, AttributeValue::Text(v));
         }
     }
+    if let Some((r, _)) = region {
+        attributes.layer_position = Vec2(r.x0 as i32, r.y0 as i32);
+    }
     let encoding = Encoding {
-        compression: options.compression.to_exr(),
+        compression: compression.to_exr(),
         ..Encoding::SMALL_LOSSLESS
     };
     let layer = Layer::new(
-        (film.width, film.height),
+        size,
         attributes,
         encoding,
         // EXR requires channels sorted by name; `sort` does that (bytewise, see CHANNELS).
         AnyChannels::sort(channels),
     );
-    let image = Image::from_layer(layer);
+    match region {
+        Some((_, (w, h))) => Image {
+            attributes: ImageAttributes::new(IntegerBounds::from_dimensions((
+                w as usize, h as usize,
+            ))),
+            layer_data: layer,
+        },
+        None => Image::from_layer(layer),
+    }
+}
+
+/// Writes an EXR image atomically.
+pub(super) fn write_image(
+    path: &Path,
+    image: &Image<Layer<AnyChannels<FlatSamples>>>,
+) -> Result<(), OutputError> {
     let resolved = target::check_target(path)?;
     write_atomic(path, &resolved, |file| {
         image

@@ -1,0 +1,554 @@
+//! Assembling tiles (renders of regions of one image, `--region` / `--tiles`) into the image.
+//!
+//! A tile is a file dofray wrote for a region: its metadata names the region
+//! (`dofray:region`) and the whole image's size (`dofray:width`, `dofray:height`), and an EXR
+//! tile is also placed by its data window. Tiles belong together when everything else they
+//! record about how they were made is the same (scene and its hash, settings, lens, dofray
+//! and Embree versions), except the scene file's path, time and ray counts. They must cover
+//! the image exactly once. Pixels are copied as stored (EXR samples in their own type, PNG
+//! bytes), so the merged image is bit for bit the one a single render would have written.
+
+use std::collections::HashMap;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+
+use ::exr::prelude::*;
+use std::result::Result; // not the prelude's
+
+use super::{ImageFormat, Metadata, OutputError, exr as dofray_exr, png as dofray_png};
+use crate::render::Region;
+
+/// Metadata keys that may differ between tiles of one image (they describe where, when and
+/// at what cost each tile was made, not what it shows).
+const PER_TILE: [&str; 4] = [
+    "dofray:region",
+    "dofray:seconds",
+    "dofray:rays",
+    "dofray:scene_file",
+];
+
+/// Why tiles could not be merged.
+#[derive(Debug, thiserror::Error)]
+pub enum MergeError {
+    #[error("no tiles given")]
+    NoTiles,
+    #[error("cannot read tile {}: {message}", path.display())]
+    Read { path: PathBuf, message: String },
+    #[error("{} is not a dofray tile: it has no valid {key} ({message})", path.display())]
+    NotATile {
+        path: PathBuf,
+        key: &'static str,
+        message: String,
+    },
+    #[error(
+        "{} is a {} and {} a {}: tiles of one image share a format",
+        first.display(), first_format, other.display(), other_format
+    )]
+    Formats {
+        first: PathBuf,
+        first_format: &'static str,
+        other: PathBuf,
+        other_format: &'static str,
+    },
+    #[error(
+        "the merged image {} must be a {} like its tiles",
+        path.display(), format
+    )]
+    OutputFormat { path: PathBuf, format: &'static str },
+    #[error(
+        "{} and {} are not tiles of one render: {key} is {first_value:?} in the first and \
+         {other_value:?} in the second",
+        first.display(), other.display()
+    )]
+    Mismatch {
+        first: PathBuf,
+        other: PathBuf,
+        key: String,
+        first_value: String,
+        other_value: String,
+    },
+    #[error(
+        "{} (region {first_region}) and {} (region {other_region}) overlap",
+        first.display(), other.display()
+    )]
+    Overlap {
+        first: PathBuf,
+        first_region: Region,
+        other: PathBuf,
+        other_region: Region,
+    },
+    #[error(
+        "the tiles leave {missing} pixels of the {width}x{height} image uncovered, the first at \
+         ({x}, {y}): a tile is missing"
+    )]
+    Gap {
+        missing: u64,
+        width: u32,
+        height: u32,
+        x: u32,
+        y: u32,
+    },
+    #[error("{} holds {found} but its region {region} needs {expected}", path.display())]
+    Size {
+        path: PathBuf,
+        region: Region,
+        found: String,
+        expected: String,
+    },
+    #[error(transparent)]
+    Output(#[from] OutputError),
+}
+
+/// A tile's pixels as stored.
+enum Pixels {
+    /// Every channel, in the tile's own sample types, and how the file was compressed.
+    Exr {
+        channels: Vec<(Text, FlatSamples)>,
+        compression: Compression,
+    },
+    /// Rows of PNG samples and their layout.
+    Png {
+        data: Vec<u8>,
+        bytes_per_pixel: usize,
+        color: ::png::ColorType,
+        depth: ::png::BitDepth,
+    },
+}
+
+/// One tile read back.
+struct Tile {
+    path: PathBuf,
+    region: Region,
+    size: (u32, u32),
+    metadata: Metadata,
+    pixels: Pixels,
+}
+
+impl Tile {
+    fn format(&self) -> &'static str {
+        match self.pixels {
+            Pixels::Exr { .. } => "EXR",
+            Pixels::Png { .. } => "PNG",
+        }
+    }
+}
+
+/// What [`merge`] wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Merged {
+    pub width: u32,
+    pub height: u32,
+    pub tiles: usize,
+    /// The tiles' render times added up.
+    pub seconds: f64,
+    /// The tiles' rays added up (each tile traced the whole frame's depth pass).
+    pub rays: u64,
+}
+
+/// Assembles `tiles` into `output` (atomically), checking that they are tiles of one render
+/// that cover the image exactly once. The output's format must be the tiles'.
+pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
+    if tiles.is_empty() {
+        return Err(MergeError::NoTiles);
+    }
+    let tiles: Vec<Tile> = tiles
+        .iter()
+        .map(|p| read_tile(p))
+        .collect::<Result<_, _>>()?;
+    let first = &tiles[0];
+    for t in &tiles[1..] {
+        if t.format() != first.format() {
+            return Err(MergeError::Formats {
+                first: first.path.clone(),
+                first_format: first.format(),
+                other: t.path.clone(),
+                other_format: t.format(),
+            });
+        }
+        check_same_render(first, t)?;
+    }
+    let out_format = ImageFormat::from_path(output)?;
+    let wanted = match first.pixels {
+        Pixels::Exr { .. } => ImageFormat::Exr,
+        Pixels::Png { .. } => ImageFormat::Png,
+    };
+    if out_format != wanted {
+        return Err(MergeError::OutputFormat {
+            path: output.to_path_buf(),
+            format: first.format(),
+        });
+    }
+    let (width, height) = first.size;
+    check_coverage(&tiles, width, height)?;
+
+    let seconds: f64 = tiles
+        .iter()
+        .filter_map(|t| t.metadata.get("dofray:seconds")?.parse::<f64>().ok())
+        .sum();
+    let rays: u64 = tiles
+        .iter()
+        .filter_map(|t| t.metadata.get("dofray:rays")?.parse::<u64>().ok())
+        .sum();
+    let mut metadata = Metadata::new();
+    for (k, v) in first.metadata.iter() {
+        match k {
+            "dofray:region" => {}
+            "dofray:seconds" => metadata.push(k, format!("{seconds:.3}")),
+            "dofray:rays" => metadata.push(k, rays),
+            _ => metadata.push(k, v),
+        }
+    }
+    metadata.push("dofray:tiles", tiles.len());
+    let (w, h) = (width as usize, height as usize);
+    match &first.pixels {
+        Pixels::Exr {
+            channels,
+            compression,
+        } => {
+            let mut full: Vec<(Text, FlatSamples)> = channels
+                .iter()
+                .map(|(name, s)| (name.clone(), empty_like(s, w * h)))
+                .collect();
+            for t in &tiles {
+                let Pixels::Exr { channels, .. } = &t.pixels else {
+                    unreachable!("formats checked")
+                };
+                for (name, samples) in channels {
+                    let Some((_, dst)) = full.iter_mut().find(|(n, _)| n == name) else {
+                        return Err(mismatch(first, t, "channels", "", name.to_string()));
+                    };
+                    copy_rows(samples, dst, &t.region, w).map_err(|(found, expected)| {
+                        mismatch(first, t, &format!("channel {name}"), &expected, found)
+                    })?;
+                }
+            }
+            let channels = full
+                .into_iter()
+                .map(|(name, s)| AnyChannel::new(name, s))
+                .collect();
+            let compression = dofray_exr::ExrCompression::from_exr(*compression)
+                .unwrap_or(dofray_exr::ExrCompression::Zip);
+            let image = dofray_exr::layer_image(channels, (w, h), None, &metadata, compression);
+            dofray_exr::write_image(output, &image)?;
+        }
+        Pixels::Png {
+            bytes_per_pixel,
+            color,
+            depth,
+            ..
+        } => {
+            let bpp = *bytes_per_pixel;
+            let mut data = vec![0u8; w * h * bpp];
+            for t in &tiles {
+                let Pixels::Png {
+                    data: src,
+                    bytes_per_pixel: tile_bpp,
+                    ..
+                } = &t.pixels
+                else {
+                    unreachable!("formats checked")
+                };
+                if *tile_bpp != bpp {
+                    return Err(mismatch(
+                        first,
+                        t,
+                        "PNG pixel layout",
+                        &format!("{bpp} bytes per pixel"),
+                        format!("{tile_bpp} bytes per pixel"),
+                    ));
+                }
+                let r = &t.region;
+                let row = r.width() as usize * bpp;
+                for y in 0..r.height() as usize {
+                    let at = ((r.y0 as usize + y) * w + r.x0 as usize) * bpp;
+                    data[at..at + row].copy_from_slice(&src[y * row..(y + 1) * row]);
+                }
+            }
+            let png = dofray_png::Png {
+                width: w,
+                height: h,
+                data: &data,
+                sixteen: *depth == ::png::BitDepth::Sixteen,
+                alpha: *color == ::png::ColorType::Rgba,
+            };
+            png.write(output, &metadata)?;
+        }
+    }
+    Ok(Merged {
+        width,
+        height,
+        tiles: tiles.len(),
+        seconds,
+        rays,
+    })
+}
+
+fn mismatch(first: &Tile, other: &Tile, key: &str, a: &str, b: String) -> MergeError {
+    MergeError::Mismatch {
+        first: first.path.clone(),
+        other: other.path.clone(),
+        key: key.to_string(),
+        first_value: a.to_string(),
+        other_value: b,
+    }
+}
+
+/// Every recorded setting but the per-tile ones must agree.
+fn check_same_render(first: &Tile, other: &Tile) -> Result<(), MergeError> {
+    let settings = |t: &Tile| -> HashMap<String, String> {
+        t.metadata
+            .iter()
+            .filter(|(k, _)| !PER_TILE.contains(k))
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect()
+    };
+    let (a, b) = (settings(first), settings(other));
+    let mut keys: Vec<&String> = a.keys().chain(b.keys()).collect();
+    keys.sort();
+    keys.dedup();
+    for key in keys {
+        let (va, vb) = (a.get(key), b.get(key));
+        if va != vb {
+            let show = |v: Option<&String>| v.cloned().unwrap_or_else(|| "(missing)".into());
+            return Err(mismatch(first, other, key, &show(va), show(vb)));
+        }
+    }
+    Ok(())
+}
+
+/// No two tiles overlap and together they cover the image.
+fn check_coverage(tiles: &[Tile], width: u32, height: u32) -> Result<(), MergeError> {
+    let mut sorted: Vec<&Tile> = tiles.iter().collect();
+    sorted.sort_by_key(|t| (t.region.y0, t.region.x0));
+    for (i, a) in sorted.iter().enumerate() {
+        if let Some(b) = sorted[i + 1..]
+            .iter()
+            .find(|b| a.region.overlaps(&b.region))
+        {
+            return Err(MergeError::Overlap {
+                first: a.path.clone(),
+                first_region: a.region,
+                other: b.path.clone(),
+                other_region: b.region,
+            });
+        }
+    }
+    let area: u64 = tiles
+        .iter()
+        .map(|t| u64::from(t.region.width()) * u64::from(t.region.height()))
+        .sum();
+    let total = u64::from(width) * u64::from(height);
+    if area < total {
+        // Regions are disjoint and inside the image: find the first pixel none covers.
+        let (x, y) = (0..height)
+            .flat_map(|y| (0..width).map(move |x| (x, y)))
+            .find(|&(x, y)| !tiles.iter().any(|t| t.region.contains(x, y)))
+            .unwrap_or((0, 0));
+        return Err(MergeError::Gap {
+            missing: total - area,
+            width,
+            height,
+            x,
+            y,
+        });
+    }
+    Ok(())
+}
+
+fn empty_like(s: &FlatSamples, n: usize) -> FlatSamples {
+    match s {
+        FlatSamples::F16(_) => FlatSamples::F16(vec![f16::ZERO; n]),
+        FlatSamples::F32(_) => FlatSamples::F32(vec![0.0; n]),
+        FlatSamples::U32(_) => FlatSamples::U32(vec![0; n]),
+    }
+}
+
+/// Copies a region's samples into the full image's; on a type or size mismatch returns
+/// (found, expected).
+fn copy_rows(
+    src: &FlatSamples,
+    dst: &mut FlatSamples,
+    r: &Region,
+    width: usize,
+) -> Result<(), (String, String)> {
+    fn rows<T: Copy>(src: &[T], dst: &mut [T], r: &Region, width: usize) -> Result<(), ()> {
+        let row = r.width() as usize;
+        if src.len() != row * r.height() as usize {
+            return Err(());
+        }
+        for y in 0..r.height() as usize {
+            let at = (r.y0 as usize + y) * width + r.x0 as usize;
+            dst[at..at + row].copy_from_slice(&src[y * row..(y + 1) * row]);
+        }
+        Ok(())
+    }
+    let kind = |s: &FlatSamples| match s {
+        FlatSamples::F16(_) => "half",
+        FlatSamples::F32(_) => "float",
+        FlatSamples::U32(_) => "uint",
+    };
+    let bad = (kind(src).to_string(), kind(dst).to_string());
+    match (src, dst) {
+        (FlatSamples::F16(s), FlatSamples::F16(d)) => rows(s, d, r, width).map_err(|_| bad_size()),
+        (FlatSamples::F32(s), FlatSamples::F32(d)) => rows(s, d, r, width).map_err(|_| bad_size()),
+        (FlatSamples::U32(s), FlatSamples::U32(d)) => rows(s, d, r, width).map_err(|_| bad_size()),
+        _ => Err(bad),
+    }
+}
+
+fn bad_size() -> (String, String) {
+    (
+        "a different number of samples".into(),
+        "one per pixel of its region".into(),
+    )
+}
+
+fn read_tile(path: &Path) -> Result<Tile, MergeError> {
+    let read_error = |message: String| MergeError::Read {
+        path: path.to_path_buf(),
+        message,
+    };
+    let format = ImageFormat::from_path(path)?;
+    let (metadata, pixels, stored) = match format {
+        ImageFormat::Exr => {
+            let image = read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .all_channels()
+                .first_valid_layer()
+                .all_attributes()
+                .from_file(path)
+                .map_err(|e| read_error(e.to_string()))?;
+            let mut metadata = Metadata::new();
+            let layer = &image.layer_data;
+            let mut attributes: Vec<(String, String)> = image
+                .attributes
+                .other
+                .iter()
+                .chain(&layer.attributes.other)
+                .filter_map(|(k, v)| match v {
+                    AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
+                    _ => None,
+                })
+                .collect();
+            attributes.sort();
+            for (k, v) in attributes {
+                metadata.push(k, v);
+            }
+            let position = layer.attributes.layer_position;
+            let stored = (
+                Some((position.0, position.1)),
+                layer.size.0 as u64,
+                layer.size.1 as u64,
+            );
+            let channels = layer
+                .channel_data
+                .list
+                .iter()
+                .map(|c| (c.name.clone(), c.sample_data.clone()))
+                .collect();
+            let pixels = Pixels::Exr {
+                channels,
+                compression: layer.encoding.compression,
+            };
+            (metadata, pixels, stored)
+        }
+        ImageFormat::Png => {
+            let file = std::fs::File::open(path).map_err(|e| read_error(e.to_string()))?;
+            let mut decoder = ::png::Decoder::new(BufReader::new(file));
+            decoder.set_transformations(::png::Transformations::IDENTITY);
+            let mut reader = decoder.read_info().map_err(|e| read_error(e.to_string()))?;
+            let mut data = vec![
+                0;
+                reader
+                    .output_buffer_size()
+                    .ok_or_else(|| read_error("too large".into()))?
+            ];
+            let frame = reader
+                .next_frame(&mut data)
+                .map_err(|e| read_error(e.to_string()))?;
+            data.truncate(frame.buffer_size());
+            let info = reader.info();
+            let mut metadata = Metadata::new();
+            for t in &info.uncompressed_latin1_text {
+                metadata.push(t.keyword.clone(), t.text.clone());
+            }
+            for t in &info.utf8_text {
+                if let Ok(text) = t.get_text() {
+                    metadata.push(t.keyword.clone(), text);
+                }
+            }
+            let channels = match frame.color_type {
+                ::png::ColorType::Rgb => 3,
+                ::png::ColorType::Rgba => 4,
+                other => {
+                    return Err(read_error(format!(
+                        "{other:?} PNG; dofray writes RGB or RGBA"
+                    )));
+                }
+            };
+            let bytes = if frame.bit_depth == ::png::BitDepth::Sixteen {
+                2
+            } else {
+                1
+            };
+            let stored = (None, u64::from(frame.width), u64::from(frame.height));
+            let pixels = Pixels::Png {
+                data,
+                bytes_per_pixel: channels * bytes,
+                color: frame.color_type,
+                depth: frame.bit_depth,
+            };
+            (metadata, pixels, stored)
+        }
+    };
+    let not_a_tile = |key: &'static str, message: String| MergeError::NotATile {
+        path: path.to_path_buf(),
+        key,
+        message,
+    };
+    let number = |key: &'static str| -> Result<u32, MergeError> {
+        let v = metadata
+            .get(key)
+            .ok_or_else(|| not_a_tile(key, "missing".into()))?;
+        v.parse()
+            .map_err(|_| not_a_tile(key, format!("{v:?} is not a whole number")))
+    };
+    let region: Region = metadata
+        .get("dofray:region")
+        .ok_or_else(|| {
+            not_a_tile(
+                "dofray:region",
+                "missing: render tiles with --region or --tiles".into(),
+            )
+        })?
+        .parse()
+        .map_err(|e: crate::render::RegionError| not_a_tile("dofray:region", e.to_string()))?;
+    let size = (number("dofray:width")?, number("dofray:height")?);
+    region
+        .check(size.0, size.1)
+        .map_err(|e| not_a_tile("dofray:region", e.to_string()))?;
+    let (position, w, h) = stored;
+    let placed = position.is_none_or(|(x, y)| (x, y) == (region.x0 as i32, region.y0 as i32));
+    if !placed || (w, h) != (u64::from(region.width()), u64::from(region.height())) {
+        return Err(MergeError::Size {
+            path: path.to_path_buf(),
+            region,
+            found: format!("{w}x{h} pixels at {:?}", position.unwrap_or((0, 0))),
+            expected: format!(
+                "{}x{} at ({}, {})",
+                region.width(),
+                region.height(),
+                region.x0,
+                region.y0
+            ),
+        });
+    }
+    Ok(Tile {
+        path: path.to_path_buf(),
+        region,
+        size,
+        metadata,
+        pixels,
+    })
+}

@@ -1,0 +1,357 @@
+//! Batch and farm rendering from the command line: frame sequences, resume, tiles and their
+//! merge, shards from flags and from Slurm's and Kubernetes' environment.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// A dofray command with no scheduler in its environment.
+fn cmd() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_dofray"));
+    for v in [
+        "SLURM_ARRAY_TASK_ID",
+        "SLURM_ARRAY_TASK_MIN",
+        "SLURM_ARRAY_TASK_MAX",
+        "SLURM_ARRAY_TASK_COUNT",
+        "SLURM_ARRAY_TASK_STEP",
+        "JOB_COMPLETION_INDEX",
+        "DOFRAY_SHARD_COUNT",
+    ] {
+        c.env_remove(v);
+    }
+    c
+}
+
+fn dofray(args: &[&str]) -> Output {
+    cmd().args(args).output().expect("run dofray")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dofray-farm-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn json(o: &Output) -> serde_json::Value {
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| {
+        panic!(
+            "stdout is not JSON ({e}): {}\nstderr: {}",
+            String::from_utf8_lossy(&o.stdout),
+            stderr(o)
+        )
+    })
+}
+
+/// Every channel's samples (as bits) of an EXR, with its display and data windows.
+fn exr_pixels(path: &Path) -> (Vec<(String, Vec<u32>)>, String) {
+    use exr::prelude::*;
+    let image = read_all_flat_layers_from_file(path).unwrap();
+    let layer = &image.layer_data[0];
+    let channels = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            let bits = match &c.sample_data {
+                FlatSamples::F16(v) => v.iter().map(|h| u32::from(h.to_bits())).collect(),
+                FlatSamples::F32(v) => v.iter().map(|f| f.to_bits()).collect(),
+                FlatSamples::U32(v) => v.clone(),
+            };
+            (c.name.to_string(), bits)
+        })
+        .collect();
+    let windows = format!(
+        "display {:?}, data at {:?} size {:?}",
+        image.attributes.display_window, layer.attributes.layer_position, layer.size
+    );
+    (channels, windows)
+}
+
+fn png_pixels(path: &Path) -> (u32, u32, Vec<u8>) {
+    let img = image::open(path).unwrap();
+    (img.width(), img.height(), img.into_bytes())
+}
+
+const SIZE: [&str; 4] = ["--width", "160", "--height", "120"];
+
+#[test]
+fn tiles_merge_into_the_full_render_bit_for_bit() {
+    let dir = scratch("tiles");
+    for ext in ["exr", "png"] {
+        let full = dir.join(format!("full.{ext}"));
+        let tiled = dir.join(format!("tiled.{ext}"));
+        let o = dofray(&[&["render", "-o", s(&full), "-q"][..], &SIZE].concat());
+        assert!(o.status.success(), "{}", stderr(&o));
+        let o = dofray(
+            &[
+                &["render", "-o", s(&tiled), "--tiles", "3x2", "--json"][..],
+                &SIZE,
+            ]
+            .concat(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let j = json(&o);
+        assert_eq!(j["jobs"], 6);
+        assert_eq!(j["rendered"], 6);
+        assert_eq!(j["merged"][0], s(&tiled));
+        // The tiles were merged and removed.
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().contains(".tile-"))
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
+        if ext == "exr" {
+            let (a, wa) = exr_pixels(&full);
+            let (b, wb) = exr_pixels(&tiled);
+            assert_eq!(wa, wb);
+            assert_eq!(a.len(), 8);
+            assert!(a == b, "the merged EXR differs from the full render");
+        } else {
+            assert_eq!(png_pixels(&full), png_pixels(&tiled));
+        }
+    }
+}
+
+#[test]
+fn region_tiles_carry_their_place_and_merge_checks_them() {
+    let dir = scratch("merge");
+    let tile = |name: &str, region: &str, extra: &[&str]| {
+        let path = dir.join(name);
+        let o = dofray(
+            &[
+                &["render", "-q", "-o", s(&path), "--region", region][..],
+                &SIZE,
+                extra,
+            ]
+            .concat(),
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        path
+    };
+    let left = tile("left.exr", "0,0,100,120", &[]);
+    let right = tile("right.exr", "100,0,160,120", &[]);
+    // The tile is placed by its data window in the whole image's display window.
+    let (_, windows) = exr_pixels(&right);
+    assert!(
+        windows.contains("data at Vec2(100, 0) size Vec2(60, 120)"),
+        "{windows}"
+    );
+    assert!(windows.contains("size: Vec2(160, 120)"), "{windows}");
+    let full = dir.join("full.exr");
+    let o = dofray(&["merge", s(&left), s(&right), "-o", s(&full), "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(json(&o)["tiles"], 2);
+    let reference = dir.join("ref.exr");
+    let o = dofray(&[&["render", "-q", "-o", s(&reference)][..], &SIZE].concat());
+    assert!(o.status.success());
+    assert!(exr_pixels(&reference).0 == exr_pixels(&full).0);
+
+    // Refusals, each naming what is wrong, exit 3 (bad input) and write nothing.
+    let bad_out = dir.join("bad.exr");
+    let overlap = tile("overlap.exr", "90,0,160,120", &[]);
+    let other_spp = tile("spp.exr", "100,0,160,120", &["--spp", "32"]);
+    let cases: Vec<(Vec<&Path>, &str)> = vec![
+        (vec![&left, &overlap], "overlap"),
+        (vec![&left], "uncovered, the first at (100, 0)"),
+        (
+            vec![&left, &other_spp],
+            "dofray:spp is \"16\" in the first and \"32\"",
+        ),
+        (vec![&left, &reference], "is not a dofray tile"),
+    ];
+    for (tiles, message) in cases {
+        let mut args = vec!["merge"];
+        args.extend(tiles.iter().map(|p| s(p)));
+        args.extend(["-o", s(&bad_out)]);
+        let o = dofray(&args);
+        assert_eq!(o.status.code(), Some(3), "{message}: {}", stderr(&o));
+        assert!(stderr(&o).contains(message), "{message}: {}", stderr(&o));
+        assert!(!bad_out.exists());
+    }
+    let o = dofray(&["merge", s(&left), s(&right), "-o", s(&dir.join("x.png"))]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let o = dofray(&[
+        "render",
+        "--region",
+        "0,0,161,10",
+        "-o",
+        s(&bad_out),
+        "--width",
+        "160",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--region"), "{}", stderr(&o));
+}
+
+/// Frames written by a run, by name.
+fn written(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.ends_with(".png") && !n.starts_with('.'))
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn shards_split_the_frames_from_flags_slurm_and_kubernetes() {
+    let dir = scratch("shards");
+    let run = |out: &Path, env: &[(&str, &str)], extra: &[&str]| {
+        let pattern = out.join("f_###.png");
+        let mut c = cmd();
+        c.args([
+            "render", "-q", "--json", "--width", "32", "--height", "24", "--frames", "1-7",
+        ])
+        .args(["-o", s(&pattern)])
+        .args(extra);
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        c.output().unwrap()
+    };
+    let slurm = |id: &str| {
+        vec![
+            ("SLURM_ARRAY_TASK_ID", id.to_string()),
+            ("SLURM_ARRAY_TASK_MIN", "1".into()),
+            ("SLURM_ARRAY_TASK_MAX", "3".into()),
+            ("SLURM_ARRAY_TASK_COUNT", "3".into()),
+        ]
+    };
+    let mut by_source: Vec<Vec<String>> = Vec::new();
+    for source in ["flag", "slurm", "kubernetes"] {
+        let out = dir.join(source);
+        std::fs::create_dir_all(&out).unwrap();
+        let mut seen = Vec::new();
+        for i in 0..3 {
+            let o = match source {
+                "flag" => run(&out, &[], &["--shard", &format!("{i}/3")]),
+                "slurm" => {
+                    let env = slurm(&(i + 1).to_string());
+                    let env: Vec<(&str, &str)> =
+                        env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+                    run(&out, &env, &[])
+                }
+                _ => run(
+                    &out,
+                    &[
+                        ("JOB_COMPLETION_INDEX", &i.to_string()),
+                        ("DOFRAY_SHARD_COUNT", "3"),
+                    ],
+                    &[],
+                ),
+            };
+            assert!(o.status.success(), "{source} {i}: {}", stderr(&o));
+            let j = json(&o);
+            assert_eq!(j["shard"], format!("{i}/3"), "{source}");
+            let frames: Vec<i64> = j["frames"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|f| f["frame"].as_i64().unwrap())
+                .collect();
+            // Round robin: shard i renders frames 1 + i, 4 + i, ...
+            let want: Vec<i64> = (1..=7).filter(|f| (f - 1) % 3 == i).collect();
+            assert_eq!(frames, want, "{source} shard {i}");
+            seen.extend(frames);
+        }
+        seen.sort();
+        assert_eq!(
+            seen,
+            (1..=7).collect::<Vec<_>>(),
+            "{source}: every frame once"
+        );
+        by_source.push(written(&out));
+    }
+    assert_eq!(by_source[0].len(), 7);
+    assert!(by_source.iter().all(|w| *w == by_source[0]));
+    // --shard overrides the environment.
+    let out = dir.join("override");
+    std::fs::create_dir_all(&out).unwrap();
+    let env = slurm("2");
+    let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let o = run(&out, &env, &["--shard", "0/1"]);
+    assert_eq!(json(&o)["rendered"], 7, "{}", stderr(&o));
+    // Broken environments are usage errors naming the variable.
+    let o = run(&out, &[("JOB_COMPLETION_INDEX", "1")], &[]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("DOFRAY_SHARD_COUNT"), "{}", stderr(&o));
+    let sparse = [
+        ("SLURM_ARRAY_TASK_ID", "3"),
+        ("SLURM_ARRAY_TASK_MIN", "0"),
+        ("SLURM_ARRAY_TASK_MAX", "5"),
+        ("SLURM_ARRAY_TASK_COUNT", "3"),
+    ];
+    let o = run(&out, &sparse, &[]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--shard"), "{}", stderr(&o));
+}
+
+#[test]
+fn a_failing_frame_is_reported_and_the_others_still_render() {
+    let dir = scratch("failures");
+    let pattern = dir.join("f_####.png");
+    let base = [
+        "render", "--width", "32", "--height", "24", "--frames", "1-4", "--json",
+    ];
+    let o = dofray(&[&base[..], &["-o", s(&pattern), "-q"]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j = json(&o);
+    assert_eq!(
+        (j["rendered"].as_u64(), j["failed"].as_u64()),
+        (Some(4), Some(0))
+    );
+    // Frame 2 removed: --skip-existing renders only it.
+    std::fs::remove_file(dir.join("f_0002.png")).unwrap();
+    let o = dofray(&[&base[..], &["-o", s(&pattern), "--skip-existing"]].concat());
+    let j = json(&o);
+    assert_eq!(
+        (j["rendered"].as_u64(), j["skipped"].as_u64()),
+        (Some(1), Some(3))
+    );
+    assert_eq!(j["frames"][1]["status"], "rendered");
+    assert_eq!(j["frames"][1]["frame"], 2);
+    // --no-overwrite: the existing frames fail, named, and the run exits 4 (io) at the end.
+    std::fs::remove_file(dir.join("f_0004.png")).unwrap();
+    let o = dofray(&[&base[..], &["-o", s(&pattern), "--no-overwrite"]].concat());
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    let j = json(&o);
+    assert_eq!(
+        (j["rendered"].as_u64(), j["failed"].as_u64()),
+        (Some(1), Some(3))
+    );
+    assert_eq!(j["frames"][3]["status"], "rendered");
+    assert_eq!(j["frames"][0]["error"]["kind"], "io");
+    assert_eq!(j["error"]["exit_code"], 4);
+    assert!(stderr(&o).contains("error: frame 1:"), "{}", stderr(&o));
+    // --fail-fast stops at the first failure.
+    let o = dofray(
+        &[
+            &base[..],
+            &["-o", s(&pattern), "--no-overwrite", "--fail-fast"],
+        ]
+        .concat(),
+    );
+    let j = json(&o);
+    assert_eq!(
+        (j["failed"].as_u64(), j["not_run"].as_u64()),
+        (Some(1), Some(3))
+    );
+    // Several frames need a pattern; a pattern needs frames.
+    let o = dofray(&[&base[..], &["-o", s(&dir.join("one.png"))]].concat());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("####"), "{}", stderr(&o));
+    let o = dofray(&["render", "-o", s(&pattern)]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--frames"), "{}", stderr(&o));
+}
