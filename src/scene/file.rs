@@ -1533,9 +1533,7 @@ fn view_problem(eye: Vec3, look_at: Vec3, up: Vec3) -> Option<(&'static str, &'s
             "`eye` and `look_at` are too far apart: the distance between them is beyond the \
              range of 32-bit floats",
         ))
-    } else if (look_at - eye).cross(up).length_squared()
-        <= 1e-12 * view * up.length_squared()
-    {
+    } else if (look_at - eye).cross(up).length_squared() <= 1e-12 * view * up.length_squared() {
         Some((
             "up",
             "`up` must not be zero or parallel to the view direction (eye to look_at)",
@@ -1678,20 +1676,22 @@ fn animation(
     };
     let frame_start = range_end(&raw.frame_start, "frame_start", key_frames().min())?;
     let frame_end = range_end(&raw.frame_end, "frame_end", key_frames().max())?;
-    if frame_end < frame_start || frame_end - frame_start >= MAX_SHOT_FRAMES {
+    let frames = frame_end - frame_start + 1;
+    if !(1..=MAX_SHOT_FRAMES).contains(&frames) {
         let span = raw
             .frame_end
             .as_ref()
             .or(raw.frame_start.as_ref())
             .map_or(table.clone(), |s| s.span());
-        return Err(ctx.invalid(
-            span,
-            "animation.frame_end",
+        let message = if frames < 1 {
+            format!("`frame_end` ({frame_end}) must be at least `frame_start` ({frame_start})")
+        } else {
             format!(
-                "`frame_end` ({frame_end}) must be at least `frame_start` ({frame_start}), and \
-                 a shot has at most 1000000 frames"
-            ),
-        ));
+                "the shot from frame {frame_start} to {frame_end} has {frames} frames; a shot \
+                 has at most {MAX_SHOT_FRAMES}"
+            )
+        };
+        return Err(ctx.invalid(span, "animation.frame_end", message));
     }
 
     let default = raw.interpolation.unwrap_or_default();
@@ -1700,7 +1700,14 @@ fn animation(
     let point = |v: &Option<Spanned<V3>>| v.as_ref().map(|v| (v.span(), dv3(*v.get_ref())));
     let tracks = Tracks {
         eye: track(ctx, keys, default, "eye", |k| point(&k.eye), &mut places)?,
-        look_at: track(ctx, keys, default, "look_at", |k| point(&k.look_at), &mut places)?,
+        look_at: track(
+            ctx,
+            keys,
+            default,
+            "look_at",
+            |k| point(&k.look_at),
+            &mut places,
+        )?,
         up: track(ctx, keys, default, "up", |k| point(&k.up), &mut places)?,
         vfov: track(
             ctx,
