@@ -237,7 +237,9 @@ impl Animation {
                 // Dioptres beyond 0 (a spline overshooting infinity) stay at infinity.
                 camera.focus = Focus::Distance((1.0 / track.at(frame).max(0.0)) as f32);
             }
-            Some(FocusTrack::Point(track)) => camera.focus = Focus::Point(track.at(frame).as_vec3()),
+            Some(FocusTrack::Point(track)) => {
+                camera.focus = Focus::Point(track.at(frame).as_vec3())
+            }
         }
     }
 
@@ -347,9 +349,8 @@ mod tests {
         for x in frames {
             assert!((t.at(x as f64) - f(x as f64)).abs() < 1e-12);
         }
-        for i in 1..4 {
-            let x = frames[i] as f64;
-            assert!((t.tangent(i) - (x - 1.0)).abs() < 1e-9);
+        for (i, &x) in frames.iter().enumerate().take(4).skip(1) {
+            assert!((t.tangent(i) - (x as f64 - 1.0)).abs() < 1e-9);
         }
         assert_eq!(t.tangent(0), 0.0);
         assert_eq!(t.tangent(4), 0.0);

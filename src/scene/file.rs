@@ -1533,9 +1533,7 @@ fn view_problem(eye: Vec3, look_at: Vec3, up: Vec3) -> Option<(&'static str, &'s
             "`eye` and `look_at` are too far apart: the distance between them is beyond the \
              range of 32-bit floats",
         ))
-    } else if (look_at - eye).cross(up).length_squared()
-        <= 1e-12 * view * up.length_squared()
-    {
+    } else if (look_at - eye).cross(up).length_squared() <= 1e-12 * view * up.length_squared() {
         Some((
             "up",
             "`up` must not be zero or parallel to the view direction (eye to look_at)",
@@ -1568,47 +1566,110 @@ struct Place {
 /// The keys of one parameter and where they are written (in frame order).
 type Places = Vec<(&'static str, Vec<Place>)>;
 
-/// The track of parameter `name` from the keys that set it (`value` reads it from a key, in
-/// the space it is interpolated in), or None when no key does; records where its keys are.
-fn track<T: Value>(
-    ctx: &Ctx,
-    keys: &[Spanned<RawKey>],
-    default: Interpolation,
-    name: &'static str,
-    value: impl Fn(&RawKey) -> Option<(Range<usize>, T)>,
-    places: &mut Places,
-) -> Result<Option<Track<T>>, LoadError> {
-    let (mut found, mut spots) = (Vec::new(), Vec::<Place>::new());
-    for (index, k) in keys.iter().enumerate() {
-        let k = k.get_ref();
-        let Some((span, value)) = value(k) else {
-            continue;
-        };
-        let frame = *k.frame.get_ref();
-        if let Some(first) = spots.iter().find(|p| p.frame == frame) {
-            return Err(ctx.invalid(
-                span,
-                format!("animation.key[{index}].{name}"),
-                format!(
-                    "`{name}` is keyed twice at frame {frame} (animation.key[{}] keys it there \
-                     too); a parameter has at most one key per frame",
-                    first.index
-                ),
-            ));
+/// The keys' positions (`[x, y, z]`) by name.
+const POINTS: [&str; 4] = ["eye", "look_at", "up", "focus_point"];
+/// The keys' numbers by name.
+const SCALARS: [&str; 5] = [
+    "vfov",
+    "focal_length_mm",
+    "f_number",
+    "aperture_radius",
+    "focus_distance",
+];
+
+impl RawKey {
+    /// Where position `name` is written in this key, and its value, if the key sets it.
+    fn point(&self, name: &str) -> Option<(Range<usize>, DVec3)> {
+        let v = match name {
+            "eye" => &self.eye,
+            "look_at" => &self.look_at,
+            "up" => &self.up,
+            "focus_point" => &self.focus_point,
+            _ => return None,
         }
-        found.push(Key {
-            frame,
-            value,
-            interpolation: k.interpolation.unwrap_or(default),
-        });
-        spots.push(Place { frame, index, span });
+        .as_ref()?;
+        Some((v.span(), dv3(*v.get_ref())))
     }
-    if !spots.is_empty() {
-        spots.sort_by_key(|p| p.frame);
-        places.push((name, spots));
+
+    /// Where number `name` is written in this key, and its value, if the key sets it.
+    fn scalar(&self, name: &str) -> Option<(Range<usize>, f64)> {
+        fn read<T>(v: &Option<Spanned<T>>, f: fn(&T) -> f32) -> Option<(Range<usize>, f64)> {
+            v.as_ref().map(|v| (v.span(), f(v.get_ref()) as f64))
+        }
+        match name {
+            "vfov" => read(&self.vfov, |v| v.0),
+            "focal_length_mm" => read(&self.focal_length_mm, |v| v.0),
+            "f_number" => read(&self.f_number, |v| v.0),
+            "aperture_radius" => read(&self.aperture_radius, |v| v.0),
+            "focus_distance" => read(&self.focus_distance, |v| v.0),
+            _ => None,
+        }
     }
-    // Frames are unique, so this fails only without keys.
-    Ok(Track::new(found).ok())
+}
+
+/// Reads tracks from the keys, recording where each parameter's keys are.
+struct TrackReader<'a> {
+    ctx: &'a Ctx<'a>,
+    keys: &'a [Spanned<RawKey>],
+    /// The table's interpolation (for keys that give none).
+    default: Interpolation,
+    places: Places,
+}
+
+impl TrackReader<'_> {
+    /// The track of position `name`, or None when no key sets it.
+    fn point(&mut self, name: &'static str) -> Result<Option<Track<DVec3>>, LoadError> {
+        self.track(name, |k| k.point(name))
+    }
+
+    /// The track of number `name`, interpolated as `space` of it, or None when no key sets it.
+    fn scalar(
+        &mut self,
+        name: &'static str,
+        space: fn(f64) -> f64,
+    ) -> Result<Option<Track<f64>>, LoadError> {
+        self.track(name, |k| k.scalar(name).map(|(span, v)| (span, space(v))))
+    }
+
+    /// The track of parameter `name` from the keys that set it (`value` reads it from a key,
+    /// in the space it is interpolated in), or None when no key does.
+    fn track<T: Value>(
+        &mut self,
+        name: &'static str,
+        value: impl Fn(&RawKey) -> Option<(Range<usize>, T)>,
+    ) -> Result<Option<Track<T>>, LoadError> {
+        let (mut found, mut spots) = (Vec::new(), Vec::<Place>::new());
+        for (index, k) in self.keys.iter().enumerate() {
+            let k = k.get_ref();
+            let Some((span, value)) = value(k) else {
+                continue;
+            };
+            let frame = *k.frame.get_ref();
+            if let Some(first) = spots.iter().find(|p| p.frame == frame) {
+                return Err(self.ctx.invalid(
+                    span,
+                    format!("animation.key[{index}].{name}"),
+                    format!(
+                        "`{name}` is keyed twice at frame {frame} (animation.key[{}] keys it \
+                         there too); a parameter has at most one key per frame",
+                        first.index
+                    ),
+                ));
+            }
+            found.push(Key {
+                frame,
+                value,
+                interpolation: k.interpolation.unwrap_or(self.default),
+            });
+            spots.push(Place { frame, index, span });
+        }
+        if !spots.is_empty() {
+            spots.sort_by_key(|p| p.frame);
+            self.places.push((name, spots));
+        }
+        // Frames are unique, so this fails only without keys.
+        Ok(Track::new(found).ok())
+    }
 }
 
 /// The keys of `name`, if it is animated.
@@ -1645,18 +1706,9 @@ fn animation(
     for (i, k) in raw.key.iter().enumerate() {
         let key = k.get_ref();
         frame_ok(&key.frame, format!("animation.key[{i}].frame"))?;
-        let sets = [
-            key.eye.is_some(),
-            key.look_at.is_some(),
-            key.up.is_some(),
-            key.vfov.is_some(),
-            key.focal_length_mm.is_some(),
-            key.f_number.is_some(),
-            key.aperture_radius.is_some(),
-            key.focus_distance.is_some(),
-            key.focus_point.is_some(),
-        ];
-        if !sets.contains(&true) {
+        let sets = POINTS.iter().any(|n| key.point(n).is_some())
+            || SCALARS.iter().any(|n| key.scalar(n).is_some());
+        if !sets {
             return Err(ctx.invalid(
                 k.span(),
                 format!("animation.key[{i}]"),
@@ -1678,93 +1730,45 @@ fn animation(
     };
     let frame_start = range_end(&raw.frame_start, "frame_start", key_frames().min())?;
     let frame_end = range_end(&raw.frame_end, "frame_end", key_frames().max())?;
-    if frame_end < frame_start || frame_end - frame_start >= MAX_SHOT_FRAMES {
+    let frames = frame_end - frame_start + 1;
+    if !(1..=MAX_SHOT_FRAMES).contains(&frames) {
         let span = raw
             .frame_end
             .as_ref()
             .or(raw.frame_start.as_ref())
             .map_or(table.clone(), |s| s.span());
-        return Err(ctx.invalid(
-            span,
-            "animation.frame_end",
+        let message = if frames < 1 {
+            format!("`frame_end` ({frame_end}) must be at least `frame_start` ({frame_start})")
+        } else {
             format!(
-                "`frame_end` ({frame_end}) must be at least `frame_start` ({frame_start}), and \
-                 a shot has at most 1000000 frames"
-            ),
-        ));
+                "the shot from frame {frame_start} to {frame_end} has {frames} frames; a shot \
+                 has at most {MAX_SHOT_FRAMES}"
+            )
+        };
+        return Err(ctx.invalid(span, "animation.frame_end", message));
     }
 
-    let default = raw.interpolation.unwrap_or_default();
-    let keys = &raw.key;
-    let mut places = Places::new();
-    let point = |v: &Option<Spanned<V3>>| v.as_ref().map(|v| (v.span(), dv3(*v.get_ref())));
+    let mut read = TrackReader {
+        ctx,
+        keys: &raw.key,
+        default: raw.interpolation.unwrap_or_default(),
+        places: Places::new(),
+    };
+    let same = |v: f64| v;
     let tracks = Tracks {
-        eye: track(ctx, keys, default, "eye", |k| point(&k.eye), &mut places)?,
-        look_at: track(ctx, keys, default, "look_at", |k| point(&k.look_at), &mut places)?,
-        up: track(ctx, keys, default, "up", |k| point(&k.up), &mut places)?,
-        vfov: track(
-            ctx,
-            keys,
-            default,
-            "vfov",
-            |k| k.vfov.as_ref().map(|v| (v.span(), v.get_ref().0 as f64)),
-            &mut places,
-        )?,
-        focal_length_mm: track(
-            ctx,
-            keys,
-            default,
-            "focal_length_mm",
-            |k| {
-                let v = k.focal_length_mm.as_ref()?;
-                Some((v.span(), v.get_ref().0 as f64))
-            },
-            &mut places,
-        )?,
-        ln_f_number: track(
-            ctx,
-            keys,
-            default,
-            "f_number",
-            |k| {
-                let v = k.f_number.as_ref()?;
-                Some((v.span(), (v.get_ref().0 as f64).ln()))
-            },
-            &mut places,
-        )?,
-        aperture_radius: track(
-            ctx,
-            keys,
-            default,
-            "aperture_radius",
-            |k| {
-                let v = k.aperture_radius.as_ref()?;
-                Some((v.span(), v.get_ref().0 as f64))
-            },
-            &mut places,
-        )?,
+        eye: read.point("eye")?,
+        look_at: read.point("look_at")?,
+        up: read.point("up")?,
+        vfov: read.scalar("vfov", same)?,
+        focal_length_mm: read.scalar("focal_length_mm", same)?,
+        ln_f_number: read.scalar("f_number", f64::ln)?,
+        aperture_radius: read.scalar("aperture_radius", same)?,
         focus: None,
     };
     // Focus distances in dioptres (inf is 0).
-    let dioptres = track(
-        ctx,
-        keys,
-        default,
-        "focus_distance",
-        |k| {
-            let v = k.focus_distance.as_ref()?;
-            Some((v.span(), 1.0 / v.get_ref().0 as f64))
-        },
-        &mut places,
-    )?;
-    let focus_point = track(
-        ctx,
-        keys,
-        default,
-        "focus_point",
-        |k| point(&k.focus_point),
-        &mut places,
-    )?;
+    let dioptres = read.scalar("focus_distance", |d| 1.0 / d)?;
+    let focus_point = read.point("focus_point")?;
+    let places = read.places;
     let first_key = |name: &str| {
         let spots = keys_of(&places, name)?;
         spots.iter().min_by_key(|p| p.index)
