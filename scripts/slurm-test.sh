@@ -3,7 +3,6 @@
 #
 #   scripts/slurm-test.sh DOFRAY_BINARY WORKDIR
 #   scripts/slurm-test.sh target/release/dofray /tmp/dofray-slurm-test
-#   scripts/slurm-test.sh .ci/slurm/fake-dofray /tmp/fake-test    # the harness alone
 #
 # 1. Starts the test cluster (.ci/slurm/cluster.sh) in WORKDIR/cluster; where Slurm cannot
 #    run, prints "SKIP: ..." and exits 3.
@@ -211,6 +210,9 @@ local_dofray "$bin" render "$scene" -o "local/frames_####.png" --frames "$frames
   >"$work/local-frames.log" 2>&1 || fatal "local render of the frames failed: $(tail -n 5 "$work/local-frames.log")"
 local_dofray "$bin" render "$scene" --tiles "$tiles" -o local/still.exr "${args[@]}" \
   >"$work/local-still.log" 2>&1 || fatal "local render of the still failed: $(tail -n 5 "$work/local-still.log")"
+# The same still in one piece: tiles must assemble into exactly the untiled render.
+local_dofray "$bin" render "$scene" -o local/whole.exr "${args[@]}" \
+  >"$work/local-whole.log" 2>&1 || fatal "local render of the untiled still failed: $(tail -n 5 "$work/local-whole.log")"
 same=0
 for f in "${frame_numbers[@]}"; do
   a=$(frame_file farm/out "$f") b=$(frame_file local "$f")
@@ -229,6 +231,11 @@ elif same_pixels farm/out/still.exr local/still.exr; then
   ok "the merged still from Slurm is pixel-identical to the local tiled render"
 else
   bad "the merged still differs from the local render: $(tail -n 4 "$work/diff.txt" | tr '\n' ' ')"
+fi
+if same_pixels farm/out/still.exr local/whole.exr; then
+  ok "the merged still from Slurm is pixel-identical to the untiled local render"
+else
+  bad "the merged still differs from the untiled render: $(tail -n 4 "$work/diff.txt" | tr '\n' ' ')"
 fi
 same=0 compared=0
 for ((t = 0; t < ntiles; t++)); do

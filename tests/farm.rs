@@ -355,3 +355,82 @@ fn a_failing_frame_is_reported_and_the_others_still_render() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--frames"), "{}", stderr(&o));
 }
+
+/// The acceptance run: scenes/focus_pull.toml's 48 frames from one command, killed
+/// part-way (SIGKILL: no clean-up), then resumed with --skip-existing, which renders only the
+/// rest. Writes a contact sheet of every 8th frame (and the last) for a person to look at.
+#[test]
+fn a_killed_focus_pull_resumes_with_skip_existing() {
+    let dir = scratch("pull");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/focus_pull.toml");
+    let pattern = dir.join("pull_####.png");
+    let mut child = cmd()
+        .args(["render", s(&scene), "-o", s(&pattern), "-q"])
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    loop {
+        if written(&dir).len() >= 12 {
+            break;
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the render ended before it could be killed"
+        );
+        assert!(started.elapsed().as_secs() < 600, "no frames after 10 minutes");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = written(&dir);
+    assert!(before.len() < 48, "{} frames before the kill", before.len());
+    let stamps: Vec<_> = before
+        .iter()
+        .map(|n| std::fs::metadata(dir.join(n)).unwrap().modified().unwrap())
+        .collect();
+
+    let o = dofray(&["render", s(&scene), "-o", s(&pattern), "--skip-existing", "--json", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j = json(&o);
+    assert_eq!(j["jobs"], 48);
+    assert_eq!(j["skipped"].as_u64(), Some(before.len() as u64));
+    assert_eq!(j["rendered"].as_u64(), Some(48 - before.len() as u64));
+    let frames = j["frames"].as_array().unwrap();
+    for f in frames {
+        let name = format!("pull_{:04}.png", f["frame"].as_i64().unwrap());
+        let expected = if before.contains(&name) { "skipped" } else { "rendered" };
+        assert_eq!(f["status"], expected, "{name}");
+    }
+    // The frames from before the kill were left alone; the killed frame's temporary file is
+    // gone (the resumed write of that frame removed it); every frame is a whole picture.
+    for (n, t) in before.iter().zip(&stamps) {
+        assert_eq!(std::fs::metadata(dir.join(n)).unwrap().modified().unwrap(), *t, "{n}");
+    }
+    let all: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(all.len(), 48, "{all:?}");
+    // The focus racks out monotonically over the rendered frames.
+    let focus: Vec<f64> = frames
+        .iter()
+        .filter(|f| f["status"] == "rendered")
+        .map(|f| f["focus_distance"].as_f64().unwrap())
+        .collect();
+    assert!(focus.windows(2).all(|w| w[1] >= w[0]), "{focus:?}");
+
+    // Contact sheet: frames 1, 9, ..., 41 and 48, four to a row.
+    let picks = [1, 9, 17, 25, 33, 41, 48];
+    let mut sheet = image::RgbImage::new(320 * 4, 240 * 2);
+    for (i, f) in picks.iter().enumerate() {
+        let frame = image::open(dir.join(format!("pull_{f:04}.png")))
+            .unwrap()
+            .to_rgb8();
+        assert_eq!(frame.dimensions(), (320, 240));
+        let (x, y) = ((i % 4) as i64 * 320, (i / 4) as i64 * 240);
+        image::imageops::overlay(&mut sheet, &frame, x, y);
+    }
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("focus_pull_contact_sheet.png");
+    sheet.save(&out).unwrap();
+    eprintln!("contact sheet of the focus pull: {}", out.display());
+}
