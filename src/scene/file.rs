@@ -385,6 +385,7 @@ struct RawCamera {
     anamorphic: Option<Positive>,
 }
 
+/// The `[animation]` table: the shot's range and rate, and its keys.
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawAnimation {
