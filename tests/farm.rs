@@ -377,7 +377,10 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
             child.try_wait().unwrap().is_none(),
             "the render ended before it could be killed"
         );
-        assert!(started.elapsed().as_secs() < 600, "no frames after 10 minutes");
+        assert!(
+            started.elapsed().as_secs() < 600,
+            "no frames after 10 minutes"
+        );
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
     child.kill().unwrap();
@@ -389,7 +392,15 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
         .map(|n| std::fs::metadata(dir.join(n)).unwrap().modified().unwrap())
         .collect();
 
-    let o = dofray(&["render", s(&scene), "-o", s(&pattern), "--skip-existing", "--json", "-q"]);
+    let o = dofray(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&pattern),
+        "--skip-existing",
+        "--json",
+        "-q",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let j = json(&o);
     assert_eq!(j["jobs"], 48);
@@ -398,13 +409,21 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
     let frames = j["frames"].as_array().unwrap();
     for f in frames {
         let name = format!("pull_{:04}.png", f["frame"].as_i64().unwrap());
-        let expected = if before.contains(&name) { "skipped" } else { "rendered" };
+        let expected = if before.contains(&name) {
+            "skipped"
+        } else {
+            "rendered"
+        };
         assert_eq!(f["status"], expected, "{name}");
     }
     // The frames from before the kill were left alone; the killed frame's temporary file is
     // gone (the resumed write of that frame removed it); every frame is a whole picture.
     for (n, t) in before.iter().zip(&stamps) {
-        assert_eq!(std::fs::metadata(dir.join(n)).unwrap().modified().unwrap(), *t, "{n}");
+        assert_eq!(
+            std::fs::metadata(dir.join(n)).unwrap().modified().unwrap(),
+            *t,
+            "{n}"
+        );
     }
     let all: Vec<String> = std::fs::read_dir(&dir)
         .unwrap()
