@@ -945,7 +945,8 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         (None, None) => None,
     };
     let shard = shard(a)?;
-    let sequence = frames.is_some() || tiles.is_some() || shard.is_some();
+    // Anything that may render several jobs, or none, reports as a run of jobs.
+    let sequence = frames.is_some() || tiles.is_some() || shard.is_some() || a.skip_existing;
     if sequence && a.aov_dir.is_some() {
         usage!(
             "--aov-dir writes the maps of one image; with frames, tiles or shards write EXR \

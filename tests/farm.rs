@@ -370,7 +370,7 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
         .unwrap();
     let started = std::time::Instant::now();
     loop {
-        if written(&dir).len() >= 12 {
+        if written(&dir).len() >= 24 {
             break;
         }
         assert!(
