@@ -971,7 +971,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         // One image: its targets (and --aov-dir) are checked before rendering.
         output::check_render_outputs(&a.output, a.aov_dir.as_deref())?;
         let job = &mine[0];
-        refuse_existing(a, &job.output)?;
+        refuse_existing(a, job)?;
         let summary = render_job(a, &p, &settings, job)?;
         if a.json {
             println!("{summary}");
@@ -997,7 +997,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         let outcome = if a.skip_existing && (job.output.is_file() || job.image.is_file()) {
             Outcome::Skipped
         } else {
-            match refuse_existing(a, &job.output).and_then(|()| {
+            match refuse_existing(a, job).and_then(|()| {
                 output::check_render_outputs(&job.output, None)?;
                 render_job(a, &p, &settings, job)
             }) {
@@ -1122,9 +1122,13 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
     })
 }
 
-/// With --no-overwrite, an existing output is an error.
-fn refuse_existing(a: &RenderArgs, path: &Path) -> Result<()> {
-    if a.no_overwrite && path.exists() {
+/// With --no-overwrite, an existing output (a tile's, or the image it would be merged into)
+/// is an error.
+fn refuse_existing(a: &RenderArgs, job: &dofray::batch::jobs::Job) -> Result<()> {
+    let existing = [&job.output, &job.image].into_iter().find(|p| p.exists());
+    if a.no_overwrite
+        && let Some(path) = existing
+    {
         return Err(anyhow::Error::new(dofray::exit::KindError {
             kind: dofray::exit::ErrorKind::Io,
             message: format!(

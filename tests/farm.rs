@@ -109,6 +109,28 @@ fn tiles_merge_into_the_full_render_bit_for_bit() {
             .filter(|e| e.file_name().to_string_lossy().contains(".tile-"))
             .collect();
         assert!(left.is_empty(), "{left:?}");
+        // The merged image is an output too: --no-overwrite keeps it.
+        let stamp = std::fs::metadata(&tiled).unwrap().modified().unwrap();
+        let o = dofray(
+            &[
+                &[
+                    "render",
+                    "-q",
+                    "-o",
+                    s(&tiled),
+                    "--tiles",
+                    "3x2",
+                    "--no-overwrite",
+                ][..],
+                &SIZE,
+            ]
+            .concat(),
+        );
+        assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+        assert_eq!(
+            std::fs::metadata(&tiled).unwrap().modified().unwrap(),
+            stamp
+        );
         if ext == "exr" {
             let (a, wa) = exr_pixels(&full);
             let (b, wb) = exr_pixels(&tiled);
