@@ -22,7 +22,9 @@ use crate::camera::CameraError;
 use crate::embree::{EmbreeError, ErrorCode};
 use crate::limits::MemoryError;
 use crate::output::OutputError;
+use crate::overrides::OverrideError;
 use crate::render::RenderError;
+use crate::renderer::RendererError;
 use crate::scene::{LoadError, SceneError};
 
 /// Exit status of a successful run.
@@ -145,14 +147,17 @@ fn kind_of(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
     if e.is::<MemoryError>() {
         return Some(ErrorKind::ResourceLimit);
     }
+    if e.is::<OverrideError>() {
+        return Some(ErrorKind::Usage);
+    }
+    if let Some(e) = e.downcast_ref::<RendererError>() {
+        return Some(renderer_kind(e));
+    }
     if let Some(e) = e.downcast_ref::<LoadError>() {
         return Some(load_kind(e));
     }
     if let Some(e) = e.downcast_ref::<SceneError>() {
-        return Some(match e {
-            SceneError::Embree(e) => embree_kind(e, ErrorKind::BadInput),
-            _ => ErrorKind::BadInput,
-        });
+        return Some(scene_kind(e));
     }
     if e.is::<CameraError>() {
         return Some(ErrorKind::BadInput);
@@ -196,6 +201,30 @@ fn kind_of(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
         });
     }
     None
+}
+
+fn renderer_kind(e: &RendererError) -> ErrorKind {
+    match e {
+        RendererError::Load(e) => load_kind(e),
+        RendererError::Scene { source, .. } => scene_kind(source),
+        RendererError::Override(_) => ErrorKind::Usage,
+        RendererError::Memory(_) => ErrorKind::ResourceLimit,
+        // The caller asked for this camera.
+        RendererError::Camera {
+            overridden: true, ..
+        } => ErrorKind::Usage,
+        RendererError::Camera { .. } | RendererError::ScaledFocusPixelMisses { .. } => {
+            ErrorKind::BadInput
+        }
+        RendererError::Render(e) => render_kind(e),
+    }
+}
+
+fn scene_kind(e: &SceneError) -> ErrorKind {
+    match e {
+        SceneError::Embree(e) => embree_kind(e, ErrorKind::BadInput),
+        _ => ErrorKind::BadInput,
+    }
 }
 
 fn load_kind(e: &LoadError) -> ErrorKind {

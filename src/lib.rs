@@ -6,6 +6,8 @@
 //!
 //! Data flows one way: [`scene::SceneDesc`] -> [`scene::World`] (Embree geometry, materials)
 //! -> [`camera::Camera`] -> [`render::render`] -> [`render::Film`] -> [`output`].
+//! [`renderer::Renderer`] does the middle for a scene with [`overrides::Overrides`] (what the
+//! command line's flags set): load, override, render, write.
 #![deny(unsafe_code)]
 
 /// dofray's version (Cargo's package version).
@@ -26,7 +28,13 @@ pub mod filter;
 pub mod limits;
 pub mod metrics;
 pub mod output;
+pub mod overrides;
 pub mod render;
+pub mod renderer;
 pub mod sampler;
 pub mod scene;
 pub mod shade;
+
+/// The vector maths crate of dofray's public types (`Vec3` in scenes, cameras and lights),
+/// re-exported so callers use the same version.
+pub use glam;

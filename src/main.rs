@@ -9,14 +9,15 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use dofray::batch::shard::Shard;
 use dofray::bench::{self, BenchConfig, equal_error};
-use dofray::camera::{Camera, Focus, LensSpec};
+use dofray::camera::Camera;
 use dofray::embree::Device;
-use dofray::filter::{PixelFilter, PixelFilterKind};
+use dofray::filter::PixelFilterKind;
 use dofray::output;
+use dofray::overrides::{Overrides, Param, SettingsOverrides};
 use dofray::render::{self, Mode, Progress, Region, RenderSettings, SiteRule};
+use dofray::renderer::{Renderer, RendererError};
 use dofray::sampler::LensFilter;
-use dofray::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
-use dofray::scene::{SceneDesc, World, builtin};
+use dofray::scene::{SceneDesc, builtin};
 use dofray::shade::Light;
 use glam::Vec3;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -525,198 +526,37 @@ impl Progress for Bar {
     }
 }
 
-/// Applies command-line overrides of size and lens to a camera of the scene.
-fn apply_camera_overrides(cam: &mut dofray::camera::CameraSpec, a: &SceneArgs) -> Result<()> {
-    for (name, v) in [("--width", a.width), ("--height", a.height)] {
-        if v == Some(0) {
-            usage!("{name} must be at least 1 pixel");
-        }
+/// The scene overrides the flags ask for.
+fn overrides(a: &SceneArgs) -> Overrides {
+    Overrides {
+        width: a.width,
+        height: a.height,
+        aperture_radius: a.aperture_radius,
+        f_number: a.f_number,
+        focal_length_mm: a.focal_length,
+        sensor_width_mm: a.sensor_width,
+        sharp_range: a.sharp_range.zip(a.spread),
+        focus_distance: a.focus_distance,
+        autofocus: a.autofocus,
+        blades: a.blades,
+        blade_rotation_deg: a.blade_rotation,
+        anamorphic: a.anamorphic,
+        lights: a.lights.clone(),
+        ambient: a.ambient,
     }
-    let (old_w, old_h) = (cam.width, cam.height);
-    match (a.width, a.height) {
-        (Some(w), Some(h)) => (cam.width, cam.height) = (w, h),
-        (Some(w), None) => {
-            cam.height = ((w as u64 * cam.height as u64) as f64 / cam.width as f64)
-                .round()
-                .max(1.0) as u32;
-            cam.width = w;
-        }
-        (None, Some(h)) => {
-            cam.width = ((h as u64 * cam.width as u64) as f64 / cam.height as f64)
-                .round()
-                .max(1.0) as u32;
-            cam.height = h;
-        }
-        (None, None) => {}
-    }
-    // An autofocus pixel from the scene names a place in the picture: keep it there at a new size.
-    if let Focus::Pixel { x, y } = &mut cam.focus {
-        let scale = |v: u32, from: u32, to: u32| {
-            (((v as f64 + 0.5) * to as f64 / from.max(1) as f64) as u32).min(to.saturating_sub(1))
-        };
-        *x = scale(*x, old_w, cam.width);
-        *y = scale(*y, old_h, cam.height);
-    }
-    for (flag, v) in [
-        ("--f-number", a.f_number),
-        ("--focal-length", a.focal_length),
-        ("--sensor-width", a.sensor_width),
-        ("--anamorphic", a.anamorphic),
-    ] {
-        if let Some(v) = v
-            && !(v.is_finite() && v > 0.0)
-        {
-            usage!("{flag} must be a finite number > 0, got {v}");
-        }
-    }
-    if let Some(r) = a.aperture_radius {
-        if !(r.is_finite() && r >= 0.0) {
-            usage!("--aperture-radius must be a finite number >= 0, got {r}");
-        }
-        // A photographic lens set the field of view: keep the framing it gave.
-        cam.vfov_deg = cam.effective_vfov_deg();
-        cam.lens = LensSpec::Aperture { radius: r };
-    }
-    if let (Some(sharp_range), Some(spread)) = (a.sharp_range, a.spread) {
-        if !(sharp_range.is_finite() && sharp_range > 0.0) {
-            usage!("--sharp-range must be a finite number > 0, got {sharp_range}");
-        }
-        if !(spread.is_finite() && spread >= 0.0) {
-            usage!("--spread must be a finite number >= 0, got {spread}");
-        }
-        // A photographic lens set the field of view: keep the framing it gave.
-        cam.vfov_deg = cam.effective_vfov_deg();
-        cam.lens = LensSpec::Seed {
-            sharp_range,
-            spread,
-        };
-    }
-    match (a.f_number, &mut cam.lens) {
-        (
-            None,
-            LensSpec::Photographic {
-                focal_length_mm,
-                sensor_width_mm,
-                ..
-            },
-        ) => {
-            *focal_length_mm = a.focal_length.unwrap_or(*focal_length_mm);
-            *sensor_width_mm = a.sensor_width.unwrap_or(*sensor_width_mm);
-        }
-        (None, lens) => {
-            let given = [
-                ("--focal-length", a.focal_length.is_some()),
-                ("--sensor-width", a.sensor_width.is_some()),
-            ];
-            if let Some((flag, _)) = given.iter().find(|(_, set)| *set) {
-                let what = match lens {
-                    LensSpec::Pinhole => "a pinhole (no aperture)",
-                    LensSpec::Aperture { .. } => "given by an aperture radius",
-                    LensSpec::Seed { .. } => "the seed's (sharp_range and spread)",
-                    LensSpec::Photographic { .. } => unreachable!("matched above"),
-                };
-                usage!(
-                    "{flag} applies to a photographic lens, but the scene's lens is {what}; \
-                     give --f-number too to replace it with a photographic lens"
-                );
-            }
-        }
-        (Some(n), lens) => {
-            let (focal, sensor) = match *lens {
-                LensSpec::Photographic {
-                    focal_length_mm,
-                    sensor_width_mm,
-                    ..
-                } => (focal_length_mm, sensor_width_mm),
-                _ => (DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM),
-            };
-            *lens = LensSpec::Photographic {
-                focal_length_mm: a.focal_length.unwrap_or(focal),
-                f_number: n,
-                sensor_width_mm: a.sensor_width.unwrap_or(sensor),
-            };
-        }
-    }
-    if let LensSpec::Photographic {
-        focal_length_mm,
-        sensor_width_mm,
-        ..
-    } = cam.lens
-        && (a.f_number.is_some() || a.focal_length.is_some() || a.sensor_width.is_some())
-    {
-        let vfov = cam.effective_vfov_deg();
-        if !(vfov > 0.0 && vfov < 180.0) {
-            usage!(
-                "a {focal_length_mm:e} mm lens on a {sensor_width_mm} mm sensor has no usable \
-                 field of view ({vfov} degrees vertically); choose a longer --focal-length or \
-                 a smaller --sensor-width"
-            );
-        }
-    }
-    if let Some(d) = a.focus_distance {
-        if d.is_nan() || d <= 0.0 {
-            usage!("--focus-distance must be a number > 0 (or inf), got {d}");
-        }
-        cam.focus = Focus::Distance(d);
-    }
-    if let Some((x, y)) = a.autofocus {
-        cam.focus = Focus::Pixel { x, y };
-    }
-    if let Some(b) = a.blades {
-        if b == 1 || b == 2 {
-            usage!("--blades must be 0 (a circular aperture) or at least 3, got {b}");
-        }
-        cam.aperture.blades = b;
-    }
-    if let Some(r) = a.blade_rotation {
-        if !r.is_finite() {
-            usage!("--blade-rotation must be a finite angle in degrees, got {r}");
-        }
-        cam.aperture.rotation_deg = r;
-    }
-    if let Some(r) = a.anamorphic {
-        cam.aperture.anamorphic = r;
-    }
-    Ok(())
 }
 
-/// Applies command-line overrides of the lights.
-fn apply_light_overrides(desc: &mut SceneDesc, a: &SceneArgs) -> Result<()> {
-    if !a.lights.is_empty() {
-        desc.lights = a.lights.clone();
+/// A renderer's error, an override's worded for the command line (flag names).
+fn cli_error(e: RendererError) -> anyhow::Error {
+    match e {
+        RendererError::Override(e) => dofray::exit::UsageError(e.message(Param::flag)).into(),
+        e => e.into(),
     }
-    if let Some(v) = a.ambient {
-        if !(v.is_finite() && v >= 0.0) {
-            usage!("--ambient must be a finite number >= 0, got {v}");
-        }
-        desc.ambient = Vec3::splat(v);
-    }
-    Ok(())
 }
 
-/// Whether any flag replaced the scene's lens, focus or aperture shape (a camera error is then
-/// a usage error, not the scene's).
-fn lens_flags_given(a: &SceneArgs) -> bool {
-    a.aperture_radius.is_some()
-        || a.f_number.is_some()
-        || a.focal_length.is_some()
-        || a.sensor_width.is_some()
-        || a.sharp_range.is_some()
-        || a.spread.is_some()
-        || a.focus_distance.is_some()
-        || a.autofocus.is_some()
-        || a.blades.is_some()
-        || a.blade_rotation.is_some()
-        || a.anamorphic.is_some()
-}
-
-/// A scene ready to render: its description (lights and, for the first frame, camera as the
-/// flags set them), the Embree world, and the camera as the scene gave it (each frame's
-/// camera is made from it: [`Prepared::camera`]).
+/// A scene ready to render with the flags' overrides, and the worker threads to render it on.
 struct Prepared {
-    desc: SceneDesc,
-    base_camera: dofray::camera::CameraSpec,
-    world: World,
+    renderer: Renderer,
     pool: rayon::ThreadPool,
 }
 
@@ -735,15 +575,10 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
             .unwrap_or(defaults.max_instanced_triangles),
         ..defaults
     };
-    let mut desc = dofray::scene::load_with(&a.scene, &options)?;
+    let desc = dofray::scene::load_with(&a.scene, &options)?;
     for warning in &desc.warnings {
         eprintln!("warning: {warning}");
     }
-    let base_camera = desc.camera.clone();
-    apply_light_overrides(&mut desc, a)?;
-    // The flags are checked once, before anything is built.
-    apply_camera_overrides(&mut desc.camera, a)?;
-    dofray::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
     let threads = a.threads.map(usize::from);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.unwrap_or(0))
@@ -755,95 +590,29 @@ fn prepare(a: &SceneArgs) -> Result<Prepared> {
         None => Device::new(),
     }
     .context("cannot create the Embree device")?;
-    let world =
-        World::build(&desc, &device).with_context(|| format!("invalid scene {}", desc.name))?;
-    Ok(Prepared {
-        desc,
-        base_camera,
-        world,
-        pool,
-    })
-}
-
-impl Prepared {
-    /// The camera at `frame` (the scene's animation evaluated there; `None`: the scene's
-    /// first frame), with the flags' overrides on top.
-    fn camera(&self, a: &SceneArgs, frame: Option<i64>) -> Result<Camera> {
-        let mut spec = self.base_camera.clone();
-        if let Some(animation) = &self.desc.animation {
-            let frame = frame.unwrap_or(*animation.frames().start());
-            animation.apply(&mut spec, frame as f64);
-        }
-        // The scene's own autofocus pixel and size, for messages after --width/--height moved it.
-        let scene_focus = (spec.focus, spec.width, spec.height);
-        apply_camera_overrides(&mut spec, a)?;
-        dofray::limits::check_image_memory(spec.width, spec.height)?;
-        let forward = (spec.look_at - spec.eye).normalize_or_zero();
-        let world = &self.world;
-        spec.build(|ray| {
-            world
-                .scene
-                .intersect1(ray)
-                .map(|hit| (ray.at(hit.t) - ray.origin).dot(forward))
-        })
-        .map_err(|e| match (e, scene_focus) {
-            (
-                dofray::camera::CameraError::FocusPixelMisses { x, y },
-                (Focus::Pixel { x: x0, y: y0 }, w0, h0),
-            ) if (x, y) != (x0, y0) => anyhow::Error::new(dofray::exit::KindError {
-                kind: dofray::exit::ErrorKind::BadInput,
-                message: format!(
-                    "the scene's autofocus pixel ({x0}, {y0}) of its {w0}x{h0} image (({x}, \
-                     {y}) at {}x{}) sees no surface to focus on",
-                    spec.width, spec.height
-                ),
-            }),
-            // The lens or focus came from the flags: the command line asked for this camera.
-            (e, _) if lens_flags_given(a) => anyhow::Error::new(dofray::exit::KindError {
-                kind: dofray::exit::ErrorKind::Usage,
-                message: e.to_string(),
-            }),
-            (e, _) => anyhow::Error::new(e),
-        })
-        .context("invalid camera")
-    }
+    let renderer = Renderer::with_overrides(desc, overrides(a), &device).map_err(cli_error)?;
+    Ok(Prepared { renderer, pool })
 }
 
 /// The render settings the flags and the scene ask for.
 fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<RenderSettings> {
-    let mut settings = RenderSettings {
-        mode: a.mode,
+    let flags = SettingsOverrides {
+        mode: Some(a.mode),
+        spp: a.spp,
+        aa: a.aa,
+        pixel_filter: a.pixel_filter,
+        pixel_filter_width: a.pixel_filter_width,
+        tolerance: a.tolerance,
+        interval_factor: a.interval_factor,
         paper_exact: a.paper_exact,
-        seed: a.scene.seed,
-        filter: a.filter,
-        ..Default::default()
+        transparent: a.transparent,
+        exposure: a.exposure,
+        seed: Some(a.scene.seed),
+        lens_filter: Some(a.filter),
     };
-    settings.spp = a.spp.or(desc.spp).unwrap_or(16);
-    settings.aa = a.aa.or(desc.aa).unwrap_or(4);
-    settings.pixel_filter = match (a.pixel_filter, desc.pixel_filter) {
-        (Some(kind), _) => PixelFilter::new(kind),
-        (None, Some(scene)) => scene,
-        (None, None) => PixelFilter::default(),
-    };
-    if let Some(width) = a.pixel_filter_width {
-        settings.pixel_filter.width = width;
-    }
-    // The command line's rule wins; else the scene's; else the error-controlled rule.
-    let seed_rule = a.interval_factor.is_some()
-        || a.paper_exact
-        || (a.tolerance.is_none() && desc.interval_factor.is_some());
-    if seed_rule {
-        settings.rule = SiteRule::Seed;
-        settings.interval_factor = a.interval_factor.or(desc.interval_factor).unwrap_or(0.4);
-    } else {
-        settings.tolerance = a.tolerance.or(desc.tolerance);
-    }
-    settings.transparent = a.transparent || desc.transparent;
-    settings.exposure = a.exposure.unwrap_or(0.0);
-    settings
-        .validate()
-        .map_err(|e| dofray::exit::UsageError(cli_message(&e)))?;
-    Ok(settings)
+    Ok(flags
+        .settings(desc)
+        .map_err(|e| dofray::exit::UsageError(cli_message(&e)))?)
 }
 
 /// The frames the flags (or, for a frame pattern, the scene's animation) ask for; `None` for
@@ -929,9 +698,12 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         );
     }
     let p = prepare(&a.scene)?;
-    let settings = render_settings(a, &p.desc)?;
-    let frames = frame_list(a, &p.desc)?;
-    let (width, height) = (p.desc.camera.width, p.desc.camera.height);
+    let settings = render_settings(a, p.renderer.desc())?;
+    let frames = frame_list(a, p.renderer.desc())?;
+    let (width, height) = (
+        p.renderer.desc().camera.width,
+        p.renderer.desc().camera.height,
+    );
     let tiles = match (a.tiles, a.region) {
         (Some((columns, rows)), _) => Some(
             Region::grid(width, height, columns, rows)
@@ -1084,7 +856,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
             "schema_version": dofray::exit::SCHEMA_VERSION,
             "dofray_version": dofray::VERSION,
             "git_commit": dofray::GIT_COMMIT,
-            "scene": p.desc.name,
+            "scene": p.renderer.desc().name,
             "output": a.output,
             "shard": shard.as_ref().map(|(s, _)| s.to_string()),
             "shard_source": shard.as_ref().map(|(_, source)| source),
@@ -1096,7 +868,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
             "merged": merged,
             "seconds": start.elapsed().as_secs_f64(),
             "frames": results,
-            "warnings": p.desc.warnings,
+            "warnings": p.renderer.desc().warnings,
         });
         if let (Some(kind), Some(map)) = (first_failure, summary.as_object_mut()) {
             map.insert(
@@ -1148,7 +920,7 @@ fn render_job(
     settings: &RenderSettings,
     job: &dofray::batch::jobs::Job,
 ) -> Result<serde_json::Value> {
-    let camera = p.camera(&a.scene, job.frame)?;
+    let camera = p.renderer.camera(job.frame).map_err(cli_error)?;
     let region = job
         .tile
         .map(|t| t.region)
@@ -1157,17 +929,17 @@ fn render_job(
     let bar = Bar::new(a.quiet || a.json);
     let (film, stats) = p
         .pool
-        .install(|| render::render_region(&p.world, &camera, settings, &region, &bar))?;
+        .install(|| render::render_region(p.renderer.world(), &camera, settings, &region, &bar))?;
 
     // The scene's file, when it is one, is recorded and hashed in the image's metadata.
     let scene_file = Path::new(&a.scene.scene);
     let mut metadata = output::Metadata::for_render(
-        &p.desc.name,
+        &p.renderer.desc().name,
         scene_file.is_file().then_some(scene_file),
         &camera,
         settings,
         &stats,
-        &p.world.scene.device().embree_version(),
+        &p.renderer.world().scene.device().embree_version(),
     );
     if let Some(frame) = job.frame {
         metadata.push("dofray:frame", frame);
@@ -1216,7 +988,7 @@ fn render_job(
         "schema_version": dofray::exit::SCHEMA_VERSION,
         "dofray_version": dofray::VERSION,
         "git_commit": dofray::GIT_COMMIT,
-        "scene": p.desc.name,
+        "scene": p.renderer.desc().name,
         "output": job.output,
         "frame": job.frame,
         "region": (region != full).then(|| region.to_string()),
@@ -1252,8 +1024,8 @@ fn render_job(
         "focus_distance": json_f32(camera.focus_distance),
         "threads": p.pool.current_num_threads(),
         "process_threads": dofray::limits::process_threads(),
-        "embree": embree_json(&p.world.scene),
-        "warnings": p.desc.warnings,
+        "embree": embree_json(&p.renderer.world().scene),
+        "warnings": p.renderer.desc().warnings,
     }))
 }
 
@@ -1316,13 +1088,13 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
             .with_context(|| format!("cannot create --out directory {}", dir.display()))?;
     }
     let p = prepare(&a.scene)?;
-    let camera = p.camera(&a.scene, None)?;
+    let camera = p.renderer.camera(None).map_err(cli_error)?;
     if a.equal_error {
         return run_equal_error(a, &p, &camera);
     }
     let config = BenchConfig {
-        spp: a.spp.or(p.desc.spp).unwrap_or(16),
-        aa: a.aa.or(p.desc.aa).unwrap_or(4),
+        spp: a.spp.or(p.renderer.desc().spp).unwrap_or(16),
+        aa: a.aa.or(p.renderer.desc().aa).unwrap_or(4),
         repeat: a.repeat,
         reference_spp: a.reference_spp,
         seed: a.scene.seed,
@@ -1342,9 +1114,15 @@ fn run_bench(a: &BenchArgs) -> Result<()> {
         usage!("--repeat must be at least 1");
     }
     let bar = Bar::new(a.quiet || a.json);
-    let (report, images) = p
-        .pool
-        .install(|| bench::run(&p.desc, &p.world, &camera, &config, &bar))?;
+    let (report, images) = p.pool.install(|| {
+        bench::run(
+            p.renderer.desc(),
+            p.renderer.world(),
+            &camera,
+            &config,
+            &bar,
+        )
+    })?;
     // Images first: a failure then reports one JSON object (the error), never two.
     if let Some(dir) = &a.out {
         write_bench_images(dir, &report, &images)?;
@@ -1387,7 +1165,7 @@ fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> Result<()> {
     let aa = match a.aa {
         Some(n) => equal_error::RungAa::Fixed(n),
         None => equal_error::RungAa::Ratio(
-            p.desc.aa.unwrap_or(4) as f64 / p.desc.spp.unwrap_or(16) as f64,
+            p.renderer.desc().aa.unwrap_or(4) as f64 / p.renderer.desc().spp.unwrap_or(16) as f64,
         ),
     };
     let config = equal_error::EqualErrorConfig {
@@ -1400,9 +1178,9 @@ fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> Result<()> {
         cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
     };
     let bar = Bar::new(a.quiet || a.json);
-    let mut report = p
-        .pool
-        .install(|| equal_error::run(&p.desc, &p.world, camera, &config, &bar))?;
+    let mut report = p.pool.install(|| {
+        equal_error::run(p.renderer.desc(), p.renderer.world(), camera, &config, &bar)
+    })?;
     if let Some(dir) = &a.out {
         equal_error::write_plot(&mut report, dir)?;
     }

@@ -1,0 +1,457 @@
+//! Overrides of a scene's camera, lights and render settings: what the command line's flags
+//! set, as a library type, so another tool changes a loaded scene the same way `dofray render`
+//! does.
+//!
+//! [`Overrides`] changes the scene (size, lens, focus, aperture shape, lights, ambient);
+//! [`SettingsOverrides`] merges the render settings (flag, else the scene's, else the default).
+//! Every value is checked when applied; an [`OverrideError`] names the [`Param`] and what was
+//! expected.
+
+use glam::Vec3;
+
+use crate::camera::{CameraSpec, Focus, LensSpec};
+use crate::filter::{PixelFilter, PixelFilterKind};
+use crate::render::{Mode, RenderError, RenderSettings, SiteRule};
+use crate::sampler::LensFilter;
+use crate::scene::SceneDesc;
+use crate::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
+use crate::shade::Light;
+
+/// Changes to a scene's camera and lights; `None` (or an empty `lights`) keeps the scene's.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Overrides {
+    /// Image width in pixels; the height follows the aspect when `height` is `None`.
+    pub width: Option<u32>,
+    /// Image height in pixels; the width follows the aspect when `width` is `None`.
+    pub height: Option<u32>,
+    /// A lens of this aperture radius (scene units), replacing the scene's.
+    pub aperture_radius: Option<f32>,
+    /// A photographic lens of this f-number, replacing the scene's (focal length and sensor
+    /// width from the fields below, else the scene's photographic lens, else 50 mm on 36 mm).
+    pub f_number: Option<f32>,
+    /// Focal length in mm of a photographic lens (needs `f_number` unless the scene's lens is
+    /// photographic).
+    pub focal_length_mm: Option<f32>,
+    /// Sensor width in mm of a photographic lens (likewise).
+    pub sensor_width_mm: Option<f32>,
+    /// The seed's lens: (sharp range in scene units, spread in pixels), replacing the scene's.
+    pub sharp_range: Option<(f32, f32)>,
+    /// Focus distance along the view axis (`f32::INFINITY`: at infinity).
+    pub focus_distance: Option<f32>,
+    /// Autofocus on the surface seen through this pixel (wins over `focus_distance`).
+    pub autofocus: Option<(u32, u32)>,
+    /// Aperture blades (0: circular).
+    pub blades: Option<u32>,
+    /// Rotation of a polygonal aperture in degrees.
+    pub blade_rotation_deg: Option<f32>,
+    /// Anamorphic ratio: aperture height over width.
+    pub anamorphic: Option<f32>,
+    /// Lights replacing the scene's (empty: the scene's).
+    pub lights: Vec<Light>,
+    /// Ambient light level replacing the scene's.
+    pub ambient: Option<f32>,
+}
+
+/// A parameter of [`Overrides`] or [`SettingsOverrides`], for messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Param {
+    Width,
+    Height,
+    ApertureRadius,
+    FNumber,
+    FocalLength,
+    SensorWidth,
+    SharpRange,
+    Spread,
+    FocusDistance,
+    Blades,
+    BladeRotation,
+    Anamorphic,
+    Ambient,
+}
+
+impl Param {
+    /// The field's name (`f_number`).
+    pub fn field(self) -> &'static str {
+        match self {
+            Self::Width => "width",
+            Self::Height => "height",
+            Self::ApertureRadius => "aperture_radius",
+            Self::FNumber => "f_number",
+            Self::FocalLength => "focal_length_mm",
+            Self::SensorWidth => "sensor_width_mm",
+            Self::SharpRange => "sharp_range",
+            Self::Spread => "spread",
+            Self::FocusDistance => "focus_distance",
+            Self::Blades => "blades",
+            Self::BladeRotation => "blade_rotation_deg",
+            Self::Anamorphic => "anamorphic",
+            Self::Ambient => "ambient",
+        }
+    }
+
+    /// The command line's flag for it (`--f-number`).
+    pub fn flag(self) -> &'static str {
+        match self {
+            Self::Width => "--width",
+            Self::Height => "--height",
+            Self::ApertureRadius => "--aperture-radius",
+            Self::FNumber => "--f-number",
+            Self::FocalLength => "--focal-length",
+            Self::SensorWidth => "--sensor-width",
+            Self::SharpRange => "--sharp-range",
+            Self::Spread => "--spread",
+            Self::FocusDistance => "--focus-distance",
+            Self::Blades => "--blades",
+            Self::BladeRotation => "--blade-rotation",
+            Self::Anamorphic => "--anamorphic",
+            Self::Ambient => "--ambient",
+        }
+    }
+}
+
+/// An override that cannot be applied. `Display` names the fields of [`Overrides`];
+/// [`OverrideError::message`] names them any other way (the command line: its flags).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OverrideError {
+    #[error("{}", self.message(Param::field))]
+    ZeroSize(Param),
+    /// Expected a finite number > 0.
+    #[error("{}", self.message(Param::field))]
+    NotPositive { param: Param, value: f32 },
+    /// Expected a finite number >= 0.
+    #[error("{}", self.message(Param::field))]
+    Negative { param: Param, value: f32 },
+    /// Expected a number > 0 or infinity.
+    #[error("{}", self.message(Param::field))]
+    FocusDistance(f32),
+    /// Expected 0 or at least 3.
+    #[error("{}", self.message(Param::field))]
+    Blades(u32),
+    /// Expected a finite angle.
+    #[error("{}", self.message(Param::field))]
+    BladeRotation(f32),
+    /// A focal length or sensor width for a lens that is not photographic, without `f_number`.
+    #[error("{}", self.message(Param::field))]
+    NotPhotographic { param: Param, lens: &'static str },
+    /// The photographic lens gives no usable field of view.
+    #[error("{}", self.message(Param::field))]
+    NoFieldOfView {
+        focal_length_mm: f32,
+        sensor_width_mm: f32,
+        vfov_deg: f32,
+    },
+}
+
+impl OverrideError {
+    /// The message with every parameter called `name(param)`.
+    pub fn message(&self, name: impl Fn(Param) -> &'static str) -> String {
+        match *self {
+            Self::ZeroSize(p) => format!("{} must be at least 1 pixel", name(p)),
+            Self::NotPositive { param, value } => {
+                format!("{} must be a finite number > 0, got {value}", name(param))
+            }
+            Self::Negative { param, value } => {
+                format!("{} must be a finite number >= 0, got {value}", name(param))
+            }
+            Self::FocusDistance(d) => format!(
+                "{} must be a number > 0 (or inf), got {d}",
+                name(Param::FocusDistance)
+            ),
+            Self::Blades(b) => format!(
+                "{} must be 0 (a circular aperture) or at least 3, got {b}",
+                name(Param::Blades)
+            ),
+            Self::BladeRotation(r) => format!(
+                "{} must be a finite angle in degrees, got {r}",
+                name(Param::BladeRotation)
+            ),
+            Self::NotPhotographic { param, lens } => format!(
+                "{} applies to a photographic lens, but the scene's lens is {lens}; give {} too \
+                 to replace it with a photographic lens",
+                name(param),
+                name(Param::FNumber)
+            ),
+            Self::NoFieldOfView {
+                focal_length_mm,
+                sensor_width_mm,
+                vfov_deg,
+            } => format!(
+                "a {focal_length_mm:e} mm lens on a {sensor_width_mm} mm sensor has no usable \
+                 field of view ({vfov_deg} degrees vertically); choose a longer {} or a smaller \
+                 {}",
+                name(Param::FocalLength),
+                name(Param::SensorWidth)
+            ),
+        }
+    }
+}
+
+fn scaled(v: u32, from: u32, to: u32) -> u32 {
+    (((v as f64 + 0.5) * to as f64 / from.max(1) as f64) as u32).min(to.saturating_sub(1))
+}
+
+fn follow_aspect(given: u32, given_base: u32, other_base: u32) -> u32 {
+    ((given as u64 * other_base as u64) as f64 / given_base as f64)
+        .round()
+        .max(1.0) as u32
+}
+
+impl Overrides {
+    /// Applies the size, lens, focus and aperture shape to a camera. An autofocus pixel of the
+    /// camera's own moves with a new size (it names a place in the picture).
+    pub fn apply_camera(&self, cam: &mut CameraSpec) -> Result<(), OverrideError> {
+        for (param, v) in [(Param::Width, self.width), (Param::Height, self.height)] {
+            if v == Some(0) {
+                return Err(OverrideError::ZeroSize(param));
+            }
+        }
+        let (old_w, old_h) = (cam.width, cam.height);
+        match (self.width, self.height) {
+            (Some(w), Some(h)) => (cam.width, cam.height) = (w, h),
+            (Some(w), None) => {
+                cam.height = follow_aspect(w, cam.width, cam.height);
+                cam.width = w;
+            }
+            (None, Some(h)) => {
+                cam.width = follow_aspect(h, cam.height, cam.width);
+                cam.height = h;
+            }
+            (None, None) => {}
+        }
+        if let Focus::Pixel { x, y } = &mut cam.focus {
+            *x = scaled(*x, old_w, cam.width);
+            *y = scaled(*y, old_h, cam.height);
+        }
+        for (param, v) in [
+            (Param::FNumber, self.f_number),
+            (Param::FocalLength, self.focal_length_mm),
+            (Param::SensorWidth, self.sensor_width_mm),
+            (Param::Anamorphic, self.anamorphic),
+        ] {
+            if let Some(value) = v
+                && !(value.is_finite() && value > 0.0)
+            {
+                return Err(OverrideError::NotPositive { param, value });
+            }
+        }
+        if let Some(r) = self.aperture_radius {
+            if !(r.is_finite() && r >= 0.0) {
+                return Err(OverrideError::Negative {
+                    param: Param::ApertureRadius,
+                    value: r,
+                });
+            }
+            // A photographic lens set the field of view: keep the framing it gave.
+            cam.vfov_deg = cam.effective_vfov_deg();
+            cam.lens = LensSpec::Aperture { radius: r };
+        }
+        if let Some((sharp_range, spread)) = self.sharp_range {
+            if !(sharp_range.is_finite() && sharp_range > 0.0) {
+                return Err(OverrideError::NotPositive {
+                    param: Param::SharpRange,
+                    value: sharp_range,
+                });
+            }
+            if !(spread.is_finite() && spread >= 0.0) {
+                return Err(OverrideError::Negative {
+                    param: Param::Spread,
+                    value: spread,
+                });
+            }
+            cam.vfov_deg = cam.effective_vfov_deg();
+            cam.lens = LensSpec::Seed {
+                sharp_range,
+                spread,
+            };
+        }
+        self.apply_photographic(cam)?;
+        if let Some(d) = self.focus_distance {
+            if d.is_nan() || d <= 0.0 {
+                return Err(OverrideError::FocusDistance(d));
+            }
+            cam.focus = Focus::Distance(d);
+        }
+        if let Some((x, y)) = self.autofocus {
+            cam.focus = Focus::Pixel { x, y };
+        }
+        if let Some(b) = self.blades {
+            if b == 1 || b == 2 {
+                return Err(OverrideError::Blades(b));
+            }
+            cam.aperture.blades = b;
+        }
+        if let Some(r) = self.blade_rotation_deg {
+            if !r.is_finite() {
+                return Err(OverrideError::BladeRotation(r));
+            }
+            cam.aperture.rotation_deg = r;
+        }
+        if let Some(r) = self.anamorphic {
+            cam.aperture.anamorphic = r;
+        }
+        Ok(())
+    }
+
+    /// The photographic lens's part of [`Overrides::apply_camera`].
+    fn apply_photographic(&self, cam: &mut CameraSpec) -> Result<(), OverrideError> {
+        match (self.f_number, &mut cam.lens) {
+            (
+                None,
+                LensSpec::Photographic {
+                    focal_length_mm,
+                    sensor_width_mm,
+                    ..
+                },
+            ) => {
+                *focal_length_mm = self.focal_length_mm.unwrap_or(*focal_length_mm);
+                *sensor_width_mm = self.sensor_width_mm.unwrap_or(*sensor_width_mm);
+            }
+            (None, lens) => {
+                let given = [
+                    (Param::FocalLength, self.focal_length_mm.is_some()),
+                    (Param::SensorWidth, self.sensor_width_mm.is_some()),
+                ];
+                if let Some(&(param, _)) = given.iter().find(|(_, set)| *set) {
+                    let lens = match lens {
+                        LensSpec::Pinhole => "a pinhole (no aperture)",
+                        LensSpec::Aperture { .. } => "given by an aperture radius",
+                        LensSpec::Seed { .. } => "the seed's (sharp_range and spread)",
+                        LensSpec::Photographic { .. } => unreachable!("matched above"),
+                    };
+                    return Err(OverrideError::NotPhotographic { param, lens });
+                }
+            }
+            (Some(n), lens) => {
+                let (focal, sensor) = match *lens {
+                    LensSpec::Photographic {
+                        focal_length_mm,
+                        sensor_width_mm,
+                        ..
+                    } => (focal_length_mm, sensor_width_mm),
+                    _ => (DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM),
+                };
+                *lens = LensSpec::Photographic {
+                    focal_length_mm: self.focal_length_mm.unwrap_or(focal),
+                    f_number: n,
+                    sensor_width_mm: self.sensor_width_mm.unwrap_or(sensor),
+                };
+            }
+        }
+        if let LensSpec::Photographic {
+            focal_length_mm,
+            sensor_width_mm,
+            ..
+        } = cam.lens
+            && (self.f_number.is_some()
+                || self.focal_length_mm.is_some()
+                || self.sensor_width_mm.is_some())
+        {
+            let vfov_deg = cam.effective_vfov_deg();
+            if !(vfov_deg > 0.0 && vfov_deg < 180.0) {
+                return Err(OverrideError::NoFieldOfView {
+                    focal_length_mm,
+                    sensor_width_mm,
+                    vfov_deg,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Applies the lights and ambient level, then the camera ([`Overrides::apply_camera`]).
+    pub fn apply_scene(&self, desc: &mut SceneDesc) -> Result<(), OverrideError> {
+        if !self.lights.is_empty() {
+            desc.lights = self.lights.clone();
+        }
+        if let Some(v) = self.ambient {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(OverrideError::Negative {
+                    param: Param::Ambient,
+                    value: v,
+                });
+            }
+            desc.ambient = Vec3::splat(v);
+        }
+        self.apply_camera(&mut desc.camera)
+    }
+
+    /// Whether the lens, focus or aperture shape is overridden (a camera that cannot be built
+    /// is then the caller's doing, not the scene's).
+    pub fn lens_given(&self) -> bool {
+        self.aperture_radius.is_some()
+            || self.f_number.is_some()
+            || self.focal_length_mm.is_some()
+            || self.sensor_width_mm.is_some()
+            || self.sharp_range.is_some()
+            || self.focus_distance.is_some()
+            || self.autofocus.is_some()
+            || self.blades.is_some()
+            || self.blade_rotation_deg.is_some()
+            || self.anamorphic.is_some()
+    }
+}
+
+/// Render settings that replace a scene's; `None` (or `false`) keeps the scene's, else the
+/// default of [`RenderSettings`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SettingsOverrides {
+    /// Default: adaptive.
+    pub mode: Option<Mode>,
+    pub spp: Option<u32>,
+    pub aa: Option<u32>,
+    pub pixel_filter: Option<PixelFilterKind>,
+    pub pixel_filter_width: Option<f32>,
+    /// The error-controlled rule's tolerance (8-bit sRGB code values).
+    pub tolerance: Option<f32>,
+    /// The seed's rule with this interval factor.
+    pub interval_factor: Option<f32>,
+    /// The seed's rule, per pixel as the paper has it.
+    pub paper_exact: bool,
+    pub transparent: bool,
+    /// Exposure in stops (default 0).
+    pub exposure: Option<f32>,
+    /// Default 0.
+    pub seed: Option<u64>,
+    /// Default: box.
+    pub lens_filter: Option<LensFilter>,
+}
+
+impl SettingsOverrides {
+    /// The settings for `desc`: each value from here, else the scene's, else the default. The
+    /// seed's rule is used when `interval_factor` or `paper_exact` is given, or when the scene
+    /// has an interval factor and no `tolerance` is given here; else the error-controlled
+    /// rule. The result is validated.
+    pub fn settings(&self, desc: &SceneDesc) -> Result<RenderSettings, RenderError> {
+        let mut settings = RenderSettings {
+            mode: self.mode.unwrap_or(Mode::Adaptive),
+            paper_exact: self.paper_exact,
+            seed: self.seed.unwrap_or(0),
+            filter: self.lens_filter.unwrap_or(LensFilter::Box),
+            ..Default::default()
+        };
+        settings.spp = self.spp.or(desc.spp).unwrap_or(16);
+        settings.aa = self.aa.or(desc.aa).unwrap_or(4);
+        settings.pixel_filter = match (self.pixel_filter, desc.pixel_filter) {
+            (Some(kind), _) => PixelFilter::new(kind),
+            (None, Some(scene)) => scene,
+            (None, None) => PixelFilter::default(),
+        };
+        if let Some(width) = self.pixel_filter_width {
+            settings.pixel_filter.width = width;
+        }
+        let seed_rule = self.interval_factor.is_some()
+            || self.paper_exact
+            || (self.tolerance.is_none() && desc.interval_factor.is_some());
+        if seed_rule {
+            settings.rule = SiteRule::Seed;
+            settings.interval_factor = self.interval_factor.or(desc.interval_factor).unwrap_or(0.4);
+        } else {
+            settings.tolerance = self.tolerance.or(desc.tolerance);
+        }
+        settings.transparent = self.transparent || desc.transparent;
+        settings.exposure = self.exposure.unwrap_or(0.0);
+        settings.validate()?;
+        Ok(settings)
+    }
+}

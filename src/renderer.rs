@@ -1,0 +1,188 @@
+//! [`Renderer`]: a scene with its overrides and its Embree world, ready to render any frame.
+
+use crate::camera::{Camera, CameraError, CameraSpec, Focus};
+use crate::embree::Device;
+use crate::limits::MemoryError;
+use crate::overrides::{OverrideError, Overrides};
+use crate::render::{self, Film, Progress, Region, RenderError, RenderSettings, RenderStats};
+use crate::scene::{LoadError, SceneDesc, SceneError, World};
+
+/// Why a [`Renderer`] could not be made or could not render. [`crate::exit::classify`] sorts
+/// it as the command line does: overrides (and a camera they made invalid) are usage errors,
+/// the scene's own faults bad input, memory a resource limit.
+#[derive(Debug, thiserror::Error)]
+pub enum RendererError {
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    #[error("invalid scene {name}")]
+    Scene {
+        name: String,
+        #[source]
+        source: SceneError,
+    },
+    #[error(transparent)]
+    Override(#[from] OverrideError),
+    #[error(transparent)]
+    Memory(#[from] MemoryError),
+    /// The camera cannot be built; `overridden`: the overrides set its lens, focus or aperture.
+    #[error("invalid camera")]
+    Camera {
+        #[source]
+        source: CameraError,
+        overridden: bool,
+    },
+    /// The scene's autofocus pixel, moved to a new image size, sees no surface.
+    #[error(
+        "invalid camera: the scene's autofocus pixel ({x0}, {y0}) of its {w0}x{h0} image (({x}, \
+         {y}) at {width}x{height}) sees no surface to focus on"
+    )]
+    ScaledFocusPixelMisses {
+        x0: u32,
+        y0: u32,
+        w0: u32,
+        h0: u32,
+        x: u32,
+        y: u32,
+        width: u32,
+        height: u32,
+    },
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+/// A scene ready to render: its description with the [`Overrides`] applied, the camera as the
+/// scene gave it (each frame's camera is made from it), and the Embree world, built once.
+///
+/// ```rust
+/// use dofray::{embree::Device, overrides::Overrides, render::NoProgress, renderer::Renderer};
+///
+/// let desc = dofray::scene::load("paper")?;
+/// let overrides = Overrides { width: Some(64), height: Some(48), f_number: Some(2.8), ..Default::default() };
+/// let renderer = Renderer::with_overrides(desc, overrides, &Device::new()?)?;
+/// let settings = dofray::overrides::SettingsOverrides::default().settings(renderer.desc())?;
+/// let (film, stats) = renderer.render(&settings, &NoProgress)?;
+/// let path = std::env::temp_dir().join("dofray-doc-example.png");
+/// dofray::output::write_film(&path, &film)?;
+/// assert_eq!((film.width, film.height), (64, 48));
+/// println!("{} rays in {:.2} s", stats.rays.total(), stats.seconds);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub struct Renderer {
+    desc: SceneDesc,
+    base_camera: CameraSpec,
+    overrides: Overrides,
+    world: World,
+}
+
+impl Renderer {
+    /// The scene as it is, on `device`.
+    pub fn new(desc: SceneDesc, device: &Device) -> Result<Self, RendererError> {
+        Self::with_overrides(desc, Overrides::default(), device)
+    }
+
+    /// The scene with `overrides` (checked before anything is built), on `device`.
+    pub fn with_overrides(
+        mut desc: SceneDesc,
+        overrides: Overrides,
+        device: &Device,
+    ) -> Result<Self, RendererError> {
+        let base_camera = desc.camera.clone();
+        overrides.apply_scene(&mut desc)?;
+        crate::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
+        let world = World::build(&desc, device).map_err(|source| RendererError::Scene {
+            name: desc.name.clone(),
+            source,
+        })?;
+        Ok(Self {
+            desc,
+            base_camera,
+            overrides,
+            world,
+        })
+    }
+
+    /// The scene with the overrides applied (its camera: the first frame's).
+    pub fn desc(&self) -> &SceneDesc {
+        &self.desc
+    }
+
+    /// The Embree world.
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    /// The overrides.
+    pub fn overrides(&self) -> &Overrides {
+        &self.overrides
+    }
+
+    /// The camera at `frame` (the scene's animation evaluated there; `None`: the animation's
+    /// first frame), with the overrides on top; autofocus looks into the world.
+    pub fn camera(&self, frame: Option<i64>) -> Result<Camera, RendererError> {
+        let mut spec = self.base_camera.clone();
+        if let Some(animation) = &self.desc.animation {
+            let frame = frame.unwrap_or(*animation.frames().start());
+            animation.apply(&mut spec, frame as f64);
+        }
+        // The scene's own autofocus pixel and size, for messages after a new size moved it.
+        let scene_focus = (spec.focus, spec.width, spec.height);
+        self.overrides.apply_camera(&mut spec)?;
+        crate::limits::check_image_memory(spec.width, spec.height)?;
+        let forward = (spec.look_at - spec.eye).normalize_or_zero();
+        let world = &self.world;
+        spec.build(|ray| {
+            world
+                .scene
+                .intersect1(ray)
+                .map(|hit| (ray.at(hit.t) - ray.origin).dot(forward))
+        })
+        .map_err(|e| match (e, scene_focus) {
+            (CameraError::FocusPixelMisses { x, y }, (Focus::Pixel { x: x0, y: y0 }, w0, h0))
+                if (x, y) != (x0, y0) =>
+            {
+                RendererError::ScaledFocusPixelMisses {
+                    x0,
+                    y0,
+                    w0,
+                    h0,
+                    x,
+                    y,
+                    width: spec.width,
+                    height: spec.height,
+                }
+            }
+            (source, _) => RendererError::Camera {
+                source,
+                overridden: self.overrides.lens_given(),
+            },
+        })
+    }
+
+    /// Renders the whole image (the first frame of an animated scene).
+    pub fn render(
+        &self,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<(Film, RenderStats), RendererError> {
+        self.render_frame(None, None, settings, progress)
+    }
+
+    /// Renders `region` (`None`: the whole image) of `frame` ([`Renderer::camera`]).
+    pub fn render_frame(
+        &self,
+        frame: Option<i64>,
+        region: Option<&Region>,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<(Film, RenderStats), RendererError> {
+        let camera = self.camera(frame)?;
+        let full = Region::full(camera.width, camera.height);
+        Ok(render::render_region(
+            &self.world,
+            &camera,
+            settings,
+            region.unwrap_or(&full),
+            progress,
+        )?)
+    }
+}
