@@ -248,6 +248,8 @@ fn embree_kind(e: &EmbreeError, otherwise: ErrorKind) -> ErrorKind {
 fn render_kind(e: &RenderError) -> ErrorKind {
     match e {
         RenderError::NonFinite { .. } => ErrorKind::Internal,
+        // The caller stopped it, as SIGINT would.
+        RenderError::Cancelled => ErrorKind::Interrupted(2),
         _ => ErrorKind::Usage,
     }
 }

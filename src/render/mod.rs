@@ -138,9 +138,13 @@ impl Default for RenderSettings {
     }
 }
 
-/// Why a render could not start.
+/// Why a render could not start (or did not finish).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RenderError {
+    /// [`Progress::cancelled`] returned true; no image was made. [`crate::exit::classify`]
+    /// sorts it as `interrupted` (exit code 130, as SIGINT): the caller stopped it.
+    #[error("the render was cancelled")]
+    Cancelled,
     #[error("spp must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
     BadSpp(u32),
     #[error("aa must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
@@ -247,17 +251,91 @@ impl RenderStats {
     }
 }
 
-/// Receives progress; all methods may be called from several threads.
+/// Receives progress, and may cancel the render; all methods may be called from several
+/// threads.
 pub trait Progress: Sync {
     /// A new phase with `total` units of work begins.
     fn start(&self, _phase: &str, _total: u64) {}
     fn advance(&self, _units: u64) {}
     fn finish(&self) {}
+    /// Whether to stop: polled before every band of 4 rows of the depth pass, every row of
+    /// pinhole, dense and the seed's rule, and every round of every bucket of the
+    /// error-controlled rule. Once it returns true the render skips the work not yet started
+    /// and returns [`RenderError::Cancelled`] (within about a row's or a round's time per
+    /// thread). It should stay true once it has been. Default: never.
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// Progress that goes nowhere.
 pub struct NoProgress;
 impl Progress for NoProgress {}
+
+/// A cancellation token: [`CancelFlag::cancel`] it from any thread (a UI's stop button, a
+/// signal handler) and a render given it (as its [`Progress`], or another progress wrapped with
+/// [`CancelFlag::with`]) stops with [`RenderError::Cancelled`].
+#[derive(Debug, Default)]
+pub struct CancelFlag(std::sync::atomic::AtomicBool);
+
+impl CancelFlag {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Asks every render polling this flag to stop.
+    pub fn cancel(&self) {
+        self.0.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    pub fn is_cancelled(&self) -> bool {
+        self.0.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    /// `progress`, also cancelled by this flag.
+    pub fn with<'a>(&'a self, progress: &'a dyn Progress) -> Cancellable<'a> {
+        Cancellable {
+            progress,
+            flag: self,
+        }
+    }
+}
+
+impl Progress for CancelFlag {
+    fn cancelled(&self) -> bool {
+        self.is_cancelled()
+    }
+}
+
+/// A progress reporter with a [`CancelFlag`] ([`CancelFlag::with`]).
+pub struct Cancellable<'a> {
+    progress: &'a dyn Progress,
+    flag: &'a CancelFlag,
+}
+
+impl Progress for Cancellable<'_> {
+    fn start(&self, phase: &str, total: u64) {
+        self.progress.start(phase, total);
+    }
+    fn advance(&self, units: u64) {
+        self.progress.advance(units);
+    }
+    fn finish(&self) {
+        self.progress.finish();
+    }
+    fn cancelled(&self) -> bool {
+        self.flag.is_cancelled() || self.progress.cancelled()
+    }
+}
+
+/// `Err(RenderError::Cancelled)` when `progress` asks to stop.
+pub(crate) fn check_cancelled(progress: &dyn Progress) -> Result<(), RenderError> {
+    if progress.cancelled() {
+        Err(RenderError::Cancelled)
+    } else {
+        Ok(())
+    }
+}
 
 /// Depth pass: one ray per pixel through the pixel centre and the lens centre, 16 pixels (a
 /// 4 x 4 block) per packet, intersected only. Fills the film's depth and CoC, a band of 4 rows
@@ -269,7 +347,7 @@ fn depth_pass(
     film: &mut Film,
     tally: &mut Tally,
     progress: &dyn Progress,
-) {
+) -> Result<(), RenderError> {
     const BAND: usize = 4;
     let (w, h) = (film.width, film.height);
     progress.start("depth", h.div_ceil(BAND) as u64);
@@ -284,6 +362,9 @@ fn depth_pass(
             let mut packet = RayPacket16::new();
             let mut t_hit = [0.0f32; LANES];
             let mut local = Tally::new(settings.record_rays);
+            if progress.cancelled() {
+                return local;
+            }
             for x_start in (0..w).step_by(4) {
                 packet.clear();
                 // Film index of each lane's pixel within the band.
@@ -324,6 +405,7 @@ fn depth_pass(
     for local in tallies {
         tally.merge(local);
     }
+    check_cancelled(progress)
 }
 
 /// Pinhole, dense, and adaptive with the seed's rule: fills `film.samples` (0 where the
@@ -407,7 +489,7 @@ pub fn render_region(
     let (w, h) = (camera.width as usize, camera.height as usize);
     let mut film = Film::new(w, h);
     let mut tally = Tally::new(settings.record_rays);
-    depth_pass(world, camera, settings, &mut film, &mut tally, progress);
+    depth_pass(world, camera, settings, &mut film, &mut tally, progress)?;
     let mut stats = RenderStats {
         pinhole_seconds: start.elapsed().as_secs_f64(),
         ..Default::default()
@@ -424,7 +506,7 @@ pub fn render_region(
     let blurred = maps::blurred(&film.coc, w, h);
     if settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error {
         // Maps, sites and interpolation interleave in rounds: timed as shading.
-        let refined = refine::refine(&shader, &film.coc, &blurred, region, progress, &mut tally);
+        let refined = refine::refine(&shader, &film.coc, &blurred, region, progress, &mut tally)?;
         stats.rounds = refined.rounds;
         film.set_rgba(&refined.color);
         film.interval = refined.interval;
@@ -437,7 +519,7 @@ pub fn render_region(
         progress.start(settings.mode.name(), h as u64);
         let mut estimates = vec![Estimate::default(); w * h];
         let none = vec![0; w * h];
-        shader.shade_rows(&none, &film.samples, &mut estimates, progress, &mut tally);
+        shader.shade_rows(&none, &film.samples, &mut estimates, progress, &mut tally)?;
         let mut rgba: Vec<glam::Vec4> = estimates.iter().map(|e| e.mean_rgba()).collect();
         stats.sites_seconds = phase.elapsed().as_secs_f64();
         let phase = Instant::now();

@@ -470,7 +470,7 @@ pub fn refine(
     region: &super::Region,
     progress: &dyn Progress,
     tally: &mut Tally,
-) -> Refined {
+) -> Result<Refined, super::RenderError> {
     let s = shader.settings;
     let (width, height) = (shader.camera.width as usize, shader.camera.height as usize);
     let maps = Maps {
@@ -492,15 +492,16 @@ pub fn refine(
         .map(|(x0, y0)| Bucket::new(x0, y0, size, width, height))
         .collect();
     progress.start("adaptive", buckets.len() as u64);
-    let done: Vec<(Bucket, Refined, Tally)> = buckets
+    let done: Vec<(Bucket, Option<Refined>, Tally)> = buckets
         .par_iter()
         .map(|b| {
             let mut local = Tally::new(s.record_rays);
-            let refined = refine_bucket(shader, &maps, b, &mut local);
+            let refined = refine_bucket(shader, &maps, b, progress, &mut local);
             progress.advance(1);
             (*b, refined, local)
         })
         .collect();
+    super::check_cancelled(progress)?;
     let mut out = Refined {
         color: vec![Vec4::ZERO; width * height],
         interval: maps.start.clone(),
@@ -508,6 +509,9 @@ pub fn refine(
         rounds: 0,
     };
     for (b, refined, local) in done {
+        let Some(refined) = refined else {
+            return Err(super::RenderError::Cancelled);
+        };
         for y in 0..b.owned_h {
             for x in 0..b.owned_w {
                 let (p, q) = ((b.y0 + y) * width + b.x0 + x, y * b.w + x);
@@ -519,12 +523,18 @@ pub fn refine(
         out.rounds = out.rounds.max(refined.rounds);
         tally.merge(local);
     }
-    out
+    Ok(out)
 }
 
 /// The error-controlled rule inside one bucket; the result covers the bucket's closure, of
-/// which the owned pixels are final.
-fn refine_bucket(shader: &SiteShader, maps: &Maps, b: &Bucket, tally: &mut Tally) -> Refined {
+/// which the owned pixels are final. `None` when `progress` cancelled it (polled every round).
+fn refine_bucket(
+    shader: &SiteShader,
+    maps: &Maps,
+    b: &Bucket,
+    progress: &dyn Progress,
+    tally: &mut Tally,
+) -> Option<Refined> {
     let s = shader.settings;
     let full_width = shader.camera.width as usize;
     let (width, height) = (b.w, b.h);
@@ -559,6 +569,9 @@ fn refine_bucket(shader: &SiteShader, maps: &Maps, b: &Bucket, tally: &mut Tally
     let mut scratch = super::SiteScratch::new();
     let mut rounds = 0;
     loop {
+        if progress.cancelled() {
+            return None;
+        }
         pending.sort_unstable();
         pending.dedup();
         let limit = SAMPLING_SHARE * tolerance;
@@ -642,12 +655,12 @@ fn refine_bucket(shader: &SiteShader, maps: &Maps, b: &Bucket, tally: &mut Tally
                 .expect("every corner and centre of every cell is traced before the loop ends")
         })
         .collect();
-    Refined {
+    Some(Refined {
         color,
         interval,
         samples: traced.est.iter().map(|e| e.n).collect(),
         rounds,
-    }
+    })
 }
 
 #[cfg(test)]

@@ -71,7 +71,7 @@ impl SiteShader<'_> {
         estimates: &mut [Estimate],
         progress: &dyn Progress,
         tally: &mut Tally,
-    ) {
+    ) -> Result<(), super::RenderError> {
         let width = self.camera.width as usize;
         let record = self.settings.record_rays;
         let tallies: Vec<Tally> = estimates
@@ -80,7 +80,7 @@ impl SiteShader<'_> {
             .enumerate()
             .map_init(SiteScratch::new, |scratch, (y, (row, (from, to)))| {
                 let mut local = Tally::new(record);
-                if from != to {
+                if from != to && !progress.cancelled() {
                     self.shade_row((0, y), from, to, row, scratch, &mut local);
                 }
                 progress.advance(1);
@@ -90,6 +90,7 @@ impl SiteShader<'_> {
         for local in tallies {
             tally.merge(local);
         }
+        super::check_cancelled(progress)
     }
 
     /// Adds samples `from[i] .. to[i]` of pixel (x0 + i, y) to `estimates[i]` for every pixel
