@@ -127,6 +127,26 @@ pub struct CameraSpec {
     pub aperture: ApertureShape,
 }
 
+/// A pinhole camera at (0, 0, 5) looking at the origin along -z (y up), 640 x 480 pixels with
+/// a 40 degree vertical field of view, focused at the origin (5 units): give it a `lens` for
+/// depth of field, e.g. `CameraSpec { lens: LensSpec::Aperture { radius: 0.1 }, ..Default::default() }`.
+impl Default for CameraSpec {
+    fn default() -> Self {
+        use crate::scene::model::{DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH};
+        Self {
+            eye: Vec3::new(0.0, 0.0, 5.0),
+            look_at: Vec3::ZERO,
+            up: Vec3::Y,
+            vfov_deg: DEFAULT_VFOV,
+            width: DEFAULT_WIDTH,
+            height: DEFAULT_HEIGHT,
+            lens: LensSpec::Pinhole,
+            focus: Focus::Distance(5.0),
+            aperture: ApertureShape::default(),
+        }
+    }
+}
+
 /// A thin-lens camera, ready to generate rays.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Camera {

@@ -124,6 +124,33 @@ pub struct SceneDesc {
     pub animation: Option<Animation>,
 }
 
+/// An empty scene named "scene": the default [`CameraSpec`] (a pinhole at (0, 0, 5) looking
+/// down -z at the origin, 640 x 480), no materials, objects or lights, ambient 0.1 (a scene
+/// file's default), the default sky, and the render settings left to the renderer. Fill in
+/// what it needs: `SceneDesc { materials, objects, lights, ..Default::default() }` (a scene
+/// without objects does not build: [`SceneError::Empty`]).
+impl Default for SceneDesc {
+    fn default() -> Self {
+        Self {
+            name: "scene".into(),
+            camera: CameraSpec::default(),
+            materials: Vec::new(),
+            objects: Vec::new(),
+            lights: Vec::new(),
+            ambient: Vec3::splat(0.1),
+            background: model::default_background(),
+            spp: None,
+            aa: None,
+            pixel_filter: None,
+            interval_factor: None,
+            tolerance: None,
+            transparent: false,
+            warnings: Vec::new(),
+            animation: None,
+        }
+    }
+}
+
 /// Loads a scene: a built-in scene by name (see [`builtin::BUILTIN`]), a `.toml` scene file
 /// (`docs/scene-format.md`), or a `.obj`, `.gltf` or `.glb` model, which gets the glTF camera if
 /// it has one (else a view framing its bounds), a small aperture focused on the bounds' centre,
