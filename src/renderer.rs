@@ -57,7 +57,8 @@ pub enum RendererError {
 /// use dofray::{embree::Device, overrides::Overrides, render::NoProgress, renderer::Renderer};
 ///
 /// let desc = dofray::scene::load("paper")?;
-/// let overrides = Overrides { width: Some(64), height: Some(48), f_number: Some(2.8), ..Default::default() };
+/// let (width, height, f_number) = (Some(64), Some(48), Some(2.8));
+/// let overrides = Overrides { width, height, f_number, ..Default::default() };
 /// let renderer = Renderer::with_overrides(desc, overrides, &Device::new()?)?;
 /// let settings = dofray::overrides::SettingsOverrides::default().settings(renderer.desc())?;
 /// let (film, stats) = renderer.render(&settings, &NoProgress)?;

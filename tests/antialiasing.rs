@@ -56,14 +56,7 @@ fn scene(
         lights: vec![],
         ambient: Vec3::ONE,
         background: Background::uniform(Vec3::ZERO),
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
-        warnings: Vec::new(),
-        animation: None,
+        ..Default::default()
     }
 }
 

@@ -108,14 +108,7 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
         lights: vec![],
         ambient: Vec3::splat(100.0),
         background: Background::uniform(Vec3::ZERO),
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
-        warnings: Vec::new(),
-        animation: None,
+        ..Default::default()
     };
     let (world, camera) = setup(&desc);
     let coc = camera.coc_px(5.0);

@@ -124,14 +124,7 @@ fn wall_scene(z: f32, material: Material) -> SceneDesc {
         lights: vec![],
         ambient: Vec3::ONE,
         background: Background::uniform(Vec3::ZERO),
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
-        warnings: Vec::new(),
-        animation: None,
+        ..Default::default()
     }
 }
 

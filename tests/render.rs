@@ -178,14 +178,7 @@ fn rendered_blur_disc_matches_coc_px() {
         lights: vec![],
         ambient: Vec3::ONE,
         background: Background::uniform(Vec3::ZERO),
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
-        warnings: Vec::new(),
-        animation: None,
+        ..Default::default()
     };
     let (world, camera) = setup(&desc);
     let settings = RenderSettings {
@@ -306,14 +299,7 @@ fn mirror_reflects_one_bounce() {
         lights: vec![],
         ambient: Vec3::ONE,
         background: Background::uniform(Vec3::new(0.0, 0.0, 1.0)),
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
-        warnings: Vec::new(),
-        animation: None,
+        ..Default::default()
     };
     let (world, camera) = setup(&desc);
     let pinhole = |bounces| RenderSettings {

@@ -43,14 +43,7 @@ fn scene(camera: CameraSpec, objects: Vec<Object>, light: Vec3, intensity: f32) 
         }],
         ambient: Vec3::splat(0.1),
         background: Background::uniform(Vec3::ZERO),
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
-        warnings: Vec::new(),
-        animation: None,
+        ..Default::default()
     }
 }
 

@@ -115,13 +115,6 @@ pub fn paper() -> SceneDesc {
             horizon: Vec3::new(0.75, 0.82, 0.95),
             zenith: Vec3::new(0.3, 0.45, 0.8),
         },
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
-        warnings: Vec::new(),
-        animation: None,
+        ..Default::default()
     }
 }

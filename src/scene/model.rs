@@ -380,14 +380,8 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         },
         ambient: Vec3::splat(0.15),
         background: default_background(),
-        spp: None,
-        aa: None,
-        pixel_filter: None,
-        interval_factor: None,
-        tolerance: None,
-        transparent: false,
         warnings: model.warnings,
-        animation: None,
+        ..Default::default()
     })
 }
 
