@@ -764,18 +764,32 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
     let start = std::time::Instant::now();
     let mut results = Vec::new();
     let mut first_failure: Option<dofray::exit::ErrorKind> = None;
+    // Jobs rendered so far and their time, for the estimate of what is left.
+    let (mut done, mut busy) = (0u32, 0.0f64);
     for (i, job) in mine.iter().enumerate() {
         let label = job.label();
         let outcome = if a.skip_existing && (job.output.is_file() || job.image.is_file()) {
             Outcome::Skipped
         } else {
-            match refuse_existing(a, job).and_then(|()| {
+            if !a.quiet && !a.json {
+                let left = match busy / f64::from(done.max(1)) * (mine.len() - i) as f64 {
+                    _ if done == 0 => String::new(),
+                    t if t < 10.0 => format!(", about {t:.1} s left"),
+                    t => format!(", about {t:.0} s left"),
+                };
+                eprintln!("[{}/{}] {label}{left}", i + 1, mine.len());
+            }
+            let began = std::time::Instant::now();
+            let outcome = match refuse_existing(a, job).and_then(|()| {
                 output::check_render_outputs(&job.output, None)?;
                 render_job(a, &p, &settings, job)
             }) {
                 Ok(summary) => Outcome::Rendered(summary),
                 Err(e) => Outcome::Failed(e),
-            }
+            };
+            done += 1;
+            busy += began.elapsed().as_secs_f64();
+            outcome
         };
         let (status, detail) = match outcome {
             Outcome::Rendered(summary) => ("rendered", summary),
