@@ -93,11 +93,17 @@ pub const SCHEMA_VERSION: u32 = 1;
 pub fn json_error(kind: ErrorKind, message: &str) -> serde_json::Value {
     serde_json::json!({
         "schema_version": SCHEMA_VERSION,
-        "error": {
-            "kind": kind.name(),
-            "message": message,
-            "exit_code": kind.exit_code(),
-        },
+        "error": error_object(kind, message),
+    })
+}
+
+/// The `error` member of [`json_error`]: `kind`, `message` and `exit_code` (also a failed
+/// job's entry in a run's summary).
+pub fn error_object(kind: ErrorKind, message: &str) -> serde_json::Value {
+    serde_json::json!({
+        "kind": kind.name(),
+        "message": message,
+        "exit_code": kind.exit_code(),
     })
 }
 

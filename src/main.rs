@@ -805,11 +805,9 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
                 first_failure.get_or_insert(kind);
                 (
                     "failed",
-                    serde_json::json!({ "error": {
-                        "kind": kind.name(),
-                        "message": format!("{e:#}"),
-                        "exit_code": kind.exit_code(),
-                    }}),
+                    serde_json::json!({
+                        "error": dofray::exit::error_object(kind, &format!("{e:#}"))
+                    }),
                 )
             }
         };
@@ -887,11 +885,10 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         if let (Some(kind), Some(map)) = (first_failure, summary.as_object_mut()) {
             map.insert(
                 "error".into(),
-                serde_json::json!({
-                    "kind": kind.name(),
-                    "message": format!("{failed} of {} jobs failed", mine.len()),
-                    "exit_code": kind.exit_code(),
-                }),
+                dofray::exit::error_object(
+                    kind,
+                    &format!("{failed} of {} jobs failed", mine.len()),
+                ),
             );
         }
         println!("{summary}");

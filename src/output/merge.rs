@@ -257,12 +257,8 @@ pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
                         format!("{tile_bpp} bytes per pixel"),
                     ));
                 }
-                let r = &t.region;
-                let row = r.width() as usize * bpp;
-                for y in 0..r.height() as usize {
-                    let at = ((r.y0 as usize + y) * w + r.x0 as usize) * bpp;
-                    data[at..at + row].copy_from_slice(&src[y * row..(y + 1) * row]);
-                }
+                let pasted = t.region.paste(src, &mut data, w, bpp);
+                debug_assert!(pasted, "read_tile checked the tile's size");
             }
             let png = dofray_png::Png {
                 width: w,
@@ -371,17 +367,6 @@ fn copy_rows(
     r: &Region,
     width: usize,
 ) -> Result<(), (String, String)> {
-    fn rows<T: Copy>(src: &[T], dst: &mut [T], r: &Region, width: usize) -> Result<(), ()> {
-        let row = r.width() as usize;
-        if src.len() != row * r.height() as usize {
-            return Err(());
-        }
-        for y in 0..r.height() as usize {
-            let at = (r.y0 as usize + y) * width + r.x0 as usize;
-            dst[at..at + row].copy_from_slice(&src[y * row..(y + 1) * row]);
-        }
-        Ok(())
-    }
     let kind = |s: &FlatSamples| match s {
         FlatSamples::F16(_) => "half",
         FlatSamples::F32(_) => "float",
@@ -389,9 +374,15 @@ fn copy_rows(
     };
     let bad = (kind(src).to_string(), kind(dst).to_string());
     match (src, dst) {
-        (FlatSamples::F16(s), FlatSamples::F16(d)) => rows(s, d, r, width).map_err(|_| bad_size()),
-        (FlatSamples::F32(s), FlatSamples::F32(d)) => rows(s, d, r, width).map_err(|_| bad_size()),
-        (FlatSamples::U32(s), FlatSamples::U32(d)) => rows(s, d, r, width).map_err(|_| bad_size()),
+        (FlatSamples::F16(s), FlatSamples::F16(d)) => {
+            r.paste(s, d, width, 1).then_some(()).ok_or_else(bad_size)
+        }
+        (FlatSamples::F32(s), FlatSamples::F32(d)) => {
+            r.paste(s, d, width, 1).then_some(()).ok_or_else(bad_size)
+        }
+        (FlatSamples::U32(s), FlatSamples::U32(d)) => {
+            r.paste(s, d, width, 1).then_some(()).ok_or_else(bad_size)
+        }
         _ => Err(bad),
     }
 }

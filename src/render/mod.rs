@@ -529,7 +529,7 @@ pub fn render_region(
         film.set_rgba(&rgba);
         stats.interpolate_seconds = phase.elapsed().as_secs_f64();
     }
-    let (film, blurred) = if *region == Region::full(camera.width, camera.height) {
+    let (mut film, blurred) = if *region == Region::full(camera.width, camera.height) {
         (film, blurred)
     } else {
         (film.crop(region), region.crop(&blurred, w))
@@ -542,15 +542,16 @@ pub fn render_region(
             y: first / film.width + region.y0 as usize,
         });
     }
-    let mut film = film;
     if !settings.transparent {
         // The background is part of the picture: every pixel is opaque.
         film.alpha.fill(1.0);
     }
     stats.sample_sites = film.samples.iter().filter(|&&n| n > 0).count() as u64;
-    stats.defocused_sites = (film.samples.iter().zip(&blurred))
-        .filter(|&(&n, &b)| b && n > 0 && settings.mode != Mode::Pinhole)
-        .count() as u64;
+    if settings.mode != Mode::Pinhole {
+        stats.defocused_sites = (film.samples.iter().zip(&blurred))
+            .filter(|&(&n, &b)| b && n > 0)
+            .count() as u64;
+    }
     progress.finish();
     stats.rays = tally.counts;
     stats.ray_log = tally.log;

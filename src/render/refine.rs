@@ -437,15 +437,24 @@ impl Bucket {
         x < self.owned_w && y < self.owned_h
     }
 
+    /// The image's pixels in the closure (`closure = true`) or the owned ones.
+    fn region(&self, closure: bool) -> super::Region {
+        let (w, h) = if closure {
+            (self.w, self.h)
+        } else {
+            (self.owned_w, self.owned_h)
+        };
+        super::Region {
+            x0: self.x0 as u32,
+            y0: self.y0 as u32,
+            x1: (self.x0 + w) as u32,
+            y1: (self.y0 + h) as u32,
+        }
+    }
+
     /// The closure's part of a full-frame map.
     fn slice<T: Copy>(&self, full: &[T], width: usize) -> Vec<T> {
-        (self.y0..self.y0 + self.h)
-            .flat_map(|y| {
-                full[y * width + self.x0..y * width + self.x0 + self.w]
-                    .iter()
-                    .copied()
-            })
-            .collect()
+        self.region(true).crop(full, width)
     }
 }
 
@@ -482,14 +491,8 @@ pub fn refine(
     let buckets: Vec<Bucket> = (0..height)
         .step_by(size)
         .flat_map(|y0| (0..width).step_by(size).map(move |x0| (x0, y0)))
-        .filter(|&(x0, y0)| {
-            let r = region;
-            (x0 as u32) < r.x1
-                && r.x0 < (x0 + size) as u32
-                && (y0 as u32) < r.y1
-                && r.y0 < (y0 + size) as u32
-        })
         .map(|(x0, y0)| Bucket::new(x0, y0, size, width, height))
+        .filter(|b| region.overlaps(&b.region(false)))
         .collect();
     progress.start("adaptive", buckets.len() as u64);
     let done: Vec<(Bucket, Option<Refined>, Tally)> = buckets

@@ -100,6 +100,21 @@ impl Region {
             .collect()
     }
 
+    /// Copies a region-sized, row-major buffer (`per_pixel` elements to a pixel) into the
+    /// region's place in a full-frame buffer of width `width`: the inverse of [`Region::crop`].
+    /// False (nothing copied) when `src` is not the region's size.
+    pub fn paste<T: Copy>(&self, src: &[T], dst: &mut [T], width: usize, per_pixel: usize) -> bool {
+        let row = self.width() as usize * per_pixel;
+        if src.len() != row * self.height() as usize {
+            return false;
+        }
+        for (y, line) in src.chunks_exact(row).enumerate() {
+            let at = ((self.y0 as usize + y) * width + self.x0 as usize) * per_pixel;
+            dst[at..at + row].copy_from_slice(line);
+        }
+        true
+    }
+
     /// Splits a `width` x `height` image into `columns` x `rows` tiles, row by row from the
     /// top left. Tile edges fall on multiples of 64 pixels where the tiles are large enough
     /// (the adaptive rule's buckets, which a tile edge would otherwise cut so both neighbours
