@@ -9,17 +9,8 @@
 //! so sampling them is exact: the estimate converges to the filtered image itself.
 
 /// The shape of the pixel filter.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum PixelFilterKind {
     /// Every position within the width counts equally (width 1: exactly the pixel's square).

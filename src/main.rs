@@ -800,7 +800,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
                 ("skipped", serde_json::json!({}))
             }
             Outcome::Failed(e) => {
-                let kind = dofray::exit::classify_anyhow(&e);
+                let kind = dofray::exit::classify(e.as_ref());
                 eprintln!("error: {label}: {e:#}");
                 first_failure.get_or_insert(kind);
                 (
@@ -854,7 +854,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
                 }
                 Err(e) => {
                     let e = anyhow::Error::new(e);
-                    let kind = dofray::exit::classify_anyhow(&e);
+                    let kind = dofray::exit::classify(e.as_ref());
                     eprintln!("error: {}: {e:#}", image.display());
                     first_failure.get_or_insert(kind);
                 }
@@ -1576,6 +1576,6 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
-        Err(e) => report_error(dofray::exit::classify_anyhow(&e), &format!("{e:#}"), json),
+        Err(e) => report_error(dofray::exit::classify(e.as_ref()), &format!("{e:#}"), json),
     }
 }

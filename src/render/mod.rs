@@ -45,9 +45,8 @@ pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 
 /// Where sample sites are placed.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     Pinhole,
