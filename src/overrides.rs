@@ -55,18 +55,31 @@ pub struct Overrides {
 /// A parameter of [`Overrides`] or [`SettingsOverrides`], for messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Param {
+    /// [`Overrides::width`].
     Width,
+    /// [`Overrides::height`].
     Height,
+    /// [`Overrides::aperture_radius`].
     ApertureRadius,
+    /// [`Overrides::f_number`].
     FNumber,
+    /// [`Overrides::focal_length_mm`].
     FocalLength,
+    /// [`Overrides::sensor_width_mm`].
     SensorWidth,
+    /// The sharp range of [`Overrides::sharp_range`].
     SharpRange,
+    /// The spread of [`Overrides::sharp_range`].
     Spread,
+    /// [`Overrides::focus_distance`].
     FocusDistance,
+    /// [`Overrides::blades`].
     Blades,
+    /// [`Overrides::blade_rotation_deg`].
     BladeRotation,
+    /// [`Overrides::anamorphic`].
     Anamorphic,
+    /// [`Overrides::ambient`].
     Ambient,
 }
 
@@ -114,14 +127,25 @@ impl Param {
 /// [`OverrideError::message`] names them any other way (the command line: its flags).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum OverrideError {
+    /// A width or height of 0 pixels.
     #[error("{}", self.message(Param::field))]
     ZeroSize(Param),
     /// Expected a finite number > 0.
     #[error("{}", self.message(Param::field))]
-    NotPositive { param: Param, value: f32 },
+    NotPositive {
+        /// The parameter.
+        param: Param,
+        /// The value given.
+        value: f32,
+    },
     /// Expected a finite number >= 0.
     #[error("{}", self.message(Param::field))]
-    Negative { param: Param, value: f32 },
+    Negative {
+        /// The parameter.
+        param: Param,
+        /// The value given.
+        value: f32,
+    },
     /// Expected a number > 0 or infinity.
     #[error("{}", self.message(Param::field))]
     FocusDistance(f32),
@@ -133,12 +157,20 @@ pub enum OverrideError {
     BladeRotation(f32),
     /// A focal length or sensor width for a lens that is not photographic, without `f_number`.
     #[error("{}", self.message(Param::field))]
-    NotPhotographic { param: Param, lens: &'static str },
+    NotPhotographic {
+        /// The focal length or sensor width.
+        param: Param,
+        /// How the scene's lens is given (`"a pinhole (no aperture)"`, ...).
+        lens: &'static str,
+    },
     /// The photographic lens gives no usable field of view.
     #[error("{}", self.message(Param::field))]
     NoFieldOfView {
+        /// Focal length in mm.
         focal_length_mm: f32,
+        /// Sensor width in mm.
         sensor_width_mm: f32,
+        /// The vertical field of view they give, in degrees.
         vfov_deg: f32,
     },
 }
@@ -396,11 +428,17 @@ impl Overrides {
 /// default of [`RenderSettings`].
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SettingsOverrides {
-    /// Default: adaptive.
+    /// Where sample sites are placed. Default: adaptive.
     pub mode: Option<Mode>,
+    /// Lens samples per defocused sample site (traced in packets of 16). Default: the scene's,
+    /// else 16.
     pub spp: Option<u32>,
+    /// Anti-aliasing samples per in-focus sample site. Default: the scene's, else 4.
     pub aa: Option<u32>,
+    /// The pixel filter's shape (its default width). Default: the scene's, else
+    /// Blackman-Harris.
     pub pixel_filter: Option<PixelFilterKind>,
+    /// The pixel filter's width in pixels.
     pub pixel_filter_width: Option<f32>,
     /// The error-controlled rule's tolerance (8-bit sRGB code values).
     pub tolerance: Option<f32>,
@@ -408,6 +446,7 @@ pub struct SettingsOverrides {
     pub interval_factor: Option<f32>,
     /// The seed's rule, per pixel as the paper has it.
     pub paper_exact: bool,
+    /// The background contributes nothing; alpha is coverage (also when the scene says so).
     pub transparent: bool,
     /// Exposure in stops (default 0).
     pub exposure: Option<f32>,
