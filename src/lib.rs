@@ -74,3 +74,8 @@ pub mod shade;
 /// The vector maths crate of dofray's public types (`Vec3` in scenes, cameras and lights),
 /// re-exported so callers use the same version.
 pub use glam;
+
+// README.md's Rust examples are compiled and run as doctests, so the README stays true.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;
