@@ -18,6 +18,28 @@ use crate::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
 use crate::shade::Light;
 
 /// Changes to a scene's camera and lights; `None` (or an empty `lights`) keeps the scene's.
+///
+/// ```rust
+/// use dofray::glam::Vec3;
+/// use dofray::{overrides::Overrides, shade::Light};
+///
+/// let mut scene = dofray::scene::load("paper")?; // 640 x 480
+/// // `dofray render --width 320 --f-number 1.4 --focal-length 85 --light sun:-1,-2,1:3`
+/// let overrides = Overrides {
+///     width: Some(320),
+///     f_number: Some(1.4),
+///     focal_length_mm: Some(85.0),
+///     lights: vec![Light::Directional {
+///         direction: Vec3::new(-1.0, -2.0, 1.0).normalize(),
+///         irradiance: Vec3::splat(3.0),
+///     }],
+///     ..Default::default()
+/// };
+/// overrides.apply_scene(&mut scene)?;
+/// assert_eq!((scene.camera.width, scene.camera.height), (320, 240)); // the aspect is kept
+/// assert_eq!(scene.lights.len(), 1);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Overrides {
     /// Image width in pixels; the height follows the aspect when `height` is `None`.
@@ -426,6 +448,22 @@ impl Overrides {
 
 /// Render settings that replace a scene's; `None` (or `false`) keeps the scene's, else the
 /// default of [`RenderSettings`].
+///
+/// ```rust
+/// use dofray::overrides::SettingsOverrides;
+/// use dofray::render::{Mode, SiteRule};
+///
+/// let scene = dofray::scene::load("paper")?;
+/// let settings = SettingsOverrides { spp: Some(64), ..Default::default() }.settings(&scene)?;
+/// assert_eq!((settings.mode, settings.spp, settings.rule), (Mode::Adaptive, 64, SiteRule::Error));
+/// // The seed paper's fixed rule, k = 0.4 (`dofray render -k 0.4`).
+/// let seed = SettingsOverrides { interval_factor: Some(0.4), ..Default::default() };
+/// assert_eq!(seed.settings(&scene)?.rule, SiteRule::Seed);
+/// // Values are checked: 0 samples is an error naming them.
+/// let zero = SettingsOverrides { spp: Some(0), ..Default::default() };
+/// assert!(zero.settings(&scene).unwrap_err().to_string().contains("spp"));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SettingsOverrides {
     /// Where sample sites are placed. Default: adaptive.
