@@ -220,7 +220,8 @@ impl FromStr for ExrCompression {
     }
 }
 
-/// How [`write_exr`] encodes.
+/// How an EXR is encoded: set from [`WriteOptions`](super::WriteOptions) by
+/// [`write_film_with`](super::write_film_with).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ExrOptions {
     /// The beauty (`ViewLayer.Combined.R/G/B/A`) as 16-bit half floats; depth and dofray's
