@@ -117,7 +117,9 @@ pub struct UsageError(pub String);
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{message}")]
 pub struct KindError {
+    /// What kind of failure this is (sets the exit code and the JSON `kind`).
     pub kind: ErrorKind,
+    /// The whole message shown to the user.
     pub message: String,
 }
 

@@ -49,12 +49,18 @@ pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
+    /// Every pixel a site, sampled through the lens centre: no depth of field.
     Pinhole,
+    /// Every pixel a site, sampled over pixel x lens (Cook's distributed ray tracing): the
+    /// reference the other modes are measured against.
     Dense,
+    /// Sites only where needed, spaced by the CoC; the pixels between them interpolated.
     Adaptive,
 }
 
 impl Mode {
+    /// The mode's lowercase name, as the command line and JSON spell it (`"pinhole"`, `"dense"`,
+    /// `"adaptive"`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Pinhole => "pinhole",
@@ -80,6 +86,7 @@ pub enum SiteRule {
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
+    /// Where sample sites are placed.
     pub mode: Mode,
     /// Samples (of pixel x lens) per sample site that blur reaches (16 fill one packet).
     pub spp: u32,
@@ -99,7 +106,10 @@ pub struct RenderSettings {
     pub paper_exact: bool,
     /// Largest interval (power of two).
     pub max_interval: u32,
+    /// Seed of every pixel's sample stream: renders with the same seed (and everything else the
+    /// same) are bit-identical; another seed gives another, equally valid, noise pattern.
     pub seed: u64,
+    /// How lens samples are weighted when a site's samples are averaged (the bokeh's profile).
     pub filter: LensFilter,
     /// Mirror bounces after the first hit.
     pub bounces: u32,
@@ -144,20 +154,29 @@ pub enum RenderError {
     /// sorts it as `interrupted` (exit code 130, as SIGINT): the caller stopped it.
     #[error("the render was cancelled")]
     Cancelled,
+    /// `spp` is 0 or above [`RenderSettings::MAX_SAMPLES`].
     #[error("spp must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
     BadSpp(u32),
+    /// `aa` is 0 or above [`RenderSettings::MAX_SAMPLES`].
     #[error("aa must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
     BadAa(u32),
+    /// The pixel filter's width (in pixels) is not a finite number in
+    /// (0, [`PixelFilter::MAX_WIDTH`]].
     #[error("the pixel filter width must be a number in (0, {max}] pixels, got {0}", max = PixelFilter::MAX_WIDTH)]
     BadPixelFilterWidth(f32),
+    /// The tolerance is not a finite number > 0.
     #[error("tolerance must be a finite number > 0 (8-bit sRGB code values), got {0}")]
     BadTolerance(f32),
+    /// The interval factor is not a finite number > 0.
     #[error("interval factor must be a finite number > 0, got {0}")]
     BadIntervalFactor(f32),
+    /// The largest interval is not a power of two.
     #[error("max interval must be a power of two >= 1, got {0}")]
     BadMaxInterval(u32),
+    /// The exposure is not finite or beyond +-[`RenderSettings::MAX_EXPOSURE`] stops.
     #[error("exposure must be a finite number of stops from -{max} to {max}, got {0}", max = RenderSettings::MAX_EXPOSURE)]
     BadExposure(f32),
+    /// The region to render is empty or reaches beyond the image.
     #[error(transparent)]
     BadRegion(#[from] RegionError),
     /// The last line of defence: input checks should make this impossible.
@@ -165,7 +184,14 @@ pub enum RenderError {
         "the render produced {count} pixels that are not finite numbers (the first at x = {x}, \
          y = {y}); no image was written. Scene values beyond dofray's documented ranges cause this"
     )]
-    NonFinite { count: usize, x: usize, y: usize },
+    NonFinite {
+        /// How many pixels' colours are not finite.
+        count: usize,
+        /// Column of the first such pixel (in row-major order), in full-image coordinates.
+        x: usize,
+        /// Row of the first such pixel, in full-image coordinates.
+        y: usize,
+    },
 }
 
 impl RenderSettings {
@@ -187,6 +213,8 @@ impl RenderSettings {
             .unwrap_or_else(|| Self::default_tolerance(self.spp))
     }
 
+    /// Checks every setting's range, without rendering: `Err` names the first bad one (the same
+    /// check [`render`] and [`render_region`] start with).
     pub fn validate(&self) -> Result<(), RenderError> {
         if self.spp == 0 || self.spp > Self::MAX_SAMPLES {
             return Err(RenderError::BadSpp(self.spp));
@@ -218,6 +246,7 @@ impl RenderSettings {
 /// What a render did and how long it took.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct RenderStats {
+    /// Wall-clock time of the whole render (depth pass to finished film), in seconds.
     pub seconds: f64,
     /// Time of the depth pass (one pinhole ray per pixel for the depth and CoC maps) alone
     /// (included in `seconds`).
@@ -228,6 +257,8 @@ pub struct RenderStats {
     pub sites_seconds: f64,
     /// Time spent interpolating between sites (included in `seconds`).
     pub interpolate_seconds: f64,
+    /// Rays traced, by kind (for a region render, the rays traced for it, the full-frame depth pass
+    /// included).
     pub rays: RayCounts,
     /// Pixels shaded directly (the rest were interpolated).
     pub sample_sites: u64,
@@ -241,6 +272,8 @@ pub struct RenderStats {
 }
 
 impl RenderStats {
+    /// Millions of rays (of every kind) traced per second of [`RenderStats::seconds`]; 0 when no
+    /// time was measured.
     pub fn mrays_per_s(&self) -> f64 {
         if self.seconds > 0.0 {
             self.rays.total() as f64 / self.seconds / 1e6
@@ -255,7 +288,9 @@ impl RenderStats {
 pub trait Progress: Sync {
     /// A new phase with `total` units of work begins.
     fn start(&self, _phase: &str, _total: u64) {}
+    /// `units` more units of the current phase's work are done.
     fn advance(&self, _units: u64) {}
+    /// The render has finished (called once, at the end of a render that succeeded).
     fn finish(&self) {}
     /// Whether to stop: polled before every band of 4 rows of the depth pass, every row of
     /// pinhole, dense and the seed's rule, and every round of every bucket of the
@@ -278,6 +313,7 @@ impl Progress for NoProgress {}
 pub struct CancelFlag(std::sync::atomic::AtomicBool);
 
 impl CancelFlag {
+    /// A flag that is not (yet) cancelled.
     pub fn new() -> Self {
         Self::default()
     }
@@ -287,6 +323,7 @@ impl CancelFlag {
         self.0.store(true, std::sync::atomic::Ordering::Relaxed);
     }
 
+    /// Whether [`CancelFlag::cancel`] has been called.
     pub fn is_cancelled(&self) -> bool {
         self.0.load(std::sync::atomic::Ordering::Relaxed)
     }
