@@ -33,9 +33,13 @@ pub struct LoadOptions {
 }
 
 impl LoadOptions {
+    /// Default of [`LoadOptions::max_input_bytes`]: 4 GiB.
     pub const DEFAULT_MAX_INPUT_BYTES: u64 = 4 << 30;
+    /// Default of [`LoadOptions::max_texture_bytes`]: 1 GiB.
     pub const DEFAULT_MAX_TEXTURE_BYTES: u64 = 1 << 30;
+    /// Default of [`LoadOptions::max_instanced_triangles`]: 50 million.
     pub const DEFAULT_MAX_INSTANCED_TRIANGLES: u64 = 50_000_000;
+    /// Default of [`LoadOptions::max_node_instances`]: 2^20 (1,048,576).
     pub const DEFAULT_MAX_NODE_INSTANCES: u64 = 1 << 20;
 }
 
