@@ -6,7 +6,7 @@
 //!   `/dev/zero` is never read; directories and sockets are refused too.
 //! - At most [`LoadOptions::max_input_bytes`] are read from any one file.
 //! - Files a model refers to (MTL libraries, textures, external buffers) must stay inside the
-//!   model's folder unless [`LoadOptions::allow_outside_paths`] is set ([`reference`]).
+//!   model's folder unless [`LoadOptions::allow_outside_paths`] is set ([`reference()`]).
 
 use std::fs::File;
 use std::io::{BufReader, Read, Take};
