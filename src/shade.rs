@@ -249,7 +249,8 @@ pub enum AlphaMode {
 /// A material's opacity: `factor` times the texture's alpha channel.
 #[derive(Debug, Clone)]
 pub struct Alpha {
-    /// Constant opacity, multiplied by the texture's alpha (glTF `baseColorFactor`'s alpha).
+    /// Constant opacity (glTF `baseColorFactor`'s alpha, a scene file's `alpha`), multiplied
+    /// by the texture's alpha.
     pub factor: f32,
     /// Image whose alpha channel gives per-texel opacity (only kept when it has one).
     pub texture: Option<Arc<ImageTexture>>,
@@ -363,7 +364,8 @@ pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> Surface {
 }
 
 impl Material {
-    /// A plain diffuse material of linear RGB albedo `color`: no highlight, mirror, emission or maps.
+    /// A plain diffuse material of linear RGB albedo `color`: no highlight, mirror, emission
+    /// or maps.
     pub fn diffuse(color: Vec3) -> Self {
         Self {
             diffuse: Texture::Constant(color),

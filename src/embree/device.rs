@@ -63,7 +63,7 @@ pub enum EmbreeError {
     Embree {
         /// The error code.
         code: ErrorCode,
-        /// Embree's message (or a description of the call that failed).
+        /// The call that failed, with Embree's own message when it gave one.
         message: String,
     },
     /// Geometry data was rejected before it reached Embree.

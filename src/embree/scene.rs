@@ -47,9 +47,9 @@ pub enum PacketWidth {
     Auto,
     /// One 16-wide call (`rtcIntersect16` / `rtcOccluded16`).
     X16,
-    /// Two 8-wide calls.
+    /// 8-wide calls (`rtcIntersect8` / `rtcOccluded8`), one per half with an active lane.
     X8,
-    /// Four 4-wide calls.
+    /// 4-wide calls (`rtcIntersect4` / `rtcOccluded4`), one per quarter with an active lane.
     X4,
 }
 

@@ -44,7 +44,8 @@ pub enum SceneError {
         /// Number of materials in the scene.
         count: usize,
     },
-    /// A value out of range (non-finite, negative, too large, or a list of the wrong length).
+    /// A value the world cannot use (non-finite or out of range), or a per-triangle material
+    /// list of the wrong length.
     #[error("{what} must be {expected}")]
     Invalid {
         /// What the value is (`object 3's radius`, ...).
@@ -62,7 +63,7 @@ pub enum SceneError {
 pub enum MeshMaterials {
     /// One material (an index into [`SceneDesc::materials`]) for every triangle.
     One(usize),
-    /// A material index per triangle, one entry per triangle.
+    /// A material index (into [`SceneDesc::materials`]) per triangle, in triangle order.
     PerTriangle(Vec<u32>),
 }
 
@@ -105,7 +106,8 @@ impl Background {
         }
     }
 
-    /// Radiance seen along unit direction `dir` (+y up): `horizon` below the horizon, blending to `zenith` by the square root of `dir.y`.
+    /// Radiance seen along unit direction `dir` (+y up): `horizon` at and below the horizon,
+    /// blending to `zenith` by the square root of `dir.y`.
     pub fn radiance(&self, dir: Vec3) -> Vec3 {
         self.horizon.lerp(self.zenith, dir.y.clamp(0.0, 1.0).sqrt())
     }
@@ -124,7 +126,8 @@ pub struct SceneDesc {
     pub objects: Vec<Object>,
     /// Lights that cast shadows.
     pub lights: Vec<Light>,
-    /// Ambient light (linear RGB), unshadowed: adds albedo x ambient x (1 - mirror) to every hit.
+    /// Ambient light (linear RGB), unshadowed: adds albedo x ambient x (1 - mirror) to every
+    /// hit.
     pub ambient: Vec3,
     /// What rays that hit nothing see.
     pub background: Background,
@@ -288,7 +291,8 @@ pub struct World {
     normal_mapped: bool,
     /// Lights that cast shadows.
     pub lights: Vec<Light>,
-    /// Ambient light (linear RGB), unshadowed: adds albedo x ambient x (1 - mirror) to every hit.
+    /// Ambient light (linear RGB), unshadowed: adds albedo x ambient x (1 - mirror) to every
+    /// hit.
     pub ambient: Vec3,
     /// What rays that hit nothing see.
     pub background: Background,
