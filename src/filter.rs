@@ -26,6 +26,7 @@ pub enum PixelFilterKind {
 /// A pixel filter: its shape and its full width (support) in pixels.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PixelFilter {
+    /// The filter's shape.
     pub kind: PixelFilterKind,
     /// Full width of the support in pixels: samples land within +-width / 2 of the centre.
     pub width: f32,

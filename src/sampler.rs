@@ -353,6 +353,8 @@ pub enum LensFilter {
 }
 
 impl LensFilter {
+    /// The weight of a lens sample at `aperture_point` (on the aperture as sampled, its y
+    /// stretched by `anamorphic`; the radius is taken after undoing the stretch).
     pub fn weight(self, aperture_point: Vec2, anamorphic: f32) -> f32 {
         let r2 = || Vec2::new(aperture_point.x, aperture_point.y / anamorphic).length_squared();
         match self {
