@@ -45,6 +45,7 @@
 //! `.cargo/config.toml` (`rustflags = ["-C", "target-cpu=x86-64-v3"]`) or build with
 //! `RUSTFLAGS="-C target-cpu=native"`.
 #![deny(unsafe_code)]
+#![warn(missing_docs)]
 
 /// dofray's version (Cargo's package version).
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
