@@ -188,6 +188,28 @@ pub fn write_film(path: &Path, film: &Film) -> Result<(), OutputError> {
 }
 
 /// [`write_film`] with metadata and format options.
+///
+/// ```rust
+/// use dofray::output::{ExrCompression, Metadata, WriteOptions};
+/// use dofray::render::Film;
+///
+/// let film = Film::new(8, 4); // black, opaque; a render's film in practice
+/// let mut metadata = Metadata::new();
+/// metadata.push("studio:shot", "sq010_sh020");
+/// let options = WriteOptions {
+///     metadata,
+///     exr_half: true, // the beauty in half float; depth and CoC stay 32-bit
+///     exr_compression: ExrCompression::Piz,
+///     ..Default::default()
+/// };
+/// let path = std::env::temp_dir().join("dofray-write-example.exr");
+/// dofray::output::write_film_with(&path, &film, &options)?; // a temporary file, then renamed
+/// assert!(path.exists());
+///
+/// // The extension chooses the format; one dofray does not write is an error naming it.
+/// assert!(dofray::output::write_film(std::path::Path::new("out.tif"), &film).is_err());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn write_film_with(
     path: &Path,
     film: &Film,

@@ -241,6 +241,15 @@ impl Device {
 
     /// A device with an Embree configuration string such as `"threads=2,verbose=0"`.
     ///
+    /// ```rust
+    /// use dofray::embree::Device;
+    ///
+    /// // SSE4.2 kernels only, as on a CPU without AVX (test the narrow code paths).
+    /// let device = Device::with_config("isa=sse4.2,threads=1")?;
+    /// assert_eq!(device.native_packet_width(), 4);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
     /// A config Embree rejects (say `threads=notanumber`; Embree ignores unknown options) is an
     /// [`EmbreeError::Embree`] with Embree's code. Its message quotes Embree's reason on Embree 4;
     /// Embree 3 gives a failed `rtcNewDevice` no text, only the code.

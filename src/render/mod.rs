@@ -285,6 +285,34 @@ impl RenderStats {
 
 /// Receives progress, and may cancel the render; all methods may be called from several
 /// threads.
+///
+/// ```rust
+/// use std::sync::atomic::{AtomicU64, Ordering};
+/// use dofray::render::{Progress, RenderError};
+/// use dofray::renderer::{Renderer, RendererError};
+///
+/// /// Counts the work done, and stops the render after `budget` units of it.
+/// struct Budget { done: AtomicU64, budget: u64 }
+///
+/// impl Progress for Budget {
+///     fn start(&self, phase: &str, total: u64) {
+///         eprintln!("{phase}: {total} units");
+///     }
+///     fn advance(&self, units: u64) {
+///         self.done.fetch_add(units, Ordering::Relaxed);
+///     }
+///     fn cancelled(&self) -> bool {
+///         self.done.load(Ordering::Relaxed) >= self.budget
+///     }
+/// }
+///
+/// let renderer = Renderer::new(dofray::scene::load("paper")?, &dofray::embree::Device::new()?)?;
+/// let settings = renderer.settings(&Default::default())?;
+/// let progress = Budget { done: AtomicU64::new(0), budget: 10 };
+/// let result = renderer.render(&settings, &progress);
+/// assert!(matches!(result, Err(RendererError::Render(RenderError::Cancelled))));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait Progress: Sync {
     /// A new phase with `total` units of work begins.
     fn start(&self, _phase: &str, _total: u64) {}
@@ -309,6 +337,23 @@ impl Progress for NoProgress {}
 /// A cancellation token: [`CancelFlag::cancel`] it from any thread (a UI's stop button, a
 /// signal handler) and a render given it (as its [`Progress`], or another progress wrapped with
 /// [`CancelFlag::with`]) stops with [`RenderError::Cancelled`].
+///
+/// ```rust
+/// use dofray::render::{CancelFlag, NoProgress, RenderError};
+/// use dofray::renderer::{Renderer, RendererError};
+///
+/// let renderer = Renderer::new(dofray::scene::load("paper")?, &dofray::embree::Device::new()?)?;
+/// let settings = renderer.settings(&Default::default())?;
+/// let stop = CancelFlag::new();
+/// let result = std::thread::scope(|s| {
+///     let render = s.spawn(|| renderer.render(&settings, &stop.with(&NoProgress)));
+///     stop.cancel(); // e.g. a UI's stop button
+///     render.join().unwrap()
+/// });
+/// // Cancelled, unless the render won the race and finished first.
+/// assert!(matches!(result, Err(RendererError::Render(RenderError::Cancelled)) | Ok(_)));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Default)]
 pub struct CancelFlag(std::sync::atomic::AtomicBool);
 
@@ -497,6 +542,28 @@ fn fixed_sites(
 }
 
 /// Renders `world` through `camera`. The result is bit-identical for any thread count.
+///
+/// The steps [`crate::renderer::Renderer`] takes for a scene, by hand:
+///
+/// ```rust
+/// use dofray::render::{self, NoProgress, RenderSettings};
+/// use dofray::scene::World;
+///
+/// let mut desc = dofray::scene::load("paper")?;
+/// (desc.camera.width, desc.camera.height) = (64, 48);
+/// let world = World::build(&desc, &dofray::embree::Device::new()?)?;
+/// // Autofocus (a scene focused on a pixel) asks the world how far the pixel's surface is.
+/// let forward = (desc.camera.look_at - desc.camera.eye).normalize();
+/// let camera = desc.camera.build(|ray| {
+///     let hit = world.scene.intersect1(ray)?;
+///     Some((ray.at(hit.t) - ray.origin).dot(forward))
+/// })?;
+/// let settings = RenderSettings { spp: 32, ..Default::default() };
+/// let (film, stats) = render::render(&world, &camera, &settings, &NoProgress)?;
+/// assert_eq!(film.color.len(), 64 * 48);
+/// assert!(stats.sample_sites <= 64 * 48);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn render(
     world: &World,
     camera: &Camera,

@@ -114,6 +114,32 @@ impl Background {
 }
 
 /// A complete description of what to render, independent of Embree.
+///
+/// ```rust
+/// use dofray::camera::{CameraSpec, Focus, LensSpec};
+/// use dofray::glam::Vec3;
+/// use dofray::scene::{Object, SceneDesc};
+/// use dofray::shade::{Light, Material};
+/// use dofray::{embree::Device, render::NoProgress, renderer::Renderer};
+///
+/// let scene = SceneDesc {
+///     camera: CameraSpec {
+///         width: 64,
+///         height: 48,
+///         lens: LensSpec::Aperture { radius: 0.2 },
+///         focus: Focus::Distance(5.0),
+///         ..Default::default()
+///     },
+///     materials: vec![Material::diffuse(Vec3::new(0.8, 0.2, 0.2))],
+///     objects: vec![Object::Sphere { center: Vec3::ZERO, radius: 1.0, material: 0 }],
+///     lights: vec![Light::Point { position: Vec3::new(2.0, 4.0, 4.0), intensity: Vec3::splat(50.0) }],
+///     ..Default::default()
+/// };
+/// let renderer = Renderer::new(scene, &Device::new()?)?;
+/// let (film, _) = renderer.render(&renderer.settings(&Default::default())?, &NoProgress)?;
+/// assert!(film.color[24 * 64 + 32].x > 0.0); // the lit sphere fills the centre
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct SceneDesc {
     /// The scene's name (its `name` key, else the file stem or the built-in's name), for reports.
@@ -188,6 +214,16 @@ impl Default for SceneDesc {
 /// it has one (else a view framing its bounds), a small aperture focused on the bounds' centre,
 /// a key light and the default sky. Files are read with the default [`LoadOptions`] (limits
 /// and path policy); see [`load_with`].
+///
+/// ```rust
+/// let paper = dofray::scene::load("paper")?;
+/// assert_eq!((paper.camera.width, paper.camera.height), (640, 480));
+///
+/// // A file that cannot be read is an error that names it.
+/// let missing = dofray::scene::load("no/such/scene.toml").unwrap_err();
+/// assert!(missing.to_string().contains("no/such/scene.toml"), "{missing}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn load(path_or_name: &str) -> Result<SceneDesc, LoadError> {
     load_with(path_or_name, &LoadOptions::default())
 }
