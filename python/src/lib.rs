@@ -121,7 +121,7 @@ fn to_mode(mode: Option<&str>) -> Result<Option<Mode>, Failure> {
         "dense" => Ok(Mode::Dense),
         "adaptive" => Ok(Mode::Adaptive),
         other => Err(Failure::usage(format!(
-            "mode must be one of 'pinhole', 'dense', 'adaptive', got {other:?}"
+            "mode must be one of 'pinhole', 'dense', 'adaptive', got '{other}'"
         ))),
     })
     .transpose()
