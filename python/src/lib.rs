@@ -384,6 +384,8 @@ impl Render {
 
 impl Render {
     fn new(py: Python<'_>, film: Film, stats: &RenderStats) -> PyResult<Self> {
+        // An ImportError if numpy is missing (the numpy crate would panic).
+        py.import("numpy")?;
         let (w, h) = (film.width, film.height);
         let rgba: Vec<f32> = film
             .color
