@@ -1,0 +1,183 @@
+//! Compiles the C programs (`capi/tests/c/smoke.c`, the README's `capi/examples/render.c`)
+//! with the system's C compiler against `include/dofray.h`, links them with `libdofray.so`
+//! and with `libdofray.a`, and runs them.
+//!
+//! `cargo test` builds the library's cdylib and staticlib next to this test's `deps`
+//! directory before running integration tests; if they are missing (a test binary copied
+//! elsewhere), the test builds them with the same cargo, profile and target directory.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The repository root (the workspace).
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The directory of this profile's artifacts (`target/debug`), where libdofray.so and
+/// libdofray.a are, built if they are not there.
+fn lib_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("the test's path");
+    // target/debug/deps/c_api-<hash> -> target/debug
+    let dir = exe.parent().and_then(Path::parent).expect("target/<profile>").to_path_buf();
+    let (so, a) = (dir.join("libdofray.so"), dir.join("libdofray.a"));
+    if !(so.exists() && a.exists()) {
+        let profile = dir.file_name().and_then(|n| n.to_str()).unwrap_or("debug");
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let target_dir = dir.parent().expect("the target directory");
+        let mut build = Command::new(cargo);
+        build
+            .args(["build", "-p", "dofray-capi", "--lib", "--target-dir"])
+            .arg(target_dir)
+            .current_dir(root());
+        if profile == "release" {
+            build.arg("--release");
+        } else if profile != "debug" {
+            build.args(["--profile", profile]);
+        }
+        let status = build.status().expect("cargo runs");
+        assert!(status.success(), "cargo build -p dofray-capi failed");
+    }
+    assert!(so.exists() && a.exists(), "no libdofray.so / libdofray.a in {}", dir.display());
+    dir
+}
+
+/// The Embree library dofray links (`embree3` or `embree4`), from the build script of the
+/// `dofray` crate (through capi/build.rs).
+const EMBREE_LIB: &str = env!("DOFRAY_CAPI_EMBREE_LIB");
+
+/// Its directory when it is not the system's (empty otherwise).
+const EMBREE_LIB_DIR: &str = env!("DOFRAY_CAPI_EMBREE_LIB_DIR");
+
+/// When this test runs under an explicit dynamic loader (`ld-linux-x86-64.so.2
+/// --library-path DIR test`, as scripts/embree4-check.sh runs every test against Debian 13's
+/// Embree 4), that loader and its arguments, so the C programs run the same way.
+fn loader_prefix() -> Vec<String> {
+    let Ok(cmdline) = std::fs::read("/proc/self/cmdline") else {
+        return Vec::new();
+    };
+    let args: Vec<String> = cmdline
+        .split(|&b| b == 0)
+        .map(|a| String::from_utf8_lossy(a).into_owned())
+        .collect();
+    let is_loader = args
+        .first()
+        .and_then(|a| Path::new(a).file_name())
+        .is_some_and(|n| n.to_string_lossy().starts_with("ld-"));
+    if is_loader && args.get(1).map(String::as_str) == Some("--library-path") && args.len() > 2 {
+        args[..3].to_vec()
+    } else {
+        Vec::new()
+    }
+}
+
+/// A fresh output directory for `name`.
+fn out_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("capi").join(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("the output directory");
+    dir
+}
+
+/// Compiles `source` into `exe`, linked with the shared or the static library.
+fn compile(source: &Path, exe: &Path, lib_dir: &Path, shared: bool) {
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    let mut cmd = Command::new(cc);
+    cmd.args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1"])
+        .arg("-I")
+        .arg(root().join("include"))
+        .arg(source)
+        .arg("-o")
+        .arg(exe);
+    if shared {
+        cmd.arg("-L")
+            .arg(lib_dir)
+            .arg("-ldofray")
+            .arg(format!("-Wl,-rpath,{}", lib_dir.display()));
+    } else {
+        // What `rustc --print native-static-libs` lists for the staticlib, plus Embree.
+        cmd.arg(lib_dir.join("libdofray.a")).args([
+            &format!("-l{EMBREE_LIB}"),
+            "-lgcc_s",
+            "-lutil",
+            "-lrt",
+            "-lpthread",
+            "-lm",
+            "-ldl",
+            "-lc",
+        ]);
+    }
+    if !EMBREE_LIB_DIR.is_empty() {
+        let dir = EMBREE_LIB_DIR;
+        cmd.arg(format!("-L{dir}"))
+            .arg(format!("-Wl,-rpath-link,{dir}"))
+            .arg(format!("-Wl,-rpath,{dir}"));
+    }
+    cmd.arg("-lm");
+    let output = cmd.output().expect("the C compiler (cc) runs");
+    assert!(
+        output.status.success(),
+        "compiling {} failed: {cmd:?}\n{}{}",
+        source.display(),
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+/// Runs `exe` with `args` in `cwd`; its stdout and stderr, which must end in success.
+fn run(exe: &Path, args: &[&Path], cwd: &Path) -> String {
+    let prefix = loader_prefix();
+    let mut cmd = match prefix.split_first() {
+        Some((loader, rest)) => {
+            let mut c = Command::new(loader);
+            c.args(rest).arg(exe);
+            c
+        }
+        None => Command::new(exe),
+    };
+    cmd.args(args).current_dir(cwd);
+    let output = cmd.output().expect("the C program runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    println!("{text}");
+    assert!(output.status.success(), "{cmd:?} failed ({}):\n{text}", output.status);
+    text
+}
+
+fn smoke(shared: bool) {
+    let lib_dir = lib_dir();
+    let name = if shared { "smoke-shared" } else { "smoke-static" };
+    let dir = out_dir(name);
+    let exe = dir.join(name);
+    compile(&root().join("capi/tests/c/smoke.c"), &exe, &lib_dir, shared);
+    let text = run(&exe, &[&dir], &dir);
+    assert!(text.contains("all checks passed"), "{text}");
+    for file in ["smoke.png", "smoke.exr", "sphere.png"] {
+        assert!(dir.join(file).is_file(), "{file} was not written");
+    }
+}
+
+#[test]
+fn smoke_with_the_shared_library() {
+    smoke(true);
+}
+
+#[test]
+fn smoke_with_the_static_library() {
+    smoke(false);
+}
+
+/// The README's example (capi/examples/render.c) compiles and renders paper.png.
+#[test]
+fn readme_example() {
+    let lib_dir = lib_dir();
+    let dir = out_dir("example");
+    let exe = dir.join("render");
+    compile(&root().join("capi/examples/render.c"), &exe, &lib_dir, true);
+    let text = run(&exe, &[], &dir);
+    assert!(text.contains("64x48"), "{text}");
+    assert!(dir.join("paper.png").is_file());
+}
