@@ -17,7 +17,10 @@ fn main() {
                 .map(|d| prefix.join(d))
                 .find(|d| d.join(format!("libembree{major}.so")).exists())
         });
-    let shown = lib_dir.as_ref().map(|d| d.display().to_string()).unwrap_or_default();
+    let shown = lib_dir
+        .as_ref()
+        .map(|d| d.display().to_string())
+        .unwrap_or_default();
     println!("cargo::rustc-env=DOFRAY_CAPI_EMBREE_LIB_DIR={shown}");
     if lib_dir.is_some() {
         println!("cargo::rustc-link-arg-cdylib=-Wl,-rpath,{shown}");

@@ -26,7 +26,7 @@ use std::ffi::{CStr, CString, c_char, c_int, c_void};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use dofray::embree::Device;
@@ -741,7 +741,10 @@ pub unsafe extern "C" fn dofray_scene_set_transparent(
 /// # Safety
 /// `scene` is NULL or a live scene used by no other thread.
 #[unsafe(no_mangle)]
-pub unsafe extern "C" fn dofray_scene_set_frame(scene: *mut DofrayScene, frame: i64) -> DofrayStatus {
+pub unsafe extern "C" fn dofray_scene_set_frame(
+    scene: *mut DofrayScene,
+    frame: i64,
+) -> DofrayStatus {
     // SAFETY: the function's contract.
     unsafe {
         with_scene(scene, |s| {
@@ -825,7 +828,12 @@ pub unsafe extern "C" fn dofray_cancel_free(token: *mut DofrayCancel) {
 /// between at most every 50 ms; never again after it returned nonzero. It may be called from dofray's worker threads, never from two
 /// threads at once. It must not unwind (throw a C++ exception or `longjmp`) into dofray.
 pub type DofrayProgressFn = Option<
-    unsafe extern "C" fn(phase: *const c_char, done: u64, total: u64, user_data: *mut c_void) -> c_int,
+    unsafe extern "C" fn(
+        phase: *const c_char,
+        done: u64,
+        total: u64,
+        user_data: *mut c_void,
+    ) -> c_int,
 >;
 
 /// How often the progress callback is called at most within a phase.
@@ -1012,7 +1020,8 @@ fn render(
             scene.own_device.as_ref().expect("just made")
         }
     };
-    let cached = matches!(&scene.cache, Some((id, o, _)) if *id == device.id && *o == scene.overrides);
+    let cached =
+        matches!(&scene.cache, Some((id, o, _)) if *id == device.id && *o == scene.overrides);
     if !cached {
         // Drop the old world before building the new one: only one in memory at a time.
         scene.cache = None;
@@ -1056,7 +1065,11 @@ pub unsafe extern "C" fn dofray_image_free(image: *mut DofrayImage) {
 ///
 /// # Safety
 /// `image` is NULL or a live image.
-unsafe fn image_value<T>(image: *const DofrayImage, fallback: T, get: impl FnOnce(&DofrayImage) -> T) -> T {
+unsafe fn image_value<T>(
+    image: *const DofrayImage,
+    fallback: T,
+    get: impl FnOnce(&DofrayImage) -> T,
+) -> T {
     // SAFETY: the caller's contract: NULL or a live image, only read.
     match unsafe { image.as_ref() } {
         Some(image) => guard_value(fallback, || get(image)),

@@ -2,43 +2,54 @@
 //! with the system's C compiler against `include/dofray.h`, links them with `libdofray.so`
 //! and with `libdofray.a`, and runs them.
 //!
-//! `cargo test` builds the library's cdylib and staticlib next to this test's `deps`
-//! directory before running integration tests; if they are missing (a test binary copied
-//! elsewhere), the test builds them with the same cargo, profile and target directory.
+//! `cargo test` does not build the cdylib and staticlib for integration tests: the test
+//! runs `cargo build -p dofray-capi --lib` first (see [`lib_dir`]).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::OnceLock;
 
 /// The repository root (the workspace).
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The directory of this profile's artifacts (`target/debug`), where libdofray.so and
-/// libdofray.a are, built if they are not there.
+/// The directory of this profile's artifacts (`target/debug`), with libdofray.so and
+/// libdofray.a built up to date: `cargo test` builds only the test harnesses, not the
+/// library's cdylib and staticlib, so this builds them (once per test process) with the same
+/// cargo, target directory and profile (`test`, whose dependencies `cargo test` just built).
 fn lib_dir() -> PathBuf {
+    static BUILT: OnceLock<PathBuf> = OnceLock::new();
+    BUILT.get_or_init(build_lib).clone()
+}
+
+fn build_lib() -> PathBuf {
     let exe = std::env::current_exe().expect("the test's path");
     // target/debug/deps/c_api-<hash> -> target/debug
-    let dir = exe.parent().and_then(Path::parent).expect("target/<profile>").to_path_buf();
-    let (so, a) = (dir.join("libdofray.so"), dir.join("libdofray.a"));
-    if !(so.exists() && a.exists()) {
-        let profile = dir.file_name().and_then(|n| n.to_str()).unwrap_or("debug");
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let target_dir = dir.parent().expect("the target directory");
-        let mut build = Command::new(cargo);
-        build
-            .args(["build", "-p", "dofray-capi", "--lib", "--target-dir"])
-            .arg(target_dir)
-            .current_dir(root());
-        if profile == "release" {
-            build.arg("--release");
-        } else if profile != "debug" {
-            build.args(["--profile", profile]);
-        }
-        let status = build.status().expect("cargo runs");
-        assert!(status.success(), "cargo build -p dofray-capi failed");
+    let dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>")
+        .to_path_buf();
+    let target_dir = dir.parent().expect("the target directory");
+    // `cargo test` builds with the test profile into target/debug, `cargo test --release`
+    // with the bench profile into target/release.
+    let profile = match dir.file_name().and_then(|n| n.to_str()) {
+        Some("release") => "bench",
+        _ => "test",
+    };
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let status = Command::new(cargo)
+        .args(["build", "-p", "dofray-capi", "--lib", "--profile", profile])
+        .arg("--target-dir")
+        .arg(target_dir)
+        .current_dir(root())
+        .status()
+        .expect("cargo runs");
+    assert!(status.success(), "cargo build -p dofray-capi --lib failed");
+    for lib in ["libdofray.so", "libdofray.a"] {
+        assert!(dir.join(lib).is_file(), "no {lib} in {}", dir.display());
     }
-    assert!(so.exists() && a.exists(), "no libdofray.so / libdofray.a in {}", dir.display());
     dir
 }
 
@@ -73,7 +84,9 @@ fn loader_prefix() -> Vec<String> {
 
 /// A fresh output directory for `name`.
 fn out_dir(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("capi").join(name);
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("capi")
+        .join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("the output directory");
     dir
@@ -83,12 +96,19 @@ fn out_dir(name: &str) -> PathBuf {
 fn compile(source: &Path, exe: &Path, lib_dir: &Path, shared: bool) {
     let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
     let mut cmd = Command::new(cc);
-    cmd.args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1"])
-        .arg("-I")
-        .arg(root().join("include"))
-        .arg(source)
-        .arg("-o")
-        .arg(exe);
+    cmd.args([
+        "-std=c99",
+        "-Wall",
+        "-Wextra",
+        "-Werror",
+        "-pedantic",
+        "-O1",
+    ])
+    .arg("-I")
+    .arg(root().join("include"))
+    .arg(source)
+    .arg("-o")
+    .arg(exe);
     if shared {
         cmd.arg("-L")
             .arg(lib_dir)
@@ -143,13 +163,21 @@ fn run(exe: &Path, args: &[&Path], cwd: &Path) -> String {
         String::from_utf8_lossy(&output.stderr)
     );
     println!("{text}");
-    assert!(output.status.success(), "{cmd:?} failed ({}):\n{text}", output.status);
+    assert!(
+        output.status.success(),
+        "{cmd:?} failed ({}):\n{text}",
+        output.status
+    );
     text
 }
 
 fn smoke(shared: bool) {
     let lib_dir = lib_dir();
-    let name = if shared { "smoke-shared" } else { "smoke-static" };
+    let name = if shared {
+        "smoke-shared"
+    } else {
+        "smoke-static"
+    };
     let dir = out_dir(name);
     let exe = dir.join(name);
     compile(&root().join("capi/tests/c/smoke.c"), &exe, &lib_dir, shared);
