@@ -1204,4 +1204,37 @@ mod tests {
         let name = unsafe { CStr::from_ptr(dofray_status_name(99)) };
         assert_eq!(name.to_str().unwrap(), "unknown");
     }
+
+    /// The last error message of this thread.
+    fn message() -> String {
+        // SAFETY: dofray_last_error_message returns a NUL-terminated string, valid until the
+        // next status-returning call on this thread.
+        unsafe { CStr::from_ptr(dofray_last_error_message()) }
+            .to_string_lossy()
+            .into_owned()
+    }
+
+    #[test]
+    fn a_panic_becomes_a_status_and_a_message() {
+        let status = guard(|| panic!("boom"));
+        assert_eq!(status, DofrayStatus::DOFRAY_PANIC);
+        assert!(message().contains("panicked: boom"), "{}", message());
+        assert_eq!(guard(|| Ok(())), DofrayStatus::DOFRAY_OK);
+        assert_eq!(message(), "");
+        assert_eq!(guard_value(7, || panic!("boom")), 7);
+    }
+
+    #[test]
+    fn errors_are_classified_with_their_sources() {
+        let status = guard(|| {
+            Err(dofray::scene::load("/nonexistent/x.toml")
+                .unwrap_err()
+                .into())
+        });
+        assert_eq!(status, DofrayStatus::DOFRAY_BAD_INPUT);
+        assert!(message().contains("/nonexistent/x.toml"), "{}", message());
+        let status = guard(|| Err(Failure::invalid("a message with a \0 NUL")));
+        assert_eq!(status, DofrayStatus::DOFRAY_INVALID_ARGUMENT);
+        assert_eq!(message(), "a message with a ");
+    }
 }

@@ -198,9 +198,15 @@ fn smoke_with_the_static_library() {
     smoke(false);
 }
 
-/// The README's example (capi/examples/render.c) compiles and renders paper.png.
+/// The README's example is capi/examples/render.c, which compiles and renders paper.png.
 #[test]
 fn readme_example() {
+    let example = std::fs::read_to_string(root().join("capi/examples/render.c")).unwrap();
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    assert!(
+        readme.contains(&format!("```c\n{example}```")),
+        "README.md's C example (### From C) is not capi/examples/render.c: copy it there"
+    );
     let lib_dir = lib_dir();
     let dir = out_dir("example");
     let exe = dir.join("render");

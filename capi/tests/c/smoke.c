@@ -39,6 +39,7 @@ struct progress_log {
     int cancel_at;        /* cancel at this call (1-based); 0: never */
     int out_of_range;     /* calls with done > total */
     char first_phase[32];
+    DofrayCancel *token;  /* cancelled (and 0 returned) at the first call, if not NULL */
 };
 
 static int on_progress(const char *phase, uint64_t done, uint64_t total, void *user_data) {
@@ -47,6 +48,7 @@ static int on_progress(const char *phase, uint64_t done, uint64_t total, void *u
     if (done == 0) log->phases++;
     if (done > total) log->out_of_range++;
     if (log->calls == 1) snprintf(log->first_phase, sizeof log->first_phase, "%s", phase);
+    if (log->token != NULL) dofray_cancel(log->token);
     return log->cancel_at != 0 && log->calls >= log->cancel_at;
 }
 
@@ -169,6 +171,17 @@ int main(int argc, char **argv) {
     CHECK_ERROR(dofray_render(scene, device, NULL, NULL, token, &image), DOFRAY_CANCELLED,
                 "cancelled");
     CHECK(image == NULL);
+    /* Cancelled by the token during the render (as another thread would: the callback
+     * only cancels the token and returns 0). */
+    dofray_cancel_reset(token);
+    {
+        struct progress_log log = {0};
+        log.token = token;
+        CHECK_ERROR(dofray_render(scene, device, on_progress, &log, token, &image),
+                    DOFRAY_CANCELLED, "cancelled");
+        CHECK(image == NULL);
+        CHECK(log.calls == 1);
+    }
     dofray_cancel_reset(token);
     CHECK(dofray_render(scene, device, NULL, NULL, token, &image) == DOFRAY_OK);
     CHECK(dofray_image_width(image) == 64);
