@@ -33,6 +33,7 @@ pub struct BenchConfig {
     pub repeat: usize,
     /// Lens samples per pixel of the converged reference (dense).
     pub reference_spp: u32,
+    /// Seed of every mode's sample streams (the reference's seed is derived from it).
     pub seed: u64,
     /// Where the reference is cached (None: not cached).
     pub cache_dir: Option<PathBuf>,
@@ -51,29 +52,45 @@ impl Default for BenchConfig {
     }
 }
 
+/// Why a benchmark (or the equal-error study) could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
+    /// A render failed (bad settings, cancelled, non-finite pixels).
     #[error(transparent)]
     Render(#[from] render::RenderError),
+    /// An image could not be compared with another (the metrics refused it).
     #[error(transparent)]
     Metrics(#[from] metrics::MetricsError),
+    /// `repeat` is 0.
     #[error("repeat must be at least 1")]
     ZeroRepeat,
+    /// The equal-error ladder is empty or has a sample count of 0 or above
+    /// [`RenderSettings::MAX_SAMPLES`].
     #[error(
         "the spp ladder must list at least one sample count, each 1 to {max}, got {0:?}",
         max = RenderSettings::MAX_SAMPLES
     )]
     BadLadder(Vec<u32>),
+    /// The equal-error PSNR levels are empty or one is not finite.
     #[error("PSNR levels must be at least one finite number of dB, got {0:?}")]
     BadLevels(Vec<f64>),
+    /// The equal-error reference has no more samples per pixel than the ladder's top rung.
     #[error(
         "the reference's samples per pixel ({reference_spp}) must exceed the ladder's largest \
          rung ({top}); several times more is better"
     )]
-    ReferenceBelowLadder { reference_spp: u32, top: u32 },
+    ReferenceBelowLadder {
+        /// The reference's samples per pixel.
+        reference_spp: u32,
+        /// The ladder's largest sample count.
+        top: u32,
+    },
+    /// The reference could not be written to its cache file.
     #[error("reference cache {}: {error}", path.display())]
     Cache {
+        /// The cache file.
         path: PathBuf,
+        /// The underlying I/O error.
         error: std::io::Error,
     },
     /// The cache directory cannot be created or written: found before anything is rendered.
@@ -83,7 +100,9 @@ pub enum BenchError {
         dir.display()
     )]
     CacheDir {
+        /// The directory given.
         dir: PathBuf,
+        /// The underlying I/O error.
         #[source]
         source: std::io::Error,
     },
@@ -94,25 +113,40 @@ pub enum BenchError {
 pub struct BenchRow {
     /// Short label and file stem, e.g. `adaptive-k0.4`.
     pub label: String,
+    /// The render mode.
     pub mode: Mode,
+    /// The seed rule's k ([`RenderSettings::interval_factor`]); `None` for pinhole, dense and
+    /// adaptive with the error-controlled rule.
     pub interval_factor: Option<f32>,
+    /// Whether the seed rule ran with the seed's plain per-pixel interval rule
+    /// ([`RenderSettings::paper_exact`]).
     pub paper_exact: bool,
     /// Median wall time of the repeats.
     pub seconds: f64,
     /// Where the time goes (medians, each included in `seconds`): the depth pass, the blur /
     /// interval / site maps, shading the sample sites, and interpolation.
     pub pinhole_seconds: f64,
+    /// Median seconds building the blur, interval and site maps.
     pub maps_seconds: f64,
+    /// Median seconds shading sample sites.
     pub sites_seconds: f64,
+    /// Median seconds interpolating between sites.
     pub interpolate_seconds: f64,
+    /// Rays traced per render, of every kind (the same in every repeat).
     pub rays: u64,
+    /// Camera rays per render.
     pub primary_rays: u64,
+    /// Shadow rays per render.
     pub shadow_rays: u64,
+    /// Mirror reflection rays per render.
     pub secondary_rays: u64,
+    /// Millions of rays per second: `rays` over the median `seconds`.
     pub mrays_per_s: f64,
+    /// Pixels shaded directly (the rest were interpolated).
     pub sample_sites: u64,
     /// seconds / pinhole seconds (the seed reports 1 : 11.5 : 2.5).
     pub time_vs_pinhole: f64,
+    /// Dense's median seconds / this mode's (above 1: faster than dense).
     pub speedup_vs_dense: f64,
     /// sRGB PSNR (dB) against dense; null (infinite) for dense itself.
     pub psnr_vs_dense: f64,
@@ -120,7 +154,9 @@ pub struct BenchRow {
     pub psnr_vs_reference: f64,
     /// sRGB SSIM against the converged reference.
     pub ssim_vs_reference: f64,
+    /// Linear-RGB PSNR (dB) against the converged reference.
     pub psnr_vs_reference_linear: f64,
+    /// Linear-RGB SSIM against the converged reference.
     pub ssim_vs_reference_linear: f64,
     /// Largest per-pixel, per-channel sRGB error against the reference.
     pub max_error_vs_reference: f64,
@@ -129,29 +165,43 @@ pub struct BenchRow {
 /// The whole benchmark.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct BenchReport {
+    /// The scene's name.
     pub scene: String,
+    /// Image width in pixels.
     pub width: usize,
+    /// Image height in pixels.
     pub height: usize,
+    /// Samples per site that blur reaches ([`BenchConfig::spp`]).
     pub spp: u32,
+    /// Samples per in-focus site in dense and adaptive mode ([`BenchConfig::aa`]).
     pub aa: u32,
+    /// Timed repeats of each mode.
     pub repeat: usize,
+    /// Threads of the rayon pool the renders ran on.
     pub threads: usize,
+    /// Samples per pixel of the converged reference.
     pub reference_spp: u32,
+    /// Whether the reference was read from the cache instead of rendered.
     pub reference_cached: bool,
     /// Time to render the reference (0 when it came from the cache).
     pub reference_seconds: f64,
     /// Rays per second of the intersect-only replay of exactly the rays dense traces.
     pub intersect_only_mrays_per_s: f64,
+    /// Median seconds of the intersect-only replay.
     pub intersect_only_seconds: f64,
     /// Dense's rays/s as a fraction of the intersect-only rate: the median over repeats of the
     /// ratio within each repeat.
     pub dense_vs_intersect_only: f64,
+    /// One row per mode of the seed's table, in the table's order.
     pub rows: Vec<BenchRow>,
 }
 
 /// The images behind the report, for `--out`.
 pub struct BenchImages {
+    /// Each mode's label (as [`BenchRow::label`]) and its image from the first repeat, in the
+    /// table's order.
     pub films: Vec<(String, Film)>,
+    /// The converged reference: linear RGB, row-major, top row first.
     pub reference: Vec<[f32; 3]>,
 }
 

@@ -9,21 +9,36 @@ use crate::limits::MAX_COORDINATE;
 /// Why a camera specification was rejected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CameraError {
+    /// A value out of range.
     #[error("{name} must be {expected}, got {value}")]
     Invalid {
+        /// Which value (`"vfov_deg"`, `"aperture radius"`, ...).
         name: &'static str,
+        /// What it must be.
         expected: &'static str,
+        /// The value given, formatted.
         value: String,
     },
+    /// The autofocus pixel ([`Focus::Pixel`]) is not in the image.
     #[error("autofocus pixel ({x}, {y}) is outside the {width}x{height} image")]
     FocusPixelOutside {
+        /// Pixel column.
         x: u32,
+        /// Pixel row.
         y: u32,
+        /// Image width in pixels.
         width: u32,
+        /// Image height in pixels.
         height: u32,
     },
+    /// The autofocus pixel's pinhole ray hits nothing.
     #[error("autofocus pixel ({x}, {y}) sees no surface to focus on")]
-    FocusPixelMisses { x: u32, y: u32 },
+    FocusPixelMisses {
+        /// Pixel column.
+        x: u32,
+        /// Pixel row.
+        y: u32,
+    },
 }
 
 fn check(
@@ -63,13 +78,19 @@ pub enum LensSpec {
     /// No depth of field: every ray leaves the lens centre.
     Pinhole,
     /// Aperture radius in scene units (as pbrt and Mitsuba specify it).
-    Aperture { radius: f32 },
+    Aperture {
+        /// Aperture radius, scene units (>= 0; 0 is a pinhole).
+        radius: f32,
+    },
     /// A photographic lens: focal length and sensor width in millimetres, scene units metres.
     /// The aperture radius is `focal_length / (2 f_number)`, and the field of view follows from
     /// the focal length and sensor width (replacing the camera's `vfov_deg`).
     Photographic {
+        /// Focal length, millimetres (> 0).
         focal_length_mm: f32,
+        /// f-number: focal length over aperture diameter (> 0).
         f_number: f32,
+        /// Sensor width, millimetres (> 0); with the focal length it sets the field of view.
         sensor_width_mm: f32,
     },
     /// The seed's intuitive control: depths within `sharp_range` in front of and behind the
@@ -78,18 +99,30 @@ pub enum LensSpec {
     /// `coc_px(D) ~= 2 R k |D - P| / P^2` (k = pixels per unit at unit distance), the aperture
     /// radius is chosen so that `coc_px(P +- sharp_range) = spread`:
     /// `R = spread * P^2 / (2 k sharp_range)`.
-    Seed { sharp_range: f32, spread: f32 },
+    Seed {
+        /// Depth range in front of and behind the focus distance that stays sharp, scene
+        /// units (> 0).
+        sharp_range: f32,
+        /// CoC diameter at `sharp_range` from the focus distance, pixels (>= 0).
+        spread: f32,
+    },
 }
 
 /// Where the lens is focused.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Focus {
-    /// Distance along the view axis to the plane in focus.
+    /// Distance along the view axis to the plane in focus, scene units (> 0; infinity focuses
+    /// at infinity).
     Distance(f32),
     /// A world-space point that must be in focus.
     Point(Vec3),
     /// Autofocus: the surface seen through this pixel (x right, y down) is in focus.
-    Pixel { x: u32, y: u32 },
+    Pixel {
+        /// Pixel column, from 0 at the left.
+        x: u32,
+        /// Pixel row, from 0 at the top.
+        y: u32,
+    },
 }
 
 /// The outline of the aperture, which is also the shape of out-of-focus highlights (bokeh).
@@ -116,14 +149,23 @@ impl Default for ApertureShape {
 /// Everything needed to build a [`Camera`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraSpec {
+    /// Camera position (the lens centre), world space.
     pub eye: Vec3,
+    /// A point the camera looks at (must differ from `eye`).
     pub look_at: Vec3,
+    /// Which way is up (any length, not parallel to the view direction).
     pub up: Vec3,
+    /// Vertical field of view, degrees, in (0, 180); ignored by a photographic lens.
     pub vfov_deg: f32,
+    /// Image width in pixels (>= 1).
     pub width: u32,
+    /// Image height in pixels (>= 1).
     pub height: u32,
+    /// The lens: how the aperture radius is given.
     pub lens: LensSpec,
+    /// Where the lens is focused.
     pub focus: Focus,
+    /// The aperture's outline (bokeh shape).
     pub aperture: ApertureShape,
 }
 
@@ -150,12 +192,17 @@ impl Default for CameraSpec {
 /// A thin-lens camera, ready to generate rays.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Camera {
+    /// Lens centre, world space.
     pub eye: Vec3,
     /// Unit view axis.
     pub forward: Vec3,
+    /// Unit image x axis (to the right), orthogonal to `forward`.
     pub right: Vec3,
+    /// Unit image y axis (up), orthogonal to `forward` and `right`.
     pub up: Vec3,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
     /// tan(vfov / 2).
     pub tan_half_vfov: f32,
@@ -166,6 +213,7 @@ pub struct Camera {
     /// 1 / `focus_distance` (0 when focused at infinity): lens rays are computed from it, so a
     /// huge focus distance behaves like infinity instead of overflowing.
     pub inv_focus_distance: f32,
+    /// The aperture's outline (bokeh shape).
     pub aperture: ApertureShape,
 }
 

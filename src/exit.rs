@@ -117,7 +117,9 @@ pub struct UsageError(pub String);
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{message}")]
 pub struct KindError {
+    /// What kind of failure this is (sets the exit code and the JSON `kind`).
     pub kind: ErrorKind,
+    /// The whole message shown to the user.
     pub message: String,
 }
 
@@ -132,14 +134,6 @@ pub fn classify(error: &(dyn Error + 'static)) -> ErrorKind {
         next = e.source();
     }
     ErrorKind::Internal
-}
-
-/// The kind of an `anyhow` error (its whole chain, contexts skipped).
-pub fn classify_anyhow(error: &anyhow::Error) -> ErrorKind {
-    error
-        .chain()
-        .find_map(kind_of)
-        .unwrap_or(ErrorKind::Internal)
 }
 
 /// The kind of this one error, if it is one dofray knows.
@@ -295,7 +289,7 @@ mod tests {
     fn typed_errors_are_classified_through_contexts() {
         let memory = crate::limits::check_image_memory_against(100, 100, 1, true).unwrap_err();
         let e = anyhow::Error::new(memory).context("outer");
-        assert_eq!(classify_anyhow(&e), ErrorKind::ResourceLimit);
+        assert_eq!(classify(e.as_ref()), ErrorKind::ResourceLimit);
         let load = LoadError::Io {
             path: PathBuf::from("x.obj"),
             error: std::io::Error::from(std::io::ErrorKind::NotFound),
@@ -317,9 +311,9 @@ mod tests {
         assert_eq!(classify(&ext), ErrorKind::Usage);
         assert_eq!(classify(&RenderError::BadSpp(0)), ErrorKind::Usage);
         let e = anyhow::Error::new(UsageError("--x must be 1".into())).context("while parsing");
-        assert_eq!(classify_anyhow(&e), ErrorKind::Usage);
+        assert_eq!(classify(e.as_ref()), ErrorKind::Usage);
         assert_eq!(
-            classify_anyhow(&anyhow::anyhow!("something odd")),
+            classify(anyhow::anyhow!("something odd").as_ref()),
             ErrorKind::Internal
         );
     }

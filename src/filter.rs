@@ -9,17 +9,8 @@
 //! so sampling them is exact: the estimate converges to the filtered image itself.
 
 /// The shape of the pixel filter.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum PixelFilterKind {
     /// Every position within the width counts equally (width 1: exactly the pixel's square).
@@ -35,6 +26,7 @@ pub enum PixelFilterKind {
 /// A pixel filter: its shape and its full width (support) in pixels.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PixelFilter {
+    /// The filter's shape.
     pub kind: PixelFilterKind,
     /// Full width of the support in pixels: samples land within +-width / 2 of the centre.
     pub width: f32,

@@ -20,7 +20,9 @@ pub const FALLBACK_LIMIT_BYTES: u64 = 16 << 30;
     Bytes(*needed), Bytes(*available), if *measured { "available" } else { "allowed (the available memory could not be read)" }
 )]
 pub struct MemoryError {
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
     /// Estimated bytes the render buffers need (128-bit: exact for every u32 size, never
     /// saturated).
@@ -101,6 +103,9 @@ pub const MAX_COORDINATE: f32 = 1e15;
 /// that a typo cannot ask the system for thousands of threads.
 pub const MAX_THREADS: usize = 1024;
 
+/// Refuses a `width` x `height` image whose render buffers ([`BYTES_PER_PIXEL`] per pixel)
+/// would need more than the available memory (`MemAvailable` in `/proc/meminfo`, else
+/// [`FALLBACK_LIMIT_BYTES`]).
 pub fn check_image_memory(width: u32, height: u32) -> Result<(), MemoryError> {
     match available_memory() {
         Some(available) => check_image_memory_against(width, height, available, true),

@@ -665,6 +665,16 @@ fn frame_list(a: &RenderArgs, desc: &SceneDesc) -> Result<Option<Vec<i64>>> {
             a.output.display()
         );
     }
+    if let Some(list) = &frames
+        && list.len() > 1
+        && desc.animation.is_none()
+    {
+        eprintln!(
+            "warning: {} has no [animation]: its {} frames will be identical",
+            a.scene.scene,
+            list.len()
+        );
+    }
     Ok(frames)
 }
 
@@ -694,6 +704,15 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
     {
         usage!(
             "--exr-half and --exr-compression apply to .exr output only, and -o {} is a PNG",
+            a.output.display()
+        );
+    }
+    if a.png_16
+        && output::ImageFormat::from_path(&a.output).is_ok_and(|f| f == output::ImageFormat::Exr)
+    {
+        usage!(
+            "--png-16 applies to .png output only, and -o {} is an EXR (always float; \
+             --exr-half for half float)",
             a.output.display()
         );
     }
@@ -800,7 +819,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
                 ("skipped", serde_json::json!({}))
             }
             Outcome::Failed(e) => {
-                let kind = dofray::exit::classify_anyhow(&e);
+                let kind = dofray::exit::classify(e.as_ref());
                 eprintln!("error: {label}: {e:#}");
                 first_failure.get_or_insert(kind);
                 (
@@ -854,7 +873,7 @@ fn run_render(a: &RenderArgs) -> Result<ExitCode> {
                 }
                 Err(e) => {
                     let e = anyhow::Error::new(e);
-                    let kind = dofray::exit::classify_anyhow(&e);
+                    let kind = dofray::exit::classify(e.as_ref());
                     eprintln!("error: {}: {e:#}", image.display());
                     first_failure.get_or_insert(kind);
                 }
@@ -1576,6 +1595,6 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
-        Err(e) => report_error(dofray::exit::classify_anyhow(&e), &format!("{e:#}"), json),
+        Err(e) => report_error(dofray::exit::classify(e.as_ref()), &format!("{e:#}"), json),
     }
 }

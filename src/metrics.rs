@@ -68,21 +68,35 @@ pub enum MetricsError {
         width.saturating_mul(*height)
     )]
     SizeMismatch {
+        /// Pixels in image a.
         a_len: usize,
+        /// Pixels in image b.
         b_len: usize,
+        /// The width given, pixels.
         width: usize,
+        /// The height given, pixels.
         height: usize,
     },
     /// The images have no pixels.
     #[error("the images are empty ({width}x{height})")]
-    Empty { width: usize, height: usize },
+    Empty {
+        /// The width given, pixels.
+        width: usize,
+        /// The height given, pixels.
+        height: usize,
+    },
     /// A channel is NaN or infinite. `image` is `"a"` or `"b"` (the argument it came from).
     #[error("image {image} has a non-finite value {value} at pixel ({x}, {y}), channel {channel}")]
     NonFinite {
+        /// `"a"` or `"b"`.
         image: &'static str,
+        /// Pixel column, from 0 at the left.
         x: usize,
+        /// Pixel row (pixels are row-major: index `y * width + x`).
         y: usize,
+        /// Channel index: 0 red, 1 green, 2 blue.
         channel: usize,
+        /// The offending value.
         value: f32,
     },
 }

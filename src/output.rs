@@ -49,17 +49,27 @@ pub use target::{
 pub enum OutputError {
     /// The path's extension names no format we write.
     #[error("{}: unknown image extension (expected .png or .exr)", path.display())]
-    UnknownExtension { path: PathBuf },
+    UnknownExtension {
+        /// The path as given.
+        path: PathBuf,
+    },
     /// Creating, writing or renaming a file failed.
     #[error("cannot write {}", path.display())]
     Io {
+        /// The path as given.
         path: PathBuf,
+        /// The underlying I/O error.
         #[source]
         source: std::io::Error,
     },
     /// The encoder rejected the image, or the buffers do not match the image size.
     #[error("cannot encode {}: {message}", path.display())]
-    Encode { path: PathBuf, message: String },
+    Encode {
+        /// The path as given.
+        path: PathBuf,
+        /// The encoder's (or the size check's) complaint.
+        message: String,
+    },
     /// The image has no pixels (zero width or height).
     #[error("cannot write an image with no pixels")]
     EmptyImage,
@@ -70,13 +80,26 @@ pub enum OutputError {
         path.display(),
         if path == target { String::new() } else { format!(", link to {}", target.display()) }
     )]
-    ReadOnly { path: PathBuf, target: PathBuf },
+    ReadOnly {
+        /// The path as given.
+        path: PathBuf,
+        /// The file it names once symbolic links are followed (`path` itself when it is no link).
+        target: PathBuf,
+    },
     /// The target exists but is not a regular file (a device, a socket, a FIFO).
     #[error("{} is not a regular file ({}): refusing to replace it", path.display(), target.display())]
-    NotAFile { path: PathBuf, target: PathBuf },
+    NotAFile {
+        /// The path as given.
+        path: PathBuf,
+        /// What it names once symbolic links are followed (`path` itself when it is no link).
+        target: PathBuf,
+    },
     /// Following the target's symbolic links never ends.
     #[error("{}: too many levels of symbolic links", path.display())]
-    SymlinkLoop { path: PathBuf },
+    SymlinkLoop {
+        /// The path as given.
+        path: PathBuf,
+    },
     /// Two outputs of one run are the same file, so one would overwrite the other.
     #[error(
         "the output image {} and the AOV picture {} are the same file: one would overwrite \
@@ -84,7 +107,12 @@ pub enum OutputError {
         first.display(),
         second.display()
     )]
-    Collision { first: PathBuf, second: PathBuf },
+    Collision {
+        /// The output image's path.
+        first: PathBuf,
+        /// The AOV picture's path (in the AOV directory).
+        second: PathBuf,
+    },
     /// The signal handlers that remove temporary files could not be installed.
     #[error("cannot install the SIGINT/SIGTERM handlers")]
     Signals(#[source] std::io::Error),
@@ -160,6 +188,28 @@ pub fn write_film(path: &Path, film: &Film) -> Result<(), OutputError> {
 }
 
 /// [`write_film`] with metadata and format options.
+///
+/// ```rust
+/// use dofray::output::{ExrCompression, Metadata, WriteOptions};
+/// use dofray::render::Film;
+///
+/// let film = Film::new(8, 4); // black, opaque; a render's film in practice
+/// let mut metadata = Metadata::new();
+/// metadata.push("studio:shot", "sq010_sh020");
+/// let options = WriteOptions {
+///     metadata,
+///     exr_half: true, // the beauty in half float; depth and CoC stay 32-bit
+///     exr_compression: ExrCompression::Piz,
+///     ..Default::default()
+/// };
+/// let path = std::env::temp_dir().join("dofray-write-example.exr");
+/// dofray::output::write_film_with(&path, &film, &options)?; // a temporary file, then renamed
+/// assert!(path.exists());
+///
+/// // The extension chooses the format; one dofray does not write is an error naming it.
+/// assert!(dofray::output::write_film(std::path::Path::new("out.tif"), &film).is_err());
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn write_film_with(
     path: &Path,
     film: &Film,

@@ -18,6 +18,28 @@ use crate::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
 use crate::shade::Light;
 
 /// Changes to a scene's camera and lights; `None` (or an empty `lights`) keeps the scene's.
+///
+/// ```rust
+/// use dofray::glam::Vec3;
+/// use dofray::{overrides::Overrides, shade::Light};
+///
+/// let mut scene = dofray::scene::load("paper")?; // 640 x 480
+/// // `dofray render --width 320 --f-number 1.4 --focal-length 85 --light sun:-1,-2,1:3`
+/// let overrides = Overrides {
+///     width: Some(320),
+///     f_number: Some(1.4),
+///     focal_length_mm: Some(85.0),
+///     lights: vec![Light::Directional {
+///         direction: Vec3::new(-1.0, -2.0, 1.0).normalize(),
+///         irradiance: Vec3::splat(3.0),
+///     }],
+///     ..Default::default()
+/// };
+/// overrides.apply_scene(&mut scene)?;
+/// assert_eq!((scene.camera.width, scene.camera.height), (320, 240)); // the aspect is kept
+/// assert_eq!(scene.lights.len(), 1);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Overrides {
     /// Image width in pixels; the height follows the aspect when `height` is `None`.
@@ -55,18 +77,31 @@ pub struct Overrides {
 /// A parameter of [`Overrides`] or [`SettingsOverrides`], for messages.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Param {
+    /// [`Overrides::width`].
     Width,
+    /// [`Overrides::height`].
     Height,
+    /// [`Overrides::aperture_radius`].
     ApertureRadius,
+    /// [`Overrides::f_number`].
     FNumber,
+    /// [`Overrides::focal_length_mm`].
     FocalLength,
+    /// [`Overrides::sensor_width_mm`].
     SensorWidth,
+    /// The sharp range of [`Overrides::sharp_range`].
     SharpRange,
+    /// The spread of [`Overrides::sharp_range`].
     Spread,
+    /// [`Overrides::focus_distance`].
     FocusDistance,
+    /// [`Overrides::blades`].
     Blades,
+    /// [`Overrides::blade_rotation_deg`].
     BladeRotation,
+    /// [`Overrides::anamorphic`].
     Anamorphic,
+    /// [`Overrides::ambient`].
     Ambient,
 }
 
@@ -114,14 +149,25 @@ impl Param {
 /// [`OverrideError::message`] names them any other way (the command line: its flags).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum OverrideError {
+    /// A width or height of 0 pixels.
     #[error("{}", self.message(Param::field))]
     ZeroSize(Param),
     /// Expected a finite number > 0.
     #[error("{}", self.message(Param::field))]
-    NotPositive { param: Param, value: f32 },
+    NotPositive {
+        /// The parameter.
+        param: Param,
+        /// The value given.
+        value: f32,
+    },
     /// Expected a finite number >= 0.
     #[error("{}", self.message(Param::field))]
-    Negative { param: Param, value: f32 },
+    Negative {
+        /// The parameter.
+        param: Param,
+        /// The value given.
+        value: f32,
+    },
     /// Expected a number > 0 or infinity.
     #[error("{}", self.message(Param::field))]
     FocusDistance(f32),
@@ -133,12 +179,20 @@ pub enum OverrideError {
     BladeRotation(f32),
     /// A focal length or sensor width for a lens that is not photographic, without `f_number`.
     #[error("{}", self.message(Param::field))]
-    NotPhotographic { param: Param, lens: &'static str },
+    NotPhotographic {
+        /// The focal length or sensor width.
+        param: Param,
+        /// How the scene's lens is given (`"a pinhole (no aperture)"`, ...).
+        lens: &'static str,
+    },
     /// The photographic lens gives no usable field of view.
     #[error("{}", self.message(Param::field))]
     NoFieldOfView {
+        /// Focal length in mm.
         focal_length_mm: f32,
+        /// Sensor width in mm.
         sensor_width_mm: f32,
+        /// The vertical field of view they give, in degrees.
         vfov_deg: f32,
     },
 }
@@ -394,13 +448,35 @@ impl Overrides {
 
 /// Render settings that replace a scene's; `None` (or `false`) keeps the scene's, else the
 /// default of [`RenderSettings`].
+///
+/// ```rust
+/// use dofray::overrides::SettingsOverrides;
+/// use dofray::render::{Mode, SiteRule};
+///
+/// let scene = dofray::scene::load("paper")?;
+/// let settings = SettingsOverrides { spp: Some(64), ..Default::default() }.settings(&scene)?;
+/// assert_eq!((settings.mode, settings.spp, settings.rule), (Mode::Adaptive, 64, SiteRule::Error));
+/// // The seed paper's fixed rule, k = 0.4 (`dofray render -k 0.4`).
+/// let seed = SettingsOverrides { interval_factor: Some(0.4), ..Default::default() };
+/// assert_eq!(seed.settings(&scene)?.rule, SiteRule::Seed);
+/// // Values are checked: 0 samples is an error naming them.
+/// let zero = SettingsOverrides { spp: Some(0), ..Default::default() };
+/// assert!(zero.settings(&scene).unwrap_err().to_string().contains("spp"));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SettingsOverrides {
-    /// Default: adaptive.
+    /// Where sample sites are placed. Default: adaptive.
     pub mode: Option<Mode>,
+    /// Lens samples per defocused sample site (traced in packets of 16). Default: the scene's,
+    /// else 16.
     pub spp: Option<u32>,
+    /// Anti-aliasing samples per in-focus sample site. Default: the scene's, else 4.
     pub aa: Option<u32>,
+    /// The pixel filter's shape (its default width). Default: the scene's, else
+    /// Blackman-Harris.
     pub pixel_filter: Option<PixelFilterKind>,
+    /// The pixel filter's width in pixels.
     pub pixel_filter_width: Option<f32>,
     /// The error-controlled rule's tolerance (8-bit sRGB code values).
     pub tolerance: Option<f32>,
@@ -408,6 +484,7 @@ pub struct SettingsOverrides {
     pub interval_factor: Option<f32>,
     /// The seed's rule, per pixel as the paper has it.
     pub paper_exact: bool,
+    /// The background contributes nothing; alpha is coverage (also when the scene says so).
     pub transparent: bool,
     /// Exposure in stops (default 0).
     pub exposure: Option<f32>,

@@ -3,7 +3,7 @@
 use crate::camera::{Camera, CameraError, CameraSpec, Focus};
 use crate::embree::Device;
 use crate::limits::MemoryError;
-use crate::overrides::{OverrideError, Overrides};
+use crate::overrides::{OverrideError, Overrides, SettingsOverrides};
 use crate::render::{self, Film, Progress, Region, RenderError, RenderSettings, RenderStats};
 use crate::scene::{LoadError, SceneDesc, SceneError, World};
 
@@ -12,23 +12,31 @@ use crate::scene::{LoadError, SceneDesc, SceneError, World};
 /// the scene's own faults bad input, memory a resource limit.
 #[derive(Debug, thiserror::Error)]
 pub enum RendererError {
+    /// The scene file or model could not be read or parsed.
     #[error(transparent)]
     Load(#[from] LoadError),
+    /// The scene's description cannot be built into an Embree world.
     #[error("invalid scene {name}")]
     Scene {
+        /// The scene's name.
         name: String,
+        /// What is wrong with it.
         #[source]
         source: SceneError,
     },
+    /// An override has a value it cannot take.
     #[error(transparent)]
     Override(#[from] OverrideError),
+    /// The image would need more memory than dofray allows itself.
     #[error(transparent)]
     Memory(#[from] MemoryError),
-    /// The camera cannot be built; `overridden`: the overrides set its lens, focus or aperture.
+    /// The camera cannot be built.
     #[error("invalid camera")]
     Camera {
+        /// Why.
         #[source]
         source: CameraError,
+        /// Whether the overrides set its lens, focus or aperture (then it is a usage error).
         overridden: bool,
     },
     /// The scene's autofocus pixel, moved to a new image size, sees no surface.
@@ -37,15 +45,24 @@ pub enum RendererError {
          {y}) at {width}x{height}) sees no surface to focus on"
     )]
     ScaledFocusPixelMisses {
+        /// The scene's autofocus pixel, column.
         x0: u32,
+        /// The scene's autofocus pixel, row.
         y0: u32,
+        /// The scene's image width.
         w0: u32,
+        /// The scene's image height.
         h0: u32,
+        /// The pixel moved to the new size, column.
         x: u32,
+        /// The pixel moved to the new size, row.
         y: u32,
+        /// The new image width.
         width: u32,
+        /// The new image height.
         height: u32,
     },
+    /// The settings are invalid, or the render was cancelled ([`RenderError::Cancelled`]).
     #[error(transparent)]
     Render(#[from] RenderError),
 }
@@ -54,13 +71,15 @@ pub enum RendererError {
 /// scene gave it (each frame's camera is made from it), and the Embree world, built once.
 ///
 /// ```rust
-/// use dofray::{embree::Device, overrides::Overrides, render::NoProgress, renderer::Renderer};
+/// use dofray::embree::Device;
+/// use dofray::overrides::{Overrides, SettingsOverrides};
+/// use dofray::{render::NoProgress, renderer::Renderer};
 ///
 /// let desc = dofray::scene::load("paper")?;
 /// let (width, height, f_number) = (Some(64), Some(48), Some(2.8));
 /// let overrides = Overrides { width, height, f_number, ..Default::default() };
 /// let renderer = Renderer::with_overrides(desc, overrides, &Device::new()?)?;
-/// let settings = dofray::overrides::SettingsOverrides::default().settings(renderer.desc())?;
+/// let settings = renderer.settings(&SettingsOverrides { spp: Some(32), ..Default::default() })?;
 /// let (film, stats) = renderer.render(&settings, &NoProgress)?;
 /// let path = std::env::temp_dir().join("dofray-doc-example.png");
 /// dofray::output::write_film(&path, &film)?;
@@ -159,6 +178,12 @@ impl Renderer {
         })
     }
 
+    /// The render settings for this scene: each value from `overrides`, else the scene's, else
+    /// the default ([`SettingsOverrides::settings`]).
+    pub fn settings(&self, overrides: &SettingsOverrides) -> Result<RenderSettings, RendererError> {
+        Ok(overrides.settings(&self.desc)?)
+    }
+
     /// Renders the whole image (the first frame of an animated scene).
     pub fn render(
         &self,
@@ -168,7 +193,29 @@ impl Renderer {
         self.render_frame(None, None, settings, progress)
     }
 
-    /// Renders `region` (`None`: the whole image) of `frame` ([`Renderer::camera`]).
+    /// Renders `region` (`None`: the whole image) of `frame` ([`Renderer::camera`]). A region's
+    /// pixels are bit for bit those of the whole image's render; the film covers the region only.
+    ///
+    /// ```rust
+    /// use dofray::render::{CancelFlag, Region};
+    /// use dofray::{embree::Device, overrides::Overrides, renderer::Renderer};
+    ///
+    /// let overrides = Overrides { width: Some(96), ..Default::default() };
+    /// let renderer = Renderer::with_overrides(dofray::scene::load("paper")?, overrides, &Device::new()?)?;
+    /// let settings = renderer.settings(&Default::default())?;
+    /// let window = Region { x0: 32, y0: 16, x1: 64, y1: 48 };
+    /// let cancel = CancelFlag::new(); // cancel() it from another thread to stop the render
+    /// let (tile, _) = renderer.render_frame(None, Some(&window), &settings, &cancel)?;
+    /// assert_eq!((tile.width, tile.height), (32, 32));
+    ///
+    /// cancel.cancel();
+    /// let stopped = renderer.render_frame(None, None, &settings, &cancel);
+    /// assert!(matches!(
+    ///     stopped,
+    ///     Err(dofray::renderer::RendererError::Render(dofray::render::RenderError::Cancelled))
+    /// ));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn render_frame(
         &self,
         frame: Option<i64>,

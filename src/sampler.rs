@@ -339,17 +339,8 @@ pub fn aperture_points16(
 
 /// How lens samples are weighted when averaged: the filter over the CoC that the seed leaves
 /// open. The weight depends on the sample's radius on the (unstretched) aperture.
-#[derive(
-    Debug,
-    Clone,
-    Copy,
-    PartialEq,
-    Eq,
-    Default,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum LensFilter {
     /// Every sample counts equally: a uniformly bright aperture (a real lens's bokeh).
@@ -362,6 +353,8 @@ pub enum LensFilter {
 }
 
 impl LensFilter {
+    /// The weight of a lens sample at `aperture_point` (on the aperture as sampled, its y
+    /// stretched by `anamorphic`; the radius is taken after undoing the stretch).
     pub fn weight(self, aperture_point: Vec2, anamorphic: f32) -> f32 {
         let r2 = || Vec2::new(aperture_point.x, aperture_point.y / anamorphic).length_squared();
         match self {

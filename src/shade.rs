@@ -9,9 +9,13 @@ use glam::{Vec2, Vec3};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Pattern {
+    /// A checkerboard of unit cells: colour `a` and `b` alternate.
     Checker,
+    /// Stripes across u: colour `b` on the first half of each period, `a` on the second.
     Stripes,
+    /// Grid lines of colour `b` (a tenth of a period wide) on cells of colour `a`.
     Grid,
+    /// Dots of colour `b` (radius 0.3 of a period) centred in cells of colour `a`.
     Dots,
     /// Fractal value noise.
     Noise,
@@ -23,21 +27,26 @@ pub enum Pattern {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Wrap {
+    /// Coordinates wrap around: the image tiles the plane.
     #[default]
     Repeat,
+    /// Coordinates are clamped: the edge texels extend outwards.
     Clamp,
 }
 
 /// A decoded image in linear RGB, sampled bilinearly.
 #[derive(Debug, Clone)]
 pub struct ImageTexture {
+    /// Width in texels.
     pub width: usize,
+    /// Height in texels.
     pub height: usize,
     /// Row-major, top row first (v = 1 is the top, as in OBJ and glTF after its flip).
     pub texels: Vec<Vec3>,
     /// The alpha channel, same layout as `texels`, when the image has one that is not 1
     /// everywhere.
     pub alpha: Option<Vec<f32>>,
+    /// How coordinates outside [0, 1] are treated.
     pub wrap: Wrap,
 }
 
@@ -97,17 +106,24 @@ impl ImageTexture {
 /// Where a material's colour comes from.
 #[derive(Debug, Clone)]
 pub enum Texture {
+    /// One linear RGB colour everywhere.
     Constant(Vec3),
     /// Alternates colours `a` and `b`; `scale` is the number of pattern periods per UV unit.
     Procedural {
+        /// The pattern mixing `a` and `b`.
         pattern: Pattern,
+        /// Linear RGB colour where the pattern's mix is 0.
         a: Vec3,
+        /// Linear RGB colour where the pattern's mix is 1.
         b: Vec3,
+        /// Pattern periods per UV unit.
         scale: f32,
     },
     /// An image, multiplied by `tint`.
     Image {
+        /// The decoded image (shared between materials).
         image: Arc<ImageTexture>,
+        /// Linear RGB factor applied to every texel.
         tint: Vec3,
     },
 }
@@ -179,6 +195,7 @@ impl Pattern {
 }
 
 impl Texture {
+    /// The linear RGB colour at texture coordinates `uv` (v up; images black at non-finite `uv`).
     pub fn sample(&self, uv: Vec2) -> Vec3 {
         match self {
             Self::Constant(c) => *c,
@@ -197,6 +214,7 @@ impl Texture {
 /// optional emission.
 #[derive(Debug, Clone)]
 pub struct Material {
+    /// Diffuse (Lambertian) albedo, linear RGB.
     pub diffuse: Texture,
     /// Specular colour (zero for none).
     pub specular: Vec3,
@@ -218,7 +236,10 @@ pub struct Material {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum AlphaMode {
     /// A hole wherever alpha < cutoff (glTF `MASK`, `alphaCutoff`).
-    Mask { cutoff: f32 },
+    Mask {
+        /// Alpha below which the surface is a hole; at or above it, it is opaque.
+        cutoff: f32,
+    },
     /// Stochastic transparency (glTF `BLEND`): each ray passes with probability 1 - alpha,
     /// decided by a hash of the ray and the triangle, so renders are deterministic and the
     /// many pixel x lens samples average to the blend.
@@ -228,8 +249,12 @@ pub enum AlphaMode {
 /// A material's opacity: `factor` times the texture's alpha channel.
 #[derive(Debug, Clone)]
 pub struct Alpha {
+    /// Constant opacity (glTF `baseColorFactor`'s alpha, a scene file's `alpha`), multiplied
+    /// by the texture's alpha.
     pub factor: f32,
+    /// Image whose alpha channel gives per-texel opacity (only kept when it has one).
     pub texture: Option<Arc<ImageTexture>>,
+    /// Whether alpha cuts holes or blends stochastically.
     pub mode: AlphaMode,
 }
 
@@ -271,14 +296,18 @@ pub struct MetalRough {
     /// The base colour (glTF `baseColorFactor` times `baseColorTexture`), before it is dimmed
     /// by metalness into the diffuse colour.
     pub base: Texture,
+    /// Metalness factor, in [0, 1], multiplied by the texture's blue channel.
     pub metallic: f32,
+    /// Perceptual roughness factor, in [0, 1], multiplied by the texture's green channel.
     pub roughness: f32,
+    /// glTF `metallicRoughnessTexture` (blue: metallic, green: roughness; linear).
     pub texture: Arc<ImageTexture>,
 }
 
 /// A tangent-space normal map (glTF `normalTexture`, linear RGB, +y up as in OpenGL).
 #[derive(Debug, Clone)]
 pub struct NormalMap {
+    /// The normal map image (linear RGB; each channel maps [0, 1] to [-1, 1]).
     pub image: Arc<ImageTexture>,
     /// Scales the map's x and y (glTF `scale`).
     pub scale: f32,
@@ -303,6 +332,7 @@ pub struct MaterialMaps {
     /// Per-hit metallic and roughness; `None` when they are constant (already in the
     /// material's diffuse, specular, shininess and mirror).
     pub metal_rough: Option<MetalRough>,
+    /// Tangent-space normal map; `None` for none.
     pub normal: Option<NormalMap>,
 }
 
@@ -310,9 +340,13 @@ pub struct MaterialMaps {
 /// and exponent, and mirror fraction.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Surface {
+    /// Diffuse albedo, linear RGB.
     pub albedo: Vec3,
+    /// Blinn-Phong specular colour, linear RGB (zero for none).
     pub specular: Vec3,
+    /// Blinn-Phong exponent.
     pub shininess: f32,
+    /// Fraction of light reflected as a perfect mirror, in [0, 1].
     pub mirror: f32,
 }
 
@@ -330,6 +364,8 @@ pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> Surface {
 }
 
 impl Material {
+    /// A plain diffuse material of linear RGB albedo `color`: no highlight, mirror, emission
+    /// or maps.
     pub fn diffuse(color: Vec3) -> Self {
         Self {
             diffuse: Texture::Constant(color),
@@ -378,18 +414,33 @@ impl Material {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Light {
     /// Radiant intensity `intensity` at `position`, falling off as 1 / distance^2.
-    Point { position: Vec3, intensity: Vec3 },
+    Point {
+        /// Light position, scene units.
+        position: Vec3,
+        /// Radiant intensity (linear RGB, W/sr).
+        intensity: Vec3,
+    },
     /// Parallel light arriving along `direction` (pointing from the light into the scene).
-    Directional { direction: Vec3, irradiance: Vec3 },
+    Directional {
+        /// Direction the light travels in (from the light into the scene; need not be unit).
+        direction: Vec3,
+        /// Irradiance on a surface facing the light (linear RGB, W/m^2).
+        irradiance: Vec3,
+    },
     /// A point light limited to a cone around `direction` (the way it shines, unit length):
     /// radiant intensity `intensity` inside the inner cone, none outside the outer cone, and
     /// glTF's smooth falloff between (see [`spot_falloff`]). Angles are half-angles from the
     /// axis, radians, `0 <= inner <= outer <= pi / 2` (equal: a hard edge).
     Spot {
+        /// Light position, scene units.
         position: Vec3,
+        /// Direction the spot shines in (unit length).
         direction: Vec3,
+        /// Radiant intensity inside the inner cone (linear RGB, W/sr).
         intensity: Vec3,
+        /// Half-angle of the fully lit inner cone, radians.
         inner_angle: f32,
+        /// Half-angle of the outer cone, beyond which there is no light, radians.
         outer_angle: f32,
     },
 }
@@ -415,7 +466,9 @@ pub fn spot_falloff(cos_angle: f32, cos_inner: f32, cos_outer: f32) -> f32 {
 pub struct Cone {
     /// Unit direction the spot points in.
     pub axis: Vec3,
+    /// Cosine of the inner cone's half-angle.
     pub cos_inner: f32,
+    /// Cosine of the outer cone's half-angle.
     pub cos_outer: f32,
 }
 
@@ -430,8 +483,11 @@ impl Cone {
 /// A light at a position: its position, its intensity, and for a spot its cone.
 #[derive(Debug, Clone, Copy)]
 pub struct Positional {
+    /// Light position, scene units.
     pub position: Vec3,
+    /// Radiant intensity (linear RGB, W/sr), falling off as 1 / distance^2.
     pub intensity: Vec3,
+    /// The spot's cone; `None` for a point light (shines in every direction).
     pub cone: Option<Cone>,
 }
 
@@ -489,6 +545,7 @@ impl Light {
         }
     }
 
+    /// Direction, distance and irradiance of this light as seen from point `p`.
     pub fn sample(&self, p: Vec3) -> LightSample {
         if let Some(light) = self.positional() {
             let d = light.position - p;
@@ -519,9 +576,11 @@ impl Light {
 /// Local shading frame of a hit: everything shading needs, independent of geometry type.
 #[derive(Debug, Clone, Copy)]
 pub struct SurfacePoint {
+    /// Hit position, world space.
     pub position: Vec3,
     /// Unit shading normal facing the incoming ray.
     pub normal: Vec3,
+    /// Texture coordinates (v up).
     pub uv: Vec2,
 }
 
@@ -529,8 +588,11 @@ pub struct SurfacePoint {
 /// (x, y, z components) so per-lane arithmetic over them vectorises.
 #[derive(Debug, Clone)]
 pub struct SurfacePoints16 {
+    /// Hit positions: x, y and z rows of 16 lanes, world space.
     pub position: [[f32; 16]; 3],
+    /// Unit shading normals facing the incoming rays: x, y and z rows of 16 lanes.
     pub normal: [[f32; 16]; 3],
+    /// Texture coordinates per lane.
     pub uv: [Vec2; 16],
 }
 
@@ -545,6 +607,7 @@ impl Default for SurfacePoints16 {
 }
 
 impl SurfacePoints16 {
+    /// The surface point of lane `lane` (0..16).
     pub fn get(&self, lane: usize) -> SurfacePoint {
         let (p, n) = (&self.position, &self.normal);
         SurfacePoint {

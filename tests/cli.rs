@@ -986,6 +986,12 @@ fn exit_codes_name_the_kind_of_failure() {
             "usage",
             "apply to .exr output only",
         ),
+        (
+            &["render", "--png-16", "-o", "o.exr"],
+            2,
+            "usage",
+            "--png-16 applies to .png output only",
+        ),
         (&["bench", "--repeat", "0"], 2, "usage", "--repeat"),
         // Inputs.
         (

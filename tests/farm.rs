@@ -475,3 +475,23 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
     sheet.save(&out).unwrap();
     eprintln!("contact sheet of the focus pull: {}", out.display());
 }
+
+#[test]
+fn frames_of_an_unanimated_scene_warn_that_they_are_identical() {
+    let dir = scratch("unanimated");
+    let pattern = dir.join("still_##.png");
+    let o = cmd()
+        .args([
+            "render", "-q", "--width", "16", "--height", "12", "--frames", "1-2",
+        ])
+        .args(["-o", s(&pattern)])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("warning: paper has no [animation]: its 2 frames will be identical"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(dir.join("still_01.png").exists() && dir.join("still_02.png").exists());
+}

@@ -1,1 +1,507 @@
-//! Python module (skeleton).
+//! `dofray._dofray`, the extension module behind the Python package `dofray` (python/dofray):
+//! [`render`] loads a scene, applies keyword overrides and renders it on a thread of its own
+//! while the calling thread, without the GIL, waits; every 50 ms it takes the GIL back to run
+//! Python's signal handlers (Ctrl-C cancels the render and raises `KeyboardInterrupt`) and the
+//! progress callback (an exception from it cancels the render and propagates). The result is a
+//! [`Render`]: RGBA, depth and CoC as numpy arrays, the statistics as a dict.
+//!
+//! Errors are raised as `dofray.Error` (with a `kind` attribute: the name of
+//! [`dofray::exit::ErrorKind`]) or, for bad arguments, `dofray.UsageError` (also a
+//! `ValueError`); both are defined by the Python package.
+
+use std::error::Error as StdError;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::{Mutex, PoisonError};
+use std::time::Duration;
+
+use dofray::embree::Device;
+use dofray::exit::ErrorKind;
+use dofray::overrides::{OverrideError, Overrides, Param, SettingsOverrides};
+use dofray::render::{CancelFlag, Film, Mode, Progress, RenderStats};
+use dofray::renderer::{Renderer, RendererError};
+use numpy::ndarray::{Array2, Array3};
+use numpy::{IntoPyArray, PyArray2, PyArray3};
+use pyo3::IntoPyObjectExt;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+/// How often the waiting thread takes the GIL to check for signals and report progress.
+const POLL: Duration = Duration::from_millis(50);
+
+/// A failure of the render thread, sent back to the Python thread (which raises it).
+#[derive(Debug)]
+struct Failure {
+    kind: ErrorKind,
+    message: String,
+}
+
+impl Failure {
+    fn usage(message: String) -> Self {
+        Self {
+            kind: ErrorKind::Usage,
+            message,
+        }
+    }
+
+    /// The library's error: its kind ([`dofray::exit::classify`]) and its message with its
+    /// causes (`outer: inner`), the overrides named as the Python keywords are.
+    fn from_error(error: &(dyn StdError + 'static)) -> Self {
+        let kind = dofray::exit::classify(error);
+        let message = match error.downcast_ref::<RendererError>() {
+            Some(RendererError::Override(e)) => override_message(e),
+            _ => {
+                let mut message = error.to_string();
+                let mut next = error.source();
+                while let Some(e) = next {
+                    message.push_str(": ");
+                    message.push_str(&e.to_string());
+                    next = e.source();
+                }
+                message
+            }
+        };
+        Self { kind, message }
+    }
+
+    /// The Python exception: `dofray.UsageError` for usage errors, else `dofray.Error`, with
+    /// `kind` set.
+    fn into_pyerr(self, py: Python<'_>) -> PyErr {
+        let class = if self.kind == ErrorKind::Usage {
+            "UsageError"
+        } else {
+            "Error"
+        };
+        let made = (|| -> PyResult<PyErr> {
+            let exception = py
+                .import("dofray")?
+                .getattr(class)?
+                .call1((&self.message,))?;
+            exception.setattr("kind", self.kind.name())?;
+            Ok(PyErr::from_value(exception))
+        })();
+        // Only a broken installation (no `dofray` package around the module) gets here.
+        made.unwrap_or_else(|e| e)
+    }
+}
+
+/// The keyword `render` takes for an override parameter.
+fn keyword(param: Param) -> &'static str {
+    match param {
+        Param::FocalLength => "focal_length",
+        Param::SensorWidth => "sensor_width",
+        Param::BladeRotation => "blade_rotation",
+        other => other.field(),
+    }
+}
+
+fn override_message(e: &OverrideError) -> String {
+    e.message(keyword)
+}
+
+/// An integer keyword that must fit a `u32`.
+fn to_u32(name: &str, value: Option<i64>) -> Result<Option<u32>, Failure> {
+    value
+        .map(|v| {
+            u32::try_from(v).map_err(|_| {
+                Failure::usage(format!(
+                    "{name} must be an integer from 0 to {}, got {v}",
+                    u32::MAX
+                ))
+            })
+        })
+        .transpose()
+}
+
+fn to_mode(mode: Option<&str>) -> Result<Option<Mode>, Failure> {
+    mode.map(|m| match m {
+        "pinhole" => Ok(Mode::Pinhole),
+        "dense" => Ok(Mode::Dense),
+        "adaptive" => Ok(Mode::Adaptive),
+        other => Err(Failure::usage(format!(
+            "mode must be one of 'pinhole', 'dense', 'adaptive', got '{other}'"
+        ))),
+    })
+    .transpose()
+}
+
+/// What to render: the scene and the keyword overrides, checked for range by the library.
+struct Job {
+    scene: String,
+    frame: Option<i64>,
+    overrides: Overrides,
+    settings: SettingsOverrides,
+}
+
+/// The Embree device, made once per process (making one starts Embree's thread pool).
+static DEVICE: Mutex<Option<Device>> = Mutex::new(None);
+
+fn device() -> Result<Device, Failure> {
+    let mut device = DEVICE.lock().unwrap_or_else(PoisonError::into_inner);
+    if let Some(d) = device.as_ref() {
+        return Ok(d.clone());
+    }
+    let d = Device::new().map_err(|e| Failure::from_error(&e))?;
+    *device = Some(d.clone());
+    Ok(d)
+}
+
+impl Job {
+    /// Loads, builds and renders (on the calling thread), reporting to `progress`.
+    fn run(self, progress: &Shared) -> Result<(Film, RenderStats), Failure> {
+        let fail = |e: RendererError| Failure::from_error(&e);
+        let desc = dofray::scene::load(&self.scene).map_err(|e| fail(e.into()))?;
+        let renderer = Renderer::with_overrides(desc, self.overrides, &device()?).map_err(fail)?;
+        let settings = self
+            .settings
+            .settings(renderer.desc())
+            .map_err(|e| fail(e.into()))?;
+        renderer
+            .render_frame(self.frame, None, &settings, progress)
+            .map_err(fail)
+    }
+}
+
+/// Progress shared by the render thread (which writes it) and the Python thread (which reads
+/// it and may cancel).
+#[derive(Default)]
+struct Shared {
+    cancel: CancelFlag,
+    /// The current phase: its number (from 1; 0 before the first) and name.
+    phase: Mutex<(u64, String)>,
+    done: AtomicU64,
+    total: AtomicU64,
+}
+
+impl Progress for Shared {
+    fn start(&self, phase: &str, total: u64) {
+        let mut current = self.phase.lock().unwrap_or_else(PoisonError::into_inner);
+        current.0 += 1;
+        current.1 = phase.to_owned();
+        self.done.store(0, Ordering::Relaxed);
+        self.total.store(total, Ordering::Relaxed);
+    }
+
+    fn advance(&self, units: u64) {
+        self.done.fetch_add(units, Ordering::Relaxed);
+    }
+
+    fn cancelled(&self) -> bool {
+        self.cancel.is_cancelled()
+    }
+}
+
+impl Shared {
+    /// (phase number, name, done, total), `done` at most `total`.
+    fn snapshot(&self) -> (u64, String, u64, u64) {
+        let current = self.phase.lock().unwrap_or_else(PoisonError::into_inner);
+        let total = self.total.load(Ordering::Relaxed);
+        let done = self.done.load(Ordering::Relaxed).min(total);
+        (current.0, current.1.clone(), done, total)
+    }
+}
+
+/// Calls `callback(phase, done, total)` when the progress moved since `last`.
+fn report(
+    py: Python<'_>,
+    callback: Option<&Py<PyAny>>,
+    shared: &Shared,
+    last: &mut (u64, u64),
+) -> PyResult<()> {
+    let Some(callback) = callback else {
+        return Ok(());
+    };
+    let (number, phase, done, total) = shared.snapshot();
+    if number == 0 || (number, done) == *last {
+        return Ok(());
+    }
+    *last = (number, done);
+    callback.call1(py, (phase, done, total))?;
+    Ok(())
+}
+
+/// The render thread's outcome (`Ok`), or the Python exception that stopped the wait.
+type Outcome = PyResult<Result<(Film, RenderStats), Failure>>;
+
+/// Runs `job` on a thread of its own; the calling thread waits without the GIL, taking it
+/// every [`POLL`] for signals and the progress callback.
+fn run_job(py: Python<'_>, job: Job, callback: Option<Py<PyAny>>) -> Outcome {
+    let shared = Shared::default();
+    py.detach(|| {
+        std::thread::scope(|scope| {
+            let (tx, rx) = mpsc::channel();
+            let shared = &shared;
+            scope.spawn(move || {
+                let result = catch_unwind(AssertUnwindSafe(|| job.run(shared)));
+                let result = result.unwrap_or_else(|panic| {
+                    let what = panic
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| panic.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "unknown panic".into());
+                    Err(Failure {
+                        kind: ErrorKind::Internal,
+                        message: format!("internal error in dofray: {what}"),
+                    })
+                });
+                // The receiver waits for this message unless it is gone, which it is not.
+                let _ = tx.send(result);
+            });
+            let mut last = (0, 0);
+            loop {
+                match rx.recv_timeout(POLL) {
+                    Ok(result) => {
+                        // The last progress (done = total) before the result.
+                        Python::attach(|py| report(py, callback.as_ref(), shared, &mut last))?;
+                        return Ok(result);
+                    }
+                    Err(RecvTimeoutError::Timeout) => {
+                        let polled = Python::attach(|py| {
+                            py.check_signals()?;
+                            report(py, callback.as_ref(), shared, &mut last)
+                        });
+                        if let Err(e) = polled {
+                            shared.cancel.cancel();
+                            // The render stops within a row's or a round's time.
+                            let _ = rx.recv();
+                            return Err(e);
+                        }
+                    }
+                    Err(RecvTimeoutError::Disconnected) => {
+                        return Ok(Err(Failure {
+                            kind: ErrorKind::Internal,
+                            message: "internal error in dofray: the render thread stopped \
+                                      without a result"
+                                .into(),
+                        }));
+                    }
+                }
+            }
+        })
+    })
+}
+
+/// A JSON value (the statistics) as Python objects.
+fn json_to_py<'py>(py: Python<'py>, value: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    use serde_json::Value;
+    match value {
+        Value::Null => Ok(py.None().into_bound(py)),
+        Value::Bool(b) => b.into_bound_py_any(py),
+        Value::Number(n) => {
+            if let Some(i) = n.as_u64() {
+                i.into_bound_py_any(py)
+            } else if let Some(i) = n.as_i64() {
+                i.into_bound_py_any(py)
+            } else {
+                n.as_f64().unwrap_or(f64::NAN).into_bound_py_any(py)
+            }
+        }
+        Value::String(s) => s.into_bound_py_any(py),
+        Value::Array(items) => {
+            let list = PyList::empty(py);
+            for item in items {
+                list.append(json_to_py(py, item)?)?;
+            }
+            Ok(list.into_any())
+        }
+        Value::Object(map) => {
+            let dict = PyDict::new(py);
+            for (k, v) in map {
+                dict.set_item(k, json_to_py(py, v)?)?;
+            }
+            Ok(dict.into_any())
+        }
+    }
+}
+
+/// The statistics dict: `RenderStats` as `dofray --json` has it, `rays` with its `total`,
+/// and `mrays_per_s`.
+fn stats_dict<'py>(py: Python<'py>, stats: &RenderStats) -> PyResult<Bound<'py, PyDict>> {
+    let mut value = serde_json::to_value(stats).map_err(|e| {
+        Failure {
+            kind: ErrorKind::Internal,
+            message: format!("internal error in dofray: statistics: {e}"),
+        }
+        .into_pyerr(py)
+    })?;
+    if let Some(map) = value.as_object_mut() {
+        if let Some(rays) = map.get_mut("rays").and_then(|r| r.as_object_mut()) {
+            rays.insert("total".into(), stats.rays.total().into());
+        }
+        map.insert("mrays_per_s".into(), stats.mrays_per_s().into());
+    }
+    Ok(json_to_py(py, &value)?.cast_into::<PyDict>()?)
+}
+
+/// A finished render: `rgba` (height, width, 4) float32 linear RGB with alpha (premultiplied
+/// when rendered with `transparent=True`, else alpha is 1), `depth` (height, width) float32
+/// distance along the view axis (inf where nothing was hit), `coc` (height, width) float32
+/// circle-of-confusion diameter in pixels, `stats` a dict, and `save(path)`.
+#[pyclass(frozen, module = "dofray")]
+struct Render {
+    /// (height, width, 4) float32: linear RGB and alpha.
+    #[pyo3(get)]
+    rgba: Py<PyArray3<f32>>,
+    /// (height, width) float32: distance along the view axis, inf where nothing was hit.
+    #[pyo3(get)]
+    depth: Py<PyArray2<f32>>,
+    /// (height, width) float32: circle-of-confusion diameter in pixels.
+    #[pyo3(get)]
+    coc: Py<PyArray2<f32>>,
+    /// The render's statistics (rays, seconds, mrays_per_s, sample_sites, ...).
+    #[pyo3(get)]
+    stats: Py<PyDict>,
+    film: Film,
+}
+
+#[pymethods]
+impl Render {
+    /// Image width in pixels.
+    #[getter]
+    fn width(&self) -> usize {
+        self.film.width
+    }
+
+    /// Image height in pixels.
+    #[getter]
+    fn height(&self) -> usize {
+        self.film.height
+    }
+
+    /// Writes the image as rendered to `path`: PNG (8-bit sRGB) or OpenEXR (linear half
+    /// float RGBA, with the depth and CoC layers) by the extension, as `dofray render -o`.
+    fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
+        py.detach(|| dofray::output::write_film(&path, &self.film))
+            .map_err(|e| Failure::from_error(&e).into_pyerr(py))
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<dofray.Render {}x{}>", self.film.width, self.film.height)
+    }
+}
+
+impl Render {
+    fn new(py: Python<'_>, film: Film, stats: &RenderStats) -> PyResult<Self> {
+        // An ImportError if numpy is missing (the numpy crate would panic).
+        py.import("numpy")?;
+        let (w, h) = (film.width, film.height);
+        let rgba: Vec<f32> = film
+            .color
+            .iter()
+            .zip(&film.alpha)
+            .flat_map(|(c, &a)| [c.x, c.y, c.z, a])
+            .collect();
+        let shape = |e: numpy::ndarray::ShapeError| {
+            Failure {
+                kind: ErrorKind::Internal,
+                message: format!("internal error in dofray: film shape: {e}"),
+            }
+            .into_pyerr(py)
+        };
+        let rgba = Array3::from_shape_vec((h, w, 4), rgba).map_err(shape)?;
+        let depth = Array2::from_shape_vec((h, w), film.depth.clone()).map_err(shape)?;
+        let coc = Array2::from_shape_vec((h, w), film.coc.clone()).map_err(shape)?;
+        Ok(Self {
+            rgba: rgba.into_pyarray(py).unbind(),
+            depth: depth.into_pyarray(py).unbind(),
+            coc: coc.into_pyarray(py).unbind(),
+            stats: stats_dict(py, stats)?.unbind(),
+            film,
+        })
+    }
+}
+
+/// Renders `scene` (a built-in name such as "paper", or a .toml, .obj, .gltf or .glb path)
+/// with the given overrides; see the Python package's `dofray.render` for the keywords.
+#[pyfunction]
+#[pyo3(signature = (
+    scene, *, width=None, height=None, f_number=None, focal_length=None, sensor_width=None,
+    focus_distance=None, autofocus=None, aperture_radius=None, blades=None, spp=None, aa=None,
+    mode=None, tolerance=None, seed=None, exposure=None, transparent=false, frame=None,
+    progress=None
+))]
+#[allow(clippy::too_many_arguments)]
+fn render(
+    py: Python<'_>,
+    scene: PathBuf,
+    width: Option<i64>,
+    height: Option<i64>,
+    f_number: Option<f32>,
+    focal_length: Option<f32>,
+    sensor_width: Option<f32>,
+    focus_distance: Option<f32>,
+    autofocus: Option<(i64, i64)>,
+    aperture_radius: Option<f32>,
+    blades: Option<i64>,
+    spp: Option<i64>,
+    aa: Option<i64>,
+    mode: Option<&str>,
+    tolerance: Option<f32>,
+    seed: Option<u64>,
+    exposure: Option<f32>,
+    transparent: bool,
+    frame: Option<i64>,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Render> {
+    if let Some(callback) = &progress
+        && !callback.bind(py).is_callable()
+    {
+        return Err(pyo3::exceptions::PyTypeError::new_err(
+            "progress must be callable (phase, done, total)",
+        ));
+    }
+    let job = (|| -> Result<Job, Failure> {
+        let autofocus = match autofocus {
+            Some((x, y)) => Some((
+                to_u32("autofocus x", Some(x))?.unwrap_or(0),
+                to_u32("autofocus y", Some(y))?.unwrap_or(0),
+            )),
+            None => None,
+        };
+        let scene = scene.to_str().map(str::to_owned).ok_or_else(|| {
+            Failure::usage(format!("scene path {} is not valid UTF-8", scene.display()))
+        })?;
+        Ok(Job {
+            scene,
+            frame,
+            overrides: Overrides {
+                width: to_u32("width", width)?,
+                height: to_u32("height", height)?,
+                f_number,
+                focal_length_mm: focal_length,
+                sensor_width_mm: sensor_width,
+                focus_distance,
+                autofocus,
+                aperture_radius,
+                blades: to_u32("blades", blades)?,
+                ..Default::default()
+            },
+            settings: SettingsOverrides {
+                mode: to_mode(mode)?,
+                spp: to_u32("spp", spp)?,
+                aa: to_u32("aa", aa)?,
+                tolerance,
+                seed,
+                exposure,
+                transparent,
+                ..Default::default()
+            },
+        })
+    })()
+    .map_err(|f| f.into_pyerr(py))?;
+    match run_job(py, job, progress)? {
+        Err(failure) => Err(failure.into_pyerr(py)),
+        Ok((film, stats)) => Render::new(py, film, &stats),
+    }
+}
+
+/// The extension module.
+#[pymodule]
+fn _dofray(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_class::<Render>()?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

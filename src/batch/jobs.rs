@@ -12,7 +12,9 @@ use crate::render::Region;
 pub struct TileRef {
     /// Row-major from the top left, 0-based.
     pub index: usize,
+    /// How many tiles the image is split into.
     pub count: usize,
+    /// The pixels of the image the tile covers.
     pub region: Region,
 }
 
@@ -21,6 +23,7 @@ pub struct TileRef {
 pub struct Job {
     /// `None` for a render that is not one of several frames.
     pub frame: Option<i64>,
+    /// The tile this job renders; `None` for the whole image.
     pub tile: Option<TileRef>,
     /// The file this job writes (the tile's file for a tile).
     pub output: PathBuf,

@@ -53,11 +53,13 @@ pub struct EqualErrorConfig {
     pub ladder: Vec<u32>,
     /// PSNR levels in dB (sRGB, against the reference).
     pub levels: Vec<f64>,
+    /// How each rung's anti-aliasing samples (per in-focus site) are chosen.
     pub aa: RungAa,
     /// Timed repeats of each rung; the median is reported.
     pub repeat: usize,
     /// Samples per pixel of the converged reference (dense, in focus or not).
     pub reference_spp: u32,
+    /// Seed of every render's sample streams (the reference's seed is derived from it).
     pub seed: u64,
     /// Where the reference is cached (None: not cached).
     pub cache_dir: Option<PathBuf>,
@@ -81,12 +83,14 @@ impl Default for EqualErrorConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
+    /// Dense mode: every pixel a site (Cook's distributed ray tracing).
     Dense,
     /// Adaptive mode with the error-controlled rule at its default tolerance.
     Adaptive,
 }
 
 impl Method {
+    /// The method's lowercase name (`"dense"`, `"adaptive"`), as in the report's JSON.
     pub fn name(self) -> &'static str {
         match self {
             Self::Dense => "dense",
@@ -122,7 +126,9 @@ pub struct Rung {
     pub tolerance: Option<f32>,
     /// Median wall time of the repeats.
     pub seconds: f64,
+    /// Rays traced per render, of every kind (the same in every repeat).
     pub rays: u64,
+    /// Camera rays per render.
     pub primary_rays: u64,
     /// Pixels shaded directly (the rest were interpolated).
     pub sample_sites: u64,
@@ -159,8 +165,11 @@ pub struct Crossing {
 /// Both methods at one PSNR level.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Level {
+    /// The level, in dB (sRGB, against the reference).
     pub psnr_db: f64,
+    /// When dense reaches it.
     pub dense: Crossing,
+    /// When adaptive reaches it.
     pub adaptive: Crossing,
     /// Dense seconds / adaptive seconds; null unless both reach the level.
     pub speedup: Option<f64>,
@@ -198,19 +207,29 @@ impl Level {
 /// The whole study.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct EqualErrorReport {
+    /// The scene's name.
     pub scene: String,
+    /// Image width in pixels.
     pub width: usize,
+    /// Image height in pixels.
     pub height: usize,
+    /// Timed repeats of each rung.
     pub repeat: usize,
+    /// Threads of the rayon pool the renders ran on.
     pub threads: usize,
+    /// Seed of every render's sample streams.
     pub seed: u64,
+    /// Samples per pixel of the converged reference.
     pub reference_spp: u32,
+    /// Whether the reference was read from the cache instead of rendered.
     pub reference_cached: bool,
     /// Time to render the reference (0 when it came from the cache).
     pub reference_seconds: f64,
     /// How each rung's aa was chosen.
     pub aa: RungAa,
+    /// Dense's rungs, in ladder order (ascending spp).
     pub dense: Vec<Rung>,
+    /// Adaptive's rungs, in ladder order (ascending spp).
     pub adaptive: Vec<Rung>,
     /// The requested levels, ascending.
     pub levels: Vec<Level>,

@@ -24,13 +24,18 @@ pub const PLOT_SIZE: (u32, u32) = (960, 600);
 const FONT: &str = "sans-serif";
 static DEJAVU_SANS: &[u8] = include_bytes!("fonts/DejaVuSans.ttf");
 
+/// Why the equal-error plot could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
+    /// Plotters failed to draw it.
     #[error("cannot draw the plot {}: {message}", path.display())]
     Draw {
+        /// The plot's path.
         path: std::path::PathBuf,
+        /// Plotters' error, in words.
         message: String,
     },
+    /// Writing the PNG failed.
     #[error(transparent)]
     Output(#[from] OutputError),
 }

@@ -11,11 +11,17 @@ use super::sys;
 /// Embree's error codes (`RTCError`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ErrorCode {
+    /// `RTC_ERROR_UNKNOWN`.
     Unknown,
+    /// `RTC_ERROR_INVALID_ARGUMENT`.
     InvalidArgument,
+    /// `RTC_ERROR_INVALID_OPERATION`.
     InvalidOperation,
+    /// `RTC_ERROR_OUT_OF_MEMORY`.
     OutOfMemory,
+    /// `RTC_ERROR_UNSUPPORTED_CPU`: the CPU lacks an instruction set Embree was built for.
     UnsupportedCpu,
+    /// `RTC_ERROR_CANCELLED`: a progress monitor cancelled the operation.
     Cancelled,
     /// A code this version of dofray does not know.
     Other(u32),
@@ -54,15 +60,26 @@ impl fmt::Display for ErrorCode {
 pub enum EmbreeError {
     /// Embree itself reported an error (through its error callback or `rtcGetDeviceError`).
     #[error("Embree reported {code}: {message}")]
-    Embree { code: ErrorCode, message: String },
+    Embree {
+        /// The error code.
+        code: ErrorCode,
+        /// The call that failed, with Embree's own message when it gave one.
+        message: String,
+    },
     /// Geometry data was rejected before it reached Embree.
     #[error("invalid geometry: {0}")]
     InvalidGeometry(String),
     /// A device configuration string that cannot be passed to Embree.
     #[error("invalid Embree device config {config:?}: {reason}")]
-    InvalidConfig { config: String, reason: String },
+    InvalidConfig {
+        /// The configuration string.
+        config: String,
+        /// Why it was refused.
+        reason: String,
+    },
 }
 
+/// A result whose error defaults to [`EmbreeError`].
 pub type Result<T, E = EmbreeError> = std::result::Result<T, E>;
 
 /// Per thread, the first error Embree reported through the callback since that thread last
@@ -223,6 +240,15 @@ impl Device {
     }
 
     /// A device with an Embree configuration string such as `"threads=2,verbose=0"`.
+    ///
+    /// ```rust
+    /// use dofray::embree::Device;
+    ///
+    /// // SSE4.2 kernels only, as on a CPU without AVX (test the narrow code paths).
+    /// let device = Device::with_config("isa=sse4.2,threads=1")?;
+    /// assert_eq!(device.native_packet_width(), 4);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     ///
     /// A config Embree rejects (say `threads=notanumber`; Embree ignores unknown options) is an
     /// [`EmbreeError::Embree`] with Embree's code. Its message quotes Embree's reason on Embree 4;

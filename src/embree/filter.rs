@@ -19,12 +19,15 @@ use super::sys;
 /// A hit Embree found and asks about, before it becomes the ray's hit (or blocks a shadow ray).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CandidateHit {
+    /// The ray's origin, world space.
     pub origin: Vec3,
+    /// The ray's direction, as traced.
     pub dir: Vec3,
     /// Triangle index in the mesh.
     pub prim: u32,
-    /// Barycentric coordinates (Embree's u, v).
+    /// Barycentric coordinates (Embree's u, v): the hit is `(1 - u - v) p0 + u p1 + v p2`.
     pub u: f32,
+    /// Second barycentric coordinate (Embree's v).
     pub v: f32,
     /// True for an occlusion (shadow) query, false for a nearest-hit query.
     pub shadow: bool,
@@ -35,6 +38,7 @@ pub struct CandidateHit {
 /// candidate alone (never on call order) for renders to be deterministic. A panic inside
 /// `accept` is caught and counts as accepting the hit.
 pub trait HitFilter: Send + Sync {
+    /// Whether `hit` counts; `false` lets the ray pass through (a hole).
     fn accept(&self, hit: &CandidateHit) -> bool;
 }
 

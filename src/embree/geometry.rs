@@ -121,6 +121,7 @@ impl TriangleMesh {
         Ok(self)
     }
 
+    /// The per-vertex tangents (xyz unit, w the bitangent sign), if the mesh has them.
     pub fn tangents(&self) -> Option<&[[f32; 4]]> {
         self.tangents.as_deref().map(Vec::as_slice)
     }
@@ -138,26 +139,32 @@ impl TriangleMesh {
         Some((t, a[3]))
     }
 
+    /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len() - 1
     }
 
+    /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.indices.len() - 1
     }
 
+    /// Vertex positions (without Embree's padding vertex).
     pub fn positions(&self) -> &[[f32; 3]] {
         &self.positions[..self.vertex_count()]
     }
 
+    /// Each triangle's three vertex indices (without Embree's padding triangle).
     pub fn indices(&self) -> &[[u32; 3]] {
         &self.indices[..self.triangle_count()]
     }
 
+    /// The per-vertex unit shading normals, if the mesh has them.
     pub fn normals(&self) -> Option<&[[f32; 3]]> {
         self.normals.as_deref().map(Vec::as_slice)
     }
 
+    /// The per-vertex texture coordinates, if the mesh has them.
     pub fn uvs(&self) -> Option<&[[f32; 2]]> {
         self.uvs.as_deref().map(Vec::as_slice)
     }
@@ -249,10 +256,12 @@ impl Spheres {
         Ok(Self { data })
     }
 
+    /// Number of spheres.
     pub fn len(&self) -> usize {
         self.data.len()
     }
 
+    /// Whether the set has no spheres.
     pub fn is_empty(&self) -> bool {
         self.data.is_empty()
     }
@@ -282,7 +291,9 @@ impl Spheres {
 /// A geometry attached to a scene, as the Rust side keeps it for shading.
 #[derive(Debug, Clone)]
 pub enum Geometry {
+    /// A triangle mesh; primitives are its triangles.
     Mesh(TriangleMesh),
+    /// A set of spheres; primitives are its spheres.
     Spheres(Spheres),
 }
 

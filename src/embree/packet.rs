@@ -11,9 +11,13 @@ pub const LANES: usize = 16;
 /// A ray segment `origin + t * dir` for `t` in `[tnear, tfar]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ray {
+    /// Start point, world space.
     pub origin: Vec3,
+    /// Direction (not necessarily unit length; `t` is measured in multiples of it).
     pub dir: Vec3,
+    /// Smallest ray parameter that counts as a hit.
     pub tnear: f32,
+    /// Largest ray parameter that counts as a hit (infinity for none).
     pub tfar: f32,
 }
 
@@ -38,6 +42,7 @@ impl Ray {
         }
     }
 
+    /// The point at ray parameter `t`: `origin + t * dir`.
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + self.dir * t
     }
@@ -48,11 +53,13 @@ impl Ray {
 pub struct Hit {
     /// Ray parameter of the hit (a distance when `dir` is unit length).
     pub t: f32,
+    /// The geometry hit.
     pub geometry: GeometryId,
     /// Triangle index in a mesh, sphere index in a sphere set.
     pub prim: u32,
     /// Barycentric coordinates for triangles (Embree's u, v); unspecified for spheres.
     pub u: f32,
+    /// Second barycentric coordinate (Embree's v), as `u`.
     pub v: f32,
     /// Unnormalised geometric normal as Embree reports it.
     pub ng: Vec3,
@@ -61,7 +68,9 @@ pub struct Hit {
 /// Whether a packet's rays are coherent (primary rays, lens samples of one pixel) or not.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RayHint {
+    /// Rays of a packet start near each other and point alike (Embree's coherent flag).
     Coherent,
+    /// Rays go their own ways (secondary rays; Embree's incoherent flag).
     Incoherent,
 }
 

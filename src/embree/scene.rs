@@ -13,9 +13,12 @@ use super::{sys, version};
 /// Embree's BVH build quality: a trade between build time and trace speed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum BuildQuality {
+    /// `RTC_BUILD_QUALITY_LOW`: the fastest build, slower tracing.
     Low,
+    /// `RTC_BUILD_QUALITY_MEDIUM`: Embree's default balance.
     #[default]
     Medium,
+    /// `RTC_BUILD_QUALITY_HIGH`: a slower build for faster tracing.
     High,
 }
 
@@ -42,8 +45,11 @@ pub enum PacketWidth {
     /// native 8-wide calls and its shadow rays faster (`cargo bench --bench packets`, README).
     #[default]
     Auto,
+    /// One 16-wide call (`rtcIntersect16` / `rtcOccluded16`).
     X16,
+    /// 8-wide calls (`rtcIntersect8` / `rtcOccluded8`), one per half with an active lane.
     X8,
+    /// 4-wide calls (`rtcIntersect4` / `rtcOccluded4`), one per quarter with an active lane.
     X4,
 }
 
@@ -84,6 +90,7 @@ pub struct SceneBuilder {
 unsafe impl Send for SceneBuilder {}
 
 impl SceneBuilder {
+    /// An empty scene on `device` (build quality [`BuildQuality::Medium`]).
     pub fn new(device: &Device) -> Result<Self> {
         // SAFETY: device.raw() is a live device.
         let raw = unsafe { sys::rtcNewScene(device.raw()) };
@@ -103,6 +110,7 @@ impl SceneBuilder {
         })
     }
 
+    /// Sets the BVH build quality of the geometries added after this call and of the commit.
     pub fn build_quality(mut self, quality: BuildQuality) -> Self {
         self.quality = quality;
         self
@@ -292,6 +300,7 @@ impl Scene {
         &self.geometries[id.0 as usize]
     }
 
+    /// The Rust-side data of every geometry, indexed by [`GeometryId`].
     pub fn geometries(&self) -> &[Geometry] {
         &self.geometries
     }

@@ -29,7 +29,9 @@ use crate::render::film::Film;
 pub const LAYER: &str = "ViewLayer";
 /// Beauty: linear colour, premultiplied by alpha.
 pub const CHANNEL_R: &str = "ViewLayer.Combined.R";
+/// Beauty green (see [`CHANNEL_R`]).
 pub const CHANNEL_G: &str = "ViewLayer.Combined.G";
+/// Beauty blue (see [`CHANNEL_R`]).
 pub const CHANNEL_B: &str = "ViewLayer.Combined.B";
 /// Coverage alpha (associated with the colour, as EXR requires).
 pub const CHANNEL_A: &str = "ViewLayer.Combined.A";
@@ -180,13 +182,19 @@ pub enum CompressionError {
          choose one of: {}",
         ExrCompression::names()
     )]
-    Unsupported { name: String },
+    Unsupported {
+        /// The name as given.
+        name: String,
+    },
     /// Not an OpenEXR compression at all.
     #[error(
         "unknown EXR compression {name:?}; choose one of: {}",
         ExrCompression::names()
     )]
-    Unknown { name: String },
+    Unknown {
+        /// The name as given.
+        name: String,
+    },
 }
 
 impl FromStr for ExrCompression {
@@ -212,12 +220,14 @@ impl FromStr for ExrCompression {
     }
 }
 
-/// How [`write_exr`] encodes.
+/// How an EXR is encoded: set from [`WriteOptions`](super::WriteOptions) by
+/// [`write_film_with`](super::write_film_with).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ExrOptions {
     /// The beauty (`ViewLayer.Combined.R/G/B/A`) as 16-bit half floats; depth and dofray's
     /// passes stay 32-bit.
     pub half: bool,
+    /// The compression of every channel.
     pub compression: ExrCompression,
     /// The film is this region of a larger image of this size (a tile): the file's data
     /// window is the region and its display window the whole image, as OpenEXR places tiles

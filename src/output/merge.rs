@@ -30,71 +30,119 @@ const PER_TILE: [&str; 4] = [
 /// Why tiles could not be merged.
 #[derive(Debug, thiserror::Error)]
 pub enum MergeError {
+    /// The list of tiles is empty.
     #[error("no tiles given")]
     NoTiles,
+    /// A tile could not be read or decoded (or is a PNG other than RGB or RGBA).
     #[error("cannot read tile {}: {message}", path.display())]
-    Read { path: PathBuf, message: String },
-    #[error("{} is not a dofray tile: it has no valid {key} ({message})", path.display())]
-    NotATile {
+    Read {
+        /// The tile.
         path: PathBuf,
-        key: &'static str,
+        /// Why, in words.
         message: String,
     },
+    /// A file lacks the metadata that places a tile (`dofray:region`, `dofray:width`,
+    /// `dofray:height`), or it is invalid.
+    #[error("{} is not a dofray tile: it has no valid {key} ({message})", path.display())]
+    NotATile {
+        /// The file.
+        path: PathBuf,
+        /// The metadata key that is missing or invalid.
+        key: &'static str,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// Two tiles are of different formats (one EXR, one PNG).
     #[error(
         "{} is a {} and {} a {}: tiles of one image share a format",
         first.display(), first_format, other.display(), other_format
     )]
     Formats {
+        /// The first tile given.
         first: PathBuf,
+        /// Its format, `"EXR"` or `"PNG"`.
         first_format: &'static str,
+        /// The tile of the other format.
         other: PathBuf,
+        /// Its format, `"EXR"` or `"PNG"`.
         other_format: &'static str,
     },
+    /// The merged image's extension names another format than the tiles'.
     #[error(
         "the merged image {} must be a {} like its tiles",
         path.display(), format
     )]
-    OutputFormat { path: PathBuf, format: &'static str },
+    OutputFormat {
+        /// The merged image's path.
+        path: PathBuf,
+        /// The tiles' format, `"EXR"` or `"PNG"`.
+        format: &'static str,
+    },
+    /// Two tiles record different settings (a metadata key other than the per-tile region, time,
+    /// rays and scene path differs, or only one of them has it).
     #[error(
         "{} and {} are not tiles of one render: {key} is {first_value:?} in the first and \
          {other_value:?} in the second",
         first.display(), other.display()
     )]
     Mismatch {
+        /// The first tile given.
         first: PathBuf,
+        /// The tile that differs from it.
         other: PathBuf,
+        /// The metadata key whose values differ.
         key: String,
+        /// Its value in `first` (`"(missing)"` when absent).
         first_value: String,
+        /// Its value in `other` (`"(missing)"` when absent).
         other_value: String,
     },
+    /// Two tiles' regions share pixels.
     #[error(
         "{} (region {first_region}) and {} (region {other_region}) overlap",
         first.display(), other.display()
     )]
     Overlap {
+        /// One of the tiles.
         first: PathBuf,
+        /// Its region.
         first_region: Region,
+        /// The tile it overlaps.
         other: PathBuf,
+        /// That tile's region.
         other_region: Region,
     },
+    /// The tiles do not cover the whole image.
     #[error(
         "the tiles leave {missing} pixels of the {width}x{height} image uncovered, the first at \
          ({x}, {y}): a tile is missing"
     )]
     Gap {
+        /// How many pixels no tile covers.
         missing: u64,
+        /// The whole image's width in pixels.
         width: u32,
+        /// The whole image's height in pixels.
         height: u32,
+        /// Column of the first uncovered pixel (in row-major order).
         x: u32,
+        /// Row of the first uncovered pixel.
         y: u32,
     },
+    /// A tile's pixels do not match its recorded region: another size, another EXR data window
+    /// position, or channels with another number of samples.
     #[error("{} holds {found} but its region {region} needs {expected}", path.display())]
     Size {
+        /// The tile.
         path: PathBuf,
+        /// The region its metadata records.
         region: Region,
+        /// What the file holds, in words.
         found: String,
+        /// What the region needs, in words.
         expected: String,
     },
+    /// Checking or writing the merged image (or a tile's extension) failed.
     #[error(transparent)]
     Output(#[from] OutputError),
 }
@@ -136,8 +184,11 @@ impl Tile {
 /// What [`merge`] wrote.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Merged {
+    /// The merged image's width in pixels.
     pub width: u32,
+    /// The merged image's height in pixels.
     pub height: u32,
+    /// How many tiles were merged.
     pub tiles: usize,
     /// The tiles' render times added up.
     pub seconds: f64,

@@ -14,6 +14,7 @@ pub struct Metadata {
 }
 
 impl Metadata {
+    /// No entries.
     pub fn new() -> Self {
         Self::default()
     }
@@ -23,10 +24,12 @@ impl Metadata {
         self.entries.push((key.into(), value.to_string()));
     }
 
+    /// The entries in the order they were added (duplicate keys included).
     pub fn iter(&self) -> impl Iterator<Item = (&str, &str)> {
         self.entries.iter().map(|(k, v)| (k.as_str(), v.as_str()))
     }
 
+    /// The value of the last entry with `key`, if any.
     pub fn get(&self, key: &str) -> Option<&str> {
         self.iter()
             .filter(|(k, _)| *k == key)
@@ -105,12 +108,14 @@ impl Default for Fnv1a {
 }
 
 impl Fnv1a {
+    /// Feeds `bytes` into the hash.
     pub fn update(&mut self, bytes: &[u8]) {
         for &b in bytes {
             self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
         }
     }
 
+    /// The hash of everything fed so far (does not reset it).
     pub fn finish(&self) -> u64 {
         self.0
     }

@@ -128,7 +128,9 @@ pub fn same_file(a: &Path, b: &Path) -> Result<bool, OutputError> {
 /// The AOV pictures `render --aov-dir DIR` writes: `DIR/depth.png` (the seed's figure 2),
 /// `DIR/interval.png` (figure 3) and `DIR/samples.png` (samples traced per pixel).
 pub const AOV_DEPTH: &str = "depth.png";
+/// The interval picture's file name (see [`AOV_DEPTH`]).
 pub const AOV_INTERVAL: &str = "interval.png";
+/// The samples picture's file name (see [`AOV_DEPTH`]).
 pub const AOV_SAMPLES: &str = "samples.png";
 /// Every AOV picture.
 pub const AOVS: [&str; 3] = [AOV_DEPTH, AOV_INTERVAL, AOV_SAMPLES];

@@ -5,7 +5,9 @@ use glam::{Vec3, Vec4};
 /// A rendered frame: linear RGB radiance plus the maps the seed's method works from.
 #[derive(Debug, Clone)]
 pub struct Film {
+    /// Image width in pixels.
     pub width: usize,
+    /// Image height in pixels.
     pub height: usize,
     /// Linear RGB radiance, row-major, top row first. With
     /// [`RenderSettings::transparent`](super::RenderSettings) the background contributes
@@ -26,6 +28,8 @@ pub struct Film {
 }
 
 impl Film {
+    /// A `width` x `height` film with black colour, alpha 1, infinite depth, CoC 0, interval 1 and
+    /// no samples.
     pub fn new(width: usize, height: usize) -> Self {
         let n = width * height;
         Self {
@@ -40,6 +44,7 @@ impl Film {
         }
     }
 
+    /// Index of pixel (`x`, `y`) in the row-major per-pixel vectors: `y * width + x`.
     pub fn index(&self, x: usize, y: usize) -> usize {
         y * self.width + x
     }

@@ -61,7 +61,9 @@ fn square_minima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u
     out
 }
 
-/// [`square_minima`]'s counterpart: maxima over the (2r + 1)^2 squares, r = 2^l, l = 1..=top.
+/// Maxima over growing squares, for every level `l` in `1..=top`: `out[l - 1][p]` is the
+/// maximum of `src` over the (2r + 1)^2 square around pixel p with r = 2^l, clipped at the
+/// borders (missing pixels count as 0).
 pub fn square_maxima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u8>> {
     let inverted: Vec<u8> = src.iter().map(|&v| u8::MAX - v).collect();
     let mut levels = square_minima(&inverted, width, height, top);

@@ -45,17 +45,22 @@ pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 
 /// Where sample sites are placed.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
+    /// Every pixel a site, sampled through the lens centre: no depth of field.
     Pinhole,
+    /// Every pixel a site, sampled over pixel x lens (Cook's distributed ray tracing): the
+    /// reference the other modes are measured against.
     Dense,
+    /// Sites only where needed, spaced by the CoC; the pixels between them interpolated.
     Adaptive,
 }
 
 impl Mode {
+    /// The mode's lowercase name, as the command line and JSON spell it (`"pinhole"`, `"dense"`,
+    /// `"adaptive"`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Pinhole => "pinhole",
@@ -81,6 +86,7 @@ pub enum SiteRule {
 /// How to render.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RenderSettings {
+    /// Where sample sites are placed.
     pub mode: Mode,
     /// Samples (of pixel x lens) per sample site that blur reaches (16 fill one packet).
     pub spp: u32,
@@ -100,7 +106,10 @@ pub struct RenderSettings {
     pub paper_exact: bool,
     /// Largest interval (power of two).
     pub max_interval: u32,
+    /// Seed of every pixel's sample stream: renders with the same seed (and everything else the
+    /// same) are bit-identical; another seed gives another, equally valid, noise pattern.
     pub seed: u64,
+    /// How lens samples are weighted when a site's samples are averaged (the bokeh's profile).
     pub filter: LensFilter,
     /// Mirror bounces after the first hit.
     pub bounces: u32,
@@ -145,20 +154,29 @@ pub enum RenderError {
     /// sorts it as `interrupted` (exit code 130, as SIGINT): the caller stopped it.
     #[error("the render was cancelled")]
     Cancelled,
+    /// `spp` is 0 or above [`RenderSettings::MAX_SAMPLES`].
     #[error("spp must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
     BadSpp(u32),
+    /// `aa` is 0 or above [`RenderSettings::MAX_SAMPLES`].
     #[error("aa must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
     BadAa(u32),
+    /// The pixel filter's width (in pixels) is not a finite number in
+    /// (0, [`PixelFilter::MAX_WIDTH`]].
     #[error("the pixel filter width must be a number in (0, {max}] pixels, got {0}", max = PixelFilter::MAX_WIDTH)]
     BadPixelFilterWidth(f32),
+    /// The tolerance is not a finite number > 0.
     #[error("tolerance must be a finite number > 0 (8-bit sRGB code values), got {0}")]
     BadTolerance(f32),
+    /// The interval factor is not a finite number > 0.
     #[error("interval factor must be a finite number > 0, got {0}")]
     BadIntervalFactor(f32),
+    /// The largest interval is not a power of two.
     #[error("max interval must be a power of two >= 1, got {0}")]
     BadMaxInterval(u32),
+    /// The exposure is not finite or beyond +-[`RenderSettings::MAX_EXPOSURE`] stops.
     #[error("exposure must be a finite number of stops from -{max} to {max}, got {0}", max = RenderSettings::MAX_EXPOSURE)]
     BadExposure(f32),
+    /// The region to render is empty or reaches beyond the image.
     #[error(transparent)]
     BadRegion(#[from] RegionError),
     /// The last line of defence: input checks should make this impossible.
@@ -166,7 +184,14 @@ pub enum RenderError {
         "the render produced {count} pixels that are not finite numbers (the first at x = {x}, \
          y = {y}); no image was written. Scene values beyond dofray's documented ranges cause this"
     )]
-    NonFinite { count: usize, x: usize, y: usize },
+    NonFinite {
+        /// How many pixels' colours are not finite.
+        count: usize,
+        /// Column of the first such pixel (in row-major order), in full-image coordinates.
+        x: usize,
+        /// Row of the first such pixel, in full-image coordinates.
+        y: usize,
+    },
 }
 
 impl RenderSettings {
@@ -188,6 +213,8 @@ impl RenderSettings {
             .unwrap_or_else(|| Self::default_tolerance(self.spp))
     }
 
+    /// Checks every setting's range, without rendering: `Err` names the first bad one (the same
+    /// check [`render`] and [`render_region`] start with).
     pub fn validate(&self) -> Result<(), RenderError> {
         if self.spp == 0 || self.spp > Self::MAX_SAMPLES {
             return Err(RenderError::BadSpp(self.spp));
@@ -219,6 +246,7 @@ impl RenderSettings {
 /// What a render did and how long it took.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct RenderStats {
+    /// Wall-clock time of the whole render (depth pass to finished film), in seconds.
     pub seconds: f64,
     /// Time of the depth pass (one pinhole ray per pixel for the depth and CoC maps) alone
     /// (included in `seconds`).
@@ -229,6 +257,8 @@ pub struct RenderStats {
     pub sites_seconds: f64,
     /// Time spent interpolating between sites (included in `seconds`).
     pub interpolate_seconds: f64,
+    /// Rays traced, by kind (for a region render, the rays traced for it, the full-frame depth pass
+    /// included).
     pub rays: RayCounts,
     /// Pixels shaded directly (the rest were interpolated).
     pub sample_sites: u64,
@@ -242,6 +272,8 @@ pub struct RenderStats {
 }
 
 impl RenderStats {
+    /// Millions of rays (of every kind) traced per second of [`RenderStats::seconds`]; 0 when no
+    /// time was measured.
     pub fn mrays_per_s(&self) -> f64 {
         if self.seconds > 0.0 {
             self.rays.total() as f64 / self.seconds / 1e6
@@ -253,10 +285,40 @@ impl RenderStats {
 
 /// Receives progress, and may cancel the render; all methods may be called from several
 /// threads.
+///
+/// ```rust
+/// use std::sync::atomic::{AtomicU64, Ordering};
+/// use dofray::render::{Progress, RenderError};
+/// use dofray::renderer::{Renderer, RendererError};
+///
+/// /// Counts the work done, and stops the render after `budget` units of it.
+/// struct Budget { done: AtomicU64, budget: u64 }
+///
+/// impl Progress for Budget {
+///     fn start(&self, phase: &str, total: u64) {
+///         eprintln!("{phase}: {total} units");
+///     }
+///     fn advance(&self, units: u64) {
+///         self.done.fetch_add(units, Ordering::Relaxed);
+///     }
+///     fn cancelled(&self) -> bool {
+///         self.done.load(Ordering::Relaxed) >= self.budget
+///     }
+/// }
+///
+/// let renderer = Renderer::new(dofray::scene::load("paper")?, &dofray::embree::Device::new()?)?;
+/// let settings = renderer.settings(&Default::default())?;
+/// let progress = Budget { done: AtomicU64::new(0), budget: 10 };
+/// let result = renderer.render(&settings, &progress);
+/// assert!(matches!(result, Err(RendererError::Render(RenderError::Cancelled))));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub trait Progress: Sync {
     /// A new phase with `total` units of work begins.
     fn start(&self, _phase: &str, _total: u64) {}
+    /// `units` more units of the current phase's work are done.
     fn advance(&self, _units: u64) {}
+    /// The render has finished (called once, at the end of a render that succeeded).
     fn finish(&self) {}
     /// Whether to stop: polled before every band of 4 rows of the depth pass, every row of
     /// pinhole, dense and the seed's rule, and every round of every bucket of the
@@ -275,10 +337,28 @@ impl Progress for NoProgress {}
 /// A cancellation token: [`CancelFlag::cancel`] it from any thread (a UI's stop button, a
 /// signal handler) and a render given it (as its [`Progress`], or another progress wrapped with
 /// [`CancelFlag::with`]) stops with [`RenderError::Cancelled`].
+///
+/// ```rust
+/// use dofray::render::{CancelFlag, NoProgress, RenderError};
+/// use dofray::renderer::{Renderer, RendererError};
+///
+/// let renderer = Renderer::new(dofray::scene::load("paper")?, &dofray::embree::Device::new()?)?;
+/// let settings = renderer.settings(&Default::default())?;
+/// let stop = CancelFlag::new();
+/// let result = std::thread::scope(|s| {
+///     let render = s.spawn(|| renderer.render(&settings, &stop.with(&NoProgress)));
+///     stop.cancel(); // e.g. a UI's stop button
+///     render.join().unwrap()
+/// });
+/// // Cancelled, unless the render won the race and finished first.
+/// assert!(matches!(result, Err(RendererError::Render(RenderError::Cancelled)) | Ok(_)));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Default)]
 pub struct CancelFlag(std::sync::atomic::AtomicBool);
 
 impl CancelFlag {
+    /// A flag that is not (yet) cancelled.
     pub fn new() -> Self {
         Self::default()
     }
@@ -288,6 +368,7 @@ impl CancelFlag {
         self.0.store(true, std::sync::atomic::Ordering::Relaxed);
     }
 
+    /// Whether [`CancelFlag::cancel`] has been called.
     pub fn is_cancelled(&self) -> bool {
         self.0.load(std::sync::atomic::Ordering::Relaxed)
     }
@@ -461,6 +542,28 @@ fn fixed_sites(
 }
 
 /// Renders `world` through `camera`. The result is bit-identical for any thread count.
+///
+/// The steps [`crate::renderer::Renderer`] takes for a scene, by hand:
+///
+/// ```rust
+/// use dofray::render::{self, NoProgress, RenderSettings};
+/// use dofray::scene::World;
+///
+/// let mut desc = dofray::scene::load("paper")?;
+/// (desc.camera.width, desc.camera.height) = (64, 48);
+/// let world = World::build(&desc, &dofray::embree::Device::new()?)?;
+/// // Autofocus (a scene focused on a pixel) asks the world how far the pixel's surface is.
+/// let forward = (desc.camera.look_at - desc.camera.eye).normalize();
+/// let camera = desc.camera.build(|ray| {
+///     let hit = world.scene.intersect1(ray)?;
+///     Some((ray.at(hit.t) - ray.origin).dot(forward))
+/// })?;
+/// let settings = RenderSettings { spp: 32, ..Default::default() };
+/// let (film, stats) = render::render(&world, &camera, &settings, &NoProgress)?;
+/// assert_eq!(film.color.len(), 64 * 48);
+/// assert!(stats.sample_sites <= 64 * 48);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn render(
     world: &World,
     camera: &Camera,

@@ -11,36 +11,55 @@ use std::str::FromStr;
 /// Columns `x0..x1` and rows `y0..y1` of an image (half-open: `x1` and `y1` are not in it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Region {
+    /// First column (inclusive).
     pub x0: u32,
+    /// First row (inclusive).
     pub y0: u32,
+    /// End column (exclusive).
     pub x1: u32,
+    /// End row (exclusive).
     pub y1: u32,
 }
 
 /// Why a region is not usable.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum RegionError {
+    /// The text is not four comma-separated whole numbers `x0,y0,x1,y1`.
     #[error(
         "a region is x0,y0,x1,y1 in pixels (four whole numbers, x1 and y1 excluded), got {0:?}"
     )]
     Syntax(String),
+    /// The region has no pixels (`x1 <= x0` or `y1 <= y0`).
     #[error("region {region} is empty: x1 must exceed x0 and y1 must exceed y0")]
-    Empty { region: Region },
+    Empty {
+        /// The region.
+        region: Region,
+    },
+    /// The region reaches beyond the right or bottom edge of the image.
     #[error("region {region} reaches beyond the {width}x{height} image")]
     Outside {
+        /// The region.
         region: Region,
+        /// The image's width in pixels.
         width: u32,
+        /// The image's height in pixels.
         height: u32,
     },
+    /// The text is not a tile grid `COLUMNSxROWS` (or `N`) of 1 to 1024 each.
     #[error("a tile grid is COLUMNSxROWS (e.g. 4x4) of 1 to 1024 each, got {0:?}")]
     Grid(String),
+    /// More columns than the image is wide or more rows than it is high (or none).
     #[error(
         "a {columns}x{rows} tile grid does not fit the {width}x{height} image: every tile needs at least one pixel"
     )]
     GridTooFine {
+        /// Tile columns asked for.
         columns: u32,
+        /// Tile rows asked for.
         rows: u32,
+        /// The image's width in pixels.
         width: u32,
+        /// The image's height in pixels.
         height: u32,
     },
 }
@@ -56,14 +75,17 @@ impl Region {
         }
     }
 
+    /// Width in pixels (`x1 - x0`).
     pub fn width(&self) -> u32 {
         self.x1 - self.x0
     }
 
+    /// Height in pixels (`y1 - y0`).
     pub fn height(&self) -> u32 {
         self.y1 - self.y0
     }
 
+    /// Whether pixel (`x`, `y`) lies in the region.
     pub fn contains(&self, x: u32, y: u32) -> bool {
         (self.x0..self.x1).contains(&x) && (self.y0..self.y1).contains(&y)
     }

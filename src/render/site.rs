@@ -27,9 +27,13 @@ use crate::scene::World;
 
 /// What every site of a render shares.
 pub struct SiteShader<'a> {
+    /// The scene to trace.
     pub world: &'a World,
+    /// The camera the samples' rays leave.
     pub camera: &'a Camera,
+    /// The render's settings (seed, lens filter, bounces, exposure, transparency, ...).
     pub settings: &'a RenderSettings,
+    /// Draws each sample's film offset from the pixel filter ([`RenderSettings::pixel_filter`]).
     pub pixel_filter: &'a FilterSampler,
 }
 
@@ -43,6 +47,7 @@ pub struct SiteScratch {
 }
 
 impl SiteScratch {
+    /// Empty scratch space.
     pub fn new() -> Self {
         Self::default()
     }

@@ -19,10 +19,12 @@ pub struct RayCounts {
 }
 
 impl RayCounts {
+    /// Rays of every kind.
     pub fn total(&self) -> u64 {
         self.primary + self.shadow + self.secondary
     }
 
+    /// Adds `other`'s counts to these, kind by kind.
     pub fn add(&mut self, other: &RayCounts) {
         self.primary += other.primary;
         self.shadow += other.shadow;
@@ -33,25 +35,34 @@ impl RayCounts {
 /// The kind of rays in a packet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RayKind {
+    /// Camera rays (pinhole and lens rays), intersected.
     Primary,
+    /// Occlusion rays towards lights (`occluded16`).
     Shadow,
+    /// Mirror reflection rays, intersected.
     Secondary,
 }
 
 /// One packet exactly as it was handed to Embree, for replaying without shading.
 #[derive(Debug, Clone)]
 pub struct RecordedPacket {
+    /// The rays' kind: [`RayKind::Shadow`] packets are replayed as occlusion queries, the others
+    /// as intersections.
     pub kind: RayKind,
+    /// The coherence hint the packet was traced with.
     pub hint: RayHint,
     /// Bit `i` set: lane `i` is active.
     pub active: u16,
+    /// Every lane's ray (those of inactive lanes are not traced).
     pub rays: [Ray; LANES],
 }
 
 /// What tracing did: ray counts, and (when `log` is `Some`) every packet traced, in order.
 #[derive(Debug, Default)]
 pub struct Tally {
+    /// Rays traced, by kind.
     pub counts: RayCounts,
+    /// Every packet traced, in order; `None` when not recording.
     pub log: Option<Vec<RecordedPacket>>,
 }
 
@@ -243,6 +254,7 @@ pub struct Scratch {
 }
 
 impl Scratch {
+    /// Empty scratch space (the bounce packet is built on first use).
     pub fn new() -> Self {
         Self::default()
     }

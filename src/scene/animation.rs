@@ -1,7 +1,7 @@
 //! Camera and lens animation: keyed tracks of the camera's parameters, interpolated per frame
 //! (the `[animation]` table of a scene file, `docs/scene-format.md`).
 //!
-//! Every animated parameter is a [`Track`] of its own: a list of keys (frame, value, and how
+//! Every animated parameter is a track of its own: a list of keys (frame, value, and how
 //! the segment that starts at the key runs to the next one), so a key need not set every
 //! parameter. Before a track's first key and after its last, the track holds that key's value.
 //! Some parameters are interpolated in another space than their own units, as a camera

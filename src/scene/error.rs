@@ -9,6 +9,7 @@ use crate::limits::Bytes;
 /// Where in an input file something went wrong.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Location {
+    /// The file.
     pub path: PathBuf,
     /// 1-based line, when known.
     pub line: Option<usize>,
@@ -102,57 +103,109 @@ pub enum LoadError {
         "unknown scene {name:?}: expected a built-in scene ({builtins}), a .toml scene file, \
          or a .obj, .gltf or .glb model"
     )]
-    UnknownScene { name: String, builtins: String },
+    UnknownScene {
+        /// The name given.
+        name: String,
+        /// The built-in scenes' names, comma-separated.
+        builtins: String,
+    },
     /// A file could not be opened or read.
     #[error("{}: cannot read: {error}", shown(path))]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The operating system's error.
         error: std::io::Error,
     },
     /// The TOML scene is malformed: a syntax error, an unknown key, a wrong type or an
     /// invalid value (NaN, infinity, a size or radius <= 0, ...).
     #[error("{at}: {message}")]
-    Toml { at: Location, message: String },
+    Toml {
+        /// Where in which file.
+        at: Location,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// The scene is well-formed TOML but inconsistent (a material that does not exist, two
     /// lenses at once, a key that does not apply to an object's type, ...).
     #[error("{at}: {message}")]
-    Invalid { at: Location, message: String },
+    Invalid {
+        /// Where in which file.
+        at: Location,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// A file the scene (or a model) refers to failed to load.
     #[error("{at}: {what}: {cause}")]
     Referenced {
+        /// Where the reference is.
         at: Location,
+        /// What the file was to be (`"texture"`, `"mesh"`, `"material library"`, ...).
         what: &'static str,
         /// The referenced file's own error (its message is part of this one's).
         cause: Box<LoadError>,
     },
     /// A malformed Wavefront OBJ or MTL file.
     #[error("{at}: {message}")]
-    Obj { at: Location, message: String },
+    Obj {
+        /// Where in which file.
+        at: Location,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// A malformed glTF 2.0 file (.gltf or .glb).
     #[error("{at}: {message}")]
-    Gltf { at: Location, message: String },
+    Gltf {
+        /// Where in which file.
+        at: Location,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// An image that could not be decoded.
     #[error("{}: {message}", shown(path))]
-    Image { path: PathBuf, message: String },
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The decoder's message.
+        message: String,
+    },
     /// Mesh data that cannot be traced (non-finite coordinates, face indices out of range, ...).
     #[error("{at}: {message}")]
-    Geometry { at: Location, message: String },
+    Geometry {
+        /// Where in which file.
+        at: Location,
+        /// What is wrong and what was expected.
+        message: String,
+    },
     /// A scene without anything to see.
     #[error(
         "{}: the scene has no objects (expected at least one [[objects]] entry or a mesh with triangles)",
         shown(path)
     )]
-    Empty { path: PathBuf },
+    Empty {
+        /// The scene file (or model).
+        path: PathBuf,
+    },
     /// An input that is not a regular file (a device, FIFO, socket or directory).
     #[error("{}: cannot read: it is {kind}, expected a regular file", shown(path))]
-    NotAFile { path: PathBuf, kind: &'static str },
+    NotAFile {
+        /// The file.
+        path: PathBuf,
+        /// What it is instead (`"a directory"`, `"a named pipe (FIFO)"`, ...).
+        kind: &'static str,
+    },
     /// An input file longer than `LoadOptions::max_input_bytes`.
     #[error(
         "{}: the file is larger than the input limit of {} ({limit} bytes; raise \
          it with --max-input-mib or LoadOptions::max_input_bytes for larger files)",
         shown(path), Bytes(*limit)
     )]
-    TooLarge { path: PathBuf, limit: u64 },
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The limit, bytes.
+        limit: u64,
+    },
     /// A model refers to a file outside its folder (absolute, or `..` leading out of it).
     #[error(
         "{at}: `{}` is outside the model's folder (absolute paths and `..` leading out of \
@@ -160,10 +213,20 @@ pub enum LoadError {
          LoadOptions::allow_outside_paths)",
         Shown(name)
     )]
-    OutsidePath { at: Location, name: String },
+    OutsidePath {
+        /// Where the reference is.
+        at: Location,
+        /// The file name as the model gives it.
+        name: String,
+    },
     /// A resource limit: an expansion or an allocation larger than `LoadOptions` allow.
     #[error("{at}: {message}")]
-    Limit { at: Location, message: String },
+    Limit {
+        /// Where in which file.
+        at: Location,
+        /// What is wrong and what was expected.
+        message: String,
+    },
 }
 
 impl LoadError {

@@ -571,6 +571,40 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<SceneDesc, LoadError> 
 
 /// Parses a TOML scene from `src`; `path` names it in errors, and relative file names in it
 /// resolve against `path`'s directory.
+///
+/// ```rust
+/// use std::path::Path;
+///
+/// let src = r#"
+/// [image]
+/// width = 320
+/// height = 240
+///
+/// [camera]
+/// eye = [0, 1, 5]
+/// look_at = [0, 1, 0]
+/// f_number = 2
+/// focal_length_mm = 50
+/// focus_point = [0, 1, 0]
+///
+/// [[materials]]
+/// name = "red"
+/// diffuse = [0.8, 0.1, 0.1]
+///
+/// [[objects]]
+/// type = "sphere"
+/// center = [0, 1, 0]
+/// radius = 1
+/// material = "red"
+/// "#;
+/// let scene = dofray::scene::file::parse(src, Path::new("memory.toml"))?;
+/// assert_eq!(scene.objects.len(), 1);
+///
+/// // Errors give the file, line and column, and what was expected.
+/// let e = dofray::scene::file::parse("[camera]\neye = 3\n", Path::new("bad.toml")).unwrap_err();
+/// assert!(e.to_string().starts_with("bad.toml:2:7"), "{e}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn parse(src: &str, path: &Path) -> Result<SceneDesc, LoadError> {
     parse_with(src, path, &LoadOptions::default())
 }

@@ -6,7 +6,7 @@
 //!   `/dev/zero` is never read; directories and sockets are refused too.
 //! - At most [`LoadOptions::max_input_bytes`] are read from any one file.
 //! - Files a model refers to (MTL libraries, textures, external buffers) must stay inside the
-//!   model's folder unless [`LoadOptions::allow_outside_paths`] is set ([`reference`]).
+//!   model's folder unless [`LoadOptions::allow_outside_paths`] is set ([`reference()`]).
 
 use std::fs::File;
 use std::io::{BufReader, Read, Take};
@@ -33,9 +33,13 @@ pub struct LoadOptions {
 }
 
 impl LoadOptions {
+    /// Default of [`LoadOptions::max_input_bytes`]: 4 GiB.
     pub const DEFAULT_MAX_INPUT_BYTES: u64 = 4 << 30;
+    /// Default of [`LoadOptions::max_texture_bytes`]: 1 GiB.
     pub const DEFAULT_MAX_TEXTURE_BYTES: u64 = 1 << 30;
+    /// Default of [`LoadOptions::max_instanced_triangles`]: 50 million.
     pub const DEFAULT_MAX_INSTANCED_TRIANGLES: u64 = 50_000_000;
+    /// Default of [`LoadOptions::max_node_instances`]: 2^20 (1,048,576).
     pub const DEFAULT_MAX_NODE_INSTANCES: u64 = 1 << 20;
 }
 

@@ -31,19 +31,29 @@ use crate::shade::{Alpha, AlphaMode, Light, Material, SurfacePoint, SurfacePoint
 /// Why a scene could not be built.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
+    /// The scene has no objects.
     #[error("the scene has no objects")]
     Empty,
+    /// An object refers to a material index the scene does not have.
     #[error("object {object} uses material {material}, but the scene has {count} materials")]
     MissingMaterial {
+        /// Index of the object in [`SceneDesc::objects`].
         object: usize,
+        /// The material index it uses.
         material: usize,
+        /// Number of materials in the scene.
         count: usize,
     },
+    /// A value the world cannot use (non-finite or out of range), or a per-triangle material
+    /// list of the wrong length.
     #[error("{what} must be {expected}")]
     Invalid {
+        /// What the value is (`object 3's radius`, ...).
         what: String,
+        /// What it must be.
         expected: &'static str,
     },
+    /// Embree failed to build the scene.
     #[error(transparent)]
     Embree(#[from] EmbreeError),
 }
@@ -51,20 +61,29 @@ pub enum SceneError {
 /// Which material each triangle of a mesh uses.
 #[derive(Debug, Clone)]
 pub enum MeshMaterials {
+    /// One material (an index into [`SceneDesc::materials`]) for every triangle.
     One(usize),
+    /// A material index (into [`SceneDesc::materials`]) per triangle, in triangle order.
     PerTriangle(Vec<u32>),
 }
 
 /// One thing in the scene.
 #[derive(Debug, Clone)]
 pub enum Object {
+    /// A sphere.
     Sphere {
+        /// Centre, scene units.
         center: Vec3,
+        /// Radius, scene units (> 0).
         radius: f32,
+        /// Index into [`SceneDesc::materials`].
         material: usize,
     },
+    /// A triangle mesh, in world space.
     Mesh {
+        /// The triangles.
         mesh: TriangleMesh,
+        /// Which material each triangle uses.
         materials: MeshMaterials,
     },
 }
@@ -72,11 +91,14 @@ pub enum Object {
 /// Sky colour by ray direction: `horizon` at the horizon blending to `zenith` straight up.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Background {
+    /// Radiance towards the horizon (and below it), linear RGB.
     pub horizon: Vec3,
+    /// Radiance straight up, linear RGB.
     pub zenith: Vec3,
 }
 
 impl Background {
+    /// The same radiance `c` (linear RGB) in every direction.
     pub fn uniform(c: Vec3) -> Self {
         Self {
             horizon: c,
@@ -84,20 +106,56 @@ impl Background {
         }
     }
 
+    /// Radiance seen along unit direction `dir` (+y up): `horizon` at and below the horizon,
+    /// blending to `zenith` by the square root of `dir.y`.
     pub fn radiance(&self, dir: Vec3) -> Vec3 {
         self.horizon.lerp(self.zenith, dir.y.clamp(0.0, 1.0).sqrt())
     }
 }
 
 /// A complete description of what to render, independent of Embree.
+///
+/// ```rust
+/// use dofray::camera::{CameraSpec, Focus, LensSpec};
+/// use dofray::glam::Vec3;
+/// use dofray::scene::{Object, SceneDesc};
+/// use dofray::shade::{Light, Material};
+/// use dofray::{embree::Device, render::NoProgress, renderer::Renderer};
+///
+/// let scene = SceneDesc {
+///     camera: CameraSpec {
+///         width: 64,
+///         height: 48,
+///         lens: LensSpec::Aperture { radius: 0.2 },
+///         focus: Focus::Distance(5.0),
+///         ..Default::default()
+///     },
+///     materials: vec![Material::diffuse(Vec3::new(0.8, 0.2, 0.2))],
+///     objects: vec![Object::Sphere { center: Vec3::ZERO, radius: 1.0, material: 0 }],
+///     lights: vec![Light::Point { position: Vec3::new(2.0, 4.0, 4.0), intensity: Vec3::splat(50.0) }],
+///     ..Default::default()
+/// };
+/// let renderer = Renderer::new(scene, &Device::new()?)?;
+/// let (film, _) = renderer.render(&renderer.settings(&Default::default())?, &NoProgress)?;
+/// assert!(film.color[24 * 64 + 32].x > 0.0); // the lit sphere fills the centre
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug, Clone)]
 pub struct SceneDesc {
+    /// The scene's name (its `name` key, else the file stem or the built-in's name), for reports.
     pub name: String,
+    /// Camera placement and lens.
     pub camera: CameraSpec,
+    /// The materials; objects refer to them by index.
     pub materials: Vec<Material>,
+    /// What is in the scene (world space).
     pub objects: Vec<Object>,
+    /// Lights that cast shadows.
     pub lights: Vec<Light>,
+    /// Ambient light (linear RGB), unshadowed: adds albedo x ambient x (1 - mirror) to every
+    /// hit.
     pub ambient: Vec3,
+    /// What rays that hit nothing see.
     pub background: Background,
     /// Samples per defocused site the scene asks for (the command line may override it).
     pub spp: Option<u32>,
@@ -156,6 +214,16 @@ impl Default for SceneDesc {
 /// it has one (else a view framing its bounds), a small aperture focused on the bounds' centre,
 /// a key light and the default sky. Files are read with the default [`LoadOptions`] (limits
 /// and path policy); see [`load_with`].
+///
+/// ```rust
+/// let paper = dofray::scene::load("paper")?;
+/// assert_eq!((paper.camera.width, paper.camera.height), (640, 480));
+///
+/// // A file that cannot be read is an error that names it.
+/// let missing = dofray::scene::load("no/such/scene.toml").unwrap_err();
+/// assert!(missing.to_string().contains("no/such/scene.toml"), "{missing}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub fn load(path_or_name: &str) -> Result<SceneDesc, LoadError> {
     load_with(path_or_name, &LoadOptions::default())
 }
@@ -250,13 +318,19 @@ impl HitFilter for AlphaFilter {
 
 /// A scene ready to trace: the committed Embree scene and everything needed to shade hits.
 pub struct World {
+    /// The committed Embree scene.
     pub scene: embree::Scene,
+    /// The materials, as in [`SceneDesc::materials`].
     pub materials: Vec<Material>,
     geometry_materials: Vec<GeometryMaterials>,
     /// Some material has a normal map (else surface points skip looking for one).
     normal_mapped: bool,
+    /// Lights that cast shadows.
     pub lights: Vec<Light>,
+    /// Ambient light (linear RGB), unshadowed: adds albedo x ambient x (1 - mirror) to every
+    /// hit.
     pub ambient: Vec3,
+    /// What rays that hit nothing see.
     pub background: Background,
 }
 

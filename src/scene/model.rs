@@ -14,6 +14,7 @@ use crate::shade::{Light, Material};
 /// An affine transform for points, with the inverse transpose for normals.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Transform {
+    /// The affine map of points (object to world).
     pub affine: Affine3A,
     /// Inverse transpose of the linear part: transforms normals.
     pub normal: Mat3,
@@ -28,6 +29,7 @@ impl Default for Transform {
 }
 
 impl Transform {
+    /// The identity: no change.
     pub const IDENTITY: Self = Self {
         affine: Affine3A::IDENTITY,
         normal: Mat3::IDENTITY,
@@ -62,14 +64,17 @@ impl Transform {
         Self::new(self.affine * inner.affine)
     }
 
+    /// Transforms a point.
     pub fn point(&self, p: [f32; 3]) -> [f32; 3] {
         self.affine.transform_point3(Vec3::from(p)).to_array()
     }
 
+    /// Transforms a normal by the inverse transpose and normalises it (zero if it degenerates).
     pub fn normal(&self, n: [f32; 3]) -> [f32; 3] {
         (self.normal * Vec3::from(n)).normalize_or_zero().to_array()
     }
 
+    /// Whether the affine part is exactly the identity.
     pub fn is_identity(&self) -> bool {
         self.affine == Affine3A::IDENTITY
     }
@@ -85,10 +90,13 @@ pub fn euler_xyz_deg(deg: Vec3) -> Mat3 {
 /// A camera found in a model file (glTF), in world space.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ModelCamera {
+    /// Camera position, world space.
     pub eye: Vec3,
     /// Unit view direction.
     pub forward: Vec3,
+    /// Unit up direction (the camera's +y; may be zero if degenerate).
     pub up: Vec3,
+    /// Vertical field of view, degrees, in (0, 180).
     pub vfov_deg: f32,
     /// Width over height, if the file gives one.
     pub aspect: Option<f32>,
@@ -97,7 +105,9 @@ pub struct ModelCamera {
 /// One mesh of a model with the model material it uses (`None`: the default material).
 #[derive(Debug, Clone)]
 pub struct ModelMesh {
+    /// The triangles, in world space.
     pub mesh: TriangleMesh,
+    /// Index into [`Model::materials`]; `None` for [`default_material`].
     pub material: Option<usize>,
 }
 
@@ -106,19 +116,23 @@ pub struct ModelMesh {
 /// and what the file uses that was ignored.
 #[derive(Debug, Clone, Default)]
 pub struct Model {
+    /// The meshes, transformed into world space.
     pub meshes: Vec<ModelMesh>,
+    /// The file's materials with their names; meshes refer to them by index.
     pub materials: Vec<(String, Material)>,
     /// The first perspective camera.
     pub camera: Option<ModelCamera>,
     /// When the file has no perspective camera but an orthographic one: that camera, named
     /// for messages (`camera 0 "Ortho" (node 2)`). dofray renders only perspective views.
     pub orthographic_camera: Option<String>,
+    /// The file's lights, world space, radiometric units.
     pub lights: Vec<Light>,
     /// At most one line, naming the file and everything in it dofray ignored.
     pub warnings: Vec<String>,
 }
 
 impl Model {
+    /// Triangles over all meshes.
     pub fn triangle_count(&self) -> usize {
         self.meshes.iter().map(|m| m.mesh.triangle_count()).sum()
     }
@@ -247,8 +261,9 @@ pub fn default_background() -> Background {
     }
 }
 
-/// Default image size.
+/// Default image width in pixels.
 pub const DEFAULT_WIDTH: u32 = 640;
+/// Default image height in pixels.
 pub const DEFAULT_HEIGHT: u32 = 480;
 /// Default vertical field of view, degrees.
 pub const DEFAULT_VFOV: f32 = 40.0;

@@ -232,6 +232,7 @@ pub struct TextureCache {
 }
 
 impl TextureCache {
+    /// An empty cache for a load with `options`.
     pub fn new(options: LoadOptions) -> Self {
         Self {
             files: HashMap::new(),

@@ -1,0 +1,260 @@
+"""Tests of the dofray Python module (run by scripts/python-test.sh)."""
+
+import _thread
+import threading
+
+import numpy as np
+import pytest
+
+import dofray
+
+W, H = 64, 48
+
+
+@pytest.fixture(scope="module")
+def paper():
+    """A small render of the built-in paper scene; its sky is background."""
+    return dofray.render("paper", width=W, height=H, f_number=2.8, focus_distance=5.0)
+
+
+def test_version():
+    assert isinstance(dofray.__version__, str) and dofray.__version__
+
+
+def test_shapes_and_dtypes(paper):
+    assert isinstance(paper, dofray.Render)
+    assert (paper.width, paper.height) == (W, H)
+    assert paper.rgba.shape == (H, W, 4) and paper.rgba.dtype == np.float32
+    assert paper.depth.shape == (H, W) and paper.depth.dtype == np.float32
+    assert paper.coc.shape == (H, W) and paper.coc.dtype == np.float32
+    assert repr(paper) == f"<dofray.Render {W}x{H}>"
+
+
+def test_rgba_finite_and_opaque(paper):
+    assert np.isfinite(paper.rgba).all()
+    assert (paper.rgba[..., :3] >= 0).all()
+    assert paper.rgba[..., :3].max() > 0
+    # Not transparent: alpha is 1 everywhere.
+    assert (paper.rgba[..., 3] == 1).all()
+
+
+def test_depth_inf_only_where_nothing_is_hit():
+    r = dofray.render("paper", width=W, height=H, transparent=True)
+    hit = np.isfinite(r.depth)
+    assert hit.any() and (~hit).any()
+    assert (r.depth[hit] > 0).all()
+    assert np.isposinf(r.depth[~hit]).all()
+    alpha = r.rgba[..., 3]
+    # Where the pinhole ray saw the sky, (almost) nothing covers the pixel, and where it hit a
+    # surface, (almost) everything does.
+    assert alpha[~hit].mean() < 0.1
+    assert alpha[hit].mean() > 0.9
+    # RGB is premultiplied: the background adds nothing.
+    assert (r.rgba[..., :3][alpha == 0] == 0).all()
+
+
+def test_coc_grows_off_the_focus_plane(paper):
+    coc, depth = paper.coc, paper.depth
+    assert np.isfinite(coc).all() and (coc >= 0).all()
+    hit = np.isfinite(depth)
+    near = hit & (np.abs(depth - 5.0) < 0.25)
+    far = hit & (depth > 8.0)
+    assert near.sum() > 10 and far.sum() > 10
+    assert coc[far].mean() > 5 * coc[near].mean()
+    # A smaller aperture blurs less.
+    small = dofray.render("paper", width=W, height=H, f_number=16, focus_distance=5.0)
+    assert small.coc[far].mean() < coc[far].mean()
+
+
+def test_stats(paper):
+    stats = paper.stats
+    assert isinstance(stats, dict)
+    for key in ("rays", "seconds", "mrays_per_s", "sample_sites", "defocused_sites", "rounds"):
+        assert key in stats, key
+    rays = stats["rays"]
+    assert rays["total"] == rays["primary"] + rays["shadow"] + rays["secondary"]
+    assert rays["primary"] >= W * H
+    assert stats["seconds"] >= 0 and stats["mrays_per_s"] >= 0
+    assert 0 < stats["sample_sites"] <= W * H
+
+
+def test_same_seed_same_image():
+    a = dofray.render("paper", width=32, height=24, seed=3)
+    b = dofray.render("paper", width=32, height=24, seed=3)
+    np.testing.assert_array_equal(a.rgba, b.rgba)
+
+
+def test_modes_and_overrides():
+    r = dofray.render(
+        "paper",
+        width=32,
+        mode="pinhole",
+        aa=2,
+        exposure=1.0,
+        autofocus=(16, 20),
+        blades=6,
+        frame=0,
+    )
+    assert r.rgba.shape == (24, 32, 4)  # the height follows the scene's aspect
+    d = dofray.render("paper", width=32, height=24, mode="dense", spp=4, aperture_radius=0.1)
+    assert np.isfinite(d.rgba).all()
+
+
+def test_save_png_and_exr(paper, tmp_path):
+    png, exr = tmp_path / "out.png", tmp_path / "out.exr"
+    paper.save(png)
+    paper.save(str(exr))
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert exr.read_bytes()[:4] == b"\x76\x2f\x31\x01"
+
+
+def test_save_errors(paper, tmp_path):
+    with pytest.raises(dofray.Error) as info:
+        paper.save(tmp_path / "missing-dir" / "out.png")
+    assert info.value.kind == "io"
+    with pytest.raises(dofray.Error) as info:
+        paper.save(tmp_path / "out.bmp")
+    assert "bmp" in str(info.value)
+
+
+def test_missing_scene_file(tmp_path):
+    path = tmp_path / "no-such-scene.toml"
+    with pytest.raises(dofray.Error) as info:
+        dofray.render(path)
+    assert info.value.kind == "bad_input"
+    assert "no-such-scene.toml" in str(info.value)
+    assert not isinstance(info.value, ValueError)
+
+
+def test_unknown_builtin_scene():
+    with pytest.raises(dofray.Error) as info:
+        dofray.render("no-such-builtin")
+    assert info.value.kind in ("bad_input", "usage")
+    assert "no-such-builtin" in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "name"),
+    [
+        (dict(f_number=-1.0), "f_number"),
+        (dict(f_number=float("nan")), "f_number"),
+        (dict(focal_length=0.0), "focal_length"),
+        (dict(width=0), "width"),
+        (dict(height=-5), "height"),
+        (dict(spp=0), "spp"),
+        (dict(aa=100_000), "aa"),
+        (dict(blades=2), "blades"),
+        (dict(focus_distance=-1.0), "focus_distance"),
+        (dict(aperture_radius=-0.5), "aperture_radius"),
+        (dict(mode="sharp"), "mode"),
+        (dict(exposure=1000.0), "exposure"),
+        (dict(tolerance=0.0), "tolerance"),
+    ],
+)
+def test_bad_overrides(kwargs, name):
+    with pytest.raises(dofray.UsageError) as info:
+        dofray.render("paper", **{"width": 16, "height": 12, **kwargs})
+    e = info.value
+    assert isinstance(e, ValueError) and isinstance(e, dofray.Error)
+    assert e.kind == "usage"
+    assert name in str(e)
+
+
+def test_unknown_keyword():
+    with pytest.raises(TypeError, match="f_stop"):
+        dofray.render("paper", f_stop=2.8)
+    with pytest.raises(TypeError):
+        dofray.render("paper", 64)  # overrides are keyword-only
+
+
+def test_progress_is_called_with_monotone_done():
+    calls = []
+    caller = threading.get_ident()
+
+    def progress(phase, done, total):
+        assert threading.get_ident() == caller
+        calls.append((phase, done, total))
+
+    dofray.render("paper", width=160, height=120, mode="dense", spp=32, progress=progress)
+    assert calls
+    phases = []
+    for phase, done, total in calls:
+        assert isinstance(phase, str) and 0 <= done <= total
+        if not phases or phases[-1][0] != phase:
+            phases.append((phase, []))
+        phases[-1][1].append(done)
+    for phase, dones in phases:
+        assert dones == sorted(dones), phase
+    # The last call reports the finished render.
+    phase, done, total = calls[-1]
+    assert phase == "dense" and done == total
+
+
+def test_gil_is_released():
+    count = 0
+    stop = threading.Event()
+
+    def spin():
+        nonlocal count
+        while not stop.is_set():
+            count += 1
+
+    t = threading.Thread(target=spin)
+    t.start()
+    try:
+        before = count
+        dofray.render("paper", width=320, height=240, mode="dense", spp=16)
+        during = count - before
+    finally:
+        stop.set()
+        t.join()
+    # A render holding the GIL would let the thread run only briefly at the 50 ms polls
+    # (about 1.6 million increments in this render with the GIL released, on 2 cores).
+    assert during > 100_000
+
+
+def test_keyboard_interrupt_cancels():
+    # Many seconds of work; interrupted after 0.3 s it must stop (and not hang).
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            dofray.render("paper", width=800, height=600, mode="dense", spp=256)
+    finally:
+        timer.cancel()
+    # The module still works afterwards.
+    assert dofray.render("paper", width=16, height=12).rgba.shape == (12, 16, 4)
+
+
+class Stop(Exception):
+    pass
+
+
+def test_progress_exception_cancels_and_propagates():
+    calls = []
+
+    def progress(phase, done, total):
+        calls.append(done)
+        if len(calls) >= 2:
+            raise Stop("enough")
+
+    with pytest.raises(Stop, match="enough"):
+        dofray.render("paper", width=800, height=600, mode="dense", spp=256, progress=progress)
+    assert len(calls) == 2
+
+
+def test_progress_must_be_callable():
+    with pytest.raises(TypeError, match="progress"):
+        dofray.render("paper", width=16, height=12, progress=42)
+
+
+def test_render_from_another_thread():
+    out = {}
+
+    def work():
+        out["r"] = dofray.render("paper", width=16, height=12)
+
+    t = threading.Thread(target=work)
+    t.start()
+    t.join()
+    assert out["r"].rgba.shape == (12, 16, 4)
