@@ -19,7 +19,8 @@
 
 /**
  * What a function did. `DOFRAY_INTERNAL` to `DOFRAY_RESOURCE_LIMIT` have the values of the
- * `dofray` command's exit codes for the same kinds of failure.
+ * `dofray` command's exit codes for the same kinds of failure. Later versions may add
+ * statuses: treat any value but `DOFRAY_OK` as a failure.
  */
 typedef enum DofrayStatus {
     /**
@@ -80,6 +81,12 @@ typedef struct DofrayImage DofrayImage;
 /**
  * A scene with its overrides. Rendering builds its Embree world once and keeps it for the
  * next render on the same device while the scene overrides stay the same.
+ *
+ * The `dofray_scene_set_*` functions store their value as given (they fail only for a NULL
+ * scene or an unknown mode name); every value is checked when the scene is rendered, all
+ * together (some depend on each other and on the scene): a bad one fails `dofray_render`
+ * with `DOFRAY_USAGE` and a message naming the parameter (`f_number must be a finite number
+ * > 0, got -1`). `dofray_scene_reset_overrides` clears them all.
  */
 typedef struct DofrayScene DofrayScene;
 

@@ -38,7 +38,8 @@ use dofray::renderer::Renderer;
 use dofray::scene::SceneDesc;
 
 /// What a function did. `DOFRAY_INTERNAL` to `DOFRAY_RESOURCE_LIMIT` have the values of the
-/// `dofray` command's exit codes for the same kinds of failure.
+/// `dofray` command's exit codes for the same kinds of failure. Later versions may add
+/// statuses: treat any value but `DOFRAY_OK` as a failure.
 #[allow(non_camel_case_types)]
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -354,6 +355,12 @@ pub unsafe extern "C" fn dofray_device_free(device: *mut DofrayDevice) {
 
 /// A scene with its overrides. Rendering builds its Embree world once and keeps it for the
 /// next render on the same device while the scene overrides stay the same.
+///
+/// The `dofray_scene_set_*` functions store their value as given (they fail only for a NULL
+/// scene or an unknown mode name); every value is checked when the scene is rendered, all
+/// together (some depend on each other and on the scene): a bad one fails `dofray_render`
+/// with `DOFRAY_USAGE` and a message naming the parameter (`f_number must be a finite number
+/// > 0, got -1`). `dofray_scene_reset_overrides` clears them all.
 pub struct DofrayScene {
     desc: SceneDesc,
     overrides: Overrides,
@@ -482,10 +489,6 @@ pub unsafe extern "C" fn dofray_scene_reset_overrides(scene: *mut DofrayScene) -
         })
     }
 }
-
-// Overrides are stored as given and checked when the scene is rendered, all together (some
-// depend on each other and on the scene): a bad value fails `dofray_render` with
-// DOFRAY_USAGE and a message naming the parameter.
 
 /// Image size in pixels. 0 for one of them follows the scene's aspect ratio from the other;
 /// 0 for both keeps the scene's size.
