@@ -1,7 +1,8 @@
 /*
  * dofray: depth-of-field rendering on Intel Embree, the C API.
  *
- * Link with -ldofray (libdofray.so, or libdofray.a plus -lembree3 -lpthread -ldl -lm).
+ * Link with -ldofray (libdofray.so), or with libdofray.a and -lembree3 (or -lembree4) -lgcc_s
+ * -lutil -lrt -lpthread -lm -ldl.
  * Conventions: functions that can fail return a DofrayStatus (DOFRAY_OK = 0) and set this
  * thread's message (dofray_last_error_message); results come through out-pointers; handles
  * are opaque and freed by their *_free function, which does nothing given NULL; a NULL
