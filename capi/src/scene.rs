@@ -284,14 +284,9 @@ pub unsafe extern "C" fn dofray_scene_set_mode(
         let scene = unsafe { arg_mut(scene, "scene") }?;
         // SAFETY: the function's contract.
         let name = unsafe { str_arg(mode, "mode") }?;
-        let mode = [Mode::Pinhole, Mode::Dense, Mode::Adaptive]
-            .into_iter()
-            .find(|m| m.name() == name)
-            .ok_or_else(|| {
-                Failure::invalid(format!(
-                    "mode must be \"pinhole\", \"dense\" or \"adaptive\", got {name:?}"
-                ))
-            })?;
+        let mode = name
+            .parse::<Mode>()
+            .map_err(|e| Failure::invalid(e.to_string()))?;
         scene.settings.mode = Some(mode);
         Ok(())
     })

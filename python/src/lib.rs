@@ -116,13 +116,9 @@ fn to_u32(name: &str, value: Option<i64>) -> Result<Option<u32>, Failure> {
 }
 
 fn to_mode(mode: Option<&str>) -> Result<Option<Mode>, Failure> {
-    mode.map(|m| match m {
-        "pinhole" => Ok(Mode::Pinhole),
-        "dense" => Ok(Mode::Dense),
-        "adaptive" => Ok(Mode::Adaptive),
-        other => Err(Failure::usage(format!(
-            "mode must be one of 'pinhole', 'dense', 'adaptive', got '{other}'"
-        ))),
+    mode.map(|m| {
+        m.parse()
+            .map_err(|e: dofray::render::UnknownMode| Failure::usage(e.to_string()))
     })
     .transpose()
 }

@@ -59,6 +59,9 @@ pub enum Mode {
 }
 
 impl Mode {
+    /// Every mode, in the order the command line lists them.
+    pub const ALL: [Mode; 3] = [Mode::Pinhole, Mode::Dense, Mode::Adaptive];
+
     /// The mode's lowercase name, as the command line and JSON spell it (`"pinhole"`, `"dense"`,
     /// `"adaptive"`).
     pub fn name(self) -> &'static str {
@@ -67,6 +70,30 @@ impl Mode {
             Self::Dense => "dense",
             Self::Adaptive => "adaptive",
         }
+    }
+}
+
+/// A name that is not a [`Mode`]'s.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("mode must be \"pinhole\", \"dense\" or \"adaptive\", got {0:?}")]
+pub struct UnknownMode(pub String);
+
+/// Parses a mode's [`Mode::name`] (for bindings and configuration files).
+///
+/// ```rust
+/// use dofray::render::Mode;
+///
+/// assert_eq!("dense".parse::<Mode>(), Ok(Mode::Dense));
+/// assert!("fast".parse::<Mode>().unwrap_err().to_string().contains("\"fast\""));
+/// ```
+impl std::str::FromStr for Mode {
+    type Err = UnknownMode;
+
+    fn from_str(name: &str) -> Result<Self, UnknownMode> {
+        Mode::ALL
+            .into_iter()
+            .find(|m| m.name() == name)
+            .ok_or_else(|| UnknownMode(name.to_string()))
     }
 }
 
