@@ -123,6 +123,28 @@ pub struct KindError {
     pub message: String,
 }
 
+/// `error`'s message followed by those of its sources, `outer: inner: innermost` (what the
+/// command line prints, for bindings that report a message).
+pub fn full_message(error: &(dyn Error + 'static)) -> String {
+    let mut message = error.to_string();
+    let mut source = error.source();
+    while let Some(e) = source {
+        message.push_str(": ");
+        message.push_str(&e.to_string());
+        source = e.source();
+    }
+    message
+}
+
+/// What a caught panic's payload says (`"(no message)"` when it is not a string).
+pub fn panic_text(payload: &(dyn std::any::Any + Send)) -> &str {
+    payload
+        .downcast_ref::<&str>()
+        .copied()
+        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
+        .unwrap_or("(no message)")
+}
+
 /// The kind of `error`: that of the outermost error in its `source()` chain that is recognised,
 /// else [`ErrorKind::Internal`].
 pub fn classify(error: &(dyn Error + 'static)) -> ErrorKind {

@@ -1,13 +1,13 @@
 //! Cancellation tokens.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use dofray::render::CancelFlag;
 
 use crate::args::{free, out_arg, put};
 use crate::status::{DofrayStatus, guard};
 
 /// A cancellation token: `dofray_cancel` from any thread stops the renders given it.
 pub struct DofrayCancel {
-    pub(crate) flag: AtomicBool,
+    pub(crate) flag: CancelFlag,
 }
 
 /// Creates a cancellation token, not cancelled.
@@ -20,7 +20,7 @@ pub unsafe extern "C" fn dofray_cancel_new(out: *mut *mut DofrayCancel) -> Dofra
         // SAFETY: the function's contract.
         let out = unsafe { out_arg(out) }?;
         let token = DofrayCancel {
-            flag: AtomicBool::new(false),
+            flag: CancelFlag::new(),
         };
         // SAFETY: out was checked by out_arg.
         unsafe { put(out, token) };
@@ -38,7 +38,7 @@ pub unsafe extern "C" fn dofray_cancel_new(out: *mut *mut DofrayCancel) -> Dofra
 pub unsafe extern "C" fn dofray_cancel(token: *const DofrayCancel) {
     // SAFETY: the function's contract: NULL or a live token (only read atomically).
     if let Some(token) = unsafe { token.as_ref() } {
-        token.flag.store(true, Ordering::SeqCst);
+        token.flag.cancel();
     }
 }
 
@@ -50,7 +50,7 @@ pub unsafe extern "C" fn dofray_cancel(token: *const DofrayCancel) {
 pub unsafe extern "C" fn dofray_cancel_reset(token: *const DofrayCancel) {
     // SAFETY: the function's contract: NULL or a live token (only written atomically).
     if let Some(token) = unsafe { token.as_ref() } {
-        token.flag.store(false, Ordering::SeqCst);
+        token.flag.reset();
     }
 }
 

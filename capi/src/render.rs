@@ -92,8 +92,7 @@ impl CProgress<'_> {
     }
 
     fn was_cancelled(&self) -> bool {
-        self.cancelled.load(Ordering::SeqCst)
-            || self.token.is_some_and(|t| t.flag.load(Ordering::SeqCst))
+        self.cancelled.load(Ordering::SeqCst) || self.token.is_some_and(|t| t.flag.is_cancelled())
     }
 }
 
@@ -226,16 +225,10 @@ fn render(
     if progress.was_cancelled() {
         return Err(cancelled());
     }
-    let rgba = film
-        .color
-        .iter()
-        .zip(&film.alpha)
-        .flat_map(|(c, &a)| [c.x, c.y, c.z, a])
-        .collect();
     Ok(DofrayImage {
+        rgba: film.rgba_interleaved(),
         film,
         stats,
-        rgba,
         transparent: settings.transparent,
     })
 }

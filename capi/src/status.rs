@@ -83,16 +83,9 @@ impl Failure {
     /// A library error: classified as the command line does, its message with its sources
     /// (`outer: inner: innermost`).
     fn of(error: &(dyn std::error::Error + 'static)) -> Self {
-        let mut message = error.to_string();
-        let mut source = error.source();
-        while let Some(e) = source {
-            message.push_str(": ");
-            message.push_str(&e.to_string());
-            source = e.source();
-        }
         Self::new(
             DofrayStatus::from_kind(dofray::exit::classify(error)),
-            message,
+            dofray::exit::full_message(error),
         )
     }
 }
@@ -119,11 +112,7 @@ fn set_last_error(message: &str) {
 
 /// The message of a caught panic.
 fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
-    let what = payload
-        .downcast_ref::<&str>()
-        .copied()
-        .or_else(|| payload.downcast_ref::<String>().map(String::as_str))
-        .unwrap_or("(no message)");
+    let what = dofray::exit::panic_text(payload);
     format!("internal error: dofray panicked: {what}")
 }
 

@@ -52,16 +52,7 @@ impl Failure {
         let kind = dofray::exit::classify(error);
         let message = match error.downcast_ref::<RendererError>() {
             Some(RendererError::Override(e)) => override_message(e),
-            _ => {
-                let mut message = error.to_string();
-                let mut next = error.source();
-                while let Some(e) = next {
-                    message.push_str(": ");
-                    message.push_str(&e.to_string());
-                    next = e.source();
-                }
-                message
-            }
+            _ => dofray::exit::full_message(error),
         };
         Self { kind, message }
     }
@@ -232,11 +223,7 @@ fn run_job(py: Python<'_>, job: Job, callback: Option<Py<PyAny>>) -> Outcome {
             scope.spawn(move || {
                 let result = catch_unwind(AssertUnwindSafe(|| job.run(shared)));
                 let result = result.unwrap_or_else(|panic| {
-                    let what = panic
-                        .downcast_ref::<&str>()
-                        .map(|s| s.to_string())
-                        .or_else(|| panic.downcast_ref::<String>().cloned())
-                        .unwrap_or_else(|| "unknown panic".into());
+                    let what = dofray::exit::panic_text(&*panic);
                     Err(Failure {
                         kind: ErrorKind::Internal,
                         message: format!("internal error in dofray: {what}"),
@@ -383,12 +370,7 @@ impl Render {
         // An ImportError if numpy is missing (the numpy crate would panic).
         py.import("numpy")?;
         let (w, h) = (film.width, film.height);
-        let rgba: Vec<f32> = film
-            .color
-            .iter()
-            .zip(&film.alpha)
-            .flat_map(|(c, &a)| [c.x, c.y, c.z, a])
-            .collect();
+        let rgba = film.rgba_interleaved();
         let shape = |e: numpy::ndarray::ShapeError| {
             Failure {
                 kind: ErrorKind::Internal,

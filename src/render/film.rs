@@ -74,4 +74,13 @@ impl Film {
     pub fn rgb(&self) -> Vec<[f32; 3]> {
         self.color.iter().map(|c| c.to_array()).collect()
     }
+
+    /// Colour and alpha interleaved, 4 floats per pixel, row-major (for C and numpy buffers).
+    pub fn rgba_interleaved(&self) -> Vec<f32> {
+        self.color
+            .iter()
+            .zip(&self.alpha)
+            .flat_map(|(c, &a)| [c.x, c.y, c.z, a])
+            .collect()
+    }
 }

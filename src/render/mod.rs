@@ -400,6 +400,11 @@ impl CancelFlag {
         self.0.load(std::sync::atomic::Ordering::Relaxed)
     }
 
+    /// Clears the flag, for the next render.
+    pub fn reset(&self) {
+        self.0.store(false, std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// `progress`, also cancelled by this flag.
     pub fn with<'a>(&'a self, progress: &'a dyn Progress) -> Cancellable<'a> {
         Cancellable {
