@@ -1,0 +1,220 @@
+//! Refactoring guard: every built-in and repository scene, in every mode and rule and with the
+//! lens, filter and output options that take different code paths, renders to exactly the
+//! pixels it rendered when `tests/pixel_identity.txt` was written (at the commit before the
+//! architecture issue's refactor, 60dd6ef). Each case runs the `dofray` command (the interface
+//! a refactor must not change) to a multilayer EXR and hashes every channel's samples bit for
+//! bit (colour, alpha, depth, CoC, interval, samples).
+//!
+//! Embree is pinned to its AVX2 kernels (`DOFRAY_EMBREE_CONFIG=isa=avx2`, which every machine
+//! this runs on has), so the hashes do not depend on whether the CPU has AVX-512.
+//!
+//! A change that is meant to change pixels re-blesses the table, and says so in its commit:
+//! `DOFRAY_BLESS=1 cargo test --test pixel_identity`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const TABLE: &str = "tests/pixel_identity.txt";
+
+/// (case name, arguments after `dofray render`). Small images keep the suite fast; every
+/// case still crosses in-focus and blurred regions.
+fn cases() -> Vec<(&'static str, Vec<&'static str>)> {
+    let size = ["--width", "96", "--height", "72"];
+    let mut cases: Vec<(&'static str, Vec<&'static str>)> = Vec::new();
+    let scenes: [(&str, &str); 7] = [
+        ("paper", "paper"),
+        ("paper.toml", "scenes/paper.toml"),
+        ("gallery", "scenes/gallery.toml"),
+        ("vase", "scenes/vase.toml"),
+        ("bokeh", "scenes/bokeh.toml"),
+        ("focus_pull", "scenes/focus_pull.toml"),
+        ("blender_lights", "tests/scene_assets/blender/lights.gltf"),
+    ];
+    let modes: [(&str, &[&str]); 5] = [
+        ("pinhole", &["--mode", "pinhole"]),
+        ("dense", &["--mode", "dense"]),
+        ("adaptive", &["--mode", "adaptive"]),
+        ("seed_rule", &["-k", "0.4"]),
+        ("paper_exact", &["-k", "0.4", "--paper-exact"]),
+    ];
+    for (scene_name, scene) in scenes {
+        for (mode_name, mode) in modes {
+            let name: &'static str =
+                Box::leak(format!("{scene_name}/{mode_name}").into_boxed_str());
+            let mut args = vec![scene];
+            args.extend(size);
+            args.extend(mode.iter().copied());
+            cases.push((name, args));
+        }
+    }
+    // Options that take their own code paths, on the paper scene.
+    let variants: [(&'static str, &[&'static str]); 16] = [
+        ("paper/transparent", &["--transparent"]),
+        (
+            "paper/tolerance_0.5_spp_32",
+            &["--tolerance", "0.5", "--spp", "32"],
+        ),
+        (
+            "paper/aa_8_gaussian",
+            &["--aa", "8", "--pixel-filter", "gaussian"],
+        ),
+        (
+            "paper/box_filter",
+            &["--pixel-filter", "box", "--pixel-filter-width", "1"],
+        ),
+        (
+            "paper/lens_filters",
+            &["--filter", "gaussian", "--mode", "dense"],
+        ),
+        ("paper/tent_seed", &["--filter", "tent", "-k", "0.2"]),
+        (
+            "paper/hexagon_anamorphic",
+            &[
+                "--f-number",
+                "1.4",
+                "--focal-length",
+                "50",
+                "--blades",
+                "6",
+                "--blade-rotation",
+                "15",
+                "--anamorphic",
+                "1.5",
+            ],
+        ),
+        (
+            "paper/autofocus",
+            &["--autofocus", "20,50", "--aperture-radius", "0.3"],
+        ),
+        (
+            "paper/seed_lens",
+            &["--sharp-range", "1.5", "--spread", "4"],
+        ),
+        (
+            "paper/focus_inf",
+            &["--focus-distance", "inf", "--f-number", "2"],
+        ),
+        ("paper/region", &["--region", "16,8,80,40"]),
+        ("paper/exposure_seed", &["--exposure", "-1", "--seed", "7"]),
+        (
+            "paper/lights",
+            &[
+                "--light",
+                "sun:-1,-2,1:3",
+                "--light",
+                "point:0,4,0:80",
+                "--ambient",
+                "0.05",
+            ],
+        ),
+        ("focus_pull/frame_40", &["--frames", "40"]),
+        (
+            "gallery/wide_aperture_dense",
+            &["--aperture-radius", "0.1", "--mode", "dense"],
+        ),
+        (
+            "gallery/wide_aperture_adaptive",
+            &["--aperture-radius", "0.1"],
+        ),
+    ];
+    for (name, extra) in variants {
+        let scene = match name.split('/').next() {
+            Some("focus_pull") => "scenes/focus_pull.toml",
+            Some("gallery") => "scenes/gallery.toml",
+            _ => "paper",
+        };
+        let mut args = vec![scene];
+        args.extend(size);
+        args.extend(extra.iter().copied());
+        cases.push((name, args));
+    }
+    cases
+}
+
+/// FNV-1a (64 bit) over every channel's name and its samples' bits, in the file's order.
+fn exr_hash(path: &Path) -> u64 {
+    use exr::prelude::*;
+    let image = read_all_flat_layers_from_file(path).unwrap();
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for b in bytes {
+            h ^= u64::from(*b);
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    };
+    for layer in &image.layer_data {
+        eat(format!("{:?}", layer.size).as_bytes());
+        for c in &layer.channel_data.list {
+            eat(c.name.to_string().as_bytes());
+            match &c.sample_data {
+                FlatSamples::F16(v) => v.iter().for_each(|x| eat(&x.to_bits().to_le_bytes())),
+                FlatSamples::F32(v) => v.iter().for_each(|x| eat(&x.to_bits().to_le_bytes())),
+                FlatSamples::U32(v) => v.iter().for_each(|x| eat(&x.to_le_bytes())),
+            }
+        }
+    }
+    h
+}
+
+fn render_hash(args: &[&str], dir: &Path, index: usize) -> Result<u64, String> {
+    let out = dir.join(format!("case-{index}.exr"));
+    let status = Command::new(env!("CARGO_BIN_EXE_dofray"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env("DOFRAY_EMBREE_CONFIG", "isa=avx2")
+        .arg("render")
+        .args(args)
+        .args(["--quiet", "--threads", "2", "-o"])
+        .arg(&out)
+        .output()
+        .map_err(|e| e.to_string())?;
+    if !status.status.success() {
+        return Err(String::from_utf8_lossy(&status.stderr).into_owned());
+    }
+    Ok(exr_hash(&out))
+}
+
+#[test]
+fn every_scene_and_mode_renders_the_pixels_it_did_before() {
+    if !std::arch::is_x86_feature_detected!("avx2") {
+        eprintln!("NOTICE: pixel identity skipped: the hashes are of Embree's AVX2 kernels");
+        return;
+    }
+    let dir = tempdir();
+    let table = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(TABLE);
+    let mut got = BTreeMap::new();
+    for (i, (name, args)) in cases().into_iter().enumerate() {
+        let hash = render_hash(&args, &dir, i).unwrap_or_else(|e| panic!("{name}: {e}"));
+        got.insert(name.to_string(), format!("{hash:016x}"));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+    if std::env::var_os("DOFRAY_BLESS").is_some() {
+        let text: String = got.iter().map(|(k, v)| format!("{k} {v}\n")).collect();
+        std::fs::write(&table, text).unwrap();
+        eprintln!("wrote {}", table.display());
+        return;
+    }
+    let want: BTreeMap<String, String> = std::fs::read_to_string(&table)
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_once(' '))
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
+    let differ: Vec<_> = got
+        .iter()
+        .filter(|(k, v)| want.get(*k) != Some(v))
+        .map(|(k, v)| format!("{k}: now {v}, was {:?}", want.get(k)))
+        .collect();
+    assert!(differ.is_empty(), "renders changed:\n{}", differ.join("\n"));
+    assert_eq!(
+        got.len(),
+        want.len(),
+        "the table has cases this test no longer renders"
+    );
+}
+
+fn tempdir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dofray-pixel-identity-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
