@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use crate::embree::{Geometry, Hit, LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::scene::World;
-use crate::shade::{self, LightSample, Surface, SurfacePoints16};
+use crate::shade::{self, Light, LightSample, Surface, SurfacePoints16};
 
 /// Rays traced, by kind.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
@@ -278,10 +278,9 @@ pub fn trace_and_shade(
     // Lanes whose ray hit a surface (bit per lane).
     let hits = trace_depth(world, packet, kind, hint, t_hit, tally);
     let dir = packet.dirs();
-    let view = |lane: usize| Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
     for (lane, radiance) in radiance.iter_mut().enumerate() {
         if packet.is_active(lane) && hits & (1 << lane) == 0 {
-            *radiance = world.background.radiance(view(lane));
+            *radiance = world.background.radiance(lane_vec(dir, lane));
         }
     }
     if hits == 0 {
@@ -289,114 +288,34 @@ pub fn trace_and_shade(
     }
     let points = &mut scratch.points;
     world.surface_points16(packet, hits, points);
-    let mut surface = [Surface {
-        albedo: Vec3::ZERO,
-        specular: Vec3::ZERO,
-        shininess: 0.0,
-        mirror: 0.0,
-    }; LANES];
-    let mut extent = [0.0f32; LANES];
-    let mut lift = [[0.0f32; LANES]; 3];
-    let tfar = packet.tfars();
-    for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
-        let hit = packet.hit(lane).expect("lanes in `hits` hit");
-        let material = world.material(&hit);
-        let s = material.surface(points.uv[lane]);
-        surface[lane] = s;
-        radiance[lane] =
-            s.albedo * world.ambient * (1.0 - s.mirror) + material.emitted(points.uv[lane]);
-        extent[lane] = primitive_extent(world, &hit);
-        let sp = points.get(lane);
-        let up = terminator_lift(world, &hit, sp.position, sp.normal);
-        for k in 0..3 {
-            lift[k][lane] = up[k];
-        }
-    }
-
-    let shadow = &mut scratch.shadow;
-    let (pos, nrm) = (&points.position, &points.normal);
-    let (origin, reach) = leaving_origins(pos, nrm, dir, tfar, &extent, &lift);
-    // Shadow rays and light samples of all lanes, as structure of arrays.
-    let mut to_light = [[0.0f32; LANES]; 3];
-    let mut seg_end = [0.0f32; LANES];
-    let mut distance = [0.0f32; LANES];
-    let mut irradiance = [[0.0f32; LANES]; 3];
+    let hit = surfaces_hit(world, packet, hits, points, radiance);
+    let (origin, reach) = leaving_origins(
+        &points.position,
+        &points.normal,
+        dir,
+        packet.tfars(),
+        &hit.extent,
+        &hit.lift,
+    );
+    let leaving = Leaving {
+        hits,
+        origin: &origin,
+        reach: &reach,
+        surface: &hit.surface,
+    };
     for light in &world.lights {
-        // Light::sample, written out over all lanes.
-        match light.positional() {
-            Some(light) => {
-                let position = light.position;
-                for lane in 0..LANES {
-                    let d = [
-                        position.x - pos[0][lane],
-                        position.y - pos[1][lane],
-                        position.z - pos[2][lane],
-                    ];
-                    let dist2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).max(1e-12);
-                    let dist = dist2.sqrt();
-                    let l = Vec3::new(d[0] / dist, d[1] / dist, d[2] / dist);
-                    let e = light.irradiance(l, dist2);
-                    for k in 0..3 {
-                        to_light[k][lane] = l[k];
-                        irradiance[k][lane] = e[k];
-                    }
-                    distance[lane] = dist;
-                }
-            }
-            None => {
-                let ls = light.sample(Vec3::ZERO);
-                for k in 0..3 {
-                    to_light[k] = [ls.dir[k]; LANES];
-                    irradiance[k] = [ls.irradiance[k]; LANES];
-                }
-                distance = [ls.distance; LANES];
-            }
-        }
-        let mut lit = 0u32;
-        for lane in 0..LANES {
-            let cos = nrm[0][lane] * to_light[0][lane]
-                + nrm[1][lane] * to_light[1][lane]
-                + nrm[2][lane] * to_light[2][lane];
-            // A NaN cosine (a degenerate normal) is unlit: Embree must never see a NaN ray.
-            // Lanes the light sends nothing to (outside a spot's cone) need no shadow ray.
-            let sent = irradiance[0][lane] + irradiance[1][lane] + irradiance[2][lane] > 0.0;
-            lit |= ((cos > 0.0 && sent) as u32) << lane;
-            // The segment from the leaving origin towards the light.
-            seg_end[lane] = if distance[lane].is_finite() {
-                distance[lane] * (1.0 - 1e-4) - reach[lane]
-            } else {
-                f32::INFINITY
-            };
-        }
-        let lit = lit & hits;
-        if lit == 0 {
-            continue;
-        }
-        // Unlit lanes (misses among them, whose points are infinite) are inactive: the packet
-        // replaces their NaN with an idle ray.
-        shadow.set_segments(lit, &origin, &to_light, &seg_end);
-        tally.count(RayKind::Shadow, lit.count_ones() as usize);
-        tally.record(RayKind::Shadow, RayHint::Coherent, |l| {
-            shadow.is_active(l).then(|| shadow.ray(l))
-        });
-        world.scene.occluded16(shadow, RayHint::Coherent);
-        for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
-            if !shadow.occluded(lane) {
-                let ls = LightSample {
-                    dir: Vec3::new(to_light[0][lane], to_light[1][lane], to_light[2][lane]),
-                    distance: distance[lane],
-                    irradiance: Vec3::new(
-                        irradiance[0][lane],
-                        irradiance[1][lane],
-                        irradiance[2][lane],
-                    ),
-                };
-                radiance[lane] += shade::direct(&surface[lane], &points.get(lane), view(lane), &ls);
-            }
-        }
+        add_direct(
+            world,
+            light,
+            &leaving,
+            points,
+            dir,
+            &mut scratch.shadow,
+            radiance,
+            tally,
+        );
     }
-
-    let reflects = |lane: usize| hits & (1 << lane) != 0 && surface[lane].mirror > 0.0;
+    let reflects = |lane: usize| hits & (1 << lane) != 0 && hit.surface[lane].mirror > 0.0;
     if bounces == 0 || !(0..LANES).any(reflects) {
         return;
     }
@@ -406,7 +325,7 @@ pub fn trace_and_shade(
     mirror.clear();
     for lane in (0..LANES).filter(|&l| reflects(l)) {
         let n = points.get(lane).normal;
-        let d = view(lane);
+        let d = lane_vec(dir, lane);
         let r = d - 2.0 * d.dot(n) * n;
         let o = Vec3::new(origin[0][lane], origin[1][lane], origin[2][lane]);
         mirror.set(lane, &Ray::new(o, r));
@@ -426,7 +345,176 @@ pub fn trace_and_shade(
     );
     for lane in 0..LANES {
         if mirror.is_active(lane) {
-            radiance[lane] += reflected[lane] * surface[lane].mirror;
+            radiance[lane] += reflected[lane] * hit.surface[lane].mirror;
+        }
+    }
+}
+
+/// Lane `lane` of a structure-of-arrays vector.
+fn lane_vec(v: [&[f32; LANES]; 3], lane: usize) -> Vec3 {
+    Vec3::new(v[0][lane], v[1][lane], v[2][lane])
+}
+
+/// What the lanes that hit found: their surfaces, and what [`leaving_origins`] needs.
+struct SurfacesHit {
+    surface: [Surface; LANES],
+    extent: [f32; LANES],
+    lift: [[f32; LANES]; 3],
+}
+
+/// The surfaces of the lanes in `hits`; starts each lane's radiance with its ambient and
+/// emitted terms.
+fn surfaces_hit(
+    world: &World,
+    packet: &RayPacket16,
+    hits: u32,
+    points: &SurfacePoints16,
+    radiance: &mut [Vec3; LANES],
+) -> SurfacesHit {
+    let mut out = SurfacesHit {
+        surface: [Surface {
+            albedo: Vec3::ZERO,
+            specular: Vec3::ZERO,
+            shininess: 0.0,
+            mirror: 0.0,
+        }; LANES],
+        extent: [0.0f32; LANES],
+        lift: [[0.0f32; LANES]; 3],
+    };
+    for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+        let hit = packet.hit(lane).expect("lanes in `hits` hit");
+        let material = world.material(&hit);
+        let s = material.surface(points.uv[lane]);
+        out.surface[lane] = s;
+        radiance[lane] =
+            s.albedo * world.ambient * (1.0 - s.mirror) + material.emitted(points.uv[lane]);
+        out.extent[lane] = primitive_extent(world, &hit);
+        let sp = points.get(lane);
+        let up = terminator_lift(world, &hit, sp.position, sp.normal);
+        for k in 0..3 {
+            out.lift[k][lane] = up[k];
+        }
+    }
+    out
+}
+
+/// The lanes that hit, where rays leave them ([`leaving_origins`]) and what they are made of.
+struct Leaving<'a> {
+    hits: u32,
+    origin: &'a [[f32; LANES]; 3],
+    reach: &'a [f32; LANES],
+    surface: &'a [Surface; LANES],
+}
+
+/// One light's samples for every lane, as structure of arrays ([`Light::sample`] written out
+/// over all lanes, so it vectorises).
+struct LightLanes {
+    to_light: [[f32; LANES]; 3],
+    distance: [f32; LANES],
+    irradiance: [[f32; LANES]; 3],
+}
+
+// Indexing lanes across several arrays (structure of arrays) is what lets this vectorise.
+#[allow(clippy::needless_range_loop)]
+fn light_lanes(light: &Light, pos: &[[f32; LANES]; 3]) -> LightLanes {
+    let mut out = LightLanes {
+        to_light: [[0.0f32; LANES]; 3],
+        distance: [0.0f32; LANES],
+        irradiance: [[0.0f32; LANES]; 3],
+    };
+    match light.positional() {
+        Some(light) => {
+            let position = light.position;
+            for lane in 0..LANES {
+                let d = [
+                    position.x - pos[0][lane],
+                    position.y - pos[1][lane],
+                    position.z - pos[2][lane],
+                ];
+                let dist2 = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).max(1e-12);
+                let dist = dist2.sqrt();
+                let l = Vec3::new(d[0] / dist, d[1] / dist, d[2] / dist);
+                let e = light.irradiance(l, dist2);
+                for k in 0..3 {
+                    out.to_light[k][lane] = l[k];
+                    out.irradiance[k][lane] = e[k];
+                }
+                out.distance[lane] = dist;
+            }
+        }
+        None => {
+            let ls = light.sample(Vec3::ZERO);
+            for k in 0..3 {
+                out.to_light[k] = [ls.dir[k]; LANES];
+                out.irradiance[k] = [ls.irradiance[k]; LANES];
+            }
+            out.distance = [ls.distance; LANES];
+        }
+    }
+    out
+}
+
+/// Adds `light`'s direct contribution to the lanes that hit and see it, tracing one shadow
+/// packet for them.
+#[allow(clippy::too_many_arguments)]
+fn add_direct(
+    world: &World,
+    light: &Light,
+    leaving: &Leaving,
+    points: &SurfacePoints16,
+    dir: [&[f32; LANES]; 3],
+    shadow: &mut ShadowPacket16,
+    radiance: &mut [Vec3; LANES],
+    tally: &mut Tally,
+) {
+    let nrm = &points.normal;
+    let LightLanes {
+        to_light,
+        distance,
+        irradiance,
+    } = light_lanes(light, &points.position);
+    let mut seg_end = [0.0f32; LANES];
+    let mut lit = 0u32;
+    for lane in 0..LANES {
+        let cos = nrm[0][lane] * to_light[0][lane]
+            + nrm[1][lane] * to_light[1][lane]
+            + nrm[2][lane] * to_light[2][lane];
+        // A NaN cosine (a degenerate normal) is unlit: Embree must never see a NaN ray.
+        // Lanes the light sends nothing to (outside a spot's cone) need no shadow ray.
+        let sent = irradiance[0][lane] + irradiance[1][lane] + irradiance[2][lane] > 0.0;
+        lit |= ((cos > 0.0 && sent) as u32) << lane;
+        // The segment from the leaving origin towards the light.
+        seg_end[lane] = if distance[lane].is_finite() {
+            distance[lane] * (1.0 - 1e-4) - leaving.reach[lane]
+        } else {
+            f32::INFINITY
+        };
+    }
+    let lit = lit & leaving.hits;
+    if lit == 0 {
+        return;
+    }
+    // Unlit lanes (misses among them, whose points are infinite) are inactive: the packet
+    // replaces their NaN with an idle ray.
+    shadow.set_segments(lit, leaving.origin, &to_light, &seg_end);
+    tally.count(RayKind::Shadow, lit.count_ones() as usize);
+    tally.record(RayKind::Shadow, RayHint::Coherent, |l| {
+        shadow.is_active(l).then(|| shadow.ray(l))
+    });
+    world.scene.occluded16(shadow, RayHint::Coherent);
+    for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
+        if !shadow.occluded(lane) {
+            let ls = LightSample {
+                dir: Vec3::new(to_light[0][lane], to_light[1][lane], to_light[2][lane]),
+                distance: distance[lane],
+                irradiance: Vec3::new(
+                    irradiance[0][lane],
+                    irradiance[1][lane],
+                    irradiance[2][lane],
+                ),
+            };
+            let view = lane_vec(dir, lane);
+            radiance[lane] += shade::direct(&leaving.surface[lane], &points.get(lane), view, &ls);
         }
     }
 }
