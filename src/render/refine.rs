@@ -555,18 +555,10 @@ fn refine_bucket(
     let reach = b.slice(&maps.reach, full_width);
     let top_reach = reach.iter().copied().max().unwrap_or(1);
     let mut traced = Traced::new(width * height);
-    let mut need = vec![false; width * height];
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
-    let mut pending = Vec::new();
-    for y in 0..b.owned_h {
-        for x in 0..b.owned_w {
-            let cell = Cell::of(x, y, interval[y * width + x], width, height);
-            mark_needed(&mut need, &mut pending, &cell, width);
-        }
-    }
+    let (mut need, mut pending) = first_sites(&interval, b);
     // Samples per pixel before and after this round's shading.
-    let mut from = vec![0u32; width * height];
-    let mut to = from.clone();
+    let (mut from, mut to) = (vec![0u32; width * height], vec![0u32; width * height]);
     // Cells resized by the last split: their checks must run again even if no point changed.
     let mut resized: Vec<Cell> = Vec::new();
     let mut scratch = super::SiteScratch::new();
@@ -614,19 +606,7 @@ fn refine_bucket(
             break;
         }
         rounds += 1;
-        for y in 0..height {
-            let row = y * width..(y + 1) * width;
-            if from[row.clone()] != to[row.clone()] {
-                shader.shade_row(
-                    (b.x0, b.y0 + y),
-                    &from[row.clone()],
-                    &to[row.clone()],
-                    &mut traced.est[row],
-                    &mut scratch,
-                    tally,
-                );
-            }
-        }
+        shade_changed_rows(shader, b, &from, &to, &mut traced, &mut scratch, tally);
         traced.update(&work);
         // Check every cell a new sample or a split touched.
         let mut dirty = std::mem::take(&mut resized);
@@ -644,7 +624,59 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
-    let color = (0..width * height)
+    Some(Refined {
+        color: final_colour(&traced, &interval, b),
+        interval,
+        samples: traced.est.iter().map(|e| e.n).collect(),
+        rounds,
+    })
+}
+
+/// The sites the owned pixels' starting cells need: a mask over the bucket and their list.
+fn first_sites(interval: &[u32], b: &Bucket) -> (Vec<bool>, Vec<usize>) {
+    let (width, height) = (b.w, b.h);
+    let mut need = vec![false; width * height];
+    let mut pending = Vec::new();
+    for y in 0..b.owned_h {
+        for x in 0..b.owned_w {
+            let cell = Cell::of(x, y, interval[y * width + x], width, height);
+            mark_needed(&mut need, &mut pending, &cell, width);
+        }
+    }
+    (need, pending)
+}
+
+/// Shades the rows of bucket `b` whose sample counts grow this round (`from` -> `to`).
+fn shade_changed_rows(
+    shader: &SiteShader,
+    b: &Bucket,
+    from: &[u32],
+    to: &[u32],
+    traced: &mut Traced,
+    scratch: &mut super::SiteScratch,
+    tally: &mut Tally,
+) {
+    let width = b.w;
+    for y in 0..b.h {
+        let row = y * width..(y + 1) * width;
+        if from[row.clone()] != to[row.clone()] {
+            shader.shade_row(
+                (b.x0, b.y0 + y),
+                &from[row.clone()],
+                &to[row.clone()],
+                &mut traced.est[row],
+                scratch,
+                tally,
+            );
+        }
+    }
+}
+
+/// The bucket's colours once refinement ends: sites keep their means, the owned pixels
+/// between them are interpolated from their cells.
+fn final_colour(traced: &Traced, interval: &[u32], b: &Bucket) -> Vec<Vec4> {
+    let (width, height) = (b.w, b.h);
+    (0..width * height)
         .map(|p| {
             let e = &traced.est[p];
             let (x, y) = (p % width, p / width);
@@ -653,17 +685,11 @@ fn refine_bucket(
             }
             let cell = Cell::of(x, y, interval[p], width, height);
             let centre = cell.centre();
-            interpolate_at(&traced, width, &cell, (x, y), centre)
+            interpolate_at(traced, width, &cell, (x, y), centre)
                 .map(|(v, ..)| v)
                 .expect("every corner and centre of every cell is traced before the loop ends")
         })
-        .collect();
-    Some(Refined {
-        color,
-        interval,
-        samples: traced.est.iter().map(|e| e.n).collect(),
-        rounds,
-    })
+        .collect()
 }
 
 #[cfg(test)]
