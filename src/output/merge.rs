@@ -206,6 +206,27 @@ pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
         .iter()
         .map(|p| read_tile(p))
         .collect::<Result<_, _>>()?;
+    check_one_render(&tiles, output)?;
+    let first = &tiles[0];
+    let (width, height) = first.size;
+    check_coverage(&tiles, width, height)?;
+    let (metadata, seconds, rays) = merged_metadata(&tiles);
+    let size = (width as usize, height as usize);
+    match &first.pixels {
+        Pixels::Exr { .. } => write_exr(&tiles, size, &metadata, output)?,
+        Pixels::Png { .. } => write_png(&tiles, size, &metadata, output)?,
+    }
+    Ok(Merged {
+        width,
+        height,
+        tiles: tiles.len(),
+        seconds,
+        rays,
+    })
+}
+
+/// The tiles share one format and one render's settings, and `output` has their format.
+fn check_one_render(tiles: &[Tile], output: &Path) -> Result<(), MergeError> {
     let first = &tiles[0];
     for t in &tiles[1..] {
         if t.format() != first.format() {
@@ -229,9 +250,12 @@ pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
             format: first.format(),
         });
     }
-    let (width, height) = first.size;
-    check_coverage(&tiles, width, height)?;
+    Ok(())
+}
 
+/// The first tile's metadata without its region, with the tiles' seconds and rays added up
+/// and their count; also returns those sums.
+fn merged_metadata(tiles: &[Tile]) -> (Metadata, f64, u64) {
     let seconds: f64 = tiles
         .iter()
         .filter_map(|t| t.metadata.get("dofray:seconds")?.parse::<f64>().ok())
@@ -241,7 +265,7 @@ pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
         .filter_map(|t| t.metadata.get("dofray:rays")?.parse::<u64>().ok())
         .sum();
     let mut metadata = Metadata::new();
-    for (k, v) in first.metadata.iter() {
+    for (k, v) in tiles[0].metadata.iter() {
         match k {
             "dofray:region" => {}
             "dofray:seconds" => metadata.push(k, format!("{seconds:.3}")),
@@ -250,84 +274,103 @@ pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
         }
     }
     metadata.push("dofray:tiles", tiles.len());
-    let (w, h) = (width as usize, height as usize);
-    match &first.pixels {
-        Pixels::Exr {
-            channels,
-            compression,
-        } => {
-            let mut full: Vec<(Text, FlatSamples)> = channels
-                .iter()
-                .map(|(name, s)| (name.clone(), empty_like(s, w * h)))
-                .collect();
-            for t in &tiles {
-                let Pixels::Exr { channels, .. } = &t.pixels else {
-                    unreachable!("formats checked")
-                };
-                for (name, samples) in channels {
-                    let Some((_, dst)) = full.iter_mut().find(|(n, _)| n == name) else {
-                        return Err(mismatch(first, t, "channels", "", name.to_string()));
-                    };
-                    copy_rows(samples, dst, &t.region, w).map_err(|(found, expected)| {
-                        mismatch(first, t, &format!("channel {name}"), &expected, found)
-                    })?;
-                }
-            }
-            let channels = full
-                .into_iter()
-                .map(|(name, s)| AnyChannel::new(name, s))
-                .collect();
-            let compression = dofray_exr::ExrCompression::from_exr(*compression)
-                .unwrap_or(dofray_exr::ExrCompression::Zip);
-            let image = dofray_exr::layer_image(channels, (w, h), None, &metadata, compression);
-            dofray_exr::write_image(output, &image)?;
-        }
-        Pixels::Png {
-            bytes_per_pixel,
-            color,
-            depth,
-            ..
-        } => {
-            let bpp = *bytes_per_pixel;
-            let mut data = vec![0u8; w * h * bpp];
-            for t in &tiles {
-                let Pixels::Png {
-                    data: src,
-                    bytes_per_pixel: tile_bpp,
-                    ..
-                } = &t.pixels
-                else {
-                    unreachable!("formats checked")
-                };
-                if *tile_bpp != bpp {
-                    return Err(mismatch(
-                        first,
-                        t,
-                        "PNG pixel layout",
-                        &format!("{bpp} bytes per pixel"),
-                        format!("{tile_bpp} bytes per pixel"),
-                    ));
-                }
-                let pasted = t.region.paste(src, &mut data, w, bpp);
-                debug_assert!(pasted, "read_tile checked the tile's size");
-            }
-            let png = dofray_png::Png {
-                width: w,
-                height: h,
-                data: &data,
-                sixteen: *depth == ::png::BitDepth::Sixteen,
-                alpha: *color == ::png::ColorType::Rgba,
+    (metadata, seconds, rays)
+}
+
+/// Every EXR tile's channels copied into the whole image's, written with the first tile's
+/// compression.
+fn write_exr(
+    tiles: &[Tile],
+    (w, h): (usize, usize),
+    metadata: &Metadata,
+    output: &Path,
+) -> Result<(), MergeError> {
+    let first = &tiles[0];
+    let Pixels::Exr {
+        channels,
+        compression,
+    } = &first.pixels
+    else {
+        unreachable!("formats checked")
+    };
+    let mut full: Vec<(Text, FlatSamples)> = channels
+        .iter()
+        .map(|(name, s)| (name.clone(), empty_like(s, w * h)))
+        .collect();
+    for t in tiles {
+        let Pixels::Exr { channels, .. } = &t.pixels else {
+            unreachable!("formats checked")
+        };
+        for (name, samples) in channels {
+            let Some((_, dst)) = full.iter_mut().find(|(n, _)| n == name) else {
+                return Err(mismatch(first, t, "channels", "", name.to_string()));
             };
-            png.write(output, &metadata)?;
+            copy_rows(samples, dst, &t.region, w).map_err(|(found, expected)| {
+                mismatch(first, t, &format!("channel {name}"), &expected, found)
+            })?;
         }
     }
-    Ok(Merged {
-        width,
-        height,
-        tiles: tiles.len(),
-        seconds,
-        rays,
-    })
+    let channels = full
+        .into_iter()
+        .map(|(name, s)| AnyChannel::new(name, s))
+        .collect();
+    let compression = dofray_exr::ExrCompression::from_exr(*compression)
+        .unwrap_or(dofray_exr::ExrCompression::Zip);
+    let image = dofray_exr::layer_image(channels, (w, h), None, metadata, compression);
+    dofray_exr::write_image(output, &image)?;
+    Ok(())
+}
+
+/// Every PNG tile's pixels pasted into the whole image's, written with the first tile's
+/// colour type and bit depth.
+fn write_png(
+    tiles: &[Tile],
+    (w, h): (usize, usize),
+    metadata: &Metadata,
+    output: &Path,
+) -> Result<(), MergeError> {
+    let first = &tiles[0];
+    let Pixels::Png {
+        bytes_per_pixel,
+        color,
+        depth,
+        ..
+    } = &first.pixels
+    else {
+        unreachable!("formats checked")
+    };
+    let bpp = *bytes_per_pixel;
+    let mut data = vec![0u8; w * h * bpp];
+    for t in tiles {
+        let Pixels::Png {
+            data: src,
+            bytes_per_pixel: tile_bpp,
+            ..
+        } = &t.pixels
+        else {
+            unreachable!("formats checked")
+        };
+        if *tile_bpp != bpp {
+            return Err(mismatch(
+                first,
+                t,
+                "PNG pixel layout",
+                &format!("{bpp} bytes per pixel"),
+                format!("{tile_bpp} bytes per pixel"),
+            ));
+        }
+        let pasted = t.region.paste(src, &mut data, w, bpp);
+        debug_assert!(pasted, "read_tile checked the tile's size");
+    }
+    let png = dofray_png::Png {
+        width: w,
+        height: h,
+        data: &data,
+        sixteen: *depth == ::png::BitDepth::Sixteen,
+        alpha: *color == ::png::ColorType::Rgba,
+    };
+    png.write(output, metadata)?;
+    Ok(())
 }
 
 fn mismatch(first: &Tile, other: &Tile, key: &str, a: &str, b: String) -> MergeError {
@@ -446,104 +489,144 @@ fn bad_size() -> (String, String) {
 }
 
 fn read_tile(path: &Path) -> Result<Tile, MergeError> {
-    let read_error = |message: String| MergeError::Read {
+    let (metadata, pixels, stored) = match ImageFormat::from_path(path)? {
+        ImageFormat::Exr => read_exr_tile(path)?,
+        ImageFormat::Png => read_png_tile(path)?,
+    };
+    let (region, size) = tile_place(path, &metadata)?;
+    let (position, w, h) = stored;
+    let placed = position.is_none_or(|(x, y)| (x, y) == (region.x0 as i32, region.y0 as i32));
+    if !placed || (w, h) != (u64::from(region.width()), u64::from(region.height())) {
+        return Err(MergeError::Size {
+            path: path.to_path_buf(),
+            region,
+            found: format!("{w}x{h} pixels at {:?}", position.unwrap_or((0, 0))),
+            expected: format!(
+                "{}x{} at ({}, {})",
+                region.width(),
+                region.height(),
+                region.x0,
+                region.y0
+            ),
+        });
+    }
+    Ok(Tile {
+        path: path.to_path_buf(),
+        region,
+        size,
+        metadata,
+        pixels,
+    })
+}
+
+/// Where a tile's pixels are stored: the data window's position (EXR only) and its size.
+type Stored = (Option<(i32, i32)>, u64, u64);
+
+fn read_error(path: &Path, message: String) -> MergeError {
+    MergeError::Read {
         path: path.to_path_buf(),
         message,
+    }
+}
+
+/// An EXR tile's text attributes (sorted), channels and data window.
+fn read_exr_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> {
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| read_error(path, e.to_string()))?;
+    let mut metadata = Metadata::new();
+    let layer = &image.layer_data;
+    let mut attributes: Vec<(String, String)> = image
+        .attributes
+        .other
+        .iter()
+        .chain(&layer.attributes.other)
+        .filter_map(|(k, v)| match v {
+            AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
+            _ => None,
+        })
+        .collect();
+    attributes.sort();
+    for (k, v) in attributes {
+        metadata.push(k, v);
+    }
+    let position = layer.attributes.layer_position;
+    let stored = (
+        Some((position.0, position.1)),
+        layer.size.0 as u64,
+        layer.size.1 as u64,
+    );
+    let channels = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| (c.name.clone(), c.sample_data.clone()))
+        .collect();
+    let pixels = Pixels::Exr {
+        channels,
+        compression: layer.encoding.compression,
     };
-    let format = ImageFormat::from_path(path)?;
-    let (metadata, pixels, stored) = match format {
-        ImageFormat::Exr => {
-            let image = read()
-                .no_deep_data()
-                .largest_resolution_level()
-                .all_channels()
-                .first_valid_layer()
-                .all_attributes()
-                .from_file(path)
-                .map_err(|e| read_error(e.to_string()))?;
-            let mut metadata = Metadata::new();
-            let layer = &image.layer_data;
-            let mut attributes: Vec<(String, String)> = image
-                .attributes
-                .other
-                .iter()
-                .chain(&layer.attributes.other)
-                .filter_map(|(k, v)| match v {
-                    AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
-                    _ => None,
-                })
-                .collect();
-            attributes.sort();
-            for (k, v) in attributes {
-                metadata.push(k, v);
-            }
-            let position = layer.attributes.layer_position;
-            let stored = (
-                Some((position.0, position.1)),
-                layer.size.0 as u64,
-                layer.size.1 as u64,
-            );
-            let channels = layer
-                .channel_data
-                .list
-                .iter()
-                .map(|c| (c.name.clone(), c.sample_data.clone()))
-                .collect();
-            let pixels = Pixels::Exr {
-                channels,
-                compression: layer.encoding.compression,
-            };
-            (metadata, pixels, stored)
+    Ok((metadata, pixels, stored))
+}
+
+/// A PNG tile's text chunks, bytes (as stored: 8 or 16 bits, RGB or RGBA) and size.
+fn read_png_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> {
+    let read_error = |message: String| read_error(path, message);
+    let file = std::fs::File::open(path).map_err(|e| read_error(e.to_string()))?;
+    let mut decoder = ::png::Decoder::new(BufReader::new(file));
+    decoder.set_transformations(::png::Transformations::IDENTITY);
+    let mut reader = decoder.read_info().map_err(|e| read_error(e.to_string()))?;
+    let mut data = vec![
+        0;
+        reader
+            .output_buffer_size()
+            .ok_or_else(|| read_error("too large".into()))?
+    ];
+    let frame = reader
+        .next_frame(&mut data)
+        .map_err(|e| read_error(e.to_string()))?;
+    data.truncate(frame.buffer_size());
+    let info = reader.info();
+    let mut metadata = Metadata::new();
+    for t in &info.uncompressed_latin1_text {
+        metadata.push(t.keyword.clone(), t.text.clone());
+    }
+    for t in &info.utf8_text {
+        if let Ok(text) = t.get_text() {
+            metadata.push(t.keyword.clone(), text);
         }
-        ImageFormat::Png => {
-            let file = std::fs::File::open(path).map_err(|e| read_error(e.to_string()))?;
-            let mut decoder = ::png::Decoder::new(BufReader::new(file));
-            decoder.set_transformations(::png::Transformations::IDENTITY);
-            let mut reader = decoder.read_info().map_err(|e| read_error(e.to_string()))?;
-            let mut data = vec![
-                0;
-                reader
-                    .output_buffer_size()
-                    .ok_or_else(|| read_error("too large".into()))?
-            ];
-            let frame = reader
-                .next_frame(&mut data)
-                .map_err(|e| read_error(e.to_string()))?;
-            data.truncate(frame.buffer_size());
-            let info = reader.info();
-            let mut metadata = Metadata::new();
-            for t in &info.uncompressed_latin1_text {
-                metadata.push(t.keyword.clone(), t.text.clone());
-            }
-            for t in &info.utf8_text {
-                if let Ok(text) = t.get_text() {
-                    metadata.push(t.keyword.clone(), text);
-                }
-            }
-            let channels = match frame.color_type {
-                ::png::ColorType::Rgb => 3,
-                ::png::ColorType::Rgba => 4,
-                other => {
-                    return Err(read_error(format!(
-                        "{other:?} PNG; dofray writes RGB or RGBA"
-                    )));
-                }
-            };
-            let bytes = if frame.bit_depth == ::png::BitDepth::Sixteen {
-                2
-            } else {
-                1
-            };
-            let stored = (None, u64::from(frame.width), u64::from(frame.height));
-            let pixels = Pixels::Png {
-                data,
-                bytes_per_pixel: channels * bytes,
-                color: frame.color_type,
-                depth: frame.bit_depth,
-            };
-            (metadata, pixels, stored)
+    }
+    let channels = match frame.color_type {
+        ::png::ColorType::Rgb => 3,
+        ::png::ColorType::Rgba => 4,
+        other => {
+            return Err(read_error(format!(
+                "{other:?} PNG; dofray writes RGB or RGBA"
+            )));
         }
     };
+    let bytes = if frame.bit_depth == ::png::BitDepth::Sixteen {
+        2
+    } else {
+        1
+    };
+    let stored = (None, u64::from(frame.width), u64::from(frame.height));
+    let pixels = Pixels::Png {
+        data,
+        bytes_per_pixel: channels * bytes,
+        color: frame.color_type,
+        depth: frame.bit_depth,
+    };
+    Ok((metadata, pixels, stored))
+}
+
+/// The tile's region and the whole image's size, from its metadata.
+fn tile_place(path: &Path, metadata: &Metadata) -> Result<(Region, (u32, u32)), MergeError> {
     let not_a_tile = |key: &'static str, message: String| MergeError::NotATile {
         path: path.to_path_buf(),
         key,
@@ -570,27 +653,5 @@ fn read_tile(path: &Path) -> Result<Tile, MergeError> {
     region
         .check(size.0, size.1)
         .map_err(|e| not_a_tile("dofray:region", e.to_string()))?;
-    let (position, w, h) = stored;
-    let placed = position.is_none_or(|(x, y)| (x, y) == (region.x0 as i32, region.y0 as i32));
-    if !placed || (w, h) != (u64::from(region.width()), u64::from(region.height())) {
-        return Err(MergeError::Size {
-            path: path.to_path_buf(),
-            region,
-            found: format!("{w}x{h} pixels at {:?}", position.unwrap_or((0, 0))),
-            expected: format!(
-                "{}x{} at ({}, {})",
-                region.width(),
-                region.height(),
-                region.x0,
-                region.y0
-            ),
-        });
-    }
-    Ok(Tile {
-        path: path.to_path_buf(),
-        region,
-        size,
-        metadata,
-        pixels,
-    })
+    Ok((region, size))
 }
