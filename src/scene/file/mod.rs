@@ -1,0 +1,278 @@
+//! The TOML scene format (documented key by key in `docs/scene-format.md`).
+//!
+//! Every table rejects unknown keys, so a typo is an error rather than a silently ignored
+//! setting. Numbers are checked as they are read (finite; sizes and radii > 0; colours >= 0),
+//! so errors carry the line, column and key of the offending value.
+//!
+//! `raw` is the file's shape as serde reads it; the tables become a scene in the order their
+//! errors are reported: textures, materials and objects (`objects`), the image size, the camera
+//! (`camera`), its animation (`animation`), lights and sky (`lights`), and the render settings.
+
+mod animation;
+mod camera;
+mod lights;
+mod objects;
+mod raw;
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+
+use self::objects::FromModel;
+use self::raw::{RawImage, RawRender, RawScene};
+use super::SceneDesc;
+use super::error::{LoadError, Location, shown};
+use super::input::{self, LoadOptions};
+use super::model::{self, DEFAULT_HEIGHT, DEFAULT_WIDTH, Transform};
+use super::texture::TextureCache;
+use crate::filter::PixelFilter;
+
+/// The scene file being built: its path and text, for error locations and relative paths.
+struct Ctx<'a> {
+    path: &'a Path,
+    src: &'a str,
+    dir: PathBuf,
+}
+
+impl Ctx<'_> {
+    fn at(&self, span: Range<usize>) -> Location {
+        Location::at_offset(self.path, self.src, span.start)
+    }
+
+    fn at_key(&self, span: Range<usize>, key: impl Into<String>) -> Location {
+        self.at(span).with_key(key)
+    }
+
+    fn invalid(
+        &self,
+        span: Range<usize>,
+        key: impl Into<String>,
+        message: impl Into<String>,
+    ) -> LoadError {
+        LoadError::invalid(self.at_key(span, key), message)
+    }
+
+    fn resolve(&self, file: &str) -> PathBuf {
+        self.dir.join(file)
+    }
+}
+
+/// Loads a TOML scene file.
+pub fn load(path: &Path, options: &LoadOptions) -> Result<SceneDesc, LoadError> {
+    let bytes = input::read(path, options)?;
+    let src = String::from_utf8(bytes).map_err(|e| {
+        let (line, column) = super::error::line_column(
+            &String::from_utf8_lossy(e.as_bytes()),
+            e.utf8_error().valid_up_to(),
+        );
+        LoadError::Toml {
+            at: Location {
+                line: Some(line),
+                column: Some(column),
+                ..Location::file(path)
+            },
+            message: "invalid UTF-8 (a TOML file must be UTF-8 text)".into(),
+        }
+    })?;
+    parse_with(&src, path, options)
+}
+
+/// Parses a TOML scene from `src`; `path` names it in errors, and relative file names in it
+/// resolve against `path`'s directory.
+///
+/// ```rust
+/// use std::path::Path;
+///
+/// let src = r#"
+/// [image]
+/// width = 320
+/// height = 240
+///
+/// [camera]
+/// eye = [0, 1, 5]
+/// look_at = [0, 1, 0]
+/// f_number = 2
+/// focal_length_mm = 50
+/// focus_point = [0, 1, 0]
+///
+/// [[materials]]
+/// name = "red"
+/// diffuse = [0.8, 0.1, 0.1]
+///
+/// [[objects]]
+/// type = "sphere"
+/// center = [0, 1, 0]
+/// radius = 1
+/// material = "red"
+/// "#;
+/// let scene = dofray::scene::file::parse(src, Path::new("memory.toml"))?;
+/// assert_eq!(scene.objects.len(), 1);
+///
+/// // Errors give the file, line and column, and what was expected.
+/// let e = dofray::scene::file::parse("[camera]\neye = 3\n", Path::new("bad.toml")).unwrap_err();
+/// assert!(e.to_string().starts_with("bad.toml:2:7"), "{e}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn parse(src: &str, path: &Path) -> Result<SceneDesc, LoadError> {
+    parse_with(src, path, &LoadOptions::default())
+}
+
+/// [`parse`] with explicit limits and path policy for the files the scene refers to.
+pub fn parse_with(src: &str, path: &Path, options: &LoadOptions) -> Result<SceneDesc, LoadError> {
+    let raw: RawScene = toml::from_str(src).map_err(|e| {
+        let at = match e.span() {
+            Some(span) => Location::at_offset(path, src, span.start),
+            None => Location::file(path),
+        };
+        LoadError::Toml {
+            at,
+            message: e.message().trim().replace('\n', "; "),
+        }
+    })?;
+    let ctx = Ctx {
+        path,
+        src,
+        dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
+    };
+    build(&ctx, raw, options)
+}
+
+/// The scene of a parsed file.
+fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, LoadError> {
+    let mut cache = TextureCache::new(*options);
+    let textures = objects::textures(ctx, raw.textures, &mut cache)?;
+    let mut materials = objects::Materials::read(ctx, raw.materials, &textures)?;
+    let objects = objects::objects(ctx, raw.objects, &mut materials, &mut cache)?;
+    let (width, height) = image_size(ctx, raw.image.as_ref(), objects.camera.as_ref())?;
+    // Without a focus key, the focus is on look_at, and follows it when it is animated.
+    let focus_on_look_at = !raw.camera.as_ref().is_some_and(|c| {
+        let c = c.get_ref();
+        c.focus_distance.is_some() || c.focus_point.is_some() || c.focus_pixel.is_some()
+    });
+    let camera = camera::camera(ctx, raw.camera, width, height, &objects)?;
+    let animation = raw
+        .animation
+        .map(|a| animation::animation(ctx, a, &camera, focus_on_look_at))
+        .transpose()?;
+    let lights = lights::lights(ctx, raw.lights, objects.lights, &camera)?;
+    let background = lights::background(ctx, raw.background)?;
+    let render = raw.render.unwrap_or_default();
+    let (tolerance, pixel_filter) = sampling(ctx, &render)?;
+    let name = raw.name.unwrap_or_else(|| {
+        ctx.path
+            .file_stem()
+            .map_or_else(|| "scene".into(), |s| s.to_string_lossy().into_owned())
+    });
+    Ok(SceneDesc {
+        name,
+        camera,
+        materials: materials.list,
+        objects: objects.list,
+        lights,
+        ambient: lights::ambient(raw.ambient),
+        background,
+        spp: render.spp.map(|s| s.0),
+        aa: render.aa.map(|s| s.0),
+        pixel_filter,
+        interval_factor: render.interval_factor.map(|k| k.0),
+        tolerance,
+        transparent: render.transparent.unwrap_or(false),
+        warnings: objects.warnings,
+        animation,
+    })
+}
+
+/// The image size: `[image]`'s, the height else from a model camera's aspect ratio, else the
+/// defaults; refused when its render buffers cannot fit.
+fn image_size(
+    ctx: &Ctx,
+    image: Option<&RawImage>,
+    model_camera: Option<&FromModel>,
+) -> Result<(u32, u32), LoadError> {
+    let width = image
+        .and_then(|i| i.width.as_ref())
+        .map_or(DEFAULT_WIDTH, |p| p.get_ref().0);
+    // A model camera's aspect ratio sets the height when the file gives none.
+    let aspect = model_camera
+        .and_then(|(c, _, _)| c.aspect)
+        .filter(|a| a.is_finite() && *a > 0.05 && *a < 20.0);
+    let height = image.and_then(|i| i.height.as_ref()).map_or_else(
+        || {
+            aspect.map_or(DEFAULT_HEIGHT, |a| {
+                ((width as f32 / a).round() as u32).max(1)
+            })
+        },
+        |p| p.get_ref().0,
+    );
+    // An image whose render buffers cannot fit is refused here, naming the key that asks for
+    // it (the larger side's; the command line's --width/--height cannot rescue such a file).
+    if let Err(e) = crate::limits::check_image_memory(width, height) {
+        let (key, span) = match image.map(|i| (&i.width, &i.height)) {
+            Some((Some(w), h)) if h.as_ref().is_none_or(|h| w.get_ref().0 >= h.get_ref().0) => {
+                ("image.width", w.span())
+            }
+            Some((_, Some(h))) => ("image.height", h.span()),
+            _ => ("image", 0..0),
+        };
+        return Err(ctx.invalid(span, key, e.to_string()));
+    }
+    Ok((width, height))
+}
+
+/// The `[render]` table's tolerance (refused beside the seed's `interval_factor`) and pixel
+/// filter.
+fn sampling(
+    ctx: &Ctx,
+    render: &RawRender,
+) -> Result<(Option<f32>, Option<PixelFilter>), LoadError> {
+    let tolerance = match (&render.tolerance, render.interval_factor) {
+        (Some(t), Some(_)) => {
+            return Err(ctx.invalid(
+                t.span(),
+                "render.tolerance",
+                "either `tolerance` (the error-controlled rule) or `interval_factor` (the \
+                 seed's fixed rule), not both",
+            ));
+        }
+        (t, _) => t.as_ref().map(|t| t.get_ref().0),
+    };
+    let pixel_filter = match (render.pixel_filter, &render.pixel_filter_width) {
+        (None, None) => None,
+        (kind, width) => {
+            let mut filter = PixelFilter::new(kind.unwrap_or_default());
+            if let Some(w) = width {
+                filter.width = w.get_ref().0;
+                if !filter.is_valid() {
+                    return Err(ctx.invalid(
+                        w.span(),
+                        "render.pixel_filter_width",
+                        "a width in pixels up to 16",
+                    ));
+                }
+            }
+            Some(filter)
+        }
+    };
+    Ok((tolerance, pixel_filter))
+}
+
+/// Loads a mesh file by its extension (`UnknownScene` when the extension is not a mesh's).
+pub fn load_model(
+    path: &Path,
+    transform: &Transform,
+    textures: &mut TextureCache,
+) -> Result<model::Model, LoadError> {
+    match extension(path).as_deref() {
+        Some("obj") => super::obj::load(path, transform, textures),
+        Some("gltf" | "glb") => super::gltf::load(path, transform, textures),
+        _ => Err(LoadError::UnknownScene {
+            name: shown(path),
+            builtins: String::new(),
+        }),
+    }
+}
+
+/// A path's extension, lower-cased.
+pub fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+}
