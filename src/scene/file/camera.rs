@@ -221,19 +221,23 @@ fn check_view(
     }
 }
 
+/// The keys of `keys` the table gives, with the spans of their values, in order.
+fn given(keys: [(&'static str, Option<Range<usize>>); 3]) -> Vec<(&'static str, Range<usize>)> {
+    keys.into_iter()
+        .filter_map(|(k, s)| s.map(|s| (k, s)))
+        .collect()
+}
+
 /// Refuses more than one lens parameterisation, and keys that belong to another.
 fn check_lens_keys(ctx: &Ctx, raw: &RawCamera) -> Result<(), LoadError> {
-    let lenses: Vec<(&str, Range<usize>)> = [
+    let lenses = given([
         (
             "aperture_radius",
             raw.aperture_radius.as_ref().map(|s| s.span()),
         ),
         ("f_number", raw.f_number.as_ref().map(|s| s.span())),
         ("sharp_range", raw.sharp_range.as_ref().map(|s| s.span())),
-    ]
-    .into_iter()
-    .filter_map(|(k, s)| s.map(|s| (k, s)))
-    .collect();
+    ]);
     if lenses.len() > 1 {
         return Err(ctx.invalid(lenses[1].1.clone(), format!("camera.{}", lenses[1].0), format!("`{}` and `{}` both set the lens; give one of aperture_radius, f_number (photographic) or sharp_range + spread (the seed's)", lenses[0].0, lenses[1].0)));
     }
@@ -319,17 +323,14 @@ fn focus(
     height: u32,
     view: &View,
 ) -> Result<Focus, LoadError> {
-    let focuses: Vec<(&str, Range<usize>)> = [
+    let focuses = given([
         (
             "focus_distance",
             raw.focus_distance.as_ref().map(|s| s.span()),
         ),
         ("focus_point", raw.focus_point.as_ref().map(|s| s.span())),
         ("focus_pixel", raw.focus_pixel.as_ref().map(|s| s.span())),
-    ]
-    .into_iter()
-    .filter_map(|(k, s)| s.map(|s| (k, s)))
-    .collect();
+    ]);
     if focuses.len() > 1 {
         return Err(ctx.invalid(
             focuses[1].1.clone(),

@@ -71,20 +71,12 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<Light, LoadError> 
     let span = l.span();
     let l = l.into_inner();
     let key = format!("lights[{i}]");
-    let cone = |k: &str, set: bool| -> Result<(), LoadError> {
-        if set {
-            Err(ctx.invalid(
-                span.clone(),
-                format!("{key}.{k}"),
-                format!("`{k}` belongs to spot lights"),
-            ))
-        } else {
-            Ok(())
-        }
-    };
     if l.kind != LightKind::Spot {
-        cone("inner_angle", l.inner_angle.is_some())?;
-        cone("outer_angle", l.outer_angle.is_some())?;
+        let cone = [
+            ("inner_angle", l.inner_angle.is_some()),
+            ("outer_angle", l.outer_angle.is_some()),
+        ];
+        refuse(ctx, &span, &key, cone, "belongs to spot lights")?;
     }
     match l.kind {
         LightKind::Spot => spot(ctx, &key, span, l),
@@ -148,14 +140,17 @@ fn spot(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light, 
 }
 
 fn point(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light, LoadError> {
-    for (k, set) in [
+    let directional = [
         ("direction", l.direction.is_some()),
         ("irradiance", l.irradiance.is_some()),
-    ] {
-        if set {
-            return Err(ctx.invalid(span, format!("{key}.{k}"), format!("`{k}` belongs to directional lights; a point light takes `position` and `intensity`")));
-        }
-    }
+    ];
+    refuse(
+        ctx,
+        &span,
+        key,
+        directional,
+        "belongs to directional lights; a point light takes `position` and `intensity`",
+    )?;
     let position = l
         .position
         .ok_or_else(|| ctx.invalid(span, key, "a point light needs `position`"))?;
@@ -166,14 +161,17 @@ fn point(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light,
 }
 
 fn directional(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light, LoadError> {
-    for (k, set) in [
+    let point = [
         ("position", l.position.is_some()),
         ("intensity", l.intensity.is_some()),
-    ] {
-        if set {
-            return Err(ctx.invalid(span, format!("{key}.{k}"), format!("`{k}` belongs to point lights; a directional light takes `direction` and `irradiance`")));
-        }
-    }
+    ];
+    refuse(
+        ctx,
+        &span,
+        key,
+        point,
+        "belongs to point lights; a directional light takes `direction` and `irradiance`",
+    )?;
     let direction = l
         .direction
         .ok_or_else(|| ctx.invalid(span.clone(), key, "a directional light needs `direction`"))?;
@@ -189,4 +187,25 @@ fn directional(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<
         direction: d,
         irradiance: l.irradiance.map_or(Vec3::ONE, |c| c.0),
     })
+}
+
+/// Refuses the first of `keys` that is set: it is a key that "`{k}` `belongs`" (to another
+/// kind of light).
+fn refuse(
+    ctx: &Ctx,
+    span: &Range<usize>,
+    key: &str,
+    keys: [(&str, bool); 2],
+    belongs: &str,
+) -> Result<(), LoadError> {
+    for (k, set) in keys {
+        if set {
+            return Err(ctx.invalid(
+                span.clone(),
+                format!("{key}.{k}"),
+                format!("`{k}` {belongs}"),
+            ));
+        }
+    }
+    Ok(())
 }

@@ -321,6 +321,30 @@ pub(super) fn objects(
     Ok(reader.out)
 }
 
+/// One `[[objects]]` table being read: its key and span, and what its keys common to every
+/// kind give (its transform and scale, and its material).
+struct Table<'a> {
+    key: &'a str,
+    span: Range<usize>,
+    raw: &'a RawObject,
+    transform: Option<(Transform, Vec3)>,
+    material: Option<usize>,
+}
+
+impl Table<'_> {
+    /// The value of a key an object of this kind needs (`message` says so when it is missing).
+    fn needs<'v, T>(
+        &self,
+        ctx: &Ctx,
+        value: &'v Option<T>,
+        message: &str,
+    ) -> Result<&'v T, LoadError> {
+        value
+            .as_ref()
+            .ok_or_else(|| ctx.invalid(self.span.clone(), self.key, message))
+    }
+}
+
 /// Reads objects into `out`, adding the materials they bring.
 struct ObjectReader<'a> {
     ctx: &'a Ctx<'a>,
@@ -350,33 +374,31 @@ impl ObjectReader<'_> {
             })?),
             None => None,
         };
+        let table = Table {
+            key,
+            span,
+            raw: o,
+            transform,
+            material,
+        };
         match o.kind {
-            ObjectKind::Sphere => self.sphere(key, span, o, transform, material),
-            ObjectKind::Quad => self.quad(key, span, o, transform, material),
-            ObjectKind::Mesh => self.mesh(key, span, o, transform, material),
+            ObjectKind::Sphere => self.sphere(table),
+            ObjectKind::Quad => self.quad(table),
+            ObjectKind::Mesh => self.mesh(table),
         }
     }
 
-    fn sphere(
-        &mut self,
-        key: &str,
-        span: Range<usize>,
-        o: &RawObject,
-        transform: Option<(Transform, Vec3)>,
-        material: Option<usize>,
-    ) -> Result<(), LoadError> {
-        let ctx = self.ctx;
-        let radius = o.radius.as_ref().ok_or_else(|| {
-            ctx.invalid(span.clone(), key, "a sphere needs `radius` (a number > 0)")
-        })?;
+    fn sphere(&mut self, table: Table) -> Result<(), LoadError> {
+        let (ctx, key, o) = (self.ctx, table.key, table.raw);
+        let radius = table.needs(ctx, &o.radius, "a sphere needs `radius` (a number > 0)")?;
         let center = o.center.as_ref().map_or(Vec3::ZERO, |c| v3(*c.get_ref()));
-        let (center, radius) = match &transform {
+        let (center, radius) = match &table.transform {
             None => (center, radius.get_ref().0),
             Some((t, scale)) => {
                 if (scale.x - scale.y).abs() > 1e-6 * scale.x
                     || (scale.x - scale.z).abs() > 1e-6 * scale.x
                 {
-                    let s = o.scale.as_ref().map_or(span.clone(), |s| s.span());
+                    let s = o.scale.as_ref().map_or(table.span.clone(), |s| s.span());
                     return Err(ctx.invalid(
                         s,
                         format!("{key}.scale"),
@@ -390,9 +412,11 @@ impl ObjectReader<'_> {
             }
         };
         if !(center.is_finite() && radius.is_finite() && radius > 0.0) {
-            return Err(ctx.invalid(span, key, "the transformed sphere is not finite"));
+            return Err(ctx.invalid(table.span, key, "the transformed sphere is not finite"));
         }
-        let material = material.unwrap_or_else(|| self.materials.default_index());
+        let material = table
+            .material
+            .unwrap_or_else(|| self.materials.default_index());
         self.out.list.push(Object::Sphere {
             center,
             radius,
@@ -401,22 +425,13 @@ impl ObjectReader<'_> {
         Ok(())
     }
 
-    fn quad(
-        &mut self,
-        key: &str,
-        span: Range<usize>,
-        o: &RawObject,
-        transform: Option<(Transform, Vec3)>,
-        material: Option<usize>,
-    ) -> Result<(), LoadError> {
-        let ctx = self.ctx;
-        let size = o.size.as_ref().ok_or_else(|| {
-            ctx.invalid(
-                span.clone(),
-                key,
-                "a quad needs `size = [width, depth]` (numbers > 0)",
-            )
-        })?;
+    fn quad(&mut self, table: Table) -> Result<(), LoadError> {
+        let (ctx, key, o) = (self.ctx, table.key, table.raw);
+        let size = table.needs(
+            ctx,
+            &o.size,
+            "a quad needs `size = [width, depth]` (numbers > 0)",
+        )?;
         let [w, d] = *size.get_ref();
         let c = o.center.as_ref().map_or(Vec3::ZERO, |c| v3(*c.get_ref()));
         let corners = [
@@ -428,7 +443,7 @@ impl ObjectReader<'_> {
         // Flat, so Embree's geometric normal serves for shading (no vertex normals).
         let mut positions: Vec<[f32; 3]> = corners.iter().map(|&[x, z]| [x, c.y, z]).collect();
         let mut indices = vec![[0, 2, 1], [0, 3, 2]];
-        if let Some((t, _)) = &transform {
+        if let Some((t, _)) = &table.transform {
             for p in &mut positions {
                 *p = t.point(*p);
             }
@@ -440,8 +455,10 @@ impl ObjectReader<'_> {
         }
         let mesh = TriangleMesh::new(positions, indices)
             .and_then(|m| m.with_uvs(corners.to_vec()))
-            .map_err(|e| ctx.invalid(span.clone(), key, format!("invalid quad: {e}")))?;
-        let material = material.unwrap_or_else(|| self.materials.default_index());
+            .map_err(|e| ctx.invalid(table.span.clone(), key, format!("invalid quad: {e}")))?;
+        let material = table
+            .material
+            .unwrap_or_else(|| self.materials.default_index());
         self.out.list.push(Object::Mesh {
             mesh,
             materials: MeshMaterials::One(material),
@@ -449,25 +466,19 @@ impl ObjectReader<'_> {
         Ok(())
     }
 
-    fn mesh(
-        &mut self,
-        key: &str,
-        span: Range<usize>,
-        o: &RawObject,
-        transform: Option<(Transform, Vec3)>,
-        material: Option<usize>,
-    ) -> Result<(), LoadError> {
-        let ctx = self.ctx;
-        let file = o.file.as_ref().ok_or_else(|| {
-            ctx.invalid(
-                span.clone(),
-                key,
-                "a mesh needs `file` (an .obj, .gltf or .glb file)",
-            )
-        })?;
+    fn mesh(&mut self, table: Table) -> Result<(), LoadError> {
+        let (ctx, key, o) = (self.ctx, table.key, table.raw);
+        let file = table.needs(
+            ctx,
+            &o.file,
+            "a mesh needs `file` (an .obj, .gltf or .glb file)",
+        )?;
         let at = ctx.at_key(file.span(), format!("{key}.file"));
         let p = ctx.resolve(file.get_ref());
-        let t = transform.map(|(t, _)| t).unwrap_or(Transform::IDENTITY);
+        let t = table
+            .transform
+            .map(|(t, _)| t)
+            .unwrap_or(Transform::IDENTITY);
         let model = load_model(&p, &t, self.cache).map_err(|e| match e {
             LoadError::UnknownScene { .. } => LoadError::invalid(
                 at.clone(),
@@ -492,7 +503,7 @@ impl ObjectReader<'_> {
             .list
             .extend(model.materials.into_iter().map(|(_, m)| m));
         for m in model.meshes {
-            let index = match (material, m.material) {
+            let index = match (table.material, m.material) {
                 (Some(over), _) => over,
                 (None, Some(k)) if k < model_materials => offset + k,
                 (None, _) => self.materials.default_index(),
