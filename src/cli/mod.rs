@@ -1,0 +1,126 @@
+//! The `dofray` command's pieces: arguments, the subcommands, what they print, signals.
+
+use anyhow::{Context, Result};
+use dofray::embree::Device;
+use dofray::overrides::{Overrides, Param};
+use dofray::render::Progress;
+use dofray::renderer::{Renderer, RendererError};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use args::SceneArgs;
+
+/// Returns a usage error (exit status 2): a flag's value or a combination of flags is wrong.
+macro_rules! usage {
+    ($($arg:tt)*) => {
+        return Err(anyhow::Error::new(dofray::exit::UsageError(format!($($arg)*))))
+    };
+}
+
+pub(crate) mod args;
+pub(crate) mod bench;
+pub(crate) mod render;
+pub(crate) mod report;
+
+/// An indicatif bar on stderr; it draws nothing when stderr is not a terminal.
+pub(crate) struct Bar(ProgressBar);
+
+impl Bar {
+    pub(crate) fn new(quiet: bool) -> Self {
+        let target = if quiet {
+            ProgressDrawTarget::hidden()
+        } else {
+            ProgressDrawTarget::stderr()
+        };
+        let bar = ProgressBar::with_draw_target(None, target);
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{msg:>9} [{bar:40}] {percent:>3}% {elapsed_precise} eta {eta}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        Bar(bar)
+    }
+}
+
+impl Progress for Bar {
+    fn start(&self, phase: &str, total: u64) {
+        self.0.reset();
+        self.0.set_length(total);
+        self.0.set_message(phase.to_string());
+    }
+    fn advance(&self, units: u64) {
+        self.0.inc(units);
+    }
+    fn finish(&self) {
+        self.0.finish_and_clear();
+    }
+}
+
+/// The scene overrides the flags ask for.
+pub(crate) fn overrides(a: &SceneArgs) -> Overrides {
+    Overrides {
+        width: a.width,
+        height: a.height,
+        aperture_radius: a.aperture_radius,
+        f_number: a.f_number,
+        focal_length_mm: a.focal_length,
+        sensor_width_mm: a.sensor_width,
+        sharp_range: a.sharp_range.zip(a.spread),
+        focus_distance: a.focus_distance,
+        autofocus: a.autofocus,
+        blades: a.blades,
+        blade_rotation_deg: a.blade_rotation,
+        anamorphic: a.anamorphic,
+        lights: a.lights.clone(),
+        ambient: a.ambient,
+    }
+}
+
+/// A renderer's error, an override's worded for the command line (flag names).
+pub(crate) fn cli_error(e: RendererError) -> anyhow::Error {
+    match e {
+        RendererError::Override(e) => dofray::exit::UsageError(e.message(Param::flag)).into(),
+        e => e.into(),
+    }
+}
+
+/// A scene ready to render with the flags' overrides, and the worker threads to render it on.
+pub(crate) struct Prepared {
+    pub(crate) renderer: Renderer,
+    pub(crate) pool: rayon::ThreadPool,
+}
+
+pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
+    let defaults = dofray::scene::LoadOptions::default();
+    let options = dofray::scene::LoadOptions {
+        allow_outside_paths: a.allow_outside_paths,
+        max_input_bytes: a
+            .max_input_mib
+            .map_or(defaults.max_input_bytes, |m| m.saturating_mul(1 << 20)),
+        max_texture_bytes: a
+            .max_texture_mib
+            .map_or(defaults.max_texture_bytes, |m| m.saturating_mul(1 << 20)),
+        max_instanced_triangles: a
+            .max_instanced_triangles
+            .unwrap_or(defaults.max_instanced_triangles),
+        ..defaults
+    };
+    let desc = dofray::scene::load_with(&a.scene, &options)?;
+    for warning in &desc.warnings {
+        eprintln!("warning: {warning}");
+    }
+    let threads = a.threads.map(usize::from);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")?;
+    // Embree's own thread pool (BVH builds) gets the same bound as rayon's.
+    let device = match threads {
+        Some(n) => Device::with_threads(n),
+        None => Device::new(),
+    }
+    .context("cannot create the Embree device")?;
+    let renderer = Renderer::with_overrides(desc, overrides(a), &device).map_err(cli_error)?;
+    Ok(Prepared { renderer, pool })
+}

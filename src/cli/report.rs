@@ -1,0 +1,249 @@
+//! What the command line prints: bench tables, JSON objects, the version text, errors.
+
+use std::process::ExitCode;
+
+use anyhow::Result;
+use dofray::bench::{self, equal_error};
+use dofray::embree::Device;
+use dofray::render;
+
+/// Which Embree ran the render and how: version, device configuration, packet lanes per call.
+pub(crate) fn embree_json(scene: &dofray::embree::Scene) -> serde_json::Value {
+    let device = scene.device();
+    serde_json::json!({
+        "version": device.embree_version(),
+        "config": device.config(),
+        "native_packet_width": device.native_packet_width(),
+        "isa": isa_family(device.native_packet_width()),
+        "lanes_per_call": scene.lanes_per_call(),
+    })
+}
+
+/// Seconds for a table cell: "not reached", or "<=" before an upper bound.
+pub(crate) fn crossing_cell(c: &equal_error::Crossing) -> String {
+    match c.seconds {
+        None => "not reached".into(),
+        Some(s) if c.at_first_rung => format!("<={s:.4}"),
+        Some(s) => format!("{s:.4}"),
+    }
+}
+
+pub(crate) fn speedup_cell(l: &equal_error::Level) -> String {
+    use equal_error::Bound;
+    match l.speedup {
+        None => "-".into(),
+        Some(x) => match l.speedup_bound {
+            Bound::Exact => format!("{x:.2}x"),
+            Bound::AtMost => format!("<={x:.2}x"),
+            Bound::AtLeast => format!(">={x:.2}x"),
+            Bound::Unknown => format!("~{x:.2}x?"),
+        },
+    }
+}
+
+pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
+    println!(
+        "dofray bench --equal-error: scene {}, {}x{}, median of {} runs, {} threads; reference {} spp{}",
+        r.scene,
+        r.width,
+        r.height,
+        r.repeat,
+        r.threads,
+        r.reference_spp,
+        if r.reference_cached { " (cached)" } else { "" }
+    );
+    let aa = match r.aa {
+        equal_error::RungAa::Fixed(n) => format!("{n} at every rung"),
+        equal_error::RungAa::Ratio(x) => format!("{x} x spp, at least 1"),
+    };
+    println!(
+        "adaptive: error-controlled rule, default tolerance 4/sqrt(spp) code values; aa: {aa}"
+    );
+    println!(
+        "{:>6} {:>5} | {:>9} {:>11} {:>12} {:>8} | {:>9} {:>11} {:>12} {:>8} {:>6}",
+        "spp",
+        "aa",
+        "dense s",
+        "rays",
+        "samples",
+        "PSNR",
+        "adapt. s",
+        "rays",
+        "samples",
+        "PSNR",
+        "tol."
+    );
+    for (d, ad) in r.dense.iter().zip(&r.adaptive) {
+        println!(
+            "{:>6} {:>5} | {:>9.4} {:>11} {:>12} {:>8.2} | {:>9.4} {:>11} {:>12} {:>8.2} {:>6.2}",
+            d.spp,
+            d.aa,
+            d.seconds,
+            d.rays,
+            d.samples,
+            d.psnr_vs_reference,
+            ad.seconds,
+            ad.rays,
+            ad.samples,
+            ad.psnr_vs_reference,
+            ad.tolerance.unwrap_or(f32::NAN)
+        );
+    }
+    println!("time to reach each PSNR level (seconds, interpolated in log time between rungs):");
+    println!(
+        "  {:>10} {:>12} {:>12} {:>10}",
+        "level", "dense", "adaptive", "speedup"
+    );
+    let row = |name: String, l: &equal_error::Level| {
+        println!(
+            "  {:>10} {:>12} {:>12} {:>10}",
+            name,
+            crossing_cell(&l.dense),
+            crossing_cell(&l.adaptive),
+            speedup_cell(l)
+        );
+    };
+    for l in &r.levels {
+        row(format!("{} dB", l.psnr_db), l);
+    }
+    match &r.highest_common {
+        Some(l) => {
+            println!("highest level both reach:");
+            row(format!("{:.2} dB", l.psnr_db), l);
+        }
+        None => println!("highest level both reach: none (no finite PSNR)"),
+    }
+    println!(
+        "PSNR in sRGB against the reference; \"<=\": the cheapest rung already reaches the level \
+         (an upper bound)."
+    );
+    if let Some(plot) = &r.plot {
+        println!("plot: {}", plot.display());
+    }
+}
+
+pub(crate) fn print_table(r: &bench::BenchReport) {
+    println!(
+        "dofray bench: scene {}, {}x{}, {} spp, {} aa, median of {} runs, {} threads; reference {} spp{}",
+        r.scene,
+        r.width,
+        r.height,
+        r.spp,
+        r.aa,
+        r.repeat,
+        r.threads,
+        r.reference_spp,
+        if r.reference_cached { " (cached)" } else { "" }
+    );
+    println!(
+        "{:<20} {:>8} {:>11} {:>8} {:>9} {:>8} {:>8} {:>9} {:>9} {:>8} {:>8}",
+        "mode",
+        "seconds",
+        "rays",
+        "Mrays/s",
+        "sites",
+        "x pinh.",
+        "speedup",
+        "PSNR dns",
+        "PSNR ref",
+        "SSIM ref",
+        "max err"
+    );
+    for row in &r.rows {
+        println!(
+            "{:<20} {:>8.3} {:>11} {:>8.2} {:>9} {:>8.2} {:>8.2} {:>9.2} {:>9.2} {:>8.4} {:>8.3}",
+            row.label,
+            row.seconds,
+            row.rays,
+            row.mrays_per_s,
+            row.sample_sites,
+            row.time_vs_pinhole,
+            row.speedup_vs_dense,
+            row.psnr_vs_dense,
+            row.psnr_vs_reference,
+            row.ssim_vs_reference,
+            row.max_error_vs_reference
+        );
+    }
+    println!(
+        "intersect-only replay of dense's rays: {:.2} Mrays/s; dense runs at {:.0}% of it",
+        r.intersect_only_mrays_per_s,
+        100.0 * r.dense_vs_intersect_only
+    );
+    println!("where the time goes (ms): depth pass + maps + sample sites + interpolation");
+    for row in r
+        .rows
+        .iter()
+        .filter(|row| row.mode != render::Mode::Pinhole)
+    {
+        println!(
+            "  {:<20} {:>7.1} + {:>5.1} + {:>7.1} + {:>5.1}",
+            row.label,
+            row.pinhole_seconds * 1e3,
+            row.maps_seconds * 1e3,
+            row.sites_seconds * 1e3,
+            row.interpolate_seconds * 1e3
+        );
+    }
+    println!("PSNR/SSIM in sRGB (what a viewer sees); \"inf\" = identical images.");
+}
+
+/// An f32 as the f64 with the same shortest decimal form (0.4, not 0.4000000059604645).
+pub(crate) fn json_f32(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::NAN)
+}
+
+/// A bench report (or any serialisable object) with `schema_version`, `dofray_version` and
+/// `git_commit` added at the top level.
+pub(crate) fn versioned_json(report: &impl serde::Serialize) -> Result<String> {
+    let mut value = serde_json::to_value(report)?;
+    if let Some(map) = value.as_object_mut() {
+        map.insert("schema_version".into(), dofray::exit::SCHEMA_VERSION.into());
+        map.insert("dofray_version".into(), dofray::VERSION.into());
+        map.insert("git_commit".into(), dofray::GIT_COMMIT.into());
+    }
+    Ok(serde_json::to_string(&value)?)
+}
+
+/// What `dofray --version` prints: dofray's version and commit, and the Embree it runs on.
+pub(crate) fn version_text() -> String {
+    let mut text = format!(
+        "dofray {}\ncommit: {}\n",
+        dofray::VERSION,
+        dofray::GIT_COMMIT
+    );
+    match Device::new() {
+        Ok(device) => {
+            let width = device.native_packet_width();
+            text += &format!(
+                "embree: {}\nembree isa: {} (native packet width {width})\nembree config: {:?}\n",
+                device.embree_version(),
+                isa_family(width),
+                device.config()
+            );
+        }
+        Err(e) => text += &format!("embree: unavailable ({e})\n"),
+    }
+    text
+}
+
+/// The instruction-set family behind a native packet width (Embree reports the width, not the
+/// exact ISA: 8 lanes are AVX or AVX2).
+pub(crate) fn isa_family(width: u32) -> &'static str {
+    match width {
+        16 => "AVX-512",
+        8 => "AVX/AVX2",
+        4 if cfg!(target_arch = "aarch64") => "NEON",
+        4 => "SSE",
+        _ => "scalar",
+    }
+}
+
+/// Prints a failure: the plain message on stderr and, with `--json`, the error object on stdout.
+pub(crate) fn report_error(kind: dofray::exit::ErrorKind, message: &str, json: bool) -> ExitCode {
+    eprintln!("error: {message}");
+    if json {
+        println!("{}", dofray::exit::json_error(kind, message));
+    }
+    ExitCode::from(kind.exit_code())
+}
