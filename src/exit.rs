@@ -280,7 +280,6 @@ fn output_kind(e: &OutputError) -> ErrorKind {
     match e {
         // The value of -o or --aov-dir is wrong, not the file system.
         OutputError::UnknownExtension { .. } | OutputError::Collision { .. } => ErrorKind::Usage,
-        OutputError::Signals(_) => ErrorKind::Internal,
         _ => ErrorKind::Io,
     }
 }

@@ -15,8 +15,8 @@
 //!
 //! Every writer is atomic: it writes a hidden temporary file next to the target and renames it
 //! over the target only once everything has been written, removing the temporary file on any
-//! error, so a failed or interrupted write never leaves a partial image behind; with
-//! [`clean_up_on_signals`] installed, SIGINT, SIGTERM and SIGHUP remove it too ([`atomic`]).
+//! error, so a failed or interrupted write never leaves a partial image behind; a process that
+//! exits on a signal removes it with [`atomic::remove_all_for_exit`].
 //! Targets are checked first ([`target`]): symbolic links are written through to the file
 //! they name, and read-only files, directories and devices are refused.
 //!
@@ -37,7 +37,7 @@ use glam::Vec3;
 
 use crate::render::Region;
 use crate::render::film::Film;
-pub use atomic::{TempFile, clean_up_on_signals};
+pub use atomic::{TempFile, remove_all_for_exit};
 pub use exr::{CompressionError, ExrCompression};
 pub use metadata::Metadata;
 pub use target::{
@@ -113,9 +113,6 @@ pub enum OutputError {
         /// The AOV picture's path (in the AOV directory).
         second: PathBuf,
     },
-    /// The signal handlers that remove temporary files could not be installed.
-    #[error("cannot install the SIGINT/SIGTERM handlers")]
-    Signals(#[source] std::io::Error),
 }
 
 /// The file formats [`write_film`] writes.

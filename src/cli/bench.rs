@@ -21,7 +21,7 @@ pub(crate) fn default_cache_dir() -> PathBuf {
 }
 
 pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
-    output::clean_up_on_signals(a.json)?;
+    super::signals::clean_up_on_signals(a.json)?;
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create --out directory {}", dir.display()))?;

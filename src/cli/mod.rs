@@ -20,6 +20,7 @@ pub(crate) mod args;
 pub(crate) mod bench;
 pub(crate) mod render;
 pub(crate) mod report;
+pub(crate) mod signals;
 
 /// An indicatif bar on stderr; it draws nothing when stderr is not a terminal.
 pub(crate) struct Bar(ProgressBar);

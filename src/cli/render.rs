@@ -117,7 +117,7 @@ pub(crate) enum Outcome {
 
 pub(crate) fn run_render(a: &RenderArgs) -> Result<ExitCode> {
     use dofray::batch::jobs;
-    output::clean_up_on_signals(a.json)?;
+    super::signals::clean_up_on_signals(a.json)?;
     // EXR-only flags would be silently ignored for a PNG.
     if (a.exr_half || a.exr_compression.is_some())
         && output::ImageFormat::from_path(&a.output).is_ok_and(|f| f == output::ImageFormat::Png)
@@ -480,7 +480,7 @@ pub(crate) fn render_job(
 }
 
 pub(crate) fn run_merge(a: &MergeArgs) -> Result<()> {
-    output::clean_up_on_signals(a.json)?;
+    super::signals::clean_up_on_signals(a.json)?;
     let merged = output::merge::merge(&a.tiles, &a.output)?;
     if a.json {
         println!(

@@ -3,22 +3,21 @@
 //! Every file dofray writes is first written to a hidden temporary file next to its target,
 //! `.{name}.tmp-{pid}-{n}`, and renamed over the target once complete. Each temporary file is
 //! listed in a process-wide registry while it exists: dropping a [`TempFile`] removes it, and
-//! [`clean_up_on_signals`] installs handlers for SIGINT, SIGTERM and SIGHUP that remove every
-//! listed file and exit with the conventional status (128 + the signal's number: 130, 143,
-//! 129), so an interrupted render or write leaves nothing behind. A process killed outright
+//! [`remove_all_for_exit`] removes every listed file for a process that is about to exit (the
+//! `dofray` command calls it on SIGINT, SIGTERM and SIGHUP before exiting with 128 + the
+//! signal's number), so an interrupted render or write leaves nothing behind. A process killed outright
 //! (SIGKILL, a power cut) cannot clean up: the next write to the same target removes the
 //! temporary files of that target whose process no longer exists.
 
 use std::fs::{File, OpenOptions};
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Mutex, MutexGuard};
 
 use super::OutputError;
 
-/// The temporary files that exist right now. The signal thread takes this lock and never
-/// releases it (it exits the process), so no temporary file can appear after its clean-up.
+/// The temporary files that exist right now. [`remove_all_for_exit`] takes this lock and never
+/// releases it (the process exits), so no temporary file can appear after its clean-up.
 static REGISTRY: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
 fn registry() -> MutexGuard<'static, Vec<PathBuf>> {
@@ -155,72 +154,26 @@ pub(crate) fn write_atomic(
     tmp.persist().map_err(io_err)
 }
 
-/// Whether an interrupted run also prints its error as a `--json` object on stdout.
-static JSON_ON_SIGNAL: AtomicBool = AtomicBool::new(false);
-
-/// Installs (once per process) handlers for SIGINT, SIGTERM and SIGHUP that remove every
-/// temporary file that exists, print `error: interrupted by SIG...` on stderr (and, with
-/// `json`, the same error as a `--json` error object on stdout: [`crate::exit::json_error`])
-/// and exit with status 128 + the signal's number (SIGINT 130, SIGTERM 143, SIGHUP 129).
-#[cfg(unix)]
-pub fn clean_up_on_signals(json: bool) -> Result<(), OutputError> {
-    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-
-    JSON_ON_SIGNAL.store(json, Ordering::SeqCst);
-    static INSTALLED: Mutex<bool> = Mutex::new(false);
-    let mut installed = INSTALLED.lock().unwrap_or_else(|e| e.into_inner());
-    if *installed {
-        return Ok(());
-    }
-    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])
-        .map_err(OutputError::Signals)?;
-    std::thread::Builder::new()
-        .name("dofray-signals".into())
-        .spawn(move || {
-            if let Some(signal) = signals.forever().next() {
-                exit_on_signal(signal);
-            }
-        })
-        .map_err(OutputError::Signals)?;
-    *installed = true;
-    Ok(())
-}
-
-/// Without Unix signals there is nothing to install; temporary files are still removed on
-/// every error.
-#[cfg(not(unix))]
-pub fn clean_up_on_signals(json: bool) -> Result<(), OutputError> {
-    JSON_ON_SIGNAL.store(json, Ordering::SeqCst);
-    Ok(())
-}
-
-/// Removes every temporary file and exits with 128 + `signal`, holding the registry's lock so
-/// no new temporary file can appear meanwhile.
-#[cfg(unix)]
-fn exit_on_signal(signal: i32) -> ! {
+/// Removes every temporary file that exists now, for a process about to exit (on a signal):
+/// returns the paths it removed. The registry's lock is taken and never released, so no
+/// temporary file can appear after the clean-up (a thread that tries to create one waits
+/// until the process exits). Safe to call from any thread, e.g. one that waits for signals;
+/// the caller then exits without unwinding (`_exit`).
+pub fn remove_all_for_exit() -> Vec<PathBuf> {
     let list = registry();
-    let mut message = format!(
-        "interrupted by {}",
-        signal_hook::low_level::signal_name(signal).unwrap_or("a signal")
-    );
-    for path in list.iter() {
-        if std::fs::remove_file(path).is_ok() {
-            message.push_str(&format!("; removed the unfinished {}", path.display()));
-        }
-    }
-    if JSON_ON_SIGNAL.load(Ordering::SeqCst) {
-        let error = crate::exit::json_error(crate::exit::ErrorKind::Interrupted(signal), &message);
-        let mut out = std::io::stdout().lock();
-        let _ = writeln!(out, "{error}").and_then(|()| out.flush());
-    }
-    let _ = writeln!(std::io::stderr(), "error: {message}");
-    // _exit: no atexit handlers or static destructors run while worker threads still trace.
-    signal_hook::low_level::exit(128 + signal)
+    let removed = list
+        .iter()
+        .filter(|path| std::fs::remove_file(path).is_ok())
+        .cloned()
+        .collect();
+    std::mem::forget(list);
+    removed
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::io::Write as _;
 
     #[test]
     fn temp_files_are_listed_while_they_exist_and_removed_on_drop() {
