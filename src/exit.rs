@@ -16,8 +16,8 @@
 
 use std::error::Error;
 
-use crate::bench::BenchError;
-use crate::bench::plot::PlotError;
+#[cfg(feature = "bench")]
+use crate::bench::{BenchError, plot::PlotError};
 use crate::camera::CameraError;
 use crate::embree::{EmbreeError, ErrorCode};
 use crate::limits::MemoryError;
@@ -201,6 +201,23 @@ fn kind_of(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
             _ => ErrorKind::BadInput,
         });
     }
+    #[cfg(feature = "bench")]
+    if let Some(kind) = bench_kind(e) {
+        return Some(kind);
+    }
+    if let Some(e) = e.downcast_ref::<std::io::Error>() {
+        return Some(match e.kind() {
+            std::io::ErrorKind::OutOfMemory => ErrorKind::ResourceLimit,
+            std::io::ErrorKind::Interrupted => ErrorKind::Interrupted(2),
+            _ => ErrorKind::Io,
+        });
+    }
+    None
+}
+
+/// The kind of a benchmark's error (only with the `bench` feature).
+#[cfg(feature = "bench")]
+fn bench_kind(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
     if let Some(e) = e.downcast_ref::<BenchError>() {
         return Some(match e {
             BenchError::Render(e) => render_kind(e),
@@ -213,13 +230,6 @@ fn kind_of(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
         return Some(match e {
             PlotError::Output(e) => output_kind(e),
             PlotError::Draw { .. } => ErrorKind::Io,
-        });
-    }
-    if let Some(e) = e.downcast_ref::<std::io::Error>() {
-        return Some(match e.kind() {
-            std::io::ErrorKind::OutOfMemory => ErrorKind::ResourceLimit,
-            std::io::ErrorKind::Interrupted => ErrorKind::Interrupted(2),
-            _ => ErrorKind::Io,
         });
     }
     None

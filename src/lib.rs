@@ -37,8 +37,10 @@
 //! # Features
 //!
 //! `cli` (default) builds the `dofray` command and the crates only it needs (clap, indicatif,
-//! anyhow). A library user can turn it off: `dofray = { version = "0.1", default-features =
-//! false }`.
+//! anyhow, signal-hook), and turns on `bench`. `bench` is the `bench` module (the seed's
+//! table, the equal-error study and its plot, drawn with plotters and an embedded font). A
+//! library user can turn both off: `dofray = { version = "0.1", default-features = false }`,
+//! adding `features = ["bench"]` for the benchmarks.
 //!
 //! dofray's own `.cargo/config.toml` builds for x86-64-v3 (AVX2, FMA); that file does not
 //! apply when dofray is a dependency. For the same speed, set it in the application's
@@ -55,6 +57,7 @@ pub const VERSION: &str = env!("CARGO_PKG_VERSION");
 pub const GIT_COMMIT: &str = env!("DOFRAY_GIT_COMMIT");
 
 pub mod batch;
+#[cfg(feature = "bench")]
 pub mod bench;
 pub mod camera;
 // The only module with FFI; its unsafe blocks are documented (clippy::undocumented_unsafe_blocks).
