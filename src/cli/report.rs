@@ -7,18 +7,6 @@ use dofray::bench::{self, equal_error};
 use dofray::embree::Device;
 use dofray::render;
 
-/// Which Embree ran the render and how: version, device configuration, packet lanes per call.
-pub(crate) fn embree_json(scene: &dofray::embree::Scene) -> serde_json::Value {
-    let device = scene.device();
-    serde_json::json!({
-        "version": device.embree_version(),
-        "config": device.config(),
-        "native_packet_width": device.native_packet_width(),
-        "isa": isa_family(device.native_packet_width()),
-        "lanes_per_call": scene.lanes_per_call(),
-    })
-}
-
 /// Seconds for a table cell: "not reached", or "<=" before an upper bound.
 pub(crate) fn crossing_cell(c: &equal_error::Crossing) -> String {
     match c.seconds {
@@ -188,11 +176,6 @@ pub(crate) fn print_table(r: &bench::BenchReport) {
     println!("PSNR/SSIM in sRGB (what a viewer sees); \"inf\" = identical images.");
 }
 
-/// An f32 as the f64 with the same shortest decimal form (0.4, not 0.4000000059604645).
-pub(crate) fn json_f32(v: f32) -> f64 {
-    v.to_string().parse().unwrap_or(f64::NAN)
-}
-
 /// A bench report (or any serialisable object) with `schema_version`, `dofray_version` and
 /// `git_commit` added at the top level.
 pub(crate) fn versioned_json(report: &impl serde::Serialize) -> Result<String> {
@@ -218,25 +201,13 @@ pub(crate) fn version_text() -> String {
             text += &format!(
                 "embree: {}\nembree isa: {} (native packet width {width})\nembree config: {:?}\n",
                 device.embree_version(),
-                isa_family(width),
+                dofray::batch::summary::isa_family(width),
                 device.config()
             );
         }
         Err(e) => text += &format!("embree: unavailable ({e})\n"),
     }
     text
-}
-
-/// The instruction-set family behind a native packet width (Embree reports the width, not the
-/// exact ISA: 8 lanes are AVX or AVX2).
-pub(crate) fn isa_family(width: u32) -> &'static str {
-    match width {
-        16 => "AVX-512",
-        8 => "AVX/AVX2",
-        4 if cfg!(target_arch = "aarch64") => "NEON",
-        4 => "SSE",
-        _ => "scalar",
-    }
 }
 
 /// Prints a failure: the plain message on stderr and, with `--json`, the error object on stdout.

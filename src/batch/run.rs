@@ -1,0 +1,453 @@
+//! The job loop: render each planned job ([`super::jobs::plan`]) of a [`Renderer`], write it
+//! atomically, skip or refuse what exists, go on after a failure (or stop), and assemble a
+//! frame's tiles once all of them are written. Front ends (the command line, C, Python) call
+//! it and only present what it reports ([`RunProgress`], [`RunReport`]).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use super::jobs::{self, Job};
+use super::summary::{EmbreeSummary, JobFacts, JobSummary, RunSummary};
+use crate::exit::{self, ErrorKind};
+use crate::output::{self, ExrCompression, OutputError};
+use crate::overrides::Param;
+use crate::render::{self, NoProgress, Progress, Region, RenderError, RenderSettings};
+use crate::renderer::{Renderer, RendererError};
+
+/// Why one job failed.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// `no_overwrite` and the job's output (or the image its tile is merged into) exists.
+    #[error("{} exists and --no-overwrite refuses to replace it", path.display())]
+    Exists {
+        /// The existing file.
+        path: PathBuf,
+    },
+    /// The output cannot be written.
+    #[error(transparent)]
+    Output(#[from] OutputError),
+    /// The frame's camera cannot be made.
+    #[error(transparent)]
+    Renderer(#[from] RendererError),
+    /// The render failed (or was cancelled).
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+impl JobError {
+    /// Its kind, as [`exit::classify`] sorts the error inside.
+    pub fn kind(&self) -> ErrorKind {
+        match self {
+            Self::Exists { .. } => ErrorKind::Io,
+            Self::Output(e) => exit::classify(e),
+            Self::Renderer(e) => exit::classify(e),
+            Self::Render(e) => exit::classify(e),
+        }
+    }
+
+    /// The whole message (with its sources), parameters named by `name` (e.g. [`Param::flag`]).
+    pub fn message(&self, name: impl Fn(Param) -> &'static str) -> String {
+        match self {
+            Self::Renderer(RendererError::Override(e)) => e.message(name),
+            e => exit::full_message(e),
+        }
+    }
+}
+
+/// How a job's images are written, beyond the format their extension names.
+#[derive(Debug, Clone, Default)]
+pub struct ImageOptions {
+    /// PNG: 16 bits per channel.
+    pub png_16bit: bool,
+    /// EXR: the beauty as half floats.
+    pub exr_half: bool,
+    /// EXR: the compression.
+    pub exr_compression: ExrCompression,
+    /// The scene as given: recorded and hashed in the metadata when it names a file.
+    pub scene_file: Option<PathBuf>,
+    /// Also write the depth, interval and samples pictures here (one image only).
+    pub aov_dir: Option<PathBuf>,
+}
+
+/// What to do about existing outputs and failures.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RunOptions {
+    /// A job whose output (or whole image) exists is skipped.
+    pub skip_existing: bool,
+    /// A job whose output (or whole image) exists fails.
+    pub no_overwrite: bool,
+    /// Stop at the first failure.
+    pub fail_fast: bool,
+    /// Assemble each image from its tiles once this run has them all (not for a shard).
+    pub merge_tiles: bool,
+}
+
+/// What a run tells its front end as it goes. Every method does nothing by default.
+pub trait RunProgress {
+    /// Job `index` (0-based) of `count` is about to render; `seconds_left` estimates the rest
+    /// from the jobs rendered so far (`None` before the first).
+    fn starting(&self, _index: usize, _count: usize, _job: &Job, _seconds_left: Option<f64>) {}
+    /// The progress of one job's render.
+    fn job_progress(&self, _job: &Job) -> Box<dyn Progress + '_> {
+        Box::new(NoProgress)
+    }
+    /// A job was rendered and written.
+    fn rendered(&self, _job: &Job, _summary: &JobSummary) {}
+    /// A job was skipped: its output exists.
+    fn skipped(&self, _job: &Job) {}
+    /// A job failed.
+    fn failed(&self, _job: &Job, _failure: &JobFailure) {}
+    /// `fail_fast` stops the run after a failure, with `not_run` of `count` jobs left.
+    fn stopping(&self, _not_run: usize, _count: usize) {}
+    /// An image was assembled from its tiles (and the tiles removed).
+    fn merged(&self, _image: &Path, _tiles: usize) {}
+    /// An image could not be assembled from its tiles.
+    fn merge_failed(&self, _image: &Path, _failure: &JobFailure) {}
+}
+
+/// A run that reports nothing as it goes.
+impl RunProgress for () {}
+
+/// A failure: the typed error (when there is one), its kind and its message.
+#[derive(Debug)]
+pub struct JobFailure {
+    /// What went wrong (a merge's error is only in `message`).
+    pub error: Option<JobError>,
+    /// Its kind (exit code, JSON kind).
+    pub kind: ErrorKind,
+    /// The whole message.
+    pub message: String,
+}
+
+/// What became of one job.
+#[derive(Debug)]
+pub enum JobOutcome {
+    /// Rendered and written.
+    Rendered(Box<JobSummary>),
+    /// Its output exists (`skip_existing`).
+    Skipped,
+    /// It failed.
+    Failed(JobFailure),
+}
+
+/// One job and what became of it; serialises as an entry of the run's `frames`.
+#[derive(Debug)]
+pub struct JobResult {
+    /// The job.
+    pub job: Job,
+    /// What became of it.
+    pub outcome: JobOutcome,
+}
+
+impl JobResult {
+    /// `rendered`, `skipped` or `failed`.
+    pub fn status(&self) -> &'static str {
+        match self.outcome {
+            JobOutcome::Rendered(_) => "rendered",
+            JobOutcome::Skipped => "skipped",
+            JobOutcome::Failed(_) => "failed",
+        }
+    }
+}
+
+impl serde::Serialize for JobResult {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut entry = serde_json::Map::new();
+        entry.insert("frame".into(), self.job.frame.into());
+        entry.insert("tile".into(), self.job.tile.map(|t| t.index).into());
+        let region = self.job.tile.map(|t| t.region.to_string());
+        entry.insert("region".into(), region.into());
+        let output = serde_json::to_value(&self.job.output).map_err(serde::ser::Error::custom)?;
+        entry.insert("output".into(), output);
+        entry.insert("status".into(), self.status().into());
+        let detail = match &self.outcome {
+            JobOutcome::Rendered(summary) => {
+                serde_json::to_value(summary).map_err(serde::ser::Error::custom)?
+            }
+            JobOutcome::Skipped => serde_json::json!({}),
+            JobOutcome::Failed(f) => {
+                serde_json::json!({ "error": exit::error_object(f.kind, &f.message) })
+            }
+        };
+        // The job's own fields win over the summary's (a frame's region is its tile's).
+        if let Some(detail) = detail.as_object() {
+            for (k, v) in detail {
+                entry.entry(k.clone()).or_insert(v.clone());
+            }
+        }
+        serde_json::Value::Object(entry).serialize(serializer)
+    }
+}
+
+/// What a run did.
+#[derive(Debug)]
+pub struct RunReport {
+    /// Every job attempted, in order.
+    pub results: Vec<JobResult>,
+    /// The jobs this run was given (attempted or not).
+    pub count: usize,
+    /// Images assembled from their tiles.
+    pub merged: Vec<PathBuf>,
+    /// Wall time from the first job.
+    pub seconds: f64,
+    /// The kind of the first failure (a job's or a merge's).
+    pub first_failure: Option<ErrorKind>,
+}
+
+impl RunReport {
+    fn count(&self, status: &str) -> usize {
+        self.results.iter().filter(|r| r.status() == status).count()
+    }
+    /// Jobs rendered.
+    pub fn rendered(&self) -> usize {
+        self.count("rendered")
+    }
+    /// Jobs skipped.
+    pub fn skipped(&self) -> usize {
+        self.count("skipped")
+    }
+    /// Jobs failed.
+    pub fn failed(&self) -> usize {
+        self.count("failed")
+    }
+    /// Jobs not attempted (`fail_fast`).
+    pub fn not_run(&self) -> usize {
+        self.count - self.results.len()
+    }
+
+    /// The run's JSON summary: `scene` and its `warnings`, `output` as given, this run's
+    /// `shard` and where it came from, and `jobs` of the whole run (every shard's).
+    pub fn summary<'a>(
+        &'a self,
+        renderer: &'a Renderer,
+        output: &'a Path,
+        shard: Option<(&super::Shard, &'a str)>,
+        jobs: usize,
+    ) -> RunSummary<'a> {
+        let failed = self.failed();
+        RunSummary {
+            schema_version: exit::SCHEMA_VERSION,
+            dofray_version: crate::VERSION,
+            git_commit: crate::GIT_COMMIT,
+            scene: &renderer.desc().name,
+            output,
+            shard: shard.map(|(s, _)| s.to_string()),
+            shard_source: shard.map(|(_, source)| source),
+            jobs,
+            rendered: self.rendered(),
+            skipped: self.skipped(),
+            failed,
+            not_run: self.not_run(),
+            merged: &self.merged,
+            seconds: self.seconds,
+            frames: &self.results,
+            warnings: &renderer.desc().warnings,
+            error: self.first_failure.map(|kind| {
+                exit::error_object(kind, &format!("{failed} of {} jobs failed", self.count))
+            }),
+        }
+    }
+}
+
+/// A scene ready to render jobs: the renderer, its settings, where the work runs and how the
+/// images are written.
+pub struct Batch<'a> {
+    /// The scene, its overrides and its world.
+    pub renderer: &'a Renderer,
+    /// The render settings of every job.
+    pub settings: &'a RenderSettings,
+    /// The worker threads (`None`: rayon's global pool).
+    pub pool: Option<&'a rayon::ThreadPool>,
+    /// How images are written.
+    pub image: ImageOptions,
+    /// The pixels of a job that is not a tile (`None`: the whole image).
+    pub region: Option<Region>,
+    /// How messages name a parameter ([`Param::flag`] for the command line).
+    pub param_name: fn(Param) -> &'static str,
+}
+
+/// With `no_overwrite`, an existing output (a tile's, or the image it would be merged into) is
+/// an error.
+pub fn refuse_existing(job: &Job, no_overwrite: bool) -> Result<(), JobError> {
+    let existing = [&job.output, &job.image].into_iter().find(|p| p.exists());
+    match existing {
+        Some(path) if no_overwrite => Err(JobError::Exists { path: path.clone() }),
+        _ => Ok(()),
+    }
+}
+
+impl Batch<'_> {
+    /// Renders one job (a frame, a tile of one, or the single image) and writes it.
+    pub fn render_job(&self, job: &Job, progress: &dyn Progress) -> Result<JobSummary, JobError> {
+        let renderer = self.renderer;
+        let camera = renderer.camera(job.frame)?;
+        let full = Region::full(camera.width, camera.height);
+        let region = job.tile.map(|t| t.region).or(self.region).unwrap_or(full);
+        let render =
+            || render::render_region(renderer.world(), &camera, self.settings, &region, progress);
+        let (film, stats) = match self.pool {
+            Some(pool) => pool.install(render),
+            None => render(),
+        }?;
+        let embree = EmbreeSummary::of(&renderer.world().scene);
+        let mut metadata = output::Metadata::for_render(
+            &renderer.desc().name,
+            self.image.scene_file.as_deref().filter(|p| p.is_file()),
+            &camera,
+            self.settings,
+            &stats,
+            &embree.version,
+        );
+        if let Some(frame) = job.frame {
+            metadata.push("dofray:frame", frame);
+        }
+        let options = output::WriteOptions {
+            metadata,
+            png_16bit: self.image.png_16bit,
+            png_alpha: self.settings.transparent,
+            exr_half: self.image.exr_half,
+            exr_compression: self.image.exr_compression,
+            region: (region != full).then_some((region, (camera.width, camera.height))),
+        };
+        output::write_film_with(&job.output, &film, &options)?;
+        if let Some(dir) = &self.image.aov_dir {
+            write_aovs(dir, &film)?;
+        }
+        let facts = JobFacts {
+            scene: renderer.desc().name.clone(),
+            output: job.output.clone(),
+            frame: job.frame,
+            region: (region != full).then(|| region.to_string()),
+            size: (film.width, film.height),
+            threads: self
+                .pool
+                .map_or_else(rayon::current_num_threads, |p| p.current_num_threads()),
+            embree,
+            warnings: renderer.desc().warnings.clone(),
+        };
+        Ok(JobSummary::new(facts, self.settings, &camera, stats))
+    }
+
+    /// Renders `jobs` (this run's share of a plan) one after the other. Every job's output
+    /// folder is made first (a folder that cannot be made fails the run once, not every job);
+    /// then each job is skipped, refused, rendered or failed as `options` say, and with
+    /// `merge_tiles` each image whose tiles all rendered is assembled and its tiles removed.
+    pub fn run(
+        &self,
+        jobs: &[Job],
+        options: RunOptions,
+        progress: &dyn RunProgress,
+    ) -> Result<RunReport, OutputError> {
+        for job in jobs {
+            if let Some(dir) = job.output.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir).map_err(|source| OutputError::Io {
+                    path: dir.to_path_buf(),
+                    source,
+                })?;
+            }
+        }
+        let start = Instant::now();
+        let mut report = RunReport {
+            results: Vec::new(),
+            count: jobs.len(),
+            merged: Vec::new(),
+            seconds: 0.0,
+            first_failure: None,
+        };
+        // Jobs rendered so far and their time, for the estimate of what is left.
+        let (mut done, mut busy) = (0u32, 0.0f64);
+        for (i, job) in jobs.iter().enumerate() {
+            let outcome = if options.skip_existing && (job.output.is_file() || job.image.is_file())
+            {
+                progress.skipped(job);
+                JobOutcome::Skipped
+            } else {
+                let left = busy / f64::from(done.max(1)) * (jobs.len() - i) as f64;
+                progress.starting(i, jobs.len(), job, (done > 0).then_some(left));
+                let began = Instant::now();
+                let outcome = self.attempt(job, options, progress);
+                done += 1;
+                busy += began.elapsed().as_secs_f64();
+                outcome
+            };
+            if let JobOutcome::Failed(failure) = &outcome {
+                report.first_failure.get_or_insert(failure.kind);
+            }
+            report.results.push(JobResult {
+                job: job.clone(),
+                outcome,
+            });
+            if report.first_failure.is_some() && options.fail_fast {
+                progress.stopping(jobs.len() - i - 1, jobs.len());
+                break;
+            }
+        }
+        if options.merge_tiles && report.first_failure.is_none() {
+            self.merge_tiles(jobs, &mut report, progress);
+        }
+        report.seconds = start.elapsed().as_secs_f64();
+        Ok(report)
+    }
+
+    /// Refuses, checks, renders and writes one job of a run.
+    fn attempt(&self, job: &Job, options: RunOptions, progress: &dyn RunProgress) -> JobOutcome {
+        let result = refuse_existing(job, options.no_overwrite).and_then(|()| {
+            output::check_render_outputs(&job.output, None)?;
+            self.render_job(job, &*progress.job_progress(job))
+        });
+        match result {
+            Ok(summary) => {
+                progress.rendered(job, &summary);
+                JobOutcome::Rendered(Box::new(summary))
+            }
+            Err(e) => {
+                let failure = JobFailure {
+                    kind: e.kind(),
+                    message: e.message(self.param_name),
+                    error: Some(e),
+                };
+                progress.failed(job, &failure);
+                JobOutcome::Failed(failure)
+            }
+        }
+    }
+
+    /// Assembles each image whose tiles this run rendered (or found), then removes the tiles.
+    fn merge_tiles(&self, jobs: &[Job], report: &mut RunReport, progress: &dyn RunProgress) {
+        for (image, parts) in jobs::by_image(jobs) {
+            if image.is_file() && parts.iter().all(|t| !t.output.is_file()) {
+                continue; // skipped whole: the image exists
+            }
+            let paths: Vec<PathBuf> = parts.iter().map(|t| t.output.clone()).collect();
+            match output::merge::merge(&paths, &image) {
+                Ok(m) => {
+                    for path in &paths {
+                        let _ = std::fs::remove_file(path);
+                    }
+                    progress.merged(&image, m.tiles);
+                    report.merged.push(image.clone());
+                }
+                Err(e) => {
+                    let failure = JobFailure {
+                        error: None,
+                        kind: exit::classify(&e),
+                        message: exit::full_message(&e),
+                    };
+                    progress.merge_failed(&image, &failure);
+                    report.first_failure.get_or_insert(failure.kind);
+                }
+            }
+        }
+    }
+}
+
+/// The depth, interval and samples pictures of `film` in `dir`.
+fn write_aovs(dir: &Path, film: &render::Film) -> Result<(), OutputError> {
+    let (w, h) = (film.width, film.height);
+    let depth = output::depth_picture(film);
+    output::write_png_rgb(&dir.join(output::AOV_DEPTH), w, h, &depth)?;
+    let interval = output::interval_picture(film);
+    output::write_png_rgb(&dir.join(output::AOV_INTERVAL), w, h, &interval)?;
+    let samples = output::samples_picture(film);
+    output::write_png_rgb(&dir.join(output::AOV_SAMPLES), w, h, &samples)
+}

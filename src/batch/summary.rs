@@ -1,0 +1,208 @@
+//! What a render and a run of jobs report, as the serde types of the `--json` summaries
+//! (docs/json.md): [`JobSummary`] for one rendered image or tile, [`RunSummary`] for a run of
+//! frames, tiles or shards. Serialised through [`serde_json::Value`], keys come out sorted.
+
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::camera::Camera;
+use crate::filter::PixelFilterKind;
+use crate::render::{Mode, RenderSettings, RenderStats, SiteRule};
+
+/// Which Embree ran a render and how (`embree` in a render's summary).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EmbreeSummary {
+    /// Embree's version, `major.minor.patch`.
+    pub version: String,
+    /// The device configuration string given to Embree.
+    pub config: String,
+    /// The widest packet Embree traces natively here (16, 8, 4 or 1).
+    pub native_packet_width: u32,
+    /// The instruction-set family of that width ([`isa_family`]).
+    pub isa: &'static str,
+    /// Lanes per Embree call a 16-ray packet is traced with.
+    pub lanes_per_call: u32,
+}
+
+impl EmbreeSummary {
+    /// The device and packet tracing of `scene`.
+    pub fn of(scene: &crate::embree::Scene) -> Self {
+        let device = scene.device();
+        Self {
+            version: device.embree_version(),
+            config: device.config().to_owned(),
+            native_packet_width: device.native_packet_width(),
+            isa: isa_family(device.native_packet_width()),
+            lanes_per_call: scene.lanes_per_call(),
+        }
+    }
+}
+
+/// The instruction-set family behind a native packet width (Embree reports the width, not the
+/// exact ISA: 8 lanes are AVX or AVX2).
+pub fn isa_family(width: u32) -> &'static str {
+    match width {
+        16 => "AVX-512",
+        8 => "AVX/AVX2",
+        4 if cfg!(target_arch = "aarch64") => "NEON",
+        4 => "SSE",
+        _ => "scalar",
+    }
+}
+
+/// An f32 as the f64 with the same shortest decimal form (0.4, not 0.4000000059604645).
+fn json_f32(v: f32) -> f64 {
+    v.to_string().parse().unwrap_or(f64::NAN)
+}
+
+/// One rendered image or tile: `dofray render --json`'s object (docs/json.md has each field).
+#[derive(Debug, Clone, Serialize)]
+#[allow(missing_docs)] // the fields are documented in docs/json.md, one row each
+pub struct JobSummary {
+    pub schema_version: u32,
+    pub dofray_version: &'static str,
+    pub git_commit: &'static str,
+    pub scene: String,
+    pub output: PathBuf,
+    pub frame: Option<i64>,
+    pub region: Option<String>,
+    pub mode: &'static str,
+    pub width: usize,
+    pub height: usize,
+    pub spp: u32,
+    pub aa: u32,
+    pub pixel_filter: PixelFilterKind,
+    pub pixel_filter_width: f64,
+    pub rule: SiteRule,
+    pub tolerance: Option<f64>,
+    pub interval_factor: Option<f64>,
+    pub paper_exact: bool,
+    pub transparent: bool,
+    pub exposure: f64,
+    pub rounds: u32,
+    pub seed: u64,
+    pub seconds: f64,
+    pub pinhole_seconds: f64,
+    pub maps_seconds: f64,
+    pub sites_seconds: f64,
+    pub interpolate_seconds: f64,
+    pub rays: u64,
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+    pub secondary_rays: u64,
+    pub sample_sites: u64,
+    pub defocused_sites: u64,
+    pub mrays_per_s: f64,
+    pub aperture_radius: f64,
+    pub focus_distance: f64,
+    pub threads: usize,
+    pub process_threads: Option<usize>,
+    pub embree: EmbreeSummary,
+    pub warnings: Vec<String>,
+    /// The render's statistics as measured (not in the JSON: their fields are above).
+    #[serde(skip)]
+    pub stats: RenderStats,
+}
+
+/// What a [`JobSummary`] is made of besides the render's settings, camera and stats.
+#[derive(Debug, Clone)]
+pub struct JobFacts {
+    /// The scene's name.
+    pub scene: String,
+    /// The file written.
+    pub output: PathBuf,
+    /// The frame rendered, if one of several.
+    pub frame: Option<i64>,
+    /// `x0,y0,x1,y1` of a render that is not the whole image.
+    pub region: Option<String>,
+    /// The film's size.
+    pub size: (usize, usize),
+    /// Render worker threads.
+    pub threads: usize,
+    /// The Embree that traced it.
+    pub embree: EmbreeSummary,
+    /// The scene's warnings.
+    pub warnings: Vec<String>,
+}
+
+impl JobSummary {
+    /// The summary of a render with `settings` through `camera` that measured `stats`.
+    pub fn new(
+        facts: JobFacts,
+        settings: &RenderSettings,
+        camera: &Camera,
+        stats: RenderStats,
+    ) -> Self {
+        let error_rule = settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error;
+        Self {
+            schema_version: crate::exit::SCHEMA_VERSION,
+            dofray_version: crate::VERSION,
+            git_commit: crate::GIT_COMMIT,
+            scene: facts.scene,
+            output: facts.output,
+            frame: facts.frame,
+            region: facts.region,
+            mode: settings.mode.name(),
+            width: facts.size.0,
+            height: facts.size.1,
+            spp: settings.spp,
+            aa: settings.aa,
+            pixel_filter: settings.pixel_filter.kind,
+            pixel_filter_width: json_f32(settings.pixel_filter.width),
+            rule: settings.rule,
+            tolerance: error_rule.then(|| json_f32(settings.tolerance())),
+            interval_factor: (settings.rule == SiteRule::Seed)
+                .then(|| json_f32(settings.interval_factor)),
+            paper_exact: settings.paper_exact,
+            transparent: settings.transparent,
+            exposure: json_f32(settings.exposure),
+            rounds: stats.rounds,
+            seed: settings.seed,
+            seconds: stats.seconds,
+            pinhole_seconds: stats.pinhole_seconds,
+            maps_seconds: stats.maps_seconds,
+            sites_seconds: stats.sites_seconds,
+            interpolate_seconds: stats.interpolate_seconds,
+            rays: stats.rays.total(),
+            primary_rays: stats.rays.primary,
+            shadow_rays: stats.rays.shadow,
+            secondary_rays: stats.rays.secondary,
+            sample_sites: stats.sample_sites,
+            defocused_sites: stats.defocused_sites,
+            mrays_per_s: stats.mrays_per_s(),
+            aperture_radius: json_f32(camera.aperture_radius),
+            focus_distance: json_f32(camera.focus_distance),
+            threads: facts.threads,
+            process_threads: crate::limits::process_threads(),
+            embree: facts.embree,
+            warnings: facts.warnings,
+            stats,
+        }
+    }
+}
+
+/// A run of jobs: `dofray render --json`'s object for frames, tiles and shards.
+#[derive(Debug, Clone, Serialize)]
+#[allow(missing_docs)] // the fields are documented in docs/json.md, one row each
+pub struct RunSummary<'a> {
+    pub schema_version: u32,
+    pub dofray_version: &'static str,
+    pub git_commit: &'static str,
+    pub scene: &'a str,
+    pub output: &'a std::path::Path,
+    pub shard: Option<String>,
+    pub shard_source: Option<&'a str>,
+    pub jobs: usize,
+    pub rendered: usize,
+    pub skipped: usize,
+    pub failed: usize,
+    pub not_run: usize,
+    pub merged: &'a [PathBuf],
+    pub seconds: f64,
+    pub frames: &'a [super::run::JobResult],
+    pub warnings: &'a [String],
+    /// The first failure's kind and exit code, with a message counting the failed jobs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<serde_json::Value>,
+}
