@@ -5,10 +5,10 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use dofray::camera::Camera;
+use dofray::camera::{Camera, Lens};
 use dofray::embree::Device;
 use dofray::render::{Mode, NoProgress, RenderSettings, interpolate, maps, render};
-use dofray::sampler::{PixelSampler, aperture_point};
+use dofray::sampler::PixelSampler;
 use dofray::scene::{World, builtin};
 
 fn paper(width: u32, height: u32) -> (World, Camera) {
@@ -32,7 +32,7 @@ fn benches(c: &mut Criterion) {
             for pixel in 0..1024u64 {
                 let s = PixelSampler::new(7, pixel);
                 for i in 0..16 {
-                    acc += aperture_point(s.get(i), &camera.aperture);
+                    acc += camera.lens.lens_point(s.get(i));
                 }
             }
             black_box(acc)

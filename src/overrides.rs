@@ -9,12 +9,10 @@
 
 use glam::Vec3;
 
-use crate::camera::{CameraSpec, Focus, LensSpec};
+use crate::camera::{CameraSpec, Focus, LensFilter, LensSpec, Photographic};
 use crate::filter::{PixelFilter, PixelFilterKind};
 use crate::render::{Mode, RenderError, RenderSettings, SiteRule};
-use crate::sampler::LensFilter;
 use crate::scene::SceneDesc;
-use crate::scene::model::{DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM};
 use crate::shade::Light;
 
 /// Changes to a scene's camera and lights; `None` (or an empty `lights`) keeps the scene's.
@@ -281,13 +279,19 @@ impl Overrides {
             (Param::FNumber, self.f_number),
             (Param::FocalLength, self.focal_length_mm),
             (Param::SensorWidth, self.sensor_width_mm),
-            (Param::Anamorphic, self.anamorphic),
         ] {
-            if let Some(value) = v
-                && !(value.is_finite() && value > 0.0)
-            {
-                return Err(OverrideError::NotPositive { param, value });
+            if let Some(value) = v {
+                Photographic::check_number(param.field(), value)
+                    .map_err(|_| OverrideError::NotPositive { param, value })?;
             }
+        }
+        if let Some(value) = self.anamorphic
+            && !(value.is_finite() && value > 0.0)
+        {
+            return Err(OverrideError::NotPositive {
+                param: Param::Anamorphic,
+                value,
+            });
         }
         if let Some(r) = self.aperture_radius {
             if !(r.is_finite() && r >= 0.0) {
@@ -377,19 +381,14 @@ impl Overrides {
                 }
             }
             (Some(n), lens) => {
-                let (focal, sensor) = match *lens {
-                    LensSpec::Photographic {
-                        focal_length_mm,
-                        sensor_width_mm,
-                        ..
-                    } => (focal_length_mm, sensor_width_mm),
-                    _ => (DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM),
-                };
-                *lens = LensSpec::Photographic {
-                    focal_length_mm: self.focal_length_mm.unwrap_or(focal),
-                    f_number: n,
-                    sensor_width_mm: self.sensor_width_mm.unwrap_or(sensor),
-                };
+                // The scene's photographic lens, else the default one, with what is given.
+                let scene = lens.photographic();
+                *lens = Photographic::new(
+                    n,
+                    self.focal_length_mm.or(scene.map(|p| p.focal_length_mm)),
+                    self.sensor_width_mm.or(scene.map(|p| p.sensor_width_mm)),
+                )
+                .spec();
             }
         }
         if let LensSpec::Photographic {

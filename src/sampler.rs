@@ -1,5 +1,6 @@
 //! Samples of pixel x lens: Owen-scrambled 4D Sobol points, deterministic from
-//! (seed, pixel, sample index); the lens pair is mapped area-preservingly onto the aperture.
+//! (seed, pixel, sample index). This module only makes numbers in [0, 1); the lens maps its
+//! pair onto the aperture (`camera::aperture`).
 //!
 //! Dimensions 0 and 1 (the lens position) form a (0,2)-sequence: any power-of-two prefix of 16
 //! points is stratified in every 2^a x 2^b elementary interval of area 1/16, so one 16-sample
@@ -12,11 +13,7 @@
 //! Scrambling"), so neighbouring pixels' patterns are uncorrelated and no image depends on
 //! thread count or tile order.
 
-use std::f32::consts::{FRAC_PI_4, TAU};
-
 use glam::Vec2;
-
-use crate::camera::ApertureShape;
 
 /// A 64-bit mix (SplitMix64's finaliser): a good hash for small structured inputs.
 pub fn hash64(mut x: u64) -> u64 {
@@ -238,133 +235,6 @@ impl PixelSampler {
     }
 }
 
-/// Shirley & Chiu's concentric map from the unit square to the unit disc (area-preserving,
-/// low distortion, so stratification survives).
-pub fn concentric_disc(u: Vec2) -> Vec2 {
-    let (x, y) = concentric_xy(u.x, u.y);
-    Vec2::new(x, y)
-}
-
-/// [`concentric_disc`] on coordinates, without branches (the choice of wedge is random per
-/// sample, so a branch mispredicts half the time; selects also let batches vectorise).
-#[inline(always)]
-fn concentric_xy(ux: f32, uy: f32) -> (f32, f32) {
-    let a = 2.0 * ux - 1.0;
-    let b = 2.0 * uy - 1.0;
-    // phi = pi/4 * t with |t| <= 1 when |a| > |b|, else pi/2 - pi/4 * t, whose cosine and
-    // sine are the first case's swapped; so only |angle| <= pi/4 is ever evaluated.
-    let first = a.abs() > b.abs();
-    let (r, other) = if first { (a, b) } else { (b, a) };
-    let (s, c) = sin_cos_quarter(FRAC_PI_4 * (other / r));
-    let (x, y) = if first {
-        (r * c, r * s)
-    } else {
-        (r * s, r * c)
-    };
-    // The centre maps to itself (0 / 0 above).
-    if a == 0.0 && b == 0.0 {
-        (0.0, 0.0)
-    } else {
-        (x, y)
-    }
-}
-
-/// sin and cos for |x| <= pi/4 by their Taylor series to x^11 / x^12 (error below 2e-9, far
-/// under f32 precision): the concentric map runs once per lens sample, and libm's general
-/// sincosf was a visible share of a dense render.
-#[inline(always)]
-fn sin_cos_quarter(x: f32) -> (f32, f32) {
-    let x2 = x * x;
-    let sin = x
-        * (1.0
-            + x2 * (-1.0 / 6.0
-                + x2 * (1.0 / 120.0
-                    + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0 - x2 / 39_916_800.0)))));
-    let cos = 1.0
-        + x2 * (-0.5
-            + x2 * (1.0 / 24.0
-                + x2 * (-1.0 / 720.0
-                    + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0 + x2 / 479_001_600.0)))));
-    (sin, cos)
-}
-
-/// Uniform map from the unit square to a regular polygon with `blades` corners on the unit
-/// circle: `u.x` picks a triangle of the fan (and is reused within it), `u.y` the radius.
-pub fn polygon(u: Vec2, blades: u32, rotation_rad: f32) -> Vec2 {
-    let n = blades as f32;
-    let scaled = u.x * n;
-    let k = scaled.floor().min(n - 1.0);
-    let t = scaled - k;
-    let a0 = rotation_rad + TAU * k / n;
-    let a1 = rotation_rad + TAU * (k + 1.0) / n;
-    let edge = Vec2::new(a0.cos(), a0.sin()) * (1.0 - t) + Vec2::new(a1.cos(), a1.sin()) * t;
-    edge * u.y.sqrt()
-}
-
-/// A point on the aperture in lens units (the unit disc or polygon, stretched vertically by
-/// the anamorphic ratio); the camera scales it by the aperture radius.
-pub fn aperture_point(u: Vec2, shape: &ApertureShape) -> Vec2 {
-    let p = if shape.blades >= 3 {
-        polygon(u, shape.blades, shape.rotation_deg.to_radians())
-    } else {
-        concentric_disc(u)
-    };
-    Vec2::new(p.x, p.y * shape.anamorphic)
-}
-
-/// [`aperture_point`] of 16 samples given as structure of arrays (as [`PixelSampler::get16`]
-/// returns them), bit for bit equal to it lane by lane.
-pub fn aperture_points16(
-    u: &[f32; BATCH],
-    v: &[f32; BATCH],
-    shape: &ApertureShape,
-) -> ([f32; BATCH], [f32; BATCH]) {
-    let mut x = [0.0f32; BATCH];
-    let mut y = [0.0f32; BATCH];
-    if shape.blades >= 3 {
-        for lane in 0..BATCH {
-            let p = aperture_point(Vec2::new(u[lane], v[lane]), shape);
-            (x[lane], y[lane]) = (p.x, p.y);
-        }
-    } else {
-        let stretch = shape.anamorphic;
-        for lane in 0..BATCH {
-            let (px, py) = concentric_xy(u[lane], v[lane]);
-            x[lane] = px;
-            y[lane] = py * stretch;
-        }
-    }
-    (x, y)
-}
-
-/// How lens samples are weighted when averaged: the filter over the CoC that the seed leaves
-/// open. The weight depends on the sample's radius on the (unstretched) aperture.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
-#[serde(rename_all = "lowercase")]
-pub enum LensFilter {
-    /// Every sample counts equally: a uniformly bright aperture (a real lens's bokeh).
-    #[default]
-    Box,
-    /// Weight 1 - r: softer bokeh edges.
-    Tent,
-    /// Weight exp(-r^2 / (2 * 0.5^2)): a smooth, Gaussian-like blur.
-    Gaussian,
-}
-
-impl LensFilter {
-    /// The weight of a lens sample at `aperture_point` (on the aperture as sampled, its y
-    /// stretched by `anamorphic`; the radius is taken after undoing the stretch).
-    pub fn weight(self, aperture_point: Vec2, anamorphic: f32) -> f32 {
-        let r2 = || Vec2::new(aperture_point.x, aperture_point.y / anamorphic).length_squared();
-        match self {
-            Self::Box => 1.0,
-            Self::Tent => (1.0 - r2().sqrt()).max(0.0) + 1e-3,
-            Self::Gaussian => (-r2() / (2.0 * 0.25)).exp(),
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -459,18 +329,6 @@ mod tests {
 
     #[test]
     fn batches_equal_single_samples_bit_for_bit() {
-        let shapes = [
-            ApertureShape::default(),
-            ApertureShape {
-                anamorphic: 1.7,
-                ..ApertureShape::default()
-            },
-            ApertureShape {
-                blades: 6,
-                rotation_deg: 10.0,
-                anamorphic: 0.6,
-            },
-        ];
         for pixel in 0..200u64 {
             let s = PixelSampler::new(3, pixel * 7919);
             for first in [0u32, 16, 32, 48, 1024, 4096 + 32, 7, u32::MAX - 15] {
@@ -488,135 +346,7 @@ mod tests {
                         (p.x.to_bits(), p.y.to_bits())
                     );
                 }
-                for shape in &shapes {
-                    let (x, y) = aperture_points16(&u, &v, shape);
-                    for lane in 0..BATCH {
-                        let p = aperture_point(Vec2::new(u[lane], v[lane]), shape);
-                        assert_eq!(
-                            (x[lane].to_bits(), y[lane].to_bits()),
-                            (p.x.to_bits(), p.y.to_bits())
-                        );
-                    }
-                }
             }
         }
-    }
-
-    /// The concentric map as first written, with branches: the branchless one must agree.
-    fn concentric_disc_branching(u: Vec2) -> Vec2 {
-        let a = 2.0 * u.x - 1.0;
-        let b = 2.0 * u.y - 1.0;
-        if a == 0.0 && b == 0.0 {
-            return Vec2::ZERO;
-        }
-        if a.abs() > b.abs() {
-            let (s, c) = sin_cos_quarter(FRAC_PI_4 * (b / a));
-            Vec2::new(a * c, a * s)
-        } else {
-            let (s, c) = sin_cos_quarter(FRAC_PI_4 * (a / b));
-            Vec2::new(b * s, b * c)
-        }
-    }
-
-    #[test]
-    fn branchless_concentric_map_is_unchanged() {
-        let n = 257;
-        for i in 0..=n {
-            for j in 0..=n {
-                let u = Vec2::new(i as f32 / n as f32, j as f32 / n as f32);
-                let (a, b) = (concentric_disc(u), concentric_disc_branching(u));
-                assert_eq!(
-                    (a.x.to_bits(), a.y.to_bits()),
-                    (b.x.to_bits(), b.y.to_bits()),
-                    "{u}"
-                );
-            }
-        }
-        for u in [
-            Vec2::splat(0.5),
-            Vec2::new(0.5, 0.0),
-            Vec2::new(0.0, 0.5),
-            Vec2::ZERO,
-        ] {
-            let (a, b) = (concentric_disc(u), concentric_disc_branching(u));
-            assert_eq!(
-                (a.x.to_bits(), a.y.to_bits()),
-                (b.x.to_bits(), b.y.to_bits()),
-                "{u}"
-            );
-        }
-    }
-
-    #[test]
-    fn fast_sin_cos_matches_libm() {
-        for i in -100..=100 {
-            let x = FRAC_PI_4 * i as f32 / 100.0;
-            let (s, c) = sin_cos_quarter(x);
-            assert!(
-                (s - x.sin()).abs() < 2e-7 && (c - x.cos()).abs() < 2e-7,
-                "{x}"
-            );
-        }
-        let p = concentric_disc(Vec2::new(0.9, 0.3));
-        let (a, b) = (0.8f32, -0.4f32);
-        let phi = FRAC_PI_4 * b / a;
-        assert!((p - Vec2::new(a * phi.cos(), a * phi.sin())).length() < 1e-6);
-    }
-
-    #[test]
-    fn disc_map_stays_inside_and_preserves_area() {
-        // Count mapped points of a fine grid inside the disc of radius 0.5: a quarter of all.
-        let n = 200;
-        let mut inside_half = 0;
-        for i in 0..n {
-            for j in 0..n {
-                let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
-                let p = concentric_disc(u);
-                assert!(p.length() <= 1.0 + 1e-6);
-                if p.length() < 0.5 {
-                    inside_half += 1;
-                }
-            }
-        }
-        let frac = inside_half as f32 / (n * n) as f32;
-        assert!((frac - 0.25).abs() < 0.01, "{frac}");
-    }
-
-    #[test]
-    fn polygon_map_is_uniform_and_inside() {
-        let n = 200;
-        let blades = 6;
-        let apothem = (std::f32::consts::PI / blades as f32).cos();
-        let mut inner = 0;
-        for i in 0..n {
-            for j in 0..n {
-                let u = Vec2::new((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32);
-                let p = polygon(u, blades, 0.3);
-                // Inside the hexagon: within the apothem of every edge normal.
-                for k in 0..blades {
-                    let mid = 0.3 + TAU * (k as f32 + 0.5) / blades as f32;
-                    assert!(p.dot(Vec2::new(mid.cos(), mid.sin())) <= apothem + 1e-5);
-                }
-                if p.length() < 0.5 * apothem {
-                    inner += 1;
-                }
-            }
-        }
-        // The disc of radius apothem/2 covers pi a^2 / 4 of the hexagon's area 6 a^2 tan(pi/6).
-        let expected = std::f32::consts::PI * 0.25 / (6.0 * (std::f32::consts::PI / 6.0).tan());
-        let frac = inner as f32 / (n * n) as f32;
-        assert!((frac - expected).abs() < 0.01, "{frac} vs {expected}");
-    }
-
-    #[test]
-    fn filters_weight_the_centre_most() {
-        for f in [LensFilter::Box, LensFilter::Tent, LensFilter::Gaussian] {
-            assert!(f.weight(Vec2::ZERO, 1.0) >= f.weight(Vec2::new(0.9, 0.0), 1.0));
-            assert!(f.weight(Vec2::new(0.9, 0.0), 1.0) > 0.0);
-        }
-        assert!(
-            LensFilter::Gaussian.weight(Vec2::ZERO, 1.0)
-                > LensFilter::Gaussian.weight(Vec2::X, 1.0) * 2.0
-        );
     }
 }

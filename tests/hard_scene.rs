@@ -87,11 +87,11 @@ fn small_lamps_are_defocused_in_front_of_and_behind_the_focus() {
     let lamps = lamps(&desc, &camera);
     let front: Vec<_> = lamps
         .iter()
-        .filter(|l| l.2 < camera.focus_distance)
+        .filter(|l| l.2 < camera.focus_distance())
         .collect();
     let behind: Vec<_> = lamps
         .iter()
-        .filter(|l| l.2 > camera.focus_distance)
+        .filter(|l| l.2 > camera.focus_distance())
         .collect();
     assert!(front.len() >= 10, "{} lamps in front", front.len());
     assert!(behind.len() >= 25, "{} lamps behind", behind.len());

@@ -37,9 +37,9 @@ fn a_scene_from_the_defaults_renders_with_overrides() {
     assert_eq!((r.desc().camera.width, r.desc().camera.height), (32, 24));
     let camera = r.camera(None).unwrap();
     assert!(
-        (camera.focus_distance - 4.0).abs() < 0.01,
+        (camera.focus_distance() - 4.0).abs() < 0.01,
         "{}",
-        camera.focus_distance
+        camera.focus_distance()
     );
     let settings = SettingsOverrides::default().settings(r.desc()).unwrap();
     assert_eq!(settings.rule, SiteRule::Error);

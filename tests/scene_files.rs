@@ -5,7 +5,7 @@ mod scene_assets;
 
 use std::path::{Path, PathBuf};
 
-use dofray::camera::{Focus, LensSpec};
+use dofray::camera::{CameraLens, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::limits::{BYTES_PER_PIXEL, check_image_memory, check_image_memory_against};
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, render};
@@ -1519,7 +1519,10 @@ fn focus_distance_may_be_infinite() {
     )
     .unwrap();
     let camera = d.camera.build(|_| None).unwrap();
-    assert_eq!(camera.inv_focus_distance, 0.0);
+    let CameraLens::Thin(lens) = &camera.lens else {
+        panic!("a thin lens")
+    };
+    assert_eq!(lens.inv_focus_distance, 0.0);
     assert_eq!(camera.coc_px(f32::INFINITY), 0.0);
     for bad in ["-inf", "nan", "0"] {
         let m = error_of(

@@ -106,9 +106,11 @@ struct PixelSampler {
   }
 };
 
+// ---- src/camera/aperture.rs ----------------------------------------------------------------
+
 constexpr float PI_F = 3.14159265358979323846f;
 
-// sin and cos for |x| <= pi/4 by their Taylor series (sampler.rs: sin_cos_quarter).
+// sin and cos for |x| <= pi/4 by their Taylor series (aperture.rs: sin_cos_quarter).
 void sin_cos_quarter(float x, float& s, float& c) {
   float x2 = x * x;
   s = x * (1.0f + x2 * (-1.0f / 6.0f +
@@ -137,7 +139,7 @@ void concentric_disc(float u, float v, float& x, float& y) {
   }
 }
 
-// ---- src/camera.rs for the paper scene (src/scene/builtin.rs) --------------------------------
+// ---- src/camera/lens.rs (the thin lens) for the paper scene (src/scene/builtin.rs) -----------
 
 constexpr uint32_t WIDTH = 640, HEIGHT = 480;
 constexpr uint32_t STRIDE = 4, SPP = 16;

@@ -4,14 +4,14 @@
 //!
 //! Workload: the `paper` scene at 640x480, every `STRIDE`-th pixel in x and y, `SPP` thin-lens
 //! samples per pixel exactly as the renderer draws them (`PixelSampler` seeded with
-//! (`SEED`, y * width + x), `aperture_point`, `Camera::lens_ray` through the pixel centre).
+//! (`SEED`, y * width + x), the lens's `lens_point`, `Camera::lens_ray` through the pixel centre).
 //! One packet = the 16 lens samples of one pixel: coherent primary rays.
 //!
 //! Included with `#[path]` (Cargo does not build files under `benches/cpp/` on their own).
 
-use dofray::camera::Camera;
+use dofray::camera::{Camera, Lens};
 use dofray::embree::{Device, LANES, Ray, RayHint, RayPacket16, Scene, SceneBuilder, Spheres};
-use dofray::sampler::{PixelSampler, aperture_point};
+use dofray::sampler::PixelSampler;
 use dofray::scene::{Object, builtin};
 use glam::Vec2;
 
@@ -54,7 +54,7 @@ pub fn paper_rays(camera: &Camera) -> Vec<Ray> {
             let sampler = PixelSampler::new(SEED, u64::from(y * camera.width + x));
             let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
             for i in 0..SPP {
-                let lens: Vec2 = aperture_point(sampler.get(i), &camera.aperture);
+                let lens: Vec2 = camera.lens.lens_point(sampler.get(i));
                 rays.push(camera.lens_ray(px, py, lens));
             }
         }

@@ -4,10 +4,10 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
 use dofray::batch::shard::Shard;
+use dofray::camera::LensFilter;
 use dofray::filter::PixelFilterKind;
 use dofray::output;
 use dofray::render::{Mode, Region};
-use dofray::sampler::LensFilter;
 use dofray::shade::Light;
 use glam::Vec3;
 

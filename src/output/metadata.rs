@@ -87,8 +87,8 @@ impl Metadata {
             ),
         );
         m.push("dofray:lens_filter", format!("{:?}", settings.filter));
-        m.push("dofray:aperture_radius", camera.aperture_radius);
-        m.push("dofray:focus_distance", camera.focus_distance);
+        m.push("dofray:aperture_radius", camera.aperture_radius());
+        m.push("dofray:focus_distance", camera.focus_distance());
         m.push("dofray:width", camera.width);
         m.push("dofray:height", camera.height);
         m.push("dofray:seconds", format!("{:.3}", stats.seconds));

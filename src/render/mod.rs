@@ -33,10 +33,9 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::camera::Camera;
+use crate::camera::{Camera, LensFilter};
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::PixelFilter;
-use crate::sampler::LensFilter;
 use crate::scene::World;
 use estimate::Estimate;
 pub use film::Film;

@@ -19,10 +19,10 @@ use rayon::prelude::*;
 use super::estimate::Estimate;
 use super::trace::{self, RayKind, Tally};
 use super::{Mode, Progress, RenderSettings};
-use crate::camera::Camera;
+use crate::camera::{Camera, Lens, LensFilter};
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::FilterSampler;
-use crate::sampler::{LensFilter, PixelSampler, aperture_points16};
+use crate::sampler::PixelSampler;
 use crate::scene::World;
 
 /// What every site of a render shares.
@@ -164,7 +164,7 @@ impl SiteShader<'_> {
         let (pu, pv) = sampler.get_pixel16(first);
         // Pinhole mode samples the pixel only: every ray leaves the lens centre.
         let (lens_x, lens_y) = if self.settings.mode != Mode::Pinhole {
-            aperture_points16(&u, &v, &self.camera.aperture)
+            self.camera.lens.lens_points16(&u, &v)
         } else {
             ([0.0; LANES], [0.0; LANES])
         };
@@ -231,7 +231,7 @@ impl SiteShader<'_> {
                 1.0
             } else {
                 let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
-                filter.weight(lens, self.camera.aperture.anamorphic)
+                self.camera.lens.weight(filter, lens)
             };
             estimates[b.pixel[lane]].add(radiance[lane] * scale, w, hit);
         }

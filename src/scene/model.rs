@@ -7,7 +7,9 @@ use glam::{Affine3A, Mat3, Vec3};
 
 use super::error::{LoadError, Location};
 use super::{Background, MeshMaterials, Object, SceneDesc};
-use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
+use crate::camera::{
+    ApertureShape, CameraSpec, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, Focus, LensSpec,
+};
 use crate::embree::TriangleMesh;
 use crate::shade::{Light, Material};
 
@@ -261,16 +263,6 @@ pub fn default_background() -> Background {
     }
 }
 
-/// Default image width in pixels.
-pub const DEFAULT_WIDTH: u32 = 640;
-/// Default image height in pixels.
-pub const DEFAULT_HEIGHT: u32 = 480;
-/// Default vertical field of view, degrees.
-pub const DEFAULT_VFOV: f32 = 40.0;
-/// Focal length of a photographic lens that does not give one, millimetres.
-pub const DEFAULT_FOCAL_LENGTH_MM: f32 = 50.0;
-/// Sensor width of a photographic lens that does not give one, millimetres (full frame).
-pub const DEFAULT_SENSOR_WIDTH_MM: f32 = 36.0;
 /// Default aperture radius for a bare model, as a fraction of its bounds' diagonal.
 pub const MODEL_APERTURE_FRACTION: f32 = 0.02;
 

@@ -8,10 +8,13 @@ use toml::Spanned;
 use super::Ctx;
 use super::objects::{FromModel, Objects};
 use super::raw::{RawCamera, V3, v3};
-use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
+use crate::camera::{
+    ApertureShape, CameraSpec, DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM, DEFAULT_VFOV,
+    Focus, LensSpec,
+};
 use crate::scene::Object;
 use crate::scene::error::LoadError;
-use crate::scene::model::{self, DEFAULT_VFOV};
+use crate::scene::model;
 
 /// Where the camera stands and looks.
 struct View {
@@ -288,7 +291,7 @@ fn lens(raw: &RawCamera, model_view: bool, vfov_deg: f32, width: u32, height: u3
         let sensor_width_mm = raw
             .sensor_width_mm
             .as_ref()
-            .map_or(model::DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0);
+            .map_or(DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0);
         // With a model's camera, the focal length that keeps its field of view on this sensor.
         let keep_fov = model_view.then(|| {
             let tan_half_h = (vfov_deg.to_radians() * 0.5).tan() * width as f32 / height as f32;
@@ -298,7 +301,7 @@ fn lens(raw: &RawCamera, model_view: bool, vfov_deg: f32, width: u32, height: u3
             focal_length_mm: raw
                 .focal_length_mm
                 .as_ref()
-                .map_or(keep_fov.unwrap_or(model::DEFAULT_FOCAL_LENGTH_MM), |f| {
+                .map_or(keep_fov.unwrap_or(DEFAULT_FOCAL_LENGTH_MM), |f| {
                     f.get_ref().0
                 }),
             f_number: n.get_ref().0,

@@ -22,8 +22,9 @@ use self::raw::{RawImage, RawRender, RawScene};
 use super::SceneDesc;
 use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
-use super::model::{self, DEFAULT_HEIGHT, DEFAULT_WIDTH, Transform};
+use super::model::{self, Transform};
 use super::texture::TextureCache;
+use crate::camera::{DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::filter::PixelFilter;
 
 /// The scene file being built: its path and text, for error locations and relative paths.

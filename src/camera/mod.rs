@@ -1,10 +1,32 @@
-//! The thin-lens camera: rays through a lens aperture focused on a plane, the circle of
-//! confusion (CoC) that results, and the three ways of specifying the lens.
+//! The camera: where it stands and looks ([`CameraSpec`], [`Focus`]), the lens that makes its
+//! rays and bounds their blur ([`lens`]), and the aperture those rays cross ([`aperture`]).
+//!
+//! A [`CameraSpec`] is what scenes, overrides and animation edit; [`CameraSpec::build`]
+//! validates it into a [`Camera`], whose [`CameraLens`] the renderer asks for rays and for
+//! the circle of confusion (CoC) of a depth. The thin lens is the only lens today; a new one
+//! goes in [`lens`] (see there).
+
+pub mod aperture;
+pub mod lens;
 
 use glam::{Vec2, Vec3};
 
-use crate::embree::Ray;
+pub use aperture::{ApertureShape, LensFilter};
+pub use lens::{CameraLens, Lens, Photographic, ThinLens};
+
+use crate::embree::{LANES, Ray};
 use crate::limits::MAX_COORDINATE;
+
+/// Default image width in pixels.
+pub const DEFAULT_WIDTH: u32 = 640;
+/// Default image height in pixels.
+pub const DEFAULT_HEIGHT: u32 = 480;
+/// Default vertical field of view, degrees.
+pub const DEFAULT_VFOV: f32 = 40.0;
+/// Focal length of a photographic lens that does not give one, millimetres.
+pub const DEFAULT_FOCAL_LENGTH_MM: f32 = 50.0;
+/// Sensor width of a photographic lens that does not give one, millimetres (full frame).
+pub const DEFAULT_SENSOR_WIDTH_MM: f32 = 36.0;
 
 /// Why a camera specification was rejected.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -72,7 +94,7 @@ fn in_range(name: &'static str, v: Vec3) -> Result<(), CameraError> {
     )
 }
 
-/// How the lens aperture is specified. All three map to one thin lens of some aperture radius.
+/// How the lens aperture is specified. All four map to one thin lens of some aperture radius.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum LensSpec {
     /// No depth of field: every ray leaves the lens centre.
@@ -84,7 +106,8 @@ pub enum LensSpec {
     },
     /// A photographic lens: focal length and sensor width in millimetres, scene units metres.
     /// The aperture radius is `focal_length / (2 f_number)`, and the field of view follows from
-    /// the focal length and sensor width (replacing the camera's `vfov_deg`).
+    /// the focal length and sensor width (replacing the camera's `vfov_deg`); see
+    /// [`Photographic`].
     Photographic {
         /// Focal length, millimetres (> 0).
         focal_length_mm: f32,
@@ -108,6 +131,24 @@ pub enum LensSpec {
     },
 }
 
+impl LensSpec {
+    /// The photographic lens's numbers, if it is one.
+    pub fn photographic(&self) -> Option<Photographic> {
+        match *self {
+            Self::Photographic {
+                focal_length_mm,
+                f_number,
+                sensor_width_mm,
+            } => Some(Photographic {
+                focal_length_mm,
+                f_number,
+                sensor_width_mm,
+            }),
+            _ => None,
+        }
+    }
+}
+
 /// Where the lens is focused.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Focus {
@@ -123,27 +164,6 @@ pub enum Focus {
         /// Pixel row, from 0 at the top.
         y: u32,
     },
-}
-
-/// The outline of the aperture, which is also the shape of out-of-focus highlights (bokeh).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ApertureShape {
-    /// 0 for a circular aperture, else the number of diaphragm blades (>= 3).
-    pub blades: u32,
-    /// Rotation of a polygonal aperture, degrees.
-    pub rotation_deg: f32,
-    /// Anamorphic squeeze: the aperture's height over its width (1 = round bokeh).
-    pub anamorphic: f32,
-}
-
-impl Default for ApertureShape {
-    fn default() -> Self {
-        Self {
-            blades: 0,
-            rotation_deg: 0.0,
-            anamorphic: 1.0,
-        }
-    }
 }
 
 /// Everything needed to build a [`Camera`].
@@ -174,7 +194,6 @@ pub struct CameraSpec {
 /// depth of field, e.g. `CameraSpec { lens: LensSpec::Aperture { radius: 0.1 }, ..Default::default() }`.
 impl Default for CameraSpec {
     fn default() -> Self {
-        use crate::scene::model::{DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH};
         Self {
             eye: Vec3::new(0.0, 0.0, 5.0),
             look_at: Vec3::ZERO,
@@ -189,7 +208,7 @@ impl Default for CameraSpec {
     }
 }
 
-/// A thin-lens camera, ready to generate rays.
+/// A camera ready to generate rays: where it stands and looks, its film, and its lens.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Camera {
     /// Lens centre, world space.
@@ -206,32 +225,17 @@ pub struct Camera {
     pub height: u32,
     /// tan(vfov / 2).
     pub tan_half_vfov: f32,
-    /// Aperture radius in scene units (0 = pinhole).
-    pub aperture_radius: f32,
-    /// Distance of the plane in focus along the view axis (may be infinite).
-    pub focus_distance: f32,
-    /// 1 / `focus_distance` (0 when focused at infinity): lens rays are computed from it, so a
-    /// huge focus distance behaves like infinity instead of overflowing.
-    pub inv_focus_distance: f32,
-    /// The aperture's outline (bokeh shape).
-    pub aperture: ApertureShape,
+    /// The lens: makes the rays and bounds their blur.
+    pub lens: CameraLens,
 }
 
 impl CameraSpec {
     /// The vertical field of view in degrees: a photographic lens's, from its focal length and
     /// sensor width at this image's aspect, else `vfov_deg`. (Not validated; `build` checks it.)
     pub fn effective_vfov_deg(&self) -> f32 {
-        match self.lens {
-            LensSpec::Photographic {
-                focal_length_mm,
-                sensor_width_mm,
-                ..
-            } => {
-                let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
-                let tan_half_v = tan_half_h * self.height as f32 / self.width as f32;
-                2.0 * tan_half_v.atan().to_degrees()
-            }
-            _ => self.vfov_deg,
+        match self.lens.photographic() {
+            Some(p) => p.vfov_deg(self.width, self.height),
+            None => self.vfov_deg,
         }
     }
 
@@ -240,6 +244,42 @@ impl CameraSpec {
     pub fn build(&self, depth_of: impl FnOnce(&Ray) -> Option<f32>) -> Result<Camera, CameraError> {
         check(self.width > 0, "width", "at least 1 pixel", self.width)?;
         check(self.height > 0, "height", "at least 1 pixel", self.height)?;
+        let (forward, right, up) = self.view()?;
+        self.check_aperture_shape()?;
+        if let Some(p) = self.lens.photographic() {
+            p.check_film()?;
+        }
+        let vfov_deg = self.effective_vfov_deg();
+        check(
+            vfov_deg.is_finite() && vfov_deg > 0.0 && vfov_deg < 180.0,
+            "vfov_deg",
+            "an angle between 0 and 180 degrees",
+            vfov_deg,
+        )?;
+        let mut camera = Camera {
+            eye: self.eye,
+            forward,
+            right,
+            up,
+            width: self.width,
+            height: self.height,
+            tan_half_vfov: lens::tan_half_fov(vfov_deg),
+            // Autofocus looks through the lens centre, which needs no aperture or focus yet.
+            lens: CameraLens::Thin(ThinLens::new(0.0, 1.0, self.aperture)),
+        };
+        let focus_distance = self.focus_distance(&camera, depth_of)?;
+        camera.lens = CameraLens::Thin(ThinLens::build(
+            &self.lens,
+            self.aperture,
+            focus_distance,
+            camera.pixels_per_unit(),
+            self.eye,
+        )?);
+        Ok(camera)
+    }
+
+    /// The unit view axis, image right and image up, checked.
+    fn view(&self) -> Result<(Vec3, Vec3, Vec3), CameraError> {
         in_range("eye", self.eye)?;
         in_range("look_at", self.look_at)?;
         check(
@@ -262,7 +302,10 @@ impl CameraSpec {
             "a direction not parallel to the view direction",
             format!("{:?}", self.up),
         )?;
-        let up = right.cross(forward);
+        Ok((forward, right, right.cross(forward)))
+    }
+
+    fn check_aperture_shape(&self) -> Result<(), CameraError> {
         let a = &self.aperture;
         check(
             a.blades == 0 || a.blades >= 3,
@@ -281,43 +324,21 @@ impl CameraSpec {
             "anamorphic ratio",
             "a number from 0.001 to 1000",
             a.anamorphic,
-        )?;
+        )
+    }
 
-        if let LensSpec::Photographic {
-            focal_length_mm,
-            sensor_width_mm,
-            ..
-        } = self.lens
-        {
-            positive("focal_length_mm", focal_length_mm)?;
-            positive("sensor_width_mm", sensor_width_mm)?;
-        }
-        let vfov_deg = self.effective_vfov_deg();
-        check(
-            vfov_deg.is_finite() && vfov_deg > 0.0 && vfov_deg < 180.0,
-            "vfov_deg",
-            "an angle between 0 and 180 degrees",
-            vfov_deg,
-        )?;
-
-        let mut camera = Camera {
-            eye: self.eye,
-            forward,
-            right,
-            up,
-            width: self.width,
-            height: self.height,
-            tan_half_vfov: (vfov_deg.to_radians() * 0.5).tan(),
-            aperture_radius: 0.0,
-            focus_distance: 1.0,
-            inv_focus_distance: 1.0,
-            aperture: self.aperture,
-        };
-        camera.focus_distance = match self.focus {
+    /// The focus distance along the view axis, checked; autofocus asks `depth_of` about the
+    /// pinhole ray of `camera` (whose lens need not be set yet).
+    fn focus_distance(
+        &self,
+        camera: &Camera,
+        depth_of: impl FnOnce(&Ray) -> Option<f32>,
+    ) -> Result<f32, CameraError> {
+        let distance = match self.focus {
             Focus::Distance(d) => d,
             Focus::Point(p) => {
                 in_range("focus point", p)?;
-                (p - self.eye).dot(forward)
+                (p - self.eye).dot(camera.forward)
             }
             Focus::Pixel { x, y } => {
                 if x >= self.width || y >= self.height {
@@ -335,59 +356,12 @@ impl CameraSpec {
         // Infinity is a focus distance (the lens focused at infinity); so is any huge number,
         // which behaves like it (the lens rays use 1 / distance).
         check(
-            camera.focus_distance > 0.0,
+            distance > 0.0,
             "focus distance",
             "a number > 0 (or inf)",
-            camera.focus_distance,
+            distance,
         )?;
-        camera.inv_focus_distance = 1.0 / camera.focus_distance;
-        camera.aperture_radius = match self.lens {
-            LensSpec::Pinhole => 0.0,
-            LensSpec::Aperture { radius } => {
-                check(
-                    radius.is_finite() && radius >= 0.0,
-                    "aperture radius",
-                    "a finite number >= 0",
-                    radius,
-                )?;
-                radius
-            }
-            LensSpec::Photographic {
-                focal_length_mm,
-                f_number,
-                ..
-            } => {
-                positive("f_number", f_number)?;
-                focal_length_mm / 1000.0 / (2.0 * f_number)
-            }
-            LensSpec::Seed {
-                sharp_range,
-                spread,
-            } => {
-                positive("sharp_range", sharp_range)?;
-                check(
-                    spread.is_finite() && spread >= 0.0,
-                    "spread",
-                    "a finite number >= 0",
-                    spread,
-                )?;
-                let p = camera.focus_distance;
-                spread * p * p / (2.0 * camera.pixels_per_unit() * sharp_range)
-            }
-        };
-        // Every lens ray starts within the aperture's extent of the eye: keep it in range
-        // (a derived aperture too: a tiny f-number or sharp range gives a huge one).
-        let extent = camera.aperture_extent();
-        check(
-            extent.is_finite() && self.eye.abs().max_element() + extent <= MAX_COORDINATE,
-            "aperture radius",
-            "finite, and small enough that the lens stays within 1e15 of the origin (check the f-number, sharp range, spread and anamorphic ratio)",
-            format!(
-                "{:e} ({extent:e} with the anamorphic ratio)",
-                camera.aperture_radius
-            ),
-        )?;
-        Ok(camera)
+        Ok(distance)
     }
 }
 
@@ -397,24 +371,21 @@ impl Camera {
         self.height as f32 / (2.0 * self.tan_half_vfov)
     }
 
-    /// The largest extent of the aperture (the CoC's largest diameter scales with it).
-    fn aperture_extent(&self) -> f32 {
-        self.aperture_radius * self.aperture.anamorphic.max(1.0)
+    /// Diameter in pixels of the circle of confusion of a point at `depth` along the view axis
+    /// (infinite depth gives the limit for points at infinity): the lens's bound,
+    /// [`Lens::coc_px`].
+    pub fn coc_px(&self, depth: f32) -> f32 {
+        self.lens.coc_px(self, depth)
     }
 
-    /// Diameter in pixels of the circle of confusion of a point at `depth` along the view axis
-    /// (infinite depth gives the limit for points at infinity).
-    ///
-    /// For a thin lens of aperture diameter A focused at P, a point at depth D blurs to a disc
-    /// of diameter `A |D - P| / D` on the plane in focus, which the image scales by `k / P`:
-    /// `coc = A k |D - P| / (D P)`. This equals the seed's `C = |Vp - Vd| F / (n Vd)` on the
-    /// sensor converted to pixels (see the tests).
-    pub fn coc_px(&self, depth: f32) -> f32 {
-        let a = 2.0 * self.aperture_extent();
-        let k = self.pixels_per_unit();
-        // |D - P| / (D P) = |1/P - 1/D|, which also holds for P or D infinite.
-        let inv_d = 1.0 / depth.max(1e-6);
-        a * k * (self.inv_focus_distance - inv_d).abs()
+    /// Distance of the plane in focus along the view axis (may be infinite).
+    pub fn focus_distance(&self) -> f32 {
+        self.lens.focus_distance()
+    }
+
+    /// Aperture radius in scene units (0 = pinhole).
+    pub fn aperture_radius(&self) -> f32 {
+        self.lens.aperture_radius()
     }
 
     /// Unnormalised direction from the eye through film position (px, py) in pixels
@@ -428,62 +399,33 @@ impl Camera {
 
     /// The ray through the lens centre (no depth of field).
     pub fn pinhole_ray(&self, px: f32, py: f32) -> Ray {
-        Ray::new(self.eye, self.film_dir(px, py).normalize())
+        self.lens.pinhole_ray(self, px, py)
     }
 
-    /// The ray from lens position `lens` (in the aperture's unit shape, see
-    /// [`crate::sampler::aperture_point`]) through the point on the plane in focus that film
-    /// position (px, py) images ([`Camera::focus_point`]). Computed as the direction
-    /// `film_dir - offset / focus_distance` (the direction to the focus point divided by the
-    /// focus distance), so a lens focused at infinity gives parallel rays.
+    /// The ray from lens position `lens` ([`Lens::lens_point`] of the lens's sample numbers)
+    /// through the point on the plane in focus that film position (px, py) images
+    /// ([`Camera::focus_point`]).
     pub fn lens_ray(&self, px: f32, py: f32, lens: Vec2) -> Ray {
-        let offset = (self.right * lens.x + self.up * lens.y) * self.aperture_radius;
-        let dir = self.film_dir(px, py) - offset * self.inv_focus_distance;
-        Ray::new(self.eye + offset, dir.normalize())
+        self.lens.ray(self, px, py, lens)
     }
 
     /// The point on the plane in focus that film position (px, py) images: every lens ray of
     /// that pixel passes through it (infinitely far when focused at infinity).
     pub fn focus_point(&self, px: f32, py: f32) -> Vec3 {
-        self.eye + self.film_dir(px, py) * self.focus_distance
+        self.lens.focus_point(self, px, py)
     }
 
-    /// [`Camera::lens_ray`] for 16 samples at once, each with its own film position
-    /// (`px`, `py`) and lens position (`lens_x`, `lens_y`), bit for bit equal to it lane by
-    /// lane; writes origins and unit directions as structure of arrays (x, y, z components),
-    /// the layout of a ray packet.
+    /// [`Camera::lens_ray`] for 16 samples at once ([`Lens::rays16`]): origins and unit
+    /// directions as structure of arrays, bit for bit equal to it lane by lane.
+    #[inline]
     pub fn lens_rays16(
         &self,
-        (px, py): (&[f32; 16], &[f32; 16]),
-        (lens_x, lens_y): (&[f32; 16], &[f32; 16]),
-        origin: &mut [[f32; 16]; 3],
-        dir: &mut [[f32; 16]; 3],
+        film: (&[f32; LANES], &[f32; LANES]),
+        lens: (&[f32; LANES], &[f32; LANES]),
+        origin: &mut [[f32; LANES]; 3],
+        dir: &mut [[f32; LANES]; 3],
     ) {
-        let (eye, right, up, r) = (self.eye, self.right, self.up, self.aperture_radius);
-        let (fwd, inv_fd) = (self.forward, self.inv_focus_distance);
-        let aspect = self.width as f32 / self.height as f32;
-        let (w, h, tan) = (self.width as f32, self.height as f32, self.tan_half_vfov);
-        for lane in 0..16 {
-            // Written out as glam evaluates film_dir, `(right * lx + up * ly) * r`,
-            // `film_dir - offset * inv_fd` and `.normalize()` (v * (1 / sqrt(x*x + y*y + z*z))).
-            let sx = (2.0 * px[lane] / w - 1.0) * tan * aspect;
-            let sy = (1.0 - 2.0 * py[lane] / h) * tan;
-            let (lx, ly) = (lens_x[lane], lens_y[lane]);
-            let offx = (right.x * lx + up.x * ly) * r;
-            let offy = (right.y * lx + up.y * ly) * r;
-            let offz = (right.z * lx + up.z * ly) * r;
-            let dx = (fwd.x + right.x * sx + up.x * sy) - offx * inv_fd;
-            let dy = (fwd.y + right.y * sx + up.y * sy) - offy * inv_fd;
-            let dz = (fwd.z + right.z * sx + up.z * sy) - offz * inv_fd;
-            let (ox, oy, oz) = (eye.x + offx, eye.y + offy, eye.z + offz);
-            let recip = 1.0 / (dx * dx + dy * dy + dz * dz).sqrt();
-            origin[0][lane] = ox;
-            origin[1][lane] = oy;
-            origin[2][lane] = oz;
-            dir[0][lane] = dx * recip;
-            dir[1][lane] = dy * recip;
-            dir[2][lane] = dz * recip;
-        }
+        self.lens.rays16(self, film, lens, origin, dir);
     }
 
     /// Depth along the view axis of the point at parameter `t` of `ray` (unit direction).
@@ -543,7 +485,7 @@ mod tests {
         .build(no_autofocus)
         .unwrap();
         let f = focal_mm as f64 / 1000.0;
-        let p = cam.focus_distance as f64;
+        let p = cam.focus_distance() as f64;
         // Image distance for an object at distance x: 1/F = 1/x + 1/V.
         let image_dist = |x: f64| f * x / (x - f);
         let vp = image_dist(p);
@@ -595,10 +537,10 @@ mod tests {
         let mut s = spec(LensSpec::Aperture { radius: 0.1 });
         s.focus = Focus::Point(s.eye + (s.look_at - s.eye).normalize() * 7.0 + Vec3::X);
         let cam = s.build(no_autofocus).unwrap();
-        assert!((cam.focus_distance - 7.0).abs() < 1e-4);
+        assert!((cam.focus_distance() - 7.0).abs() < 1e-4);
         s.focus = Focus::Pixel { x: 320, y: 240 };
         let cam = s.build(|ray| Some(ray.dir.length() * 9.0)).unwrap();
-        assert!((cam.focus_distance - 9.0).abs() < 1e-4);
+        assert!((cam.focus_distance() - 9.0).abs() < 1e-4);
         assert!(matches!(
             s.build(no_autofocus),
             Err(CameraError::FocusPixelMisses { .. })
@@ -616,7 +558,7 @@ mod tests {
             .build(no_autofocus)
             .unwrap();
         let centre = cam.pinhole_ray(100.5, 50.5);
-        let t = cam.focus_distance / centre.dir.dot(cam.forward);
+        let t = cam.focus_distance() / centre.dir.dot(cam.forward);
         let target = centre.at(t);
         for lens in [
             Vec2::new(1.0, 0.0),
@@ -624,7 +566,7 @@ mod tests {
             Vec2::new(0.0, -1.0),
         ] {
             let r = cam.lens_ray(100.5, 50.5, lens);
-            let t = (cam.focus_distance - cam.depth_along_axis(&r, 0.0)) / r.dir.dot(cam.forward);
+            let t = (cam.focus_distance() - cam.depth_along_axis(&r, 0.0)) / r.dir.dot(cam.forward);
             assert!((r.at(t) - target).length() < 1e-4);
         }
         let p = cam.project(target).unwrap();

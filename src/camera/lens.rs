@@ -1,0 +1,414 @@
+//! The lens as a seam: what a [`Camera`] asks of its lens, the thin lens that answers today,
+//! and the photographic lens's numbers (f-number, focal length, sensor) with the one
+//! conversion between field of view and focal length.
+//!
+//! To add a lens (a traced lens prescription, say): implement [`Lens`] for it, add a variant
+//! to [`CameraLens`] and a line to its dispatch, and teach [`super::CameraSpec::build`] to
+//! make it. Renderers only see [`Camera`], which forwards to its lens.
+
+use glam::{Vec2, Vec3};
+
+use crate::limits::MAX_COORDINATE;
+
+use super::aperture::{ApertureShape, LensFilter, aperture_point, aperture_points16};
+use super::{
+    Camera, CameraError, DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM, LensSpec, check,
+    positive,
+};
+use crate::embree::{LANES, Ray};
+
+/// What a camera asks of its lens. Film positions are in pixels (x right, y down; pixel
+/// centres at +0.5); lens sample numbers are in [0, 1)^2, and the lens maps them to its own
+/// lens positions, which it later receives back to make rays and weight samples.
+pub trait Lens {
+    /// The lens position of lens sample numbers `u` (what [`Lens::ray`] takes).
+    fn lens_point(&self, u: Vec2) -> Vec2;
+
+    /// [`Lens::lens_point`] of 16 samples as structure of arrays, bit for bit equal to it
+    /// lane by lane.
+    fn lens_points16(&self, u: &[f32; LANES], v: &[f32; LANES]) -> ([f32; LANES], [f32; LANES]);
+
+    /// The ray that leaves lens position `lens` for film position (px, py).
+    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> Ray;
+
+    /// [`Lens::ray`] for 16 samples, each with its own film position (`px`, `py`) and lens
+    /// position (`lens_x`, `lens_y`), bit for bit equal to it lane by lane; writes origins
+    /// and unit directions as structure of arrays (x, y, z components), the layout of a ray
+    /// packet. This is the hot path: an implementation keeps it free of calls and branches.
+    fn rays16(
+        &self,
+        camera: &Camera,
+        film: (&[f32; LANES], &[f32; LANES]),
+        lens: (&[f32; LANES], &[f32; LANES]),
+        origin: &mut [[f32; LANES]; 3],
+        dir: &mut [[f32; LANES]; 3],
+    );
+
+    /// The ray through the centre of the lens (no depth of field): what autofocus looks along.
+    fn pinhole_ray(&self, camera: &Camera, px: f32, py: f32) -> Ray;
+
+    /// The point that film position (px, py) images sharply: every ray of that film position
+    /// passes through it (infinitely far when focused at infinity).
+    fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3;
+
+    /// The weight under `filter` of a sample that crossed the lens at `lens`.
+    fn weight(&self, filter: LensFilter, lens: Vec2) -> f32;
+
+    /// An upper bound on the diameter in pixels of the blur (circle of confusion) of a point
+    /// at `depth` along the view axis (infinite depth: points at infinity). The adaptive
+    /// sampler trusts it to decide where a pixel needs many lens samples and where one
+    /// anti-aliased sample is enough, so a lens whose blur is not a disc (aberrations,
+    /// vignetting) must still return a bound of its blur's extent, never less.
+    fn coc_px(&self, camera: &Camera, depth: f32) -> f32;
+
+    /// Distance of the plane in focus along the view axis (may be infinite).
+    fn focus_distance(&self) -> f32;
+
+    /// Radius of the aperture (the entrance pupil) in scene units, 0 for a pinhole: what a
+    /// render's metadata reports.
+    fn aperture_radius(&self) -> f32;
+}
+
+/// The lenses a camera can hold. An enum rather than a trait object so that
+/// [`Lens::rays16`] stays one inlined, monomorphic loop per packet.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum CameraLens {
+    /// An ideal thin lens.
+    Thin(ThinLens),
+}
+
+/// Calls `$call` on the lens inside a [`CameraLens`], whichever it is.
+macro_rules! dispatch {
+    ($lens:expr, $l:ident => $call:expr) => {
+        match $lens {
+            CameraLens::Thin($l) => $call,
+        }
+    };
+}
+
+impl Lens for CameraLens {
+    #[inline]
+    fn lens_point(&self, u: Vec2) -> Vec2 {
+        dispatch!(self, l => l.lens_point(u))
+    }
+
+    #[inline]
+    fn lens_points16(&self, u: &[f32; LANES], v: &[f32; LANES]) -> ([f32; LANES], [f32; LANES]) {
+        dispatch!(self, l => l.lens_points16(u, v))
+    }
+
+    #[inline]
+    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> Ray {
+        dispatch!(self, l => l.ray(camera, px, py, lens))
+    }
+
+    #[inline]
+    fn rays16(
+        &self,
+        camera: &Camera,
+        film: (&[f32; LANES], &[f32; LANES]),
+        lens: (&[f32; LANES], &[f32; LANES]),
+        origin: &mut [[f32; LANES]; 3],
+        dir: &mut [[f32; LANES]; 3],
+    ) {
+        dispatch!(self, l => l.rays16(camera, film, lens, origin, dir))
+    }
+
+    #[inline]
+    fn pinhole_ray(&self, camera: &Camera, px: f32, py: f32) -> Ray {
+        dispatch!(self, l => l.pinhole_ray(camera, px, py))
+    }
+
+    #[inline]
+    fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3 {
+        dispatch!(self, l => l.focus_point(camera, px, py))
+    }
+
+    #[inline]
+    fn weight(&self, filter: LensFilter, lens: Vec2) -> f32 {
+        dispatch!(self, l => l.weight(filter, lens))
+    }
+
+    #[inline]
+    fn coc_px(&self, camera: &Camera, depth: f32) -> f32 {
+        dispatch!(self, l => l.coc_px(camera, depth))
+    }
+
+    fn focus_distance(&self) -> f32 {
+        dispatch!(self, l => l.focus_distance())
+    }
+
+    fn aperture_radius(&self) -> f32 {
+        dispatch!(self, l => l.aperture_radius())
+    }
+}
+
+/// An ideal thin lens: rays from a point of the aperture through the point on the plane in
+/// focus that the film position images.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ThinLens {
+    /// Aperture radius in scene units (0 = pinhole).
+    pub aperture_radius: f32,
+    /// Distance of the plane in focus along the view axis (may be infinite).
+    pub focus_distance: f32,
+    /// 1 / `focus_distance` (0 when focused at infinity): lens rays are computed from it, so a
+    /// huge focus distance behaves like infinity instead of overflowing.
+    pub inv_focus_distance: f32,
+    /// The aperture's outline (bokeh shape).
+    pub aperture: ApertureShape,
+}
+
+impl ThinLens {
+    /// A lens of `aperture_radius` focused at `focus_distance` (> 0, may be infinite).
+    pub fn new(aperture_radius: f32, focus_distance: f32, aperture: ApertureShape) -> Self {
+        Self {
+            aperture_radius,
+            focus_distance,
+            inv_focus_distance: 1.0 / focus_distance,
+            aperture,
+        }
+    }
+
+    /// The thin lens that `spec` describes, focused at `focus_distance` (checked > 0) on a
+    /// film of `pixels_per_unit` ([`Camera::pixels_per_unit`]), for a camera at `eye`.
+    pub fn build(
+        spec: &LensSpec,
+        aperture: ApertureShape,
+        focus_distance: f32,
+        pixels_per_unit: f32,
+        eye: Vec3,
+    ) -> Result<Self, CameraError> {
+        let aperture_radius = match *spec {
+            LensSpec::Pinhole => 0.0,
+            LensSpec::Aperture { radius } => {
+                check(
+                    radius.is_finite() && radius >= 0.0,
+                    "aperture radius",
+                    "a finite number >= 0",
+                    radius,
+                )?;
+                radius
+            }
+            LensSpec::Photographic { .. } => {
+                spec.photographic().expect("matched").aperture_radius()?
+            }
+            LensSpec::Seed {
+                sharp_range,
+                spread,
+            } => {
+                positive("sharp_range", sharp_range)?;
+                check(
+                    spread.is_finite() && spread >= 0.0,
+                    "spread",
+                    "a finite number >= 0",
+                    spread,
+                )?;
+                let p = focus_distance;
+                spread * p * p / (2.0 * pixels_per_unit * sharp_range)
+            }
+        };
+        let lens = Self::new(aperture_radius, focus_distance, aperture);
+        // Every lens ray starts within the aperture's extent of the eye: keep it in range
+        // (a derived aperture too: a tiny f-number or sharp range gives a huge one).
+        let extent = lens.aperture_extent();
+        check(
+            extent.is_finite() && eye.abs().max_element() + extent <= MAX_COORDINATE,
+            "aperture radius",
+            "finite, and small enough that the lens stays within 1e15 of the origin (check the f-number, sharp range, spread and anamorphic ratio)",
+            format!(
+                "{:e} ({extent:e} with the anamorphic ratio)",
+                aperture_radius
+            ),
+        )?;
+        Ok(lens)
+    }
+
+    /// The largest extent of the aperture (the CoC's largest diameter scales with it).
+    fn aperture_extent(&self) -> f32 {
+        self.aperture_radius * self.aperture.anamorphic.max(1.0)
+    }
+}
+
+impl Lens for ThinLens {
+    /// A point on the aperture's unit shape ([`aperture_point`]); rays scale it by the
+    /// aperture radius.
+    #[inline]
+    fn lens_point(&self, u: Vec2) -> Vec2 {
+        aperture_point(u, &self.aperture)
+    }
+
+    #[inline]
+    fn lens_points16(&self, u: &[f32; LANES], v: &[f32; LANES]) -> ([f32; LANES], [f32; LANES]) {
+        aperture_points16(u, v, &self.aperture)
+    }
+
+    /// Computed as the direction `film_dir - offset / focus_distance` (the direction to the
+    /// focus point divided by the focus distance), so a lens focused at infinity gives
+    /// parallel rays.
+    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> Ray {
+        let offset = (camera.right * lens.x + camera.up * lens.y) * self.aperture_radius;
+        let dir = camera.film_dir(px, py) - offset * self.inv_focus_distance;
+        Ray::new(camera.eye + offset, dir.normalize())
+    }
+
+    #[inline]
+    fn rays16(
+        &self,
+        camera: &Camera,
+        (px, py): (&[f32; LANES], &[f32; LANES]),
+        (lens_x, lens_y): (&[f32; LANES], &[f32; LANES]),
+        origin: &mut [[f32; LANES]; 3],
+        dir: &mut [[f32; LANES]; 3],
+    ) {
+        let (eye, right, up, r) = (camera.eye, camera.right, camera.up, self.aperture_radius);
+        let (fwd, inv_fd) = (camera.forward, self.inv_focus_distance);
+        let aspect = camera.width as f32 / camera.height as f32;
+        let (w, h, tan) = (
+            camera.width as f32,
+            camera.height as f32,
+            camera.tan_half_vfov,
+        );
+        for lane in 0..LANES {
+            // Written out as glam evaluates film_dir, `(right * lx + up * ly) * r`,
+            // `film_dir - offset * inv_fd` and `.normalize()` (v * (1 / sqrt(x*x + y*y + z*z))).
+            let sx = (2.0 * px[lane] / w - 1.0) * tan * aspect;
+            let sy = (1.0 - 2.0 * py[lane] / h) * tan;
+            let (lx, ly) = (lens_x[lane], lens_y[lane]);
+            let offx = (right.x * lx + up.x * ly) * r;
+            let offy = (right.y * lx + up.y * ly) * r;
+            let offz = (right.z * lx + up.z * ly) * r;
+            let dx = (fwd.x + right.x * sx + up.x * sy) - offx * inv_fd;
+            let dy = (fwd.y + right.y * sx + up.y * sy) - offy * inv_fd;
+            let dz = (fwd.z + right.z * sx + up.z * sy) - offz * inv_fd;
+            let (ox, oy, oz) = (eye.x + offx, eye.y + offy, eye.z + offz);
+            let recip = 1.0 / (dx * dx + dy * dy + dz * dz).sqrt();
+            origin[0][lane] = ox;
+            origin[1][lane] = oy;
+            origin[2][lane] = oz;
+            dir[0][lane] = dx * recip;
+            dir[1][lane] = dy * recip;
+            dir[2][lane] = dz * recip;
+        }
+    }
+
+    fn pinhole_ray(&self, camera: &Camera, px: f32, py: f32) -> Ray {
+        Ray::new(camera.eye, camera.film_dir(px, py).normalize())
+    }
+
+    fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3 {
+        camera.eye + camera.film_dir(px, py) * self.focus_distance
+    }
+
+    /// The filter's weight at the sample's radius on the unstretched aperture.
+    #[inline]
+    fn weight(&self, filter: LensFilter, lens: Vec2) -> f32 {
+        filter.weight(lens, self.aperture.anamorphic)
+    }
+
+    /// Exact for a thin lens, and so its own bound. For aperture diameter A focused at P, a
+    /// point at depth D blurs to a disc of diameter `A |D - P| / D` on the plane in focus,
+    /// which the image scales by `k / P` (k = [`Camera::pixels_per_unit`]):
+    /// `coc = A k |D - P| / (D P)`. This equals the seed's `C = |Vp - Vd| F / (n Vd)` on the
+    /// sensor converted to pixels (see the tests). An anamorphic aperture counts by its
+    /// largest extent.
+    fn coc_px(&self, camera: &Camera, depth: f32) -> f32 {
+        let a = 2.0 * self.aperture_extent();
+        let k = camera.pixels_per_unit();
+        // |D - P| / (D P) = |1/P - 1/D|, which also holds for P or D infinite.
+        let inv_d = 1.0 / depth.max(1e-6);
+        a * k * (self.inv_focus_distance - inv_d).abs()
+    }
+
+    fn focus_distance(&self) -> f32 {
+        self.focus_distance
+    }
+
+    fn aperture_radius(&self) -> f32 {
+        self.aperture_radius
+    }
+}
+
+/// A photographic lens's three numbers, scene units metres: the one place that turns them
+/// into an aperture radius and a field of view, and checks them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Photographic {
+    /// Focal length, millimetres (> 0).
+    pub focal_length_mm: f32,
+    /// f-number: focal length over aperture diameter (> 0).
+    pub f_number: f32,
+    /// Sensor width, millimetres (> 0).
+    pub sensor_width_mm: f32,
+}
+
+impl Photographic {
+    /// A lens of f-number `f_number`; a focal length or sensor width not given is 50 mm or
+    /// 36 mm (full frame).
+    pub fn new(f_number: f32, focal_length_mm: Option<f32>, sensor_width_mm: Option<f32>) -> Self {
+        Self {
+            focal_length_mm: focal_length_mm.unwrap_or(DEFAULT_FOCAL_LENGTH_MM),
+            f_number,
+            sensor_width_mm: sensor_width_mm.unwrap_or(DEFAULT_SENSOR_WIDTH_MM),
+        }
+    }
+
+    /// Checks the f-number, focal length or sensor width `value` named `name`: each must be a
+    /// finite number > 0.
+    pub fn check_number(name: &'static str, value: f32) -> Result<(), CameraError> {
+        positive(name, value)
+    }
+
+    /// Checks the focal length and sensor width (what the field of view needs).
+    pub fn check_film(&self) -> Result<(), CameraError> {
+        Self::check_number("focal_length_mm", self.focal_length_mm)?;
+        Self::check_number("sensor_width_mm", self.sensor_width_mm)
+    }
+
+    /// The aperture radius in scene units (metres): `focal_length / (2 f_number)`, after
+    /// checking the f-number.
+    pub fn aperture_radius(&self) -> Result<f32, CameraError> {
+        Self::check_number("f_number", self.f_number)?;
+        Ok(self.focal_length_mm / 1000.0 / (2.0 * self.f_number))
+    }
+
+    /// The vertical field of view in degrees on a `width` x `height` image (not validated).
+    pub fn vfov_deg(&self, width: u32, height: u32) -> f32 {
+        vfov_deg_of_focal_length(self.focal_length_mm, self.sensor_width_mm, width, height)
+    }
+
+    /// The lens as a [`LensSpec`].
+    pub fn spec(self) -> LensSpec {
+        LensSpec::Photographic {
+            focal_length_mm: self.focal_length_mm,
+            f_number: self.f_number,
+            sensor_width_mm: self.sensor_width_mm,
+        }
+    }
+}
+
+/// tan(vfov / 2) of a vertical field of view in degrees.
+pub fn tan_half_fov(vfov_deg: f32) -> f32 {
+    (vfov_deg.to_radians() * 0.5).tan()
+}
+
+/// The vertical field of view in degrees of a lens of focal length `focal_length_mm` on a
+/// sensor `sensor_width_mm` wide, for a `width` x `height` image. Inverse of
+/// [`focal_length_of_vfov`].
+pub fn vfov_deg_of_focal_length(
+    focal_length_mm: f32,
+    sensor_width_mm: f32,
+    width: u32,
+    height: u32,
+) -> f32 {
+    let tan_half_h = sensor_width_mm / (2.0 * focal_length_mm);
+    let tan_half_v = tan_half_h * height as f32 / width as f32;
+    2.0 * tan_half_v.atan().to_degrees()
+}
+
+/// The focal length in millimetres that gives vertical field of view `vfov_deg` on a sensor
+/// `sensor_width_mm` wide, for a `width` x `height` image. Inverse of
+/// [`vfov_deg_of_focal_length`].
+pub fn focal_length_of_vfov(vfov_deg: f32, sensor_width_mm: f32, width: u32, height: u32) -> f32 {
+    let tan_half_h = tan_half_fov(vfov_deg) * width as f32 / height as f32;
+    sensor_width_mm / (2.0 * tan_half_h)
+}
