@@ -103,8 +103,8 @@ pub fn aperture_point(u: Vec2, shape: &ApertureShape) -> Vec2 {
     Vec2::new(p.x, p.y * shape.anamorphic)
 }
 
-/// [`aperture_point`] of 16 samples given as structure of arrays (as [`crate::sampler::PixelSampler::get16`]
-/// returns them), bit for bit equal to it lane by lane.
+/// [`aperture_point`] of 16 samples given as structure of arrays (as
+/// [`crate::sampler::PixelSampler::get16`] returns them), bit for bit equal to it lane by lane.
 pub fn aperture_points16(
     u: &[f32; LANES],
     v: &[f32; LANES],

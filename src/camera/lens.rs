@@ -8,14 +8,13 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::limits::MAX_COORDINATE;
-
 use super::aperture::{ApertureShape, LensFilter, aperture_point, aperture_points16};
 use super::{
     Camera, CameraError, DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM, LensSpec, check,
     positive,
 };
 use crate::embree::{LANES, Ray};
+use crate::limits::MAX_COORDINATE;
 
 /// What a camera asks of its lens. Film positions are in pixels (x right, y down; pixel
 /// centres at +0.5); lens sample numbers are in [0, 1)^2, and the lens maps them to its own
@@ -411,4 +410,42 @@ pub fn vfov_deg_of_focal_length(
 pub fn focal_length_of_vfov(vfov_deg: f32, sensor_width_mm: f32, width: u32, height: u32) -> f32 {
     let tan_half_h = tan_half_fov(vfov_deg) * width as f32 / height as f32;
     sensor_width_mm / (2.0 * tan_half_h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn focal_length_and_field_of_view_are_inverse() {
+        for (focal, sensor, w, h) in [(50.0, 36.0, 640, 480), (85.0, 24.0, 300, 500)] {
+            let vfov = vfov_deg_of_focal_length(focal, sensor, w, h);
+            let back = focal_length_of_vfov(vfov, sensor, w, h);
+            assert!(
+                (back - focal).abs() < 1e-3 * focal,
+                "{focal} -> {vfov} -> {back}"
+            );
+        }
+        // 50 mm on full frame at 3:2 is the classic 27 degrees vertically.
+        let vfov = Photographic::new(2.0, None, None).vfov_deg(1500, 1000);
+        assert!((vfov - 26.99).abs() < 0.01, "{vfov}");
+    }
+
+    #[test]
+    fn the_photographic_lens_checks_its_numbers_by_name() {
+        let lens = Photographic::new(0.0, Some(50.0), None);
+        assert!(lens.check_film().is_ok());
+        let e = lens.aperture_radius().unwrap_err().to_string();
+        assert_eq!(e, "f_number must be a finite number > 0, got 0");
+        let e = Photographic::new(2.0, Some(f32::NAN), None).check_film();
+        assert!(
+            e.unwrap_err()
+                .to_string()
+                .starts_with("focal_length_mm must be")
+        );
+        let radius = Photographic::new(2.0, None, None)
+            .aperture_radius()
+            .unwrap();
+        assert_eq!(radius, 0.05 / 4.0);
+    }
 }

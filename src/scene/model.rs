@@ -327,11 +327,40 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         }
         Some(_) => {}
     }
+    let camera = model_camera(model.camera, lo, hi);
+    // The file's own lights replace the key light.
+    let lights = if model.lights.is_empty() {
+        vec![default_light(
+            (camera.look_at - camera.eye).normalize_or(Vec3::NEG_Z),
+        )]
+    } else {
+        model.lights
+    };
+    let name = path
+        .file_stem()
+        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+    Ok(SceneDesc {
+        name,
+        camera,
+        materials,
+        objects,
+        lights,
+        ambient: Vec3::splat(0.15),
+        background: default_background(),
+        warnings: model.warnings,
+        ..Default::default()
+    })
+}
+
+/// The camera of a scene around a model with bounds (lo, hi): the file's camera (its aspect
+/// sets the height), else a view framing the bounds; a small aperture focused on the bounds'
+/// centre.
+fn model_camera(camera: Option<ModelCamera>, lo: Vec3, hi: Vec3) -> CameraSpec {
     let center = (lo + hi) * 0.5;
     let diagonal = (hi - lo).length().max(1e-3);
 
     let (mut width, mut height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
-    let (eye, look_at, up, vfov_deg) = match model.camera {
+    let (eye, look_at, up, vfov_deg) = match camera {
         Some(c) => {
             if let Some(aspect) = c.aspect.filter(|a| a.is_finite() && *a > 0.05 && *a < 20.0) {
                 width = DEFAULT_WIDTH;
@@ -359,37 +388,19 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
     if width == 0 || height == 0 {
         (width, height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
     }
-    let name = path
-        .file_stem()
-        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
-    Ok(SceneDesc {
-        name,
-        camera: CameraSpec {
-            eye,
-            look_at,
-            up,
-            vfov_deg,
-            width,
-            height,
-            lens: LensSpec::Aperture {
-                radius: MODEL_APERTURE_FRACTION * diagonal,
-            },
-            focus: Focus::Point(focus),
-            aperture: ApertureShape::default(),
+    CameraSpec {
+        eye,
+        look_at,
+        up,
+        vfov_deg,
+        width,
+        height,
+        lens: LensSpec::Aperture {
+            radius: MODEL_APERTURE_FRACTION * diagonal,
         },
-        materials,
-        objects,
-        // The file's own lights replace the key light.
-        lights: if model.lights.is_empty() {
-            vec![default_light((look_at - eye).normalize_or(Vec3::NEG_Z))]
-        } else {
-            model.lights
-        },
-        ambient: Vec3::splat(0.15),
-        background: default_background(),
-        warnings: model.warnings,
-        ..Default::default()
-    })
+        focus: Focus::Point(focus),
+        aperture: ApertureShape::default(),
+    }
 }
 
 #[cfg(test)]
