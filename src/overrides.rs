@@ -9,7 +9,7 @@
 
 use glam::Vec3;
 
-use crate::camera::{CameraSpec, Focus, LensFilter, LensSpec, Photographic};
+use crate::camera::{CameraSpec, Focus, LensFilter, LensSpec, Photographic, check_vfov};
 use crate::filter::{PixelFilter, PixelFilterKind};
 use crate::render::{Mode, RenderError, RenderSettings, SiteRule};
 use crate::scene::SceneDesc;
@@ -401,7 +401,7 @@ impl Overrides {
                 || self.sensor_width_mm.is_some())
         {
             let vfov_deg = cam.effective_vfov_deg();
-            if !(vfov_deg > 0.0 && vfov_deg < 180.0) {
+            if check_vfov(vfov_deg).is_err() {
                 return Err(OverrideError::NoFieldOfView {
                     focal_length_mm,
                     sensor_width_mm,

@@ -84,6 +84,16 @@ fn positive(name: &'static str, v: f32) -> Result<(), CameraError> {
     check(v.is_finite() && v > 0.0, name, "a finite number > 0", v)
 }
 
+/// Checks a vertical field of view in degrees: an angle strictly between 0 and 180.
+pub fn check_vfov(vfov_deg: f32) -> Result<(), CameraError> {
+    check(
+        vfov_deg.is_finite() && vfov_deg > 0.0 && vfov_deg < 180.0,
+        "vfov_deg",
+        "an angle between 0 and 180 degrees",
+        vfov_deg,
+    )
+}
+
 /// A point whose every coordinate is within [`MAX_COORDINATE`] of the origin.
 fn in_range(name: &'static str, v: Vec3) -> Result<(), CameraError> {
     check(
@@ -250,12 +260,7 @@ impl CameraSpec {
             p.check_film()?;
         }
         let vfov_deg = self.effective_vfov_deg();
-        check(
-            vfov_deg.is_finite() && vfov_deg > 0.0 && vfov_deg < 180.0,
-            "vfov_deg",
-            "an angle between 0 and 180 degrees",
-            vfov_deg,
-        )?;
+        check_vfov(vfov_deg)?;
         let mut camera = Camera {
             eye: self.eye,
             forward,

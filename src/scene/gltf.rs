@@ -25,6 +25,7 @@ use super::input::{self, LoadOptions};
 use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh, short_number, short_vec};
 use super::texture::{TextureCache, decode};
 use super::{MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE};
+use crate::camera::check_vfov;
 use crate::shade::{
     Alpha, AlphaMode, ImageTexture, LUMENS_PER_WATT, Light, Material, MaterialMaps, MetalRough,
     NormalMap, Texture, Wrap, pbr_params,
@@ -730,11 +731,7 @@ impl Loader<'_> {
                         .normalize_or_zero();
                     let up = world.affine.transform_vector3(Vec3::Y).normalize_or_zero();
                     let vfov_deg = p.yfov().to_degrees();
-                    if eye.is_finite()
-                        && forward != Vec3::ZERO
-                        && vfov_deg > 0.0
-                        && vfov_deg < 180.0
-                    {
+                    if eye.is_finite() && forward != Vec3::ZERO && check_vfov(vfov_deg).is_ok() {
                         self.camera = Some(ModelCamera {
                             eye,
                             forward,
