@@ -9,7 +9,9 @@
 
 use glam::Vec3;
 
-use crate::camera::{CameraSpec, Focus, LensFilter, LensSpec, Photographic, check_vfov};
+use crate::camera::{
+    ApertureShape, CameraSpec, Focus, LensFilter, LensSpec, Photographic, check_vfov,
+};
 use crate::filter::{PixelFilter, PixelFilterKind};
 use crate::render::{Mode, RenderError, RenderSettings, SiteRule};
 use crate::scene::SceneDesc;
@@ -334,7 +336,7 @@ impl Overrides {
             cam.focus = Focus::Pixel { x, y };
         }
         if let Some(b) = self.blades {
-            if b == 1 || b == 2 {
+            if !ApertureShape::blades_ok(b) {
                 return Err(OverrideError::Blades(b));
             }
             cam.aperture.blades = b;

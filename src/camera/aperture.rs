@@ -19,6 +19,13 @@ pub struct ApertureShape {
     pub anamorphic: f32,
 }
 
+impl ApertureShape {
+    /// Whether `blades` is a number of blades: 0 (a circular aperture) or at least 3.
+    pub fn blades_ok(blades: u32) -> bool {
+        blades == 0 || blades >= 3
+    }
+}
+
 impl Default for ApertureShape {
     fn default() -> Self {
         Self {

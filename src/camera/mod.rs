@@ -313,7 +313,7 @@ impl CameraSpec {
     fn check_aperture_shape(&self) -> Result<(), CameraError> {
         let a = &self.aperture;
         check(
-            a.blades == 0 || a.blades >= 3,
+            ApertureShape::blades_ok(a.blades),
             "aperture blades",
             "0 (circular) or at least 3",
             a.blades,

@@ -8,9 +8,9 @@ use toml::Spanned;
 use super::Ctx;
 use super::objects::{FromModel, Objects};
 use super::raw::{RawCamera, V3, v3};
+use crate::camera::lens::focal_length_of_vfov;
 use crate::camera::{
-    ApertureShape, CameraSpec, DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM, DEFAULT_VFOV,
-    Focus, LensSpec,
+    ApertureShape, CameraSpec, DEFAULT_SENSOR_WIDTH_MM, DEFAULT_VFOV, Focus, LensSpec, Photographic,
 };
 use crate::scene::Object;
 use crate::scene::error::LoadError;
@@ -48,7 +48,7 @@ pub(super) fn camera(
     let lens = lens(&raw, from_model.is_some(), vfov_deg, width, height);
     let focus = focus(ctx, &raw, &table, width, height, &view)?;
     let blades = raw.blades.as_ref().map_or(0, |b| b.get_ref().0);
-    if blades == 1 || blades == 2 {
+    if !ApertureShape::blades_ok(blades) {
         return Err(ctx.invalid(
             raw.blades.as_ref().map(|b| b.span()).unwrap_or(0..0),
             "camera.blades",
@@ -293,20 +293,15 @@ fn lens(raw: &RawCamera, model_view: bool, vfov_deg: f32, width: u32, height: u3
             .as_ref()
             .map_or(DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0);
         // With a model's camera, the focal length that keeps its field of view on this sensor.
-        let keep_fov = model_view.then(|| {
-            let tan_half_h = (vfov_deg.to_radians() * 0.5).tan() * width as f32 / height as f32;
-            sensor_width_mm / (2.0 * tan_half_h)
-        });
-        LensSpec::Photographic {
-            focal_length_mm: raw
-                .focal_length_mm
-                .as_ref()
-                .map_or(keep_fov.unwrap_or(DEFAULT_FOCAL_LENGTH_MM), |f| {
-                    f.get_ref().0
-                }),
-            f_number: n.get_ref().0,
-            sensor_width_mm,
-        }
+        let keep_fov =
+            model_view.then(|| focal_length_of_vfov(vfov_deg, sensor_width_mm, width, height));
+        let focal_length_mm = raw.focal_length_mm.as_ref().map(|f| f.get_ref().0);
+        Photographic::new(
+            n.get_ref().0,
+            focal_length_mm.or(keep_fov),
+            Some(sensor_width_mm),
+        )
+        .spec()
     } else if let (Some(r), Some(s)) = (&raw.sharp_range, &raw.spread) {
         LensSpec::Seed {
             sharp_range: r.get_ref().0,
