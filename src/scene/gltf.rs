@@ -131,7 +131,7 @@ fn read_uri(file: &ModelFile, uri: &str, what: &'static str) -> Result<Vec<u8>, 
     let name = uri_file_name(path, uri, what)?;
     let at = Location::file(path);
     let referenced = file.reference(Path::new(""), &name, &at)?;
-    input::read(&referenced, &file.options).map_err(|e| e.referenced(at, what))
+    input::read(&referenced, file.options()).map_err(|e| e.referenced(at, what))
 }
 
 /// Checks that reading `accessor` cannot go out of its buffer or hit a type the reader does
@@ -248,7 +248,6 @@ fn check_glb_length(path: &Path, bytes: &[u8]) -> Result<(), LoadError> {
 struct Loader<'a> {
     file: ModelFile<'a>,
     buffers: Vec<Vec<u8>>,
-    textures: &'a mut TextureCache,
     /// Decoded images by (glTF image index, repeat, sRGB).
     images: HashMap<(usize, bool, bool), Arc<ImageTexture>>,
     materials: Vec<(String, Material)>,
@@ -389,26 +388,9 @@ pub fn load(
     transform: &Transform,
     textures: &mut TextureCache,
 ) -> Result<Model, LoadError> {
-    let file = ModelFile::new(path, textures);
-    let (document, blob, extensions_used) = parse(&file)?;
-    let buffers = read_buffers(&file, &document, blob)?;
+    let (document, mut loader) = open(ModelFile::new(path, textures))?;
     let roots = roots(&document);
-    check_expansion(path, &document, &roots, &file.options)?;
-    let mut loader = Loader {
-        file,
-        buffers,
-        textures,
-        images: HashMap::new(),
-        materials: Vec::new(),
-        material_map: HashMap::new(),
-        meshes: Vec::new(),
-        camera: None,
-        orthographic: Vec::new(),
-        extra_cameras: 0,
-        lights: Vec::new(),
-        ignored: ignored_features(&document, &extensions_used),
-        visits: 0,
-    };
+    check_expansion(path, &document, &roots, loader.file.options())?;
     for root in roots {
         let walked = guarded(
             || loader.node(&root, transform, 0),
@@ -420,6 +402,28 @@ pub fn load(
         return Err(gltf_error(path, "no triangle meshes in the scene"));
     }
     Ok(loader.into_model())
+}
+
+/// Parses the file and reads its buffers: the document, and a loader ready to walk it.
+fn open(file: ModelFile) -> Result<(::gltf::Document, Loader), LoadError> {
+    let (document, blob, extensions_used) = parse(&file)?;
+    let buffers = read_buffers(&file, &document, blob)?;
+    let ignored = ignored_features(&document, &extensions_used);
+    let loader = Loader {
+        file,
+        buffers,
+        images: HashMap::new(),
+        materials: Vec::new(),
+        material_map: HashMap::new(),
+        meshes: Vec::new(),
+        camera: None,
+        orthographic: Vec::new(),
+        extra_cameras: 0,
+        lights: Vec::new(),
+        ignored,
+        visits: 0,
+    };
+    Ok((document, loader))
 }
 
 /// The error of a file the glTF parser refuses.
@@ -754,7 +758,7 @@ impl Loader<'_> {
         depth: usize,
     ) -> Result<(), LoadError> {
         self.visits += 1;
-        if depth > MAX_DEPTH || self.visits > self.file.options.max_node_instances {
+        if depth > MAX_DEPTH || self.visits > self.file.options().max_node_instances {
             return Err(gltf_error(
                 self.file.path,
                 format!(
@@ -1280,8 +1284,7 @@ impl Loader<'_> {
             {
                 let name = uri_file_name(path, uri, &what)?;
                 let (dir, at) = (Path::new(""), Location::file(path));
-                self.file
-                    .texture(self.textures, (dir, &name), srgb, wrap, at)?
+                self.file.texture((dir, &name), srgb, wrap, at)?
             }
             ::gltf::image::Source::Uri { uri, .. } => {
                 let bytes = read_uri(&self.file, uri, "image")?;
@@ -1300,7 +1303,7 @@ impl Loader<'_> {
         wrap: Wrap,
         what: &str,
     ) -> Result<Arc<ImageTexture>, LoadError> {
-        let t = decode(bytes, srgb, wrap, self.file.options.max_texture_bytes)
+        let t = decode(bytes, srgb, wrap, self.file.options().max_texture_bytes)
             .map_err(|m| gltf_error(self.file.path, format!("{what}: {m}")))?;
         Ok(Arc::new(t))
     }

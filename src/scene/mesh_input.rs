@@ -14,54 +14,59 @@ use crate::embree::{EmbreeError, TriangleMesh};
 use crate::shade::{ImageTexture, Wrap};
 
 /// A model file being loaded: its path, its folder (which the files it refers to resolve
-/// from, and by default must stay inside) and the limits of the load.
+/// from, and by default must stay inside) and the load's texture cache, which carries the
+/// limits of the load.
 pub(super) struct ModelFile<'a> {
     /// The model file, as given.
     pub path: &'a Path,
     /// The model's folder.
     pub folder: PathBuf,
-    /// The load's limits and path policy (those the texture cache carries).
-    pub options: LoadOptions,
+    textures: &'a mut TextureCache,
 }
 
 impl<'a> ModelFile<'a> {
-    /// The model at `path`, loaded under the options of `textures`.
-    pub fn new(path: &'a Path, textures: &TextureCache) -> Self {
+    /// The model at `path`, loaded with the texture cache (and under the options) of
+    /// `textures`.
+    pub fn new(path: &'a Path, textures: &'a mut TextureCache) -> Self {
         Self {
             path,
             folder: path.parent().unwrap_or(Path::new("")).to_path_buf(),
-            options: *textures.options(),
+            textures,
         }
+    }
+
+    /// The load's limits and path policy.
+    pub fn options(&self) -> &LoadOptions {
+        self.textures.options()
     }
 
     /// Opens the model file for streaming, within the byte limit.
     pub fn open(&self) -> Result<Input, LoadError> {
-        input::open(self.path, &self.options)
+        input::open(self.path, self.options())
     }
 
     /// Reads the whole model file, within the byte limit.
     pub fn read(&self) -> Result<Vec<u8>, LoadError> {
-        input::read(self.path, &self.options)
+        input::read(self.path, self.options())
     }
 
     /// The file `name` refers to from `dir` (a folder given relative to the model's), by the
     /// path policy of [`input::reference`]; `at` is where the reference is written.
     pub fn reference(&self, dir: &Path, name: &str, at: &Location) -> Result<PathBuf, LoadError> {
-        input::reference(&self.folder, dir, name, &self.options, at)
+        input::reference(&self.folder, dir, name, self.options(), at)
     }
 
     /// The image texture in the file `name` refers to from `dir`, decoded once per load;
     /// a failure is reported as the texture referenced from `at`.
     pub fn texture(
-        &self,
-        textures: &mut TextureCache,
+        &mut self,
         (dir, name): (&Path, &str),
         srgb: bool,
         wrap: Wrap,
         at: Location,
     ) -> Result<Arc<ImageTexture>, LoadError> {
         let file = self.reference(dir, name, &at)?;
-        textures
+        self.textures
             .file(&file, srgb, wrap)
             .map_err(|e| e.referenced(at, "texture"))
     }

@@ -274,8 +274,13 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
     )?;
     let center = (lo + hi) * 0.5;
     let diagonal = (hi - lo).length().max(1e-3);
-    let view = view(model.camera, lo, hi);
-    let (eye, look_at) = (view.eye, view.look_at);
+    let View {
+        eye,
+        look_at,
+        up,
+        vfov_deg,
+        size: (width, height),
+    } = view(model.camera, lo, hi);
     // Focus on the bounds' centre when it is in front of the camera, else on the look-at point.
     let focus = if (center - eye).dot(look_at - eye) > 0.0 {
         center
@@ -290,10 +295,10 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         camera: CameraSpec {
             eye,
             look_at,
-            up: view.up,
-            vfov_deg: view.vfov_deg,
-            width: view.width,
-            height: view.height,
+            up,
+            vfov_deg,
+            width,
+            height,
             lens: LensSpec::Aperture {
                 radius: MODEL_APERTURE_FRACTION * diagonal,
             },
@@ -383,14 +388,13 @@ fn check_viewable(
     Ok(())
 }
 
-/// Where a bare model is seen from, and the image's size.
+/// Where a bare model is seen from, and the image's size (width, height).
 struct View {
     eye: Vec3,
     look_at: Vec3,
     up: Vec3,
     vfov_deg: f32,
-    width: u32,
-    height: u32,
+    size: (u32, u32),
 }
 
 /// The model's own camera looking at the depth of the bounds' centre (with its aspect, when
@@ -426,8 +430,7 @@ fn view(camera: Option<ModelCamera>, lo: Vec3, hi: Vec3) -> View {
         look_at,
         up,
         vfov_deg,
-        width,
-        height,
+        size: (width, height),
     }
 }
 

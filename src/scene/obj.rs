@@ -350,7 +350,7 @@ pub fn load(
     transform: &Transform,
     textures: &mut TextureCache,
 ) -> Result<Model, LoadError> {
-    let file = ModelFile::new(path, textures);
+    let mut file = ModelFile::new(path, textures);
     let Parsed {
         result,
         found,
@@ -361,7 +361,7 @@ pub fn load(
     let libraries = loaded_libraries(file.path, libraries)?;
     // Then the first problem in the file: what tobj reported, and what it lets through.
     let models = first_problem(&file, result, &found, line)?;
-    let materials = materials(&file, libraries, textures)?;
+    let materials = materials(&mut file, libraries)?;
     let mut meshes = Vec::with_capacity(models.len());
     for model in models {
         meshes.extend(model_mesh(&file, model, transform, materials.len())?);
@@ -431,7 +431,7 @@ fn load_library(file: &ModelFile, mtl: &Path, line: usize) -> MtlResult {
             message: "the MTL file name is not UTF-8".into(),
         })
         .and_then(|name| file.reference(Path::new(""), name, &at))
-        .and_then(|full| load_mtl(&full, &file.options))
+        .and_then(|full| load_mtl(&full, file.options()))
         .map_err(|e| (e, line))
 }
 
@@ -526,9 +526,8 @@ fn first_problem(
 /// The libraries' materials with their names, numbered across libraries in load order, as
 /// tobj numbers them for the meshes.
 fn materials(
-    file: &ModelFile,
+    file: &mut ModelFile,
     libraries: Vec<(Vec<tobj::Material>, PathBuf)>,
-    textures: &mut TextureCache,
 ) -> Result<Vec<(String, Material)>, LoadError> {
     let mut materials = Vec::new();
     for (mats, mtl_path) in libraries {
@@ -536,7 +535,7 @@ fn materials(
         let mtl_dir = mtl_path.parent().unwrap_or(Path::new(""));
         let mtl_dir = mtl_dir.strip_prefix(&file.folder).unwrap_or(mtl_dir);
         for m in mats {
-            let material = convert_material(file, &m, &mtl_path, mtl_dir, textures)?;
+            let material = convert_material(file, &m, &mtl_path, mtl_dir)?;
             materials.push((m.name.clone(), material));
         }
     }
@@ -772,18 +771,17 @@ fn color(c: Option<[f32; 3]>, default: Vec3) -> Vec3 {
 
 /// `mtl_dir`: the MTL's folder relative to the OBJ's, where its texture paths start.
 fn convert_material(
-    file: &ModelFile,
+    file: &mut ModelFile,
     m: &tobj::Material,
     mtl_path: &Path,
     mtl_dir: &Path,
-    textures: &mut TextureCache,
 ) -> Result<Material, LoadError> {
     let kd = m.diffuse.map(Vec3::from).filter(|v| v.is_finite());
     let diffuse = match &m.diffuse_texture {
         Some(statement) => {
             let name = texture_file(statement);
             let at = Location::file(mtl_path).with_key(format!("{}.map_Kd", m.name));
-            let image = file.texture(textures, (mtl_dir, name), true, Wrap::Repeat, at)?;
+            let image = file.texture((mtl_dir, name), true, Wrap::Repeat, at)?;
             Texture::Image {
                 image,
                 tint: kd.map_or(Vec3::ONE, |v| v.max(Vec3::ZERO)),
