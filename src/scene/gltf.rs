@@ -349,6 +349,17 @@ fn check_expansion(
         let (ri, rt) = done[r.index()].unwrap_or((0, 0));
         (i.saturating_add(ri), t.saturating_add(rt))
     });
+    check_expansion_limits(path, instances, triangles, options)
+}
+
+/// Refuses a node tree that expands to more triangles or node instances than `options` allow
+/// (the counts saturate at `u64::MAX`, said as "or more").
+fn check_expansion_limits(
+    path: &Path,
+    instances: u64,
+    triangles: u64,
+    options: &LoadOptions,
+) -> Result<(), LoadError> {
     let count = |n: u64| {
         if n == u64::MAX {
             format!("{n} or more")
@@ -847,29 +858,7 @@ impl Loader<'_> {
             )),
             message: format!("{name}: {message}"),
         };
-        let color = Vec3::from(light.color());
-        if !(color.is_finite() && color.min_element() >= 0.0) {
-            return Err(fail(format!(
-                "color {} must be finite and >= 0",
-                short_vec(color)
-            )));
-        }
-        let intensity = light.intensity();
-        if !(intensity.is_finite() && intensity >= 0.0) {
-            return Err(fail(format!(
-                "intensity {} must be finite and >= 0",
-                short_number(intensity)
-            )));
-        }
-        let power = color * (intensity / LUMENS_PER_WATT);
-        if power.max_element() > MAX_LIGHT_VALUE {
-            return Err(fail(format!(
-                "intensity {} times color is {} W/sr or W/m^2 after dividing by {LUMENS_PER_WATT} \
-                 lm/W, more than the limit of 1e12",
-                short_number(intensity),
-                short_vec(power)
-            )));
-        }
+        let power = light_power(light).map_err(fail)?;
         if let Some(range) = light.range() {
             self.ignored.push(format!(
                 "{name} range {} (dofray lights reach every distance, falling off as 1/d^2)",
@@ -1307,6 +1296,35 @@ impl Loader<'_> {
             .map_err(|m| gltf_error(self.file.path, format!("{what}: {m}")))?;
         Ok(Arc::new(t))
     }
+}
+
+/// A light's colour times its intensity in dofray's radiometric units (W/sr for point and
+/// spot lights, W/m^2 for directional ones), or why the file's values are refused.
+fn light_power(light: &::gltf::khr_lights_punctual::Light) -> Result<Vec3, String> {
+    let color = Vec3::from(light.color());
+    if !(color.is_finite() && color.min_element() >= 0.0) {
+        return Err(format!(
+            "color {} must be finite and >= 0",
+            short_vec(color)
+        ));
+    }
+    let intensity = light.intensity();
+    if !(intensity.is_finite() && intensity >= 0.0) {
+        return Err(format!(
+            "intensity {} must be finite and >= 0",
+            short_number(intensity)
+        ));
+    }
+    let power = color * (intensity / LUMENS_PER_WATT);
+    if power.max_element() > MAX_LIGHT_VALUE {
+        return Err(format!(
+            "intensity {} times color is {} W/sr or W/m^2 after dividing by {LUMENS_PER_WATT} \
+             lm/W, more than the limit of 1e12",
+            short_number(intensity),
+            short_vec(power)
+        ));
+    }
+    Ok(power)
 }
 
 /// What a triangle primitive's vertices are read from, once its accessors are checked.
