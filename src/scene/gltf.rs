@@ -11,8 +11,7 @@
 //! Accessors are checked before they are read, and a panic inside the parser becomes an error.
 
 use std::collections::HashMap;
-use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
 use ::gltf::accessor::{DataType, Dimensions};
@@ -22,7 +21,8 @@ use glam::{Affine3A, Mat4, Vec3};
 
 use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
-use super::model::{Model, ModelCamera, ModelMesh, Transform, mesh, short_number, short_vec};
+use super::mesh_input::{MeshBuffers, ModelFile, guarded, keep_winding};
+use super::model::{Model, ModelCamera, ModelMesh, Transform, short_number, short_vec};
 use super::texture::{TextureCache, decode};
 use super::{MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE};
 use crate::camera::check_vfov;
@@ -99,15 +99,17 @@ fn percent_decode(uri: &str) -> Vec<u8> {
     out
 }
 
+/// The file name a relative URI spells (percent escapes decoded); `what` names the URI's
+/// user in the error.
+fn uri_file_name(path: &Path, uri: &str, what: &str) -> Result<String, LoadError> {
+    String::from_utf8(percent_decode(uri))
+        .map_err(|_| gltf_error(path, format!("{what}: URI {uri:?} is not UTF-8")))
+}
+
 /// The bytes a URI names: a base64 `data:` URI, or a file relative to the model (by the path
 /// policy of [`input::reference`]).
-fn read_uri(
-    path: &Path,
-    base: &Path,
-    uri: &str,
-    what: &'static str,
-    options: &LoadOptions,
-) -> Result<Vec<u8>, LoadError> {
+fn read_uri(file: &ModelFile, uri: &str, what: &'static str) -> Result<Vec<u8>, LoadError> {
+    let path = file.path;
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, data) = rest.split_once(";base64,").ok_or_else(|| {
             gltf_error(path, format!("{what}: only base64 data URIs are supported"))
@@ -127,11 +129,10 @@ fn read_uri(
             format!("{what}: unsupported URI {uri:?} (expected a relative file or a data URI)"),
         ));
     }
-    let decoded = String::from_utf8(percent_decode(uri))
-        .map_err(|_| gltf_error(path, format!("{what}: URI {uri:?} is not UTF-8")))?;
+    let name = uri_file_name(path, uri, what)?;
     let at = Location::file(path);
-    let file = input::reference(base, Path::new(""), &decoded, options, &at)?;
-    input::read(&file, options).map_err(|e| e.referenced(at, what))
+    let referenced = file.reference(Path::new(""), &name, &at)?;
+    input::read(&referenced, file.options()).map_err(|e| e.referenced(at, what))
 }
 
 /// Checks that reading `accessor` cannot go out of its buffer or hit a type the reader does
@@ -244,11 +245,10 @@ fn check_glb_length(path: &Path, bytes: &[u8]) -> Result<(), LoadError> {
     Ok(())
 }
 
+/// The node walk's state: what the file has given so far, and what it refers to.
 struct Loader<'a> {
-    path: &'a Path,
-    base: PathBuf,
+    file: ModelFile<'a>,
     buffers: Vec<Vec<u8>>,
-    textures: &'a mut TextureCache,
     /// Decoded images by (glTF image index, repeat, sRGB).
     images: HashMap<(usize, bool, bool), Arc<ImageTexture>>,
     materials: Vec<(String, Material)>,
@@ -263,7 +263,6 @@ struct Loader<'a> {
     /// What the file uses that dofray ignores, for the file's one warning.
     ignored: Vec<String>,
     visits: u64,
-    options: LoadOptions,
 }
 
 /// Deepest node nesting followed.
@@ -351,6 +350,17 @@ fn check_expansion(
         let (ri, rt) = done[r.index()].unwrap_or((0, 0));
         (i.saturating_add(ri), t.saturating_add(rt))
     });
+    check_expansion_limits(path, instances, triangles, options)
+}
+
+/// Refuses a node tree that expands to more triangles or node instances than `options` allow
+/// (the counts saturate at `u64::MAX`, said as "or more").
+fn check_expansion_limits(
+    path: &Path,
+    instances: u64,
+    triangles: u64,
+    options: &LoadOptions,
+) -> Result<(), LoadError> {
     let count = |n: u64| {
         if n == u64::MAX {
             format!("{n} or more")
@@ -390,57 +400,121 @@ pub fn load(
     transform: &Transform,
     textures: &mut TextureCache,
 ) -> Result<Model, LoadError> {
-    let options = *textures.options();
-    let bytes = input::read(path, &options)?;
-    check_glb_length(path, &bytes)?;
-    let invalid = |e: &dyn std::fmt::Display| {
-        gltf_error(
-            path,
-            format!("not a valid glTF 2.0 file (expected .gltf JSON or .glb): {e}"),
-        )
+    let (document, mut loader) = open(ModelFile::new(path, textures))?;
+    let roots = roots(&document);
+    check_expansion(path, &document, &roots, loader.file.options())?;
+    for root in roots {
+        let walked = guarded(
+            || loader.node(&root, transform, 0),
+            || gltf_error(path, "malformed file (reading its data failed)"),
+        )?;
+        walked?;
+    }
+    if loader.meshes.is_empty() {
+        return Err(gltf_error(path, "no triangle meshes in the scene"));
+    }
+    Ok(loader.into_model())
+}
+
+/// Parses the file and reads its buffers: the document, and a loader ready to walk it.
+fn open(file: ModelFile) -> Result<(::gltf::Document, Loader), LoadError> {
+    let (document, blob, extensions_used) = parse(&file)?;
+    let buffers = read_buffers(&file, &document, blob)?;
+    let ignored = ignored_features(&document, &extensions_used);
+    let loader = Loader {
+        file,
+        buffers,
+        images: HashMap::new(),
+        materials: Vec::new(),
+        material_map: HashMap::new(),
+        meshes: Vec::new(),
+        camera: None,
+        orthographic: Vec::new(),
+        extra_cameras: 0,
+        lights: Vec::new(),
+        ignored,
+        visits: 0,
     };
-    let parsed = catch_unwind(AssertUnwindSafe(|| {
-        let ::gltf::Gltf { document, blob } =
-            ::gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| invalid(&e))?;
-        let mut root = document.into_json();
-        if let Some(ext) = root
-            .extensions_required
-            .iter()
-            .find(|e| !SUPPORTED_EXTENSIONS.contains(&e.as_str()))
-        {
-            return Err(gltf_error(
-                path,
-                format!(
-                    "the file requires glTF extension {ext:?} (extensionsRequired), which \
-                     dofray does not implement (supported: {})",
-                    SUPPORTED_EXTENSIONS.join(", ")
-                ),
-            ));
-        }
-        // Required extensions are all ours: the parser need not check them against its own.
-        root.extensions_required.clear();
-        let used = root.extensions_used.clone();
-        // gltf's validation indexes accessors by the primitives' POSITION before checking them.
-        for (m, mesh) in root.meshes.iter().enumerate() {
-            for (p, prim) in mesh.primitives.iter().enumerate() {
-                let refs = prim.attributes.values().chain(prim.indices.as_ref());
-                if let Some(bad) = refs.map(|i| i.value()).find(|&i| i >= root.accessors.len()) {
-                    return Err(invalid(&format!(
+    Ok((document, loader))
+}
+
+/// The error of a file the glTF parser refuses.
+fn invalid(path: &Path, e: &dyn std::fmt::Display) -> LoadError {
+    gltf_error(
+        path,
+        format!("not a valid glTF 2.0 file (expected .gltf JSON or .glb): {e}"),
+    )
+}
+
+/// A parsed file: its document, the GLB binary chunk and the extensions it uses.
+type Parsed = (::gltf::Document, Option<Vec<u8>>, Vec<String>);
+
+/// Reads and parses the file; its bytes are freed before any buffer is read.
+fn parse(file: &ModelFile) -> Result<Parsed, LoadError> {
+    let bytes = file.read()?;
+    check_glb_length(file.path, &bytes)?;
+    guarded(
+        || parse_document(file.path, &bytes),
+        || gltf_error(file.path, "malformed file (the glTF parser failed on it)"),
+    )?
+}
+
+/// Parses the JSON (and GLB container) without the parser's validation, checks what that
+/// validation would trip over, then validates.
+fn parse_document(path: &Path, bytes: &[u8]) -> Result<Parsed, LoadError> {
+    let ::gltf::Gltf { document, blob } =
+        ::gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| invalid(path, &e))?;
+    let mut root = document.into_json();
+    if let Some(ext) = root
+        .extensions_required
+        .iter()
+        .find(|e| !SUPPORTED_EXTENSIONS.contains(&e.as_str()))
+    {
+        return Err(gltf_error(
+            path,
+            format!(
+                "the file requires glTF extension {ext:?} (extensionsRequired), which \
+                 dofray does not implement (supported: {})",
+                SUPPORTED_EXTENSIONS.join(", ")
+            ),
+        ));
+    }
+    // Required extensions are all ours: the parser need not check them against its own.
+    root.extensions_required.clear();
+    let used = root.extensions_used.clone();
+    check_primitive_accessors(path, &root)?;
+    let document = ::gltf::Document::from_json(root).map_err(|e| invalid(path, &e))?;
+    Ok((document, blob, used))
+}
+
+/// gltf's validation indexes accessors by the primitives' POSITION before checking them:
+/// an accessor index past the end is refused here first.
+fn check_primitive_accessors(path: &Path, root: &::gltf::json::Root) -> Result<(), LoadError> {
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let refs = prim.attributes.values().chain(prim.indices.as_ref());
+            if let Some(bad) = refs.map(|i| i.value()).find(|&i| i >= root.accessors.len()) {
+                return Err(invalid(
+                    path,
+                    &format!(
                         "mesh {m} primitive {p} refers to accessor {bad}, but there are {}",
                         root.accessors.len()
-                    )));
-                }
+                    ),
+                ));
             }
         }
-        let document = ::gltf::Document::from_json(root).map_err(|e| invalid(&e))?;
-        Ok((document, blob, used))
-    }))
-    .map_err(|_| gltf_error(path, "malformed file (the glTF parser failed on it)"))?;
-    let (document, blob, extensions_used) = parsed?;
-    drop(bytes);
-    let base = path.parent().unwrap_or(Path::new("")).to_path_buf();
+    }
+    Ok(())
+}
 
-    let mut blob = blob;
+/// The document's buffers: the GLB binary chunk, or files and data URIs, each as long as
+/// the document declares.
+fn read_buffers(
+    file: &ModelFile,
+    document: &::gltf::Document,
+    mut blob: Option<Vec<u8>>,
+) -> Result<Vec<Vec<u8>>, LoadError> {
+    let path = file.path;
     let mut buffers = Vec::new();
     for buffer in document.buffers() {
         let data = match buffer.source() {
@@ -453,7 +527,7 @@ pub fn load(
                     ),
                 )
             })?,
-            ::gltf::buffer::Source::Uri(uri) => read_uri(path, &base, uri, "buffer", &options)?,
+            ::gltf::buffer::Source::Uri(uri) => read_uri(file, uri, "buffer")?,
         };
         if data.len() < buffer.length() {
             return Err(gltf_error(
@@ -468,31 +542,18 @@ pub fn load(
         }
         buffers.push(data);
     }
+    Ok(buffers)
+}
 
-    let mut loader = Loader {
-        path,
-        base,
-        buffers,
-        textures,
-        images: HashMap::new(),
-        materials: Vec::new(),
-        material_map: HashMap::new(),
-        meshes: Vec::new(),
-        camera: None,
-        orthographic: Vec::new(),
-        extra_cameras: 0,
-        lights: Vec::new(),
-        ignored: ignored_features(&document, &extensions_used),
-        visits: 0,
-        options,
-    };
-    let roots: Vec<::gltf::Node> = match document
+/// The nodes the walk starts from: the default scene's (else the first scene's); with no
+/// scene, every node that is nobody's child.
+fn roots(document: &::gltf::Document) -> Vec<::gltf::Node<'_>> {
+    match document
         .default_scene()
         .or_else(|| document.scenes().next())
     {
         Some(scene) => scene.nodes().collect(),
         None => {
-            // No scene: every node that is nobody's child is a root.
             let mut child = vec![false; document.nodes().len()];
             for n in document.nodes() {
                 for c in n.children() {
@@ -501,42 +562,40 @@ pub fn load(
             }
             document.nodes().filter(|n| !child[n.index()]).collect()
         }
-    };
-    check_expansion(path, &document, &roots, &options)?;
-    for root in roots {
-        let walked = catch_unwind(AssertUnwindSafe(|| loader.node(&root, transform, 0)))
-            .map_err(|_| gltf_error(path, "malformed file (reading its data failed)"))?;
-        walked?;
     }
-    if loader.meshes.is_empty() {
-        return Err(gltf_error(path, "no triangle meshes in the scene"));
+}
+
+impl Loader<'_> {
+    /// The model the walk built, with the file's one warning (the cameras it passed over
+    /// join what the document uses and dofray ignores).
+    fn into_model(self) -> Model {
+        let mut ignored = self.ignored;
+        if !self.orthographic.is_empty() {
+            ignored.push(format!(
+                "orthographic {} {} (dofray renders perspective views only)",
+                plural(self.orthographic.len(), "camera", "cameras"),
+                self.orthographic.join(", ")
+            ));
+        }
+        if self.extra_cameras > 0 {
+            ignored.push(format!(
+                "{} after the first perspective one",
+                plural(self.extra_cameras, "camera", "cameras")
+            ));
+        }
+        let orthographic_camera = match self.camera {
+            None => self.orthographic.first().cloned(),
+            Some(_) => None,
+        };
+        Model {
+            meshes: self.meshes,
+            materials: self.materials,
+            camera: self.camera,
+            orthographic_camera,
+            lights: self.lights,
+            warnings: warning(self.file.path, &ignored).into_iter().collect(),
+        }
     }
-    let mut ignored = std::mem::take(&mut loader.ignored);
-    if !loader.orthographic.is_empty() {
-        ignored.push(format!(
-            "orthographic {} {} (dofray renders perspective views only)",
-            plural(loader.orthographic.len(), "camera", "cameras"),
-            loader.orthographic.join(", ")
-        ));
-    }
-    if loader.extra_cameras > 0 {
-        ignored.push(format!(
-            "{} after the first perspective one",
-            plural(loader.extra_cameras, "camera", "cameras")
-        ));
-    }
-    let orthographic_camera = match loader.camera {
-        None => loader.orthographic.first().cloned(),
-        Some(_) => None,
-    };
-    Ok(Model {
-        meshes: loader.meshes,
-        materials: loader.materials,
-        camera: loader.camera,
-        orthographic_camera,
-        lights: loader.lights,
-        warnings: warning(path, &ignored).into_iter().collect(),
-    })
 }
 
 /// `1 camera`, `2 cameras`.
@@ -575,7 +634,6 @@ fn warning(path: &Path, ignored: &[String]) -> Option<String> {
 /// What the document uses that the loader does not honour, found before the node walk (the
 /// walk adds cameras and light ranges).
 fn ignored_features(document: &::gltf::Document, extensions_used: &[String]) -> Vec<String> {
-    use ::gltf::texture::MagFilter;
     let mut out = Vec::new();
     let unsupported: Vec<&str> = extensions_used
         .iter()
@@ -603,6 +661,14 @@ fn ignored_features(document: &::gltf::Document, extensions_used: &[String]) -> 
             plural(skins, "skin", "skins")
         ));
     }
+    ignored_in_meshes(document, &mut out);
+    ignored_in_materials(document, &mut out);
+    out
+}
+
+/// What the meshes' primitives carry that is not drawn: morph targets, points and lines,
+/// vertex colours, texture coordinate sets other than the one loaded.
+fn ignored_in_meshes(document: &::gltf::Document, out: &mut Vec<String>) {
     let (mut morphs, mut lines, mut colours, mut uv_sets) = (Vec::new(), Vec::new(), false, false);
     for mesh in document.meshes() {
         for prim in mesh.primitives() {
@@ -648,8 +714,13 @@ fn ignored_features(document: &::gltf::Document, extensions_used: &[String]) -> 
     if uv_sets {
         out.push("texture coordinate sets other than the one each primitive is loaded with".into());
     }
-    // Samplers of the textures materials use: only wrapS is honoured (for both directions,
-    // MIRRORED_REPEAT as REPEAT), and lookups are always bilinear.
+}
+
+/// What the materials ask of textures that is not honoured: occlusion textures, and sampler
+/// settings (only wrapS is honoured, for both directions, MIRRORED_REPEAT as REPEAT; lookups
+/// are always bilinear).
+fn ignored_in_materials(document: &::gltf::Document, out: &mut Vec<String>) {
+    use ::gltf::texture::MagFilter;
     let mut samplers = Vec::new();
     for material in document.materials() {
         let pbr = material.pbr_metallic_roughness();
@@ -672,7 +743,7 @@ fn ignored_features(document: &::gltf::Document, extensions_used: &[String]) -> 
             }
         }
         if material.occlusion_texture().is_some() {
-            push_once(&mut out, "occlusion textures");
+            push_once(out, "occlusion textures");
         }
     }
     if !samplers.is_empty() {
@@ -682,7 +753,6 @@ fn ignored_features(document: &::gltf::Document, extensions_used: &[String]) -> 
             samplers.join(", ")
         ));
     }
-    out
 }
 
 fn push_once(out: &mut Vec<String>, item: &str) {
@@ -692,6 +762,7 @@ fn push_once(out: &mut Vec<String>, item: &str) {
 }
 
 impl Loader<'_> {
+    /// Walks `node` and its subtree under the transform `parent`, `depth` levels down.
     fn node(
         &mut self,
         node: &::gltf::Node,
@@ -699,9 +770,9 @@ impl Loader<'_> {
         depth: usize,
     ) -> Result<(), LoadError> {
         self.visits += 1;
-        if depth > MAX_DEPTH || self.visits > self.options.max_node_instances {
+        if depth > MAX_DEPTH || self.visits > self.file.options().max_node_instances {
             return Err(gltf_error(
-                self.path,
+                self.file.path,
                 format!(
                     "node {}: the node tree is nested more than {MAX_DEPTH} levels deep",
                     node.index()
@@ -714,41 +785,12 @@ impl Loader<'_> {
             .and_then(|l| parent.after(&l))
             .ok_or_else(|| {
                 gltf_error(
-                    self.path,
+                    self.file.path,
                     format!("node {}: singular or non-finite transform", node.index()),
                 )
             })?;
         if let Some(camera) = node.camera() {
-            match camera.projection() {
-                ::gltf::camera::Projection::Perspective(_) if self.camera.is_some() => {
-                    self.extra_cameras += 1;
-                }
-                ::gltf::camera::Projection::Perspective(p) => {
-                    let eye = world.affine.transform_point3(Vec3::ZERO);
-                    let forward = world
-                        .affine
-                        .transform_vector3(Vec3::NEG_Z)
-                        .normalize_or_zero();
-                    let up = world.affine.transform_vector3(Vec3::Y).normalize_or_zero();
-                    let vfov_deg = p.yfov().to_degrees();
-                    if eye.is_finite() && forward != Vec3::ZERO && check_vfov(vfov_deg).is_ok() {
-                        self.camera = Some(ModelCamera {
-                            eye,
-                            forward,
-                            up,
-                            vfov_deg,
-                            aspect: p.aspect_ratio(),
-                        });
-                    } else {
-                        self.extra_cameras += 1;
-                    }
-                }
-                ::gltf::camera::Projection::Orthographic(_) => {
-                    let name = named("camera", camera.index(), camera.name());
-                    self.orthographic
-                        .push(format!("{name} (node {})", node.index()));
-                }
-            }
+            self.camera(node, &camera, &world);
         }
         if let Some(light) = node.light() {
             self.light(node, &light, &world)?;
@@ -764,6 +806,41 @@ impl Loader<'_> {
         Ok(())
     }
 
+    /// A camera at `node` (world transform `world`): the first usable perspective one is the
+    /// model's; the others are counted, and orthographic ones named, for the warning.
+    fn camera(&mut self, node: &::gltf::Node, camera: &::gltf::Camera, world: &Transform) {
+        match camera.projection() {
+            ::gltf::camera::Projection::Perspective(_) if self.camera.is_some() => {
+                self.extra_cameras += 1;
+            }
+            ::gltf::camera::Projection::Perspective(p) => {
+                let eye = world.affine.transform_point3(Vec3::ZERO);
+                let forward = world
+                    .affine
+                    .transform_vector3(Vec3::NEG_Z)
+                    .normalize_or_zero();
+                let up = world.affine.transform_vector3(Vec3::Y).normalize_or_zero();
+                let vfov_deg = p.yfov().to_degrees();
+                if eye.is_finite() && forward != Vec3::ZERO && check_vfov(vfov_deg).is_ok() {
+                    self.camera = Some(ModelCamera {
+                        eye,
+                        forward,
+                        up,
+                        vfov_deg,
+                        aspect: p.aspect_ratio(),
+                    });
+                } else {
+                    self.extra_cameras += 1;
+                }
+            }
+            ::gltf::camera::Projection::Orthographic(_) => {
+                let name = named("camera", camera.index(), camera.name());
+                self.orthographic
+                    .push(format!("{name} (node {})", node.index()));
+            }
+        }
+    }
+
     /// A KHR_lights_punctual light at `node` (world transform `world`): glTF lights shine
     /// down the node's local -Z; candela (point, spot) and lux (directional) become W/sr and
     /// W/m^2 by dividing by [`LUMENS_PER_WATT`], times the light's colour.
@@ -776,35 +853,13 @@ impl Loader<'_> {
         use ::gltf::khr_lights_punctual::Kind;
         let name = named("light", light.index(), light.name());
         let fail = |message: String| LoadError::Gltf {
-            at: Location::file(self.path).with_key(format!(
+            at: Location::file(self.file.path).with_key(format!(
                 "extensions.KHR_lights_punctual.lights[{}]",
                 light.index()
             )),
             message: format!("{name}: {message}"),
         };
-        let color = Vec3::from(light.color());
-        if !(color.is_finite() && color.min_element() >= 0.0) {
-            return Err(fail(format!(
-                "color {} must be finite and >= 0",
-                short_vec(color)
-            )));
-        }
-        let intensity = light.intensity();
-        if !(intensity.is_finite() && intensity >= 0.0) {
-            return Err(fail(format!(
-                "intensity {} must be finite and >= 0",
-                short_number(intensity)
-            )));
-        }
-        let power = color * (intensity / LUMENS_PER_WATT);
-        if power.max_element() > MAX_LIGHT_VALUE {
-            return Err(fail(format!(
-                "intensity {} times color is {} W/sr or W/m^2 after dividing by {LUMENS_PER_WATT} \
-                 lm/W, more than the limit of 1e12",
-                short_number(intensity),
-                short_vec(power)
-            )));
-        }
+        let power = light_power(light).map_err(fail)?;
         if let Some(range) = light.range() {
             self.ignored.push(format!(
                 "{name} range {} (dofray lights reach every distance, falling off as 1/d^2)",
@@ -860,6 +915,8 @@ impl Loader<'_> {
         Ok(())
     }
 
+    /// One triangle primitive as a mesh in world space (points and lines have no surface and
+    /// are skipped; so is a primitive without triangles).
     fn primitive(
         &mut self,
         m: &::gltf::Mesh,
@@ -871,82 +928,132 @@ impl Loader<'_> {
             mode,
             Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
         ) {
-            return Ok(()); // points and lines have no surface
+            return Ok(());
         }
         let what = format!("mesh {} primitive {}", m.index(), prim.index());
-        let positions = prim
-            .get(&::gltf::Semantic::Positions)
-            .ok_or_else(|| gltf_error(self.path, format!("{what}: no POSITION attribute")))?;
-        let (path, buffers) = (self.path, &self.buffers);
-        check_accessor(
-            path,
-            buffers,
-            &positions,
-            "POSITION",
-            Dimensions::Vec3,
-            &[DataType::F32],
-        )?;
-        let normals = prim.get(&::gltf::Semantic::Normals);
-        if let Some(n) = &normals {
-            check_accessor(
-                path,
-                buffers,
-                n,
-                "NORMAL",
-                Dimensions::Vec3,
-                &[DataType::F32],
-            )?;
-        }
-        if let Some(i) = prim.indices() {
-            check_accessor(
-                path,
-                buffers,
-                &i,
-                "indices",
-                Dimensions::Scalar,
-                &[DataType::U8, DataType::U16, DataType::U32],
-            )?;
+        let attributes = self.check_attributes(prim, &what)?;
+        let mut buffers = self.read_vertices(prim, &attributes, world);
+        buffers.triangles = self.read_triangles(prim, mode, buffers.positions.len());
+        keep_winding(&mut buffers.triangles, world);
+        if buffers.triangles.is_empty() || buffers.positions.is_empty() {
+            return Ok(());
         }
         let material = prim.material();
-        let uv_set = uv_set(&material);
+        let material = match material.index() {
+            Some(i) => Some(self.material(&material, i)?),
+            None => None,
+        };
+        // Normal-mapped materials need tangents, which need texture coordinates.
+        let normal_mapped = material.is_some_and(|i| self.materials[i].1.maps.normal.is_some());
+        let b = &buffers;
+        let tangents = match &b.uvs {
+            Some(uv) if normal_mapped => {
+                let given = self.read_tangents(prim, world, b.positions.len())?;
+                Some(given.unwrap_or_else(|| {
+                    compute_tangents(&b.positions, &b.triangles, b.normals.as_deref(), uv)
+                }))
+            }
+            _ => None,
+        };
+        buffers.tangents = tangents;
+        let mesh = self.file.mesh(&what, buffers)?;
+        self.meshes.push(ModelMesh { mesh, material });
+        Ok(())
+    }
+
+    /// Checks that reading `accessor` cannot go out of its buffer or hit a type the reader
+    /// does not expect ([`check_accessor`]).
+    fn check(
+        &self,
+        accessor: &::gltf::Accessor,
+        what: &str,
+        dims: Dimensions,
+        types: &[DataType],
+    ) -> Result<(), LoadError> {
+        check_accessor(self.file.path, &self.buffers, accessor, what, dims, types)
+    }
+
+    /// Checks the accessors a primitive is read from, before any is read.
+    fn check_attributes(
+        &self,
+        prim: &::gltf::Primitive,
+        what: &str,
+    ) -> Result<Attributes, LoadError> {
+        let positions = prim
+            .get(&::gltf::Semantic::Positions)
+            .ok_or_else(|| gltf_error(self.file.path, format!("{what}: no POSITION attribute")))?;
+        self.check(&positions, "POSITION", Dimensions::Vec3, &[DataType::F32])?;
+        let normals = prim.get(&::gltf::Semantic::Normals);
+        if let Some(n) = &normals {
+            self.check(n, "NORMAL", Dimensions::Vec3, &[DataType::F32])?;
+        }
+        if let Some(i) = prim.indices() {
+            let types = [DataType::U8, DataType::U16, DataType::U32];
+            self.check(&i, "indices", Dimensions::Scalar, &types)?;
+        }
+        let uv_set = uv_set(&prim.material());
         let uvs = prim.get(&::gltf::Semantic::TexCoords(uv_set));
         if let Some(t) = &uvs {
-            check_accessor(
-                path,
-                buffers,
-                t,
-                "TEXCOORD",
-                Dimensions::Vec2,
-                &[DataType::F32, DataType::U8, DataType::U16],
-            )?;
+            let types = [DataType::F32, DataType::U8, DataType::U16];
+            self.check(t, "TEXCOORD", Dimensions::Vec2, &types)?;
         }
+        Ok(Attributes {
+            count: positions.count(),
+            normals: normals.is_some(),
+            uv_set: uvs.map(|_| uv_set),
+        })
+    }
 
+    /// Positions, normals and texture coordinates in world space (no triangles yet); normals
+    /// and texture coordinates only when there is one for every position.
+    fn read_vertices(
+        &self,
+        prim: &::gltf::Primitive,
+        attributes: &Attributes,
+        world: &Transform,
+    ) -> MeshBuffers {
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(Vec::as_slice));
-        let count = positions.count();
-        let mut p = Vec::with_capacity(count + 1);
+        let mut p = Vec::with_capacity(attributes.count + 1);
         if let Some(it) = reader.read_positions() {
             p.extend(it.map(|v| world.point(v)));
         }
-        let n: Option<Vec<[f32; 3]>> = normals
-            .is_some()
+        let n: Option<Vec<[f32; 3]>> = attributes
+            .normals
             .then(|| reader.read_normals())
             .flatten()
             .map(|it| it.map(|v| world.normal(v)).collect())
             .filter(|n: &Vec<[f32; 3]>| n.len() == p.len());
         // glTF's v runs down the image; ours runs up.
-        let uv: Option<Vec<[f32; 2]>> = uvs
-            .is_some()
-            .then(|| reader.read_tex_coords(uv_set))
-            .flatten()
+        let uv: Option<Vec<[f32; 2]>> = attributes
+            .uv_set
+            .and_then(|set| reader.read_tex_coords(set))
             .map(|it| it.into_f32().map(|[u, v]| [u, 1.0 - v]).collect())
             .filter(|t: &Vec<[f32; 2]>| t.len() == p.len());
+        MeshBuffers {
+            positions: p,
+            triangles: Vec::new(),
+            normals: n,
+            uvs: uv,
+            tangents: None,
+        }
+    }
+
+    /// The primitive's triangles, from its indices or else its vertex order; strips and fans
+    /// unrolled (every other strip triangle flipped to keep the winding).
+    fn read_triangles(
+        &self,
+        prim: &::gltf::Primitive,
+        mode: Mode,
+        vertices: usize,
+    ) -> Vec<[u32; 3]> {
+        let reader = prim.reader(|b| self.buffers.get(b.index()).map(Vec::as_slice));
         let indices = prim
             .indices()
             .and_then(|_| reader.read_indices())
             .map(|r| r.into_u32());
-        let mut tris: Vec<[u32; 3]> = if mode == Mode::Triangles {
+        if mode == Mode::Triangles {
             // Straight into triangles (one spare slot for TriangleMesh's padding).
-            let count = prim.indices().map_or(p.len(), |a| a.count()) / 3;
+            let count = prim.indices().map_or(vertices, |a| a.count()) / 3;
             let mut t = Vec::with_capacity(count + 1);
             match indices {
                 Some(mut it) => {
@@ -956,89 +1063,62 @@ impl Loader<'_> {
                 }
                 None => t.extend((0..count as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2])),
             }
-            t
-        } else {
-            let idx: Vec<u32> = match indices {
-                Some(it) => it.collect(),
-                None => (0..p.len() as u32).collect(),
-            };
-            if mode == Mode::TriangleStrip {
-                idx.windows(3)
-                    .enumerate()
-                    .map(|(i, w)| {
-                        if i % 2 == 0 {
-                            [w[0], w[1], w[2]]
-                        } else {
-                            [w[1], w[0], w[2]]
-                        }
-                    })
-                    .collect()
-            } else {
-                (2..idx.len())
-                    .map(|i| [idx[0], idx[i - 1], idx[i]])
-                    .collect()
-            }
-        };
-        if world.mirrors {
-            for t in &mut tris {
-                t.swap(1, 2);
-            }
+            return t;
         }
-        if tris.is_empty() || p.is_empty() {
-            return Ok(());
-        }
-        let material = match material.index() {
-            Some(i) => Some(self.material(&material, i)?),
-            None => None,
+        let idx: Vec<u32> = match indices {
+            Some(it) => it.collect(),
+            None => (0..vertices as u32).collect(),
         };
-        // Normal-mapped materials need tangents: TANGENT when the primitive has it (w is the
-        // bitangent sign, flipped with the winding by a mirroring transform), else computed.
-        let normal_mapped = material.is_some_and(|i| self.materials[i].1.maps.normal.is_some());
-        let tangents = match &uv {
-            Some(uv) if normal_mapped => {
-                let given = match prim.get(&::gltf::Semantic::Tangents) {
-                    Some(t) => {
-                        check_accessor(
-                            self.path,
-                            &self.buffers,
-                            &t,
-                            "TANGENT",
-                            Dimensions::Vec4,
-                            &[DataType::F32],
-                        )?;
-                        let flip = if world.mirrors { -1.0 } else { 1.0 };
-                        prim.reader(|b| self.buffers.get(b.index()).map(Vec::as_slice))
-                            .read_tangents()
-                            .map(|it| {
-                                it.map(|[x, y, z, w]| {
-                                    let v = world.affine.transform_vector3(Vec3::new(x, y, z));
-                                    [v.x, v.y, v.z, w * flip]
-                                })
-                                .collect::<Vec<_>>()
-                            })
-                            .filter(|t| t.len() == p.len())
+        if mode == Mode::TriangleStrip {
+            idx.windows(3)
+                .enumerate()
+                .map(|(i, w)| {
+                    if i % 2 == 0 {
+                        [w[0], w[1], w[2]]
+                    } else {
+                        [w[1], w[0], w[2]]
                     }
-                    None => None,
-                };
-                Some(given.unwrap_or_else(|| compute_tangents(&p, &tris, n.as_deref(), uv)))
-            }
-            _ => None,
-        };
-        let mut mesh = mesh(self.path, &what, p, tris, n, uv)?;
-        if let Some(t) = tangents {
-            mesh = mesh.with_tangents(t).map_err(|e| LoadError::Geometry {
-                at: Location::file(self.path),
-                message: format!("{what}: {e}"),
-            })?;
+                })
+                .collect()
+        } else {
+            (2..idx.len())
+                .map(|i| [idx[0], idx[i - 1], idx[i]])
+                .collect()
         }
-        self.meshes.push(ModelMesh { mesh, material });
-        Ok(())
     }
 
+    /// The primitive's TANGENT attribute in world space, when it has one for every vertex: w
+    /// is the bitangent sign, flipped with the winding by a mirroring transform.
+    fn read_tangents(
+        &self,
+        prim: &::gltf::Primitive,
+        world: &Transform,
+        vertices: usize,
+    ) -> Result<Option<Vec<[f32; 4]>>, LoadError> {
+        let Some(t) = prim.get(&::gltf::Semantic::Tangents) else {
+            return Ok(None);
+        };
+        self.check(&t, "TANGENT", Dimensions::Vec4, &[DataType::F32])?;
+        let flip = if world.mirrors { -1.0 } else { 1.0 };
+        Ok(prim
+            .reader(|b| self.buffers.get(b.index()).map(Vec::as_slice))
+            .read_tangents()
+            .map(|it| {
+                it.map(|[x, y, z, w]| {
+                    let v = world.affine.transform_vector3(Vec3::new(x, y, z));
+                    [v.x, v.y, v.z, w * flip]
+                })
+                .collect::<Vec<_>>()
+            })
+            .filter(|t| t.len() == vertices))
+    }
+
+    /// Our index of glTF material `index`, converted on first use.
     fn material(&mut self, m: &::gltf::Material, index: usize) -> Result<usize, LoadError> {
         if let Some(&i) = self.material_map.get(&index) {
             return Ok(i);
         }
+        let at = Location::file(self.file.path).with_key(format!("materials[{index}]"));
         let pbr = m.pbr_metallic_roughness();
         let [r, g, b, a] = pbr.base_color_factor();
         let base = Vec3::new(r, g, b);
@@ -1052,127 +1132,35 @@ impl Loader<'_> {
             Some(info) => Some(self.texture_image(&info.texture(), true)?),
             None => None,
         };
-        let base_colour = match &base_image {
-            Some(image) => Texture::Image {
-                image: image.clone(),
-                tint: base,
-            },
-            None => Texture::Constant(base),
-        };
-        let metallic = pbr.metallic_factor();
-        let metallic = if metallic.is_finite() {
-            metallic.clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let roughness = pbr.roughness_factor();
-        let roughness = if roughness.is_finite() {
-            roughness.clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
+        let metallic = unit_factor(pbr.metallic_factor(), 0.0);
+        let roughness = unit_factor(pbr.roughness_factor(), 1.0);
         // Constant metalness and roughness: the surface at the factors, the base colour's
         // texture (if any) tinted by the dimmed colour.
         let surface = pbr_params(base, metallic, roughness);
-        let diffuse = match &base_image {
-            Some(image) => Texture::Image {
-                image: image.clone(),
-                tint: surface.albedo,
-            },
-            None => Texture::Constant(surface.albedo),
-        };
         // A metallic-roughness texture on the mesh's texture coordinates makes metalness and
         // roughness vary per hit; one on another set is ignored (the factors apply).
         let metal_rough = match pbr.metallic_roughness_texture() {
             Some(info) if info.tex_coord() == uv => Some(MetalRough {
-                base: base_colour,
+                base: textured(&base_image, base),
                 metallic,
                 roughness,
                 texture: self.texture_image(&info.texture(), false)?,
             }),
             _ => None,
         };
-        // Alpha: baseColorFactor's alpha times the base-colour texture's alpha channel, for
-        // MASK (holes below alphaCutoff, default 0.5) and BLEND (stochastic transparency).
-        // A material whose alpha cannot fall below what it needs stays opaque (no filter).
-        let factor = if a.is_finite() {
-            a.clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
-        let mode = match m.alpha_mode() {
-            ::gltf::material::AlphaMode::Opaque => None,
-            ::gltf::material::AlphaMode::Mask => {
-                let cutoff = m.alpha_cutoff().unwrap_or(0.5);
-                if !(cutoff.is_finite() && cutoff >= 0.0) {
-                    return Err(LoadError::Gltf {
-                        at: Location::file(self.path).with_key(format!("materials[{index}]")),
-                        message: format!(
-                            "alphaCutoff {} is out of range (expected a number >= 0)",
-                            short_number(cutoff)
-                        ),
-                    });
-                }
-                Some(AlphaMode::Mask { cutoff })
-            }
-            ::gltf::material::AlphaMode::Blend => Some(AlphaMode::Blend),
-        };
-        let alpha = mode.and_then(|mode| Alpha::new(factor, base_image.clone(), mode));
-        // Normal map: tangent space, on the mesh's texture coordinates (else ignored).
-        let normal = match m.normal_texture() {
-            Some(info) if info.tex_coord() == uv => {
-                let scale = info.scale();
-                if !(scale.is_finite() && scale.abs() <= MAX_MATERIAL_VALUE) {
-                    return Err(LoadError::Gltf {
-                        at: Location::file(self.path).with_key(format!("materials[{index}]")),
-                        message: format!(
-                            "normalTexture scale {} is out of range (expected a finite number \
-                             of magnitude at most 1e6)",
-                            short_number(scale)
-                        ),
-                    });
-                }
-                Some(NormalMap {
-                    image: self.texture_image(&info.texture(), false)?,
-                    scale,
-                })
-            }
-            _ => None,
-        };
         let maps = MaterialMaps {
-            alpha,
+            alpha: alpha(m, &at, a, &base_image)?,
             metal_rough,
-            normal,
+            normal: self.normal_map(m, &at, uv)?,
         };
         let name = m
             .name()
             .map_or_else(|| format!("material {index}"), str::to_string);
-        // Emission: emissiveFactor times KHR_materials_emissive_strength, times
-        // emissiveTexture when it uses the texture coordinates the mesh is loaded with.
-        let strength = m.emissive_strength().unwrap_or(1.0);
-        let emission = Vec3::from(m.emissive_factor()) * strength;
-        if !(emission.is_finite() && emission.max_element() <= MAX_MATERIAL_VALUE) {
-            return Err(LoadError::Gltf {
-                at: Location::file(self.path).with_key(format!("materials[{index}]")),
-                message: format!(
-                    "emission {} (emissiveFactor times emissiveStrength {}) is out of range: \
-                     each component must be finite and at most 1e6",
-                    short_vec(emission),
-                    short_number(strength)
-                ),
-            });
-        }
-        let emission = emission.max(Vec3::ZERO);
-        let emission_texture = match m.emissive_texture() {
-            Some(info) if emission != Vec3::ZERO && info.tex_coord() == uv_set(m) => {
-                Some(self.texture_image(&info.texture(), true)?)
-            }
-            _ => None,
-        };
+        let (emission, emission_texture) = self.emission(m, &at, uv)?;
         self.materials.push((
             name,
             Material {
-                diffuse,
+                diffuse: textured(&base_image, surface.albedo),
                 specular: surface.specular,
                 shininess: surface.shininess,
                 mirror: surface.mirror,
@@ -1186,6 +1174,64 @@ impl Loader<'_> {
         Ok(i)
     }
 
+    /// The material's normal map: tangent space, on the mesh's texture coordinates `uv` (one
+    /// on another set is ignored).
+    fn normal_map(
+        &mut self,
+        m: &::gltf::Material,
+        at: &Location,
+        uv: u32,
+    ) -> Result<Option<NormalMap>, LoadError> {
+        let Some(info) = m.normal_texture().filter(|info| info.tex_coord() == uv) else {
+            return Ok(None);
+        };
+        let scale = info.scale();
+        if !(scale.is_finite() && scale.abs() <= MAX_MATERIAL_VALUE) {
+            return Err(LoadError::Gltf {
+                at: at.clone(),
+                message: format!(
+                    "normalTexture scale {} is out of range (expected a finite number of \
+                     magnitude at most 1e6)",
+                    short_number(scale)
+                ),
+            });
+        }
+        Ok(Some(NormalMap {
+            image: self.texture_image(&info.texture(), false)?,
+            scale,
+        }))
+    }
+
+    /// The material's emission: emissiveFactor times KHR_materials_emissive_strength, with
+    /// emissiveTexture when it uses the mesh's texture coordinates `uv` (and there is any).
+    fn emission(
+        &mut self,
+        m: &::gltf::Material,
+        at: &Location,
+        uv: u32,
+    ) -> Result<(Vec3, Option<Arc<ImageTexture>>), LoadError> {
+        let strength = m.emissive_strength().unwrap_or(1.0);
+        let emission = Vec3::from(m.emissive_factor()) * strength;
+        if !(emission.is_finite() && emission.max_element() <= MAX_MATERIAL_VALUE) {
+            return Err(LoadError::Gltf {
+                at: at.clone(),
+                message: format!(
+                    "emission {} (emissiveFactor times emissiveStrength {}) is out of range: \
+                     each component must be finite and at most 1e6",
+                    short_vec(emission),
+                    short_number(strength)
+                ),
+            });
+        }
+        let emission = emission.max(Vec3::ZERO);
+        let texture = match m.emissive_texture() {
+            Some(info) if emission != Vec3::ZERO && info.tex_coord() == uv => {
+                Some(self.texture_image(&info.texture(), true)?)
+            }
+            _ => None,
+        };
+        Ok((emission, texture))
+    }
     /// The image of a texture, with its sampler's wrap mode (wrapS clamp-to-edge gives clamp,
     /// else repeat).
     fn texture_image(
@@ -1200,6 +1246,8 @@ impl Loader<'_> {
         self.image(&texture.source(), wrap, srgb)
     }
 
+    /// A glTF image decoded once per (image, wrap, sRGB): from a buffer view, a data URI, or
+    /// a file shared through the texture cache.
     fn image(
         &mut self,
         image: &::gltf::Image,
@@ -1211,42 +1259,134 @@ impl Loader<'_> {
             return Ok(t.clone());
         }
         let what = format!("image {}", image.index());
+        let path = self.file.path;
         let texture = match image.source() {
             ::gltf::image::Source::View { view, .. } => {
                 let bytes = self
                     .buffers
                     .get(view.buffer().index())
                     .and_then(|b| b.get(view.offset()..view.offset().checked_add(view.length())?))
-                    .ok_or_else(|| {
-                        gltf_error(self.path, format!("{what}: buffer view out of range"))
-                    })?;
-                let t = decode(bytes, srgb, wrap, self.options.max_texture_bytes)
-                    .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
-                Arc::new(t)
+                    .ok_or_else(|| gltf_error(path, format!("{what}: buffer view out of range")))?;
+                self.decode(bytes, srgb, wrap, &what)?
             }
             ::gltf::image::Source::Uri { uri, .. }
                 if !uri.starts_with("data:") && !uri.contains(':') =>
             {
-                let decoded = String::from_utf8(percent_decode(uri)).map_err(|_| {
-                    gltf_error(self.path, format!("{what}: URI {uri:?} is not UTF-8"))
-                })?;
-                let at = Location::file(self.path);
-                let file =
-                    input::reference(&self.base, Path::new(""), &decoded, &self.options, &at)?;
-                self.textures
-                    .file(&file, srgb, wrap)
-                    .map_err(|e| e.referenced(Location::file(self.path), "texture"))?
+                let name = uri_file_name(path, uri, &what)?;
+                let (dir, at) = (Path::new(""), Location::file(path));
+                self.file.texture((dir, &name), srgb, wrap, at)?
             }
             ::gltf::image::Source::Uri { uri, .. } => {
-                let bytes = read_uri(self.path, &self.base, uri, "image", &self.options)?;
-                let t = decode(&bytes, srgb, wrap, self.options.max_texture_bytes)
-                    .map_err(|m| gltf_error(self.path, format!("{what}: {m}")))?;
-                Arc::new(t)
+                let bytes = read_uri(&self.file, uri, "image")?;
+                self.decode(&bytes, srgb, wrap, &what)?
             }
         };
         self.images.insert(key, texture.clone());
         Ok(texture)
     }
+
+    /// Decodes an image held in the file (a buffer view or a data URI).
+    fn decode(
+        &self,
+        bytes: &[u8],
+        srgb: bool,
+        wrap: Wrap,
+        what: &str,
+    ) -> Result<Arc<ImageTexture>, LoadError> {
+        let t = decode(bytes, srgb, wrap, self.file.options().max_texture_bytes)
+            .map_err(|m| gltf_error(self.file.path, format!("{what}: {m}")))?;
+        Ok(Arc::new(t))
+    }
+}
+
+/// A light's colour times its intensity in dofray's radiometric units (W/sr for point and
+/// spot lights, W/m^2 for directional ones), or why the file's values are refused.
+fn light_power(light: &::gltf::khr_lights_punctual::Light) -> Result<Vec3, String> {
+    let color = Vec3::from(light.color());
+    if !(color.is_finite() && color.min_element() >= 0.0) {
+        return Err(format!(
+            "color {} must be finite and >= 0",
+            short_vec(color)
+        ));
+    }
+    let intensity = light.intensity();
+    if !(intensity.is_finite() && intensity >= 0.0) {
+        return Err(format!(
+            "intensity {} must be finite and >= 0",
+            short_number(intensity)
+        ));
+    }
+    let power = color * (intensity / LUMENS_PER_WATT);
+    if power.max_element() > MAX_LIGHT_VALUE {
+        return Err(format!(
+            "intensity {} times color is {} W/sr or W/m^2 after dividing by {LUMENS_PER_WATT} \
+             lm/W, more than the limit of 1e12",
+            short_number(intensity),
+            short_vec(power)
+        ));
+    }
+    Ok(power)
+}
+
+/// What a triangle primitive's vertices are read from, once its accessors are checked.
+struct Attributes {
+    /// Vertices (POSITION elements).
+    count: usize,
+    /// It has normals.
+    normals: bool,
+    /// The texture coordinate set it is loaded with, when it has that set.
+    uv_set: Option<u32>,
+}
+
+/// A factor that must lie in [0, 1]: clamped, or `default` when it is not a number.
+fn unit_factor(v: f32, default: f32) -> f32 {
+    if v.is_finite() {
+        v.clamp(0.0, 1.0)
+    } else {
+        default
+    }
+}
+
+/// `image` tinted by `tint`, or the plain colour when there is no image.
+fn textured(image: &Option<Arc<ImageTexture>>, tint: Vec3) -> Texture {
+    match image {
+        Some(image) => Texture::Image {
+            image: image.clone(),
+            tint,
+        },
+        None => Texture::Constant(tint),
+    }
+}
+
+/// The material's alpha: baseColorFactor's alpha `a` times the base-colour texture's alpha
+/// channel, for MASK (holes below alphaCutoff, default 0.5) and BLEND (stochastic
+/// transparency). A material whose alpha cannot fall below what it needs stays opaque (no
+/// filter).
+fn alpha(
+    m: &::gltf::Material,
+    at: &Location,
+    a: f32,
+    base_image: &Option<Arc<ImageTexture>>,
+) -> Result<Option<Alpha>, LoadError> {
+    let factor = unit_factor(a, 1.0);
+    let mode = match m.alpha_mode() {
+        ::gltf::material::AlphaMode::Opaque => None,
+        ::gltf::material::AlphaMode::Mask => {
+            let cutoff = m.alpha_cutoff().unwrap_or(0.5);
+            if !(cutoff.is_finite() && cutoff >= 0.0) {
+                return Err(LoadError::Gltf {
+                    at: at.clone(),
+                    message: format!(
+                        "alphaCutoff {} is out of range (expected a number >= 0)",
+                        short_number(cutoff)
+                    ),
+                });
+            }
+            Some(AlphaMode::Mask { cutoff })
+        }
+        ::gltf::material::AlphaMode::Blend => Some(AlphaMode::Blend),
+    };
+    Ok(mode.and_then(|mode| Alpha::new(factor, base_image.clone(), mode)))
 }
 
 /// Per-vertex tangents from positions and texture coordinates (v up, as loaded): each

@@ -7,6 +7,7 @@ pub mod error;
 pub mod file;
 pub mod gltf;
 pub mod input;
+mod mesh_input;
 pub mod model;
 pub mod obj;
 pub mod texture;

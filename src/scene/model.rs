@@ -145,29 +145,6 @@ pub fn default_material() -> Material {
     Material::diffuse(Vec3::splat(0.8))
 }
 
-/// Builds a mesh from loader buffers, naming the file in validation errors.
-pub fn mesh(
-    path: &Path,
-    what: &str,
-    positions: Vec<[f32; 3]>,
-    indices: Vec<[u32; 3]>,
-    normals: Option<Vec<[f32; 3]>>,
-    uvs: Option<Vec<[f32; 2]>>,
-) -> Result<TriangleMesh, LoadError> {
-    let fail = |e: crate::embree::EmbreeError| LoadError::Geometry {
-        at: Location::file(path),
-        message: format!("{what}: {e}"),
-    };
-    let mut m = TriangleMesh::new(positions, indices).map_err(fail)?;
-    if let Some(n) = normals {
-        m = m.with_normals(n).map_err(fail)?;
-    }
-    if let Some(uv) = uvs {
-        m = m.with_uvs(uv).map_err(fail)?;
-    }
-    Ok(m)
-}
-
 /// Bounds of one object. They are infinite when the object reaches beyond the f32 range
 /// (a sphere whose centre plus radius overflows).
 pub fn object_bounds(o: &Object) -> (Vec3, Vec3) {
@@ -276,26 +253,100 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
             path: path.to_path_buf(),
         });
     }
-    let mut materials: Vec<Material> = model.materials.into_iter().map(|(_, m)| m).collect();
+    let (materials, objects) = objects(model.meshes, model.materials);
+    let (lo, hi) = bounds(&objects).ok_or_else(|| LoadError::Empty {
+        path: path.to_path_buf(),
+    })?;
+    check_viewable(
+        path,
+        model.camera.as_ref(),
+        &model.orthographic_camera,
+        lo,
+        hi,
+    )?;
+    let center = (lo + hi) * 0.5;
+    let diagonal = (hi - lo).length().max(1e-3);
+    let View {
+        eye,
+        look_at,
+        up,
+        vfov_deg,
+        size: (width, height),
+    } = view(model.camera, lo, hi);
+    // Focus on the bounds' centre when it is in front of the camera, else on the look-at point.
+    let focus = if (center - eye).dot(look_at - eye) > 0.0 {
+        center
+    } else {
+        look_at
+    };
+    let name = path
+        .file_stem()
+        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+    Ok(SceneDesc {
+        name,
+        camera: CameraSpec {
+            eye,
+            look_at,
+            up,
+            vfov_deg,
+            width,
+            height,
+            lens: LensSpec::Aperture {
+                radius: MODEL_APERTURE_FRACTION * diagonal,
+            },
+            focus: Focus::Point(focus),
+            aperture: ApertureShape::default(),
+        },
+        materials,
+        objects,
+        // The file's own lights replace the key light.
+        lights: if model.lights.is_empty() {
+            vec![default_light((look_at - eye).normalize_or(Vec3::NEG_Z))]
+        } else {
+            model.lights
+        },
+        ambient: Vec3::splat(0.15),
+        background: default_background(),
+        warnings: model.warnings,
+        ..Default::default()
+    })
+}
+
+/// The model's meshes as scene objects, and its materials with the default material last
+/// (the one meshes that name none use).
+fn objects(
+    meshes: Vec<ModelMesh>,
+    materials: Vec<(String, Material)>,
+) -> (Vec<Material>, Vec<Object>) {
+    let mut materials: Vec<Material> = materials.into_iter().map(|(_, m)| m).collect();
     let default = materials.len();
     materials.push(default_material());
-    let objects: Vec<Object> = model
-        .meshes
+    let objects = meshes
         .into_iter()
         .map(|m| Object::Mesh {
             mesh: m.mesh,
             materials: MeshMaterials::One(m.material.unwrap_or(default)),
         })
         .collect();
-    let (lo, hi) = bounds(&objects).ok_or_else(|| LoadError::Empty {
-        path: path.to_path_buf(),
-    })?;
+    (materials, objects)
+}
+
+/// Refuses a model no camera can be made for: one whose only camera is orthographic, and
+/// bounds `(lo, hi)` too large for f32 to frame (without a camera) or to size the aperture and
+/// focus (with one).
+fn check_viewable(
+    path: &Path,
+    camera: Option<&ModelCamera>,
+    orthographic: &Option<String>,
+    lo: Vec3,
+    hi: Vec3,
+) -> Result<(), LoadError> {
     let too_large = |message: String| LoadError::Geometry {
         at: Location::file(path),
         message: format!("{message}; scale the model down (a scene file can, with `scale`)"),
     };
-    if model.camera.is_none()
-        && let Some(ortho) = &model.orthographic_camera
+    if camera.is_none()
+        && let Some(ortho) = orthographic
     {
         return Err(LoadError::Gltf {
             at: Location::file(path),
@@ -306,7 +357,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
             ),
         });
     }
-    match model.camera {
+    match camera {
         None => {
             frame_checked(
                 lo,
@@ -316,7 +367,6 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
             )
             .map_err(too_large)?;
         }
-        // The aperture and focus come from the bounds' size and centre.
         Some(_) if !(hi - lo).length().is_finite() => {
             return Err(too_large(format!(
                 "the scene bounds are too large: they span {} to {}, beyond the range of \
@@ -327,38 +377,22 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         }
         Some(_) => {}
     }
-    let camera = model_camera(model.camera, lo, hi);
-    // The file's own lights replace the key light.
-    let lights = if model.lights.is_empty() {
-        vec![default_light(
-            (camera.look_at - camera.eye).normalize_or(Vec3::NEG_Z),
-        )]
-    } else {
-        model.lights
-    };
-    let name = path
-        .file_stem()
-        .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
-    Ok(SceneDesc {
-        name,
-        camera,
-        materials,
-        objects,
-        lights,
-        ambient: Vec3::splat(0.15),
-        background: default_background(),
-        warnings: model.warnings,
-        ..Default::default()
-    })
+    Ok(())
 }
 
-/// The camera of a scene around a model with bounds (lo, hi): the file's camera (its aspect
-/// sets the height), else a view framing the bounds; a small aperture focused on the bounds'
-/// centre.
-fn model_camera(camera: Option<ModelCamera>, lo: Vec3, hi: Vec3) -> CameraSpec {
-    let center = (lo + hi) * 0.5;
-    let diagonal = (hi - lo).length().max(1e-3);
+/// Where a bare model is seen from, and the image's size (width, height).
+struct View {
+    eye: Vec3,
+    look_at: Vec3,
+    up: Vec3,
+    vfov_deg: f32,
+    size: (u32, u32),
+}
 
+/// The model's own camera looking at the depth of the bounds' centre (with its aspect, when
+/// usable), else the default view framing bounds `(lo, hi)`.
+fn view(camera: Option<ModelCamera>, lo: Vec3, hi: Vec3) -> View {
+    let center = (lo + hi) * 0.5;
     let (mut width, mut height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
     let (eye, look_at, up, vfov_deg) = match camera {
         Some(c) => {
@@ -367,6 +401,7 @@ fn model_camera(camera: Option<ModelCamera>, lo: Vec3, hi: Vec3) -> CameraSpec {
                 height = ((DEFAULT_WIDTH as f32 / aspect).round() as u32).max(1);
             }
             let along = (center - c.eye).dot(c.forward);
+            // An up along the view direction would give no image plane.
             let up = if c.up.cross(c.forward).length_squared() > 1e-6 {
                 c.up
             } else {
@@ -379,27 +414,15 @@ fn model_camera(camera: Option<ModelCamera>, lo: Vec3, hi: Vec3) -> CameraSpec {
             (eye, look_at, Vec3::Y, DEFAULT_VFOV)
         }
     };
-    // Focus on the bounds' centre when it is in front of the camera, else on the look-at point.
-    let focus = if (center - eye).dot(look_at - eye) > 0.0 {
-        center
-    } else {
-        look_at
-    };
     if width == 0 || height == 0 {
         (width, height) = (DEFAULT_WIDTH, DEFAULT_HEIGHT);
     }
-    CameraSpec {
+    View {
         eye,
         look_at,
         up,
         vfov_deg,
-        width,
-        height,
-        lens: LensSpec::Aperture {
-            radius: MODEL_APERTURE_FRACTION * diagonal,
-        },
-        focus: Focus::Point(focus),
-        aperture: ApertureShape::default(),
+        size: (width, height),
     }
 }
 

@@ -7,7 +7,6 @@
 
 use std::cell::{Cell, RefCell};
 use std::io::{BufRead, Read};
-use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
@@ -15,7 +14,8 @@ use glam::Vec3;
 use super::MAX_MATERIAL_VALUE;
 use super::error::{LoadError, Location};
 use super::input::{self, LoadOptions};
-use super::model::{Model, ModelMesh, Transform, mesh, short_vec};
+use super::mesh_input::{MeshBuffers, ModelFile, guarded, keep_winding};
+use super::model::{Model, ModelMesh, Transform, short_vec};
 use super::texture::TextureCache;
 use crate::shade::{Material, Texture, Wrap};
 
@@ -312,16 +312,37 @@ fn describe(e: tobj::LoadError) -> String {
     }
 }
 
-/// Runs a third-party parser, turning a panic inside it into an error.
-fn guarded<T>(path: &Path, f: impl FnOnce() -> T) -> Result<T, LoadError> {
-    catch_unwind(AssertUnwindSafe(f)).map_err(|_| LoadError::Obj {
+/// How tobj is asked to parse: faces as fans of triangles, one index per vertex (positions,
+/// normals and texture coordinates share it, as a mesh needs), points and lines skipped.
+const TOBJ_OPTIONS: tobj::LoadOptions = tobj::LoadOptions {
+    triangulate: true,
+    single_index: true,
+    ignore_points: true,
+    ignore_lines: true,
+};
+
+/// The error of a parser that panicked on the file.
+fn parser_failed(path: &Path) -> LoadError {
+    LoadError::Obj {
         at: Location::file(path),
         message: "malformed file (the OBJ/MTL parser failed on it)".into(),
-    })
+    }
 }
 
 /// A parsed MTL library, or why it failed (with the line of its `mtllib` statement).
 type MtlResult = Result<(Vec<tobj::Material>, PathBuf), (LoadError, usize)>;
+
+/// What parsing an OBJ file gave, before any of it is judged.
+struct Parsed {
+    /// tobj's models, or what it reported.
+    result: tobj::LoadResult,
+    /// What the lexer saw that tobj lets through.
+    found: Findings,
+    /// The line the parser stopped on.
+    line: usize,
+    /// The MTL libraries tobj asked for, in order.
+    libraries: Vec<MtlResult>,
+}
 
 /// Loads an OBJ file (and its MTL libraries and textures), applying `transform`.
 pub fn load(
@@ -329,68 +350,115 @@ pub fn load(
     transform: &Transform,
     textures: &mut TextureCache,
 ) -> Result<Model, LoadError> {
-    let options = *textures.options();
+    let mut file = ModelFile::new(path, textures);
+    let Parsed {
+        result,
+        found,
+        line,
+        libraries,
+    } = parse(&file)?;
+    // A failed material library is reported first (tobj carries on without it).
+    let libraries = loaded_libraries(file.path, libraries)?;
+    // Then the first problem in the file: what tobj reported, and what it lets through.
+    let models = first_problem(&file, result, &found, line)?;
+    let materials = materials(&mut file, libraries)?;
+    let mut meshes = Vec::with_capacity(models.len());
+    for model in models {
+        meshes.extend(model_mesh(&file, model, transform, materials.len())?);
+    }
+    if meshes.is_empty() {
+        return Err(LoadError::Obj {
+            at: Location::file(path),
+            message: "no triangles (expected `v` vertices and `f` faces)".into(),
+        });
+    }
+    Ok(Model {
+        meshes,
+        materials,
+        ..Model::default()
+    })
+}
+
+/// Streams the file through tobj, counting lines and noting what tobj lets through, and
+/// reads the MTL libraries it names as tobj asks for them.
+fn parse(file: &ModelFile) -> Result<Parsed, LoadError> {
     let line = Cell::new(0);
-    let mut input = input::open(path, &options)?;
+    let mut input = file.open()?;
     let mut reader = LineCounter::new(input.reader(), &line);
-    let dir = path.parent().unwrap_or(Path::new("")).to_path_buf();
-    // MTL libraries: tobj asks for them by name; remember which file each material came from
-    // (texture paths are relative to it) and any failure, with its line.
+    // tobj asks for MTL libraries by name and keeps only their materials: keep which file
+    // each came from (texture paths are relative to it) and any failure, with its line.
     let libraries: RefCell<Vec<MtlResult>> = RefCell::new(Vec::new());
-    let tobj_options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let result = guarded(path, || {
-        tobj::load_obj_buf(&mut reader, &tobj_options, |mtl| {
-            let at = Location::line(path, current_line(&line));
-            let loaded = mtl
-                .to_str()
-                .ok_or_else(|| LoadError::Obj {
-                    at: at.clone(),
-                    message: "the MTL file name is not UTF-8".into(),
-                })
-                .and_then(|name| input::reference(&dir, Path::new(""), name, &options, &at))
-                .and_then(|full| load_mtl(&full, &options))
-                .map_err(|e| (e, current_line(&line)));
-            let ret = match &loaded {
-                Ok((mats, _)) => {
-                    let map = mats
-                        .iter()
-                        .enumerate()
-                        .map(|(i, m)| (m.name.clone(), i))
-                        .collect();
-                    Ok((mats.clone(), map))
-                }
-                Err(_) => Err(tobj::LoadError::OpenFileFailed),
-            };
-            libraries.borrow_mut().push(loaded);
-            ret
-        })
-    });
+    let result = guarded(
+        || {
+            tobj::load_obj_buf(&mut reader, &TOBJ_OPTIONS, |mtl| {
+                let loaded = load_library(file, mtl, current_line(&line));
+                let answer = tobj_answer(&loaded);
+                libraries.borrow_mut().push(loaded);
+                answer
+            })
+        },
+        || parser_failed(file.path),
+    );
     let found = reader.scan.finish();
     let line = current_line(&line);
     input.finish()?;
     // tobj's index arithmetic overflows on huge indices (a panic in checked builds): name the
     // face instead.
-    let result = match result {
-        Ok(r) => r,
-        Err(panic) => {
-            return Err(found
-                .suspect_indices()
-                .then(|| find_bad_face(path, &options))
-                .flatten()
-                .map_or(panic, |(line, message)| LoadError::Obj {
-                    at: Location::line(path, line),
-                    message,
-                }));
+    let result = result.map_err(|panic| {
+        found
+            .suspect_indices()
+            .then(|| find_bad_face(file))
+            .flatten()
+            .map_or(panic, |(line, message)| LoadError::Obj {
+                at: Location::line(file.path, line),
+                message,
+            })
+    })?;
+    Ok(Parsed {
+        result,
+        found,
+        line,
+        libraries: libraries.into_inner(),
+    })
+}
+
+/// The MTL library `mtl` that line `line` of the OBJ names, read and parsed.
+fn load_library(file: &ModelFile, mtl: &Path, line: usize) -> MtlResult {
+    let at = Location::line(file.path, line);
+    mtl.to_str()
+        .ok_or_else(|| LoadError::Obj {
+            at: at.clone(),
+            message: "the MTL file name is not UTF-8".into(),
+        })
+        .and_then(|name| file.reference(Path::new(""), name, &at))
+        .and_then(|full| load_mtl(&full, file.options()))
+        .map_err(|e| (e, line))
+}
+
+/// What tobj is told of a library it asked for: its materials by name, or that it failed
+/// (the real error is kept for [`loaded_libraries`]).
+fn tobj_answer(loaded: &MtlResult) -> tobj::MTLLoadResult {
+    match loaded {
+        Ok((mats, _)) => {
+            let map = mats
+                .iter()
+                .enumerate()
+                .map(|(i, m)| (m.name.clone(), i))
+                .collect();
+            Ok((mats.clone(), map))
         }
-    };
-    // A failed material library is reported first (tobj carries on without it).
+        Err(_) => Err(tobj::LoadError::OpenFileFailed),
+    }
+}
+
+/// The libraries with the file each came from, or the first failure, named as the library
+/// referenced from its `mtllib` line (a path outside the model's folder is said as such).
+fn loaded_libraries(
+    path: &Path,
+    libraries: Vec<MtlResult>,
+) -> Result<Vec<(Vec<tobj::Material>, PathBuf)>, LoadError> {
     let mut loaded = Vec::new();
-    for lib in libraries.into_inner() {
+    for lib in libraries {
         match lib {
             Ok(lib) => loaded.push(lib),
             Err((e @ LoadError::OutsidePath { .. }, _)) => return Err(e),
@@ -399,7 +467,17 @@ pub fn load(
             }
         }
     }
-    // Then the first problem in the file: what tobj reported, and what it lets through.
+    Ok(loaded)
+}
+
+/// tobj's models, or the problem on the earliest line among those tobj reported and those it
+/// lets through (a short face it drops, indices it does not check).
+fn first_problem(
+    file: &ModelFile,
+    result: tobj::LoadResult,
+    found: &Findings,
+    line: usize,
+) -> Result<Vec<tobj::Model>, LoadError> {
     let mut problems = Vec::new();
     if let Some((line, corners)) = found.short_face {
         problems.push((
@@ -418,7 +496,7 @@ pub fn load(
             | tobj::LoadError::FaceTexCoordOutOfBounds
             | tobj::LoadError::FaceNormalOutOfBounds),
         ) => {
-            problems.push(find_bad_face(path, &options).unwrap_or_else(|| (line, describe(e))));
+            problems.push(find_bad_face(file).unwrap_or_else(|| (line, describe(e))));
             None
         }
         Err(e) => {
@@ -431,98 +509,102 @@ pub fn load(
                 || (found.face_vn && found.vn_lines == 0)
                 || found.suspect_indices()
             {
-                problems.extend(find_bad_face(path, &options));
+                problems.extend(find_bad_face(file));
             }
             Some(models)
         }
     };
     if let Some((line, message)) = problems.into_iter().min_by_key(|&(line, _)| line) {
         return Err(LoadError::Obj {
-            at: Location::line(path, line),
+            at: Location::line(file.path, line),
             message,
         });
     }
-    let models = models.expect("a failed parse reported a problem");
+    Ok(models.expect("a failed parse reported a problem"))
+}
 
-    // tobj numbers materials across libraries in load order; so do we.
+/// The libraries' materials with their names, numbered across libraries in load order, as
+/// tobj numbers them for the meshes.
+fn materials(
+    file: &mut ModelFile,
+    libraries: Vec<(Vec<tobj::Material>, PathBuf)>,
+) -> Result<Vec<(String, Material)>, LoadError> {
     let mut materials = Vec::new();
-    for (mats, mtl_path) in loaded {
+    for (mats, mtl_path) in libraries {
         // Textures resolve relative to the MTL file, and must stay in the OBJ's folder.
         let mtl_dir = mtl_path.parent().unwrap_or(Path::new(""));
-        let mtl_dir = mtl_dir.strip_prefix(&dir).unwrap_or(mtl_dir).to_path_buf();
+        let mtl_dir = mtl_dir.strip_prefix(&file.folder).unwrap_or(mtl_dir);
         for m in mats {
-            let material = convert_material(&m, &mtl_path, (&dir, &mtl_dir), textures)?;
+            let material = convert_material(file, &m, &mtl_path, mtl_dir)?;
             materials.push((m.name.clone(), material));
         }
     }
+    Ok(materials)
+}
 
-    let mut meshes = Vec::with_capacity(models.len());
-    for model in models {
-        let name = model.name;
-        let tobj::Mesh {
-            positions,
-            normals,
-            texcoords,
-            indices,
-            material_id,
-            ..
-        } = model.mesh;
-        let vertices = positions.len() / 3;
-        let triangles = indices.len() / 3;
-        if vertices == 0 || triangles == 0 {
-            continue;
+/// One tobj model (an OBJ object or group, with one material) as a mesh in world space, or
+/// `None` when no triangle with area is left of it.
+fn model_mesh(
+    file: &ModelFile,
+    model: tobj::Model,
+    transform: &Transform,
+    material_count: usize,
+) -> Result<Option<ModelMesh>, LoadError> {
+    let name = model.name;
+    let tobj::Mesh {
+        positions,
+        normals,
+        texcoords,
+        indices,
+        material_id,
+        ..
+    } = model.mesh;
+    let vertices = positions.len() / 3;
+    let triangles = indices.len() / 3;
+    if vertices == 0 || triangles == 0 {
+        return Ok(None);
+    }
+    // Transformed in tobj's buffers, which are then copied into the mesh's and freed.
+    let mut positions = positions;
+    if !transform.is_identity() {
+        for c in positions.chunks_exact_mut(3) {
+            c.copy_from_slice(&transform.point([c[0], c[1], c[2]]));
         }
-        // Transformed in tobj's buffers, which are then copied into the mesh's and freed.
-        let mut positions = positions;
+    }
+    let positions = into_arrays::<f32, 3>(positions, 1);
+    let mut triangles = into_arrays::<u32, 3>(indices, 1);
+    drop_degenerate_and_repeated(&mut triangles);
+    if triangles.is_empty() {
+        return Ok(None);
+    }
+    keep_winding(&mut triangles, transform);
+    // Only complete per-vertex attributes are kept (some faces may lack them).
+    let normals = (normals.len() == vertices * 3).then(|| {
+        let mut normals = normals;
         if !transform.is_identity() {
-            for c in positions.chunks_exact_mut(3) {
-                c.copy_from_slice(&transform.point([c[0], c[1], c[2]]));
+            for c in normals.chunks_exact_mut(3) {
+                c.copy_from_slice(&transform.normal([c[0], c[1], c[2]]));
             }
         }
-        let p = into_arrays::<f32, 3>(positions, 1);
-        let mut t = into_arrays::<u32, 3>(indices, 1);
-        drop_degenerate_and_repeated(&mut t);
-        if t.is_empty() {
-            continue;
-        }
-        if transform.mirrors {
-            for tri in &mut t {
-                tri.swap(1, 2);
-            }
-        }
-        // Only complete per-vertex attributes are kept (some faces may lack them).
-        let n = (normals.len() == vertices * 3).then(|| {
-            let mut normals = normals;
-            if !transform.is_identity() {
-                for c in normals.chunks_exact_mut(3) {
-                    c.copy_from_slice(&transform.normal([c[0], c[1], c[2]]));
-                }
-            }
-            into_arrays::<f32, 3>(normals, 0)
-        });
-        let uv = (texcoords.len() == vertices * 2).then(|| into_arrays::<f32, 2>(texcoords, 0));
-        let what = if name.is_empty() {
-            "mesh".to_string()
-        } else {
-            format!("object {name:?}")
-        };
-        let mesh = mesh(path, &what, p, t, n, uv)?;
-        meshes.push(ModelMesh {
-            mesh,
-            material: material_id.filter(|&m| m < materials.len()),
-        });
-    }
-    if meshes.is_empty() {
-        return Err(LoadError::Obj {
-            at: Location::file(path),
-            message: "no triangles (expected `v` vertices and `f` faces)".into(),
-        });
-    }
-    Ok(Model {
-        meshes,
-        materials,
-        ..Model::default()
-    })
+        into_arrays::<f32, 3>(normals, 0)
+    });
+    let uvs = (texcoords.len() == vertices * 2).then(|| into_arrays::<f32, 2>(texcoords, 0));
+    let what = if name.is_empty() {
+        "mesh".to_string()
+    } else {
+        format!("object {name:?}")
+    };
+    let buffers = MeshBuffers {
+        positions,
+        triangles,
+        normals,
+        uvs,
+        tangents: None,
+    };
+    Ok(Some(ModelMesh {
+        mesh: file.mesh(&what, buffers)?,
+        material: material_id.filter(|&m| m < material_count),
+    }))
 }
 
 /// A flat buffer (`N` values per element) as one array per element, with room for `spare`
@@ -562,8 +644,8 @@ fn drop_degenerate_and_repeated(t: &mut Vec<[u32; 3]>) {
 
 /// The first face of an OBJ file whose vertex, texture or normal index is out of range, and
 /// what is wrong with it. Indices are 1-based; negative ones count back from the latest element.
-fn find_bad_face(path: &Path, options: &LoadOptions) -> Option<(usize, String)> {
-    let text = input::read(path, options).ok()?;
+fn find_bad_face(file: &ModelFile) -> Option<(usize, String)> {
+    let text = file.read().ok()?;
     let text = String::from_utf8_lossy(&text);
     let totals = text.lines().fold([0usize; 3], |mut t, l| {
         match l.split_whitespace().next() {
@@ -671,7 +753,7 @@ fn load_mtl(
     }
     let line = Cell::new(0);
     let mut reader = LineCounter::new(std::io::Cursor::new(fixed.as_bytes()), &line);
-    let result = guarded(path, || tobj::load_mtl_buf(&mut reader))?;
+    let result = guarded(|| tobj::load_mtl_buf(&mut reader), || parser_failed(path))?;
     match result {
         Ok((mats, _)) => Ok((mats, path.to_path_buf())),
         Err(e) => Err(LoadError::Obj {
@@ -687,22 +769,19 @@ fn color(c: Option<[f32; 3]>, default: Vec3) -> Vec3 {
         .map_or(default, |v| v.max(Vec3::ZERO))
 }
 
-/// `dirs`: the OBJ's folder, and the MTL's folder relative to it.
+/// `mtl_dir`: the MTL's folder relative to the OBJ's, where its texture paths start.
 fn convert_material(
+    file: &mut ModelFile,
     m: &tobj::Material,
     mtl_path: &Path,
-    (root, mtl_dir): (&Path, &Path),
-    textures: &mut TextureCache,
+    mtl_dir: &Path,
 ) -> Result<Material, LoadError> {
     let kd = m.diffuse.map(Vec3::from).filter(|v| v.is_finite());
     let diffuse = match &m.diffuse_texture {
-        Some(file) => {
-            let file = texture_file(file);
+        Some(statement) => {
+            let name = texture_file(statement);
             let at = Location::file(mtl_path).with_key(format!("{}.map_Kd", m.name));
-            let tex_path = input::reference(root, mtl_dir, file, textures.options(), &at)?;
-            let image = textures
-                .file(&tex_path, true, Wrap::Repeat)
-                .map_err(|e| e.referenced(at, "texture"))?;
+            let image = file.texture((mtl_dir, name), true, Wrap::Repeat, at)?;
             Texture::Image {
                 image,
                 tint: kd.map_or(Vec3::ONE, |v| v.max(Vec3::ZERO)),

@@ -41,15 +41,46 @@ pub fn texture_memory_bytes(width: u32, height: u32, color: image::ColorType) ->
 }
 
 /// Decodes a PNG or JPEG image. Colour textures are sRGB-encoded (`srgb`: converted to linear
-/// here); data textures are not. Alpha (always linear) is kept when it is below 1 somewhere. An image whose decoding and conversion
-/// would need more than `max_bytes` ([`texture_memory_bytes`], judged from the header before
-/// anything is decoded) is refused with the size it would need.
+/// here); data textures are not. Alpha (always linear) is kept when it is below 1 somewhere.
+/// An image whose decoding and conversion would need more than `max_bytes`
+/// ([`texture_memory_bytes`], judged from the header before anything is decoded) is refused
+/// with the size it would need.
 pub fn decode(
     bytes: &[u8],
     srgb: bool,
     wrap: Wrap,
     max_bytes: u64,
 ) -> Result<ImageTexture, String> {
+    let decoder = decoder(bytes, max_bytes)?;
+    let img =
+        image::DynamicImage::from_decoder(decoder).map_err(|e| format!("cannot decode: {e}"))?;
+    let (width, height) = (img.width() as usize, img.height() as usize);
+    if width == 0 || height == 0 {
+        return Err(format!("the image is empty ({width}x{height})"));
+    }
+    let alpha = alpha_channel(&img);
+    if alpha
+        .as_ref()
+        .is_some_and(|a| a.iter().any(|v| !v.is_finite()))
+    {
+        return Err("the image has non-finite alpha".into());
+    }
+    let texels = linear_texels(img, srgb);
+    if texels.iter().any(|t| !t.is_finite()) {
+        return Err("the image has non-finite texels".into());
+    }
+    Ok(ImageTexture {
+        width,
+        height,
+        texels,
+        alpha,
+        wrap,
+    })
+}
+
+/// A decoder of the image in `bytes` that has read only its header, once the image is known
+/// to fit in `max_bytes`. A truncated JPEG is refused here: its decoder would not say so.
+fn decoder(bytes: &[u8], max_bytes: u64) -> Result<impl image::ImageDecoder + '_, String> {
     let mut reader = image::ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| e.to_string())?;
@@ -76,36 +107,34 @@ pub fn decode(
             Bytes(max_bytes)
         ));
     }
-    let img =
-        image::DynamicImage::from_decoder(decoder).map_err(|e| format!("cannot decode: {e}"))?;
-    let (width, height) = (img.width() as usize, img.height() as usize);
-    if width == 0 || height == 0 {
-        return Err(format!("the image is empty ({width}x{height})"));
+    Ok(decoder)
+}
+
+/// The image's alpha channel in [0, 1], kept only when some texel is not opaque (an opaque
+/// image needs no alpha test).
+fn alpha_channel(img: &image::DynamicImage) -> Option<Vec<f32>> {
+    if !img.color().has_alpha() {
+        return None;
     }
-    let alpha: Option<Vec<f32>> = if img.color().has_alpha() {
-        let a: Vec<f32> = match &img {
-            image::DynamicImage::ImageLumaA8(_) | image::DynamicImage::ImageRgba8(_) => img
-                .to_rgba8()
-                .pixels()
-                .map(|p| p[3] as f32 / 255.0)
-                .collect(),
-            other => other
-                .to_rgba32f()
-                .pixels()
-                .map(|p| p[3].clamp(0.0, 1.0))
-                .collect(),
-        };
-        a.iter().any(|&v| v < 1.0).then_some(a)
-    } else {
-        None
+    let a: Vec<f32> = match img {
+        image::DynamicImage::ImageLumaA8(_) | image::DynamicImage::ImageRgba8(_) => img
+            .to_rgba8()
+            .pixels()
+            .map(|p| p[3] as f32 / 255.0)
+            .collect(),
+        other => other
+            .to_rgba32f()
+            .pixels()
+            .map(|p| p[3].clamp(0.0, 1.0))
+            .collect(),
     };
-    if alpha
-        .as_ref()
-        .is_some_and(|a| a.iter().any(|v| !v.is_finite()))
-    {
-        return Err("the image has non-finite alpha".into());
-    }
-    let texels: Vec<Vec3> = match img {
+    a.iter().any(|&v| v < 1.0).then_some(a)
+}
+
+/// The image's colours as linear RGB (decoded from sRGB when `srgb`). 8-bit images go
+/// through a 256-entry table; wider ones are converted per texel.
+fn linear_texels(img: image::DynamicImage, srgb: bool) -> Vec<Vec3> {
+    match img {
         image::DynamicImage::ImageLuma8(_)
         | image::DynamicImage::ImageLumaA8(_)
         | image::DynamicImage::ImageRgb8(_)
@@ -136,17 +165,7 @@ pub fn decode(
                 })
                 .collect()
         }
-    };
-    if texels.iter().any(|t| !t.is_finite()) {
-        return Err("the image has non-finite texels".into());
     }
-    Ok(ImageTexture {
-        width,
-        height,
-        texels,
-        alpha,
-        wrap,
-    })
 }
 
 /// Checks that a JPEG runs whole from its start-of-image marker to its end-of-image marker
