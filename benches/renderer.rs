@@ -7,7 +7,7 @@ use std::time::Duration;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use dofray::camera::{Camera, Lens};
 use dofray::embree::Device;
-use dofray::render::{Mode, NoProgress, RenderSettings, interpolate, maps, render};
+use dofray::render::{Mode, NoProgress, RenderSettings, SamplingRule, interpolate, maps, render};
 use dofray::sampler::PixelSampler;
 use dofray::scene::{World, builtin};
 
@@ -71,9 +71,13 @@ fn benches(c: &mut Criterion) {
         ("adaptive k0.4", Mode::Adaptive, 0.4),
         ("adaptive k0.2", Mode::Adaptive, 0.2),
     ] {
+        // The seed's fixed rule at k (dense ignores it).
         let settings = RenderSettings {
             mode,
-            interval_factor: k,
+            rule: SamplingRule::Seed {
+                interval_factor: k,
+                paper_exact: false,
+            },
             ..Default::default()
         };
         g.bench_function(name, |b| {

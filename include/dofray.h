@@ -33,7 +33,7 @@ typedef enum DofrayStatus {
      */
     DOFRAY_INTERNAL = 1,
     /**
-     * A bad override or setting (its message names the parameter and what was expected),
+     * A bad override or setting (its message names the setter and what was expected),
      * an unknown image extension.
      */
     DOFRAY_USAGE = 2,
@@ -86,8 +86,8 @@ typedef struct DofrayImage DofrayImage;
  * The `dofray_scene_set_*` functions store their value as given (they fail only for a NULL
  * scene or an unknown mode name); every value is checked when the scene is rendered, all
  * together (some depend on each other and on the scene): a bad one fails `dofray_render`
- * with `DOFRAY_USAGE` and a message naming the parameter (`f_number must be a finite number
- * > 0, got -1`). `dofray_scene_reset_overrides` clears them all.
+ * with `DOFRAY_USAGE` and a message naming the setter (`dofray_scene_set_f_number must be a
+ * finite number > 0, got -1`). `dofray_scene_reset_overrides` clears them all.
  */
 typedef struct DofrayScene DofrayScene;
 

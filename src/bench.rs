@@ -18,7 +18,7 @@ use crate::camera::Camera;
 use crate::metrics::{self, Space};
 use crate::output::TempFile;
 use crate::output::metadata::Fnv1a;
-use crate::render::{self, Film, Mode, Progress, RenderSettings, RenderStats, SiteRule};
+use crate::render::{self, Film, Mode, Progress, RenderSettings, RenderStats, SamplingRule};
 use crate::scene::{SceneDesc, World};
 
 /// What to measure.
@@ -115,11 +115,11 @@ pub struct BenchRow {
     pub label: String,
     /// The render mode.
     pub mode: Mode,
-    /// The seed rule's k ([`RenderSettings::interval_factor`]); `None` for pinhole, dense and
-    /// adaptive with the error-controlled rule.
+    /// The seed rule's k ([`SamplingRule::Seed`]); `None` for pinhole, dense and adaptive with
+    /// the error-controlled rule.
     pub interval_factor: Option<f32>,
     /// Whether the seed rule ran with the seed's plain per-pixel interval rule
-    /// ([`RenderSettings::paper_exact`]).
+    /// ([`SamplingRule::Seed`]'s `paper_exact`).
     pub paper_exact: bool,
     /// Median wall time of the repeats.
     pub seconds: f64,
@@ -422,13 +422,13 @@ pub fn run(
                 // The seed's "plain ray tracing": one ray per pixel.
                 aa: if *mode == Mode::Pinhole { 1 } else { config.aa },
                 // The error-controlled row has no k; the others are the seed's fixed rule.
-                rule: if k.is_some() {
-                    SiteRule::Seed
-                } else {
-                    SiteRule::Error
+                rule: match *k {
+                    Some(interval_factor) => SamplingRule::Seed {
+                        interval_factor,
+                        paper_exact: *exact,
+                    },
+                    None => SamplingRule::ErrorControlled { tolerance: None },
                 },
-                interval_factor: k.unwrap_or(0.4),
-                paper_exact: *exact,
                 seed: config.seed,
                 ..Default::default()
             };

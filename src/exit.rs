@@ -23,7 +23,7 @@ use crate::embree::{EmbreeError, ErrorCode};
 use crate::limits::MemoryError;
 use crate::output::OutputError;
 use crate::overrides::OverrideError;
-use crate::render::RenderError;
+use crate::render::{RenderError, SettingError};
 use crate::renderer::RendererError;
 use crate::scene::{LoadError, SceneError};
 
@@ -169,7 +169,7 @@ fn kind_of(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
     if e.is::<MemoryError>() {
         return Some(ErrorKind::ResourceLimit);
     }
-    if e.is::<OverrideError>() {
+    if e.is::<OverrideError>() || e.is::<SettingError>() {
         return Some(ErrorKind::Usage);
     }
     if let Some(e) = e.downcast_ref::<RendererError>() {
@@ -340,7 +340,13 @@ mod tests {
             path: PathBuf::from("o.jpg"),
         };
         assert_eq!(classify(&ext), ErrorKind::Usage);
-        assert_eq!(classify(&RenderError::BadSpp(0)), ErrorKind::Usage);
+        assert_eq!(
+            classify(&RenderError::from(SettingError::Samples {
+                param: crate::params::Param::Spp,
+                value: 0
+            })),
+            ErrorKind::Usage
+        );
         let e = anyhow::Error::new(UsageError("--x must be 1".into())).context("while parsing");
         assert_eq!(classify(e.as_ref()), ErrorKind::Usage);
         assert_eq!(

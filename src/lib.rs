@@ -13,8 +13,9 @@
 //!
 //! ```rust
 //! use dofray::embree::Device;
-//! use dofray::overrides::{Overrides, SettingsOverrides};
-//! use dofray::{render::NoProgress, renderer::Renderer};
+//! use dofray::overrides::Overrides;
+//! use dofray::render::{NoProgress, SettingsPatch};
+//! use dofray::renderer::Renderer;
 //!
 //! // A built-in scene, a scene file (.toml) or a model (.obj, .gltf, .glb).
 //! let scene = dofray::scene::load("paper")?;
@@ -26,7 +27,7 @@
 //!     ..Default::default()
 //! };
 //! let renderer = Renderer::with_overrides(scene, overrides, &Device::new()?)?;
-//! let settings = renderer.settings(&SettingsOverrides { spp: Some(32), ..Default::default() })?;
+//! let settings = renderer.settings(&SettingsPatch { spp: Some(32), ..Default::default() })?;
 //! let (film, stats) = renderer.render(&settings, &NoProgress)?;
 //! // PNG (sRGB) or multilayer EXR (linear; depth, CoC and the sampling maps too).
 //! dofray::output::write_film(&std::env::temp_dir().join("dofray-lib-example.exr"), &film)?;
@@ -69,6 +70,7 @@ pub mod limits;
 pub mod metrics;
 pub mod output;
 pub mod overrides;
+pub mod params;
 pub mod render;
 pub mod renderer;
 pub mod sampler;

@@ -2,18 +2,14 @@
 //! set, as a library type, so another tool changes a loaded scene the same way `dofray render`
 //! does.
 //!
-//! [`Overrides`] changes the scene (size, lens, focus, aperture shape, lights, ambient);
-//! [`SettingsOverrides`] merges the render settings (flag, else the scene's, else the default).
-//! Every value is checked when applied; an [`OverrideError`] names the [`Param`] and what was
-//! expected.
+//! [`Overrides`] changes the scene (size, lens, focus, aperture shape, lights, ambient); the
+//! render settings are a [`crate::render::SettingsPatch`] over the scene's. Every value is
+//! checked when applied; an [`OverrideError`] names the [`Param`] and what was expected.
 
 use glam::Vec3;
 
-use crate::camera::{
-    ApertureShape, CameraSpec, Focus, LensFilter, LensSpec, Photographic, check_vfov,
-};
-use crate::filter::{PixelFilter, PixelFilterKind};
-use crate::render::{Mode, RenderError, RenderSettings, SiteRule};
+use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec, Photographic, check_vfov};
+use crate::params::Param;
 use crate::scene::SceneDesc;
 use crate::shade::Light;
 
@@ -72,77 +68,6 @@ pub struct Overrides {
     pub lights: Vec<Light>,
     /// Ambient light level replacing the scene's.
     pub ambient: Option<f32>,
-}
-
-/// A parameter of [`Overrides`] or [`SettingsOverrides`], for messages.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum Param {
-    /// [`Overrides::width`].
-    Width,
-    /// [`Overrides::height`].
-    Height,
-    /// [`Overrides::aperture_radius`].
-    ApertureRadius,
-    /// [`Overrides::f_number`].
-    FNumber,
-    /// [`Overrides::focal_length_mm`].
-    FocalLength,
-    /// [`Overrides::sensor_width_mm`].
-    SensorWidth,
-    /// The sharp range of [`Overrides::sharp_range`].
-    SharpRange,
-    /// The spread of [`Overrides::sharp_range`].
-    Spread,
-    /// [`Overrides::focus_distance`].
-    FocusDistance,
-    /// [`Overrides::blades`].
-    Blades,
-    /// [`Overrides::blade_rotation_deg`].
-    BladeRotation,
-    /// [`Overrides::anamorphic`].
-    Anamorphic,
-    /// [`Overrides::ambient`].
-    Ambient,
-}
-
-impl Param {
-    /// The field's name (`f_number`).
-    pub fn field(self) -> &'static str {
-        match self {
-            Self::Width => "width",
-            Self::Height => "height",
-            Self::ApertureRadius => "aperture_radius",
-            Self::FNumber => "f_number",
-            Self::FocalLength => "focal_length_mm",
-            Self::SensorWidth => "sensor_width_mm",
-            Self::SharpRange => "sharp_range",
-            Self::Spread => "spread",
-            Self::FocusDistance => "focus_distance",
-            Self::Blades => "blades",
-            Self::BladeRotation => "blade_rotation_deg",
-            Self::Anamorphic => "anamorphic",
-            Self::Ambient => "ambient",
-        }
-    }
-
-    /// The command line's flag for it (`--f-number`).
-    pub fn flag(self) -> &'static str {
-        match self {
-            Self::Width => "--width",
-            Self::Height => "--height",
-            Self::ApertureRadius => "--aperture-radius",
-            Self::FNumber => "--f-number",
-            Self::FocalLength => "--focal-length",
-            Self::SensorWidth => "--sensor-width",
-            Self::SharpRange => "--sharp-range",
-            Self::Spread => "--spread",
-            Self::FocusDistance => "--focus-distance",
-            Self::Blades => "--blades",
-            Self::BladeRotation => "--blade-rotation",
-            Self::Anamorphic => "--anamorphic",
-            Self::Ambient => "--ambient",
-        }
-    }
 }
 
 /// An override that cannot be applied. `Display` names the fields of [`Overrides`];
@@ -444,92 +369,5 @@ impl Overrides {
             || self.blades.is_some()
             || self.blade_rotation_deg.is_some()
             || self.anamorphic.is_some()
-    }
-}
-
-/// Render settings that replace a scene's; `None` (or `false`) keeps the scene's, else the
-/// default of [`RenderSettings`].
-///
-/// ```rust
-/// use dofray::overrides::SettingsOverrides;
-/// use dofray::render::{Mode, SiteRule};
-///
-/// let scene = dofray::scene::load("paper")?;
-/// let settings = SettingsOverrides { spp: Some(64), ..Default::default() }.settings(&scene)?;
-/// assert_eq!((settings.mode, settings.spp, settings.rule), (Mode::Adaptive, 64, SiteRule::Error));
-/// // The seed paper's fixed rule, k = 0.4 (`dofray render -k 0.4`).
-/// let seed = SettingsOverrides { interval_factor: Some(0.4), ..Default::default() };
-/// assert_eq!(seed.settings(&scene)?.rule, SiteRule::Seed);
-/// // Values are checked: 0 samples is an error naming them.
-/// let zero = SettingsOverrides { spp: Some(0), ..Default::default() };
-/// assert!(zero.settings(&scene).unwrap_err().to_string().contains("spp"));
-/// # Ok::<(), Box<dyn std::error::Error>>(())
-/// ```
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct SettingsOverrides {
-    /// Where sample sites are placed. Default: adaptive.
-    pub mode: Option<Mode>,
-    /// Lens samples per defocused sample site (traced in packets of 16). Default: the scene's,
-    /// else 16.
-    pub spp: Option<u32>,
-    /// Anti-aliasing samples per in-focus sample site. Default: the scene's, else 4.
-    pub aa: Option<u32>,
-    /// The pixel filter's shape (its default width). Default: the scene's, else
-    /// Blackman-Harris.
-    pub pixel_filter: Option<PixelFilterKind>,
-    /// The pixel filter's width in pixels.
-    pub pixel_filter_width: Option<f32>,
-    /// The error-controlled rule's tolerance (8-bit sRGB code values).
-    pub tolerance: Option<f32>,
-    /// The seed's rule with this interval factor.
-    pub interval_factor: Option<f32>,
-    /// The seed's rule, per pixel as the paper has it.
-    pub paper_exact: bool,
-    /// The background contributes nothing; alpha is coverage (also when the scene says so).
-    pub transparent: bool,
-    /// Exposure in stops (default 0).
-    pub exposure: Option<f32>,
-    /// Default 0.
-    pub seed: Option<u64>,
-    /// Default: box.
-    pub lens_filter: Option<LensFilter>,
-}
-
-impl SettingsOverrides {
-    /// The settings for `desc`: each value from here, else the scene's, else the default. The
-    /// seed's rule is used when `interval_factor` or `paper_exact` is given, or when the scene
-    /// has an interval factor and no `tolerance` is given here; else the error-controlled
-    /// rule. The result is validated.
-    pub fn settings(&self, desc: &SceneDesc) -> Result<RenderSettings, RenderError> {
-        let mut settings = RenderSettings {
-            mode: self.mode.unwrap_or(Mode::Adaptive),
-            paper_exact: self.paper_exact,
-            seed: self.seed.unwrap_or(0),
-            filter: self.lens_filter.unwrap_or(LensFilter::Box),
-            ..Default::default()
-        };
-        settings.spp = self.spp.or(desc.spp).unwrap_or(16);
-        settings.aa = self.aa.or(desc.aa).unwrap_or(4);
-        settings.pixel_filter = match (self.pixel_filter, desc.pixel_filter) {
-            (Some(kind), _) => PixelFilter::new(kind),
-            (None, Some(scene)) => scene,
-            (None, None) => PixelFilter::default(),
-        };
-        if let Some(width) = self.pixel_filter_width {
-            settings.pixel_filter.width = width;
-        }
-        let seed_rule = self.interval_factor.is_some()
-            || self.paper_exact
-            || (self.tolerance.is_none() && desc.interval_factor.is_some());
-        if seed_rule {
-            settings.rule = SiteRule::Seed;
-            settings.interval_factor = self.interval_factor.or(desc.interval_factor).unwrap_or(0.4);
-        } else {
-            settings.tolerance = self.tolerance.or(desc.tolerance);
-        }
-        settings.transparent = self.transparent || desc.transparent;
-        settings.exposure = self.exposure.unwrap_or(0.0);
-        settings.validate()?;
-        Ok(settings)
     }
 }

@@ -3,8 +3,11 @@
 use crate::camera::{Camera, CameraError, CameraSpec, Focus};
 use crate::embree::Device;
 use crate::limits::MemoryError;
-use crate::overrides::{OverrideError, Overrides, SettingsOverrides};
-use crate::render::{self, Film, Progress, Region, RenderError, RenderSettings, RenderStats};
+use crate::overrides::{OverrideError, Overrides};
+use crate::params::Param;
+use crate::render::{
+    self, Film, Progress, Region, RenderError, RenderSettings, RenderStats, SettingsPatch,
+};
 use crate::scene::{LoadError, SceneDesc, SceneError, World};
 
 /// Why a [`Renderer`] could not be made or could not render. [`crate::exit::classify`] sorts
@@ -67,19 +70,33 @@ pub enum RendererError {
     Render(#[from] RenderError),
 }
 
+impl RendererError {
+    /// For an override or a setting out of range, its message with the parameter called
+    /// `name(param)` (a front end's name for it: [`Param::flag`], [`Param::keyword_name`],
+    /// ...); `None` for any other error.
+    pub fn param_message(&self, name: impl Fn(Param) -> &'static str) -> Option<String> {
+        match self {
+            Self::Override(e) => Some(e.message(name)),
+            Self::Render(RenderError::Setting(e)) => Some(e.message(name)),
+            _ => None,
+        }
+    }
+}
+
 /// A scene ready to render: its description with the [`Overrides`] applied, the camera as the
 /// scene gave it (each frame's camera is made from it), and the Embree world, built once.
 ///
 /// ```rust
 /// use dofray::embree::Device;
-/// use dofray::overrides::{Overrides, SettingsOverrides};
+/// use dofray::overrides::Overrides;
+/// use dofray::render::SettingsPatch;
 /// use dofray::{render::NoProgress, renderer::Renderer};
 ///
 /// let desc = dofray::scene::load("paper")?;
 /// let (width, height, f_number) = (Some(64), Some(48), Some(2.8));
 /// let overrides = Overrides { width, height, f_number, ..Default::default() };
 /// let renderer = Renderer::with_overrides(desc, overrides, &Device::new()?)?;
-/// let settings = renderer.settings(&SettingsOverrides { spp: Some(32), ..Default::default() })?;
+/// let settings = renderer.settings(&SettingsPatch { spp: Some(32), ..Default::default() })?;
 /// let (film, stats) = renderer.render(&settings, &NoProgress)?;
 /// let path = std::env::temp_dir().join("dofray-doc-example.png");
 /// dofray::output::write_film(&path, &film)?;
@@ -178,10 +195,11 @@ impl Renderer {
         })
     }
 
-    /// The render settings for this scene: each value from `overrides`, else the scene's, else
-    /// the default ([`SettingsOverrides::settings`]).
-    pub fn settings(&self, overrides: &SettingsOverrides) -> Result<RenderSettings, RendererError> {
-        Ok(overrides.settings(&self.desc)?)
+    /// The render settings for this scene: each value from `patch`, else the scene's, else
+    /// the default ([`SettingsPatch::over`] the scene's, [`SettingsPatch::resolve`]d).
+    pub fn settings(&self, patch: &SettingsPatch) -> Result<RenderSettings, RendererError> {
+        let settings = patch.over(&self.desc.settings).resolve();
+        Ok(settings.map_err(RenderError::from)?)
     }
 
     /// Renders the whole image (the first frame of an animated scene).

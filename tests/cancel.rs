@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use dofray::embree::Device;
 use dofray::overrides::Overrides;
-use dofray::render::{CancelFlag, Mode, Progress, RenderError, RenderSettings, SiteRule};
+use dofray::render::{CancelFlag, Mode, Progress, RenderError, RenderSettings, SamplingRule};
 use dofray::renderer::{Renderer, RendererError};
 
 /// Cancels after the first unit of work of `phase` ("depth", or the mode's own phase).
@@ -57,10 +57,25 @@ fn settings() -> Vec<RenderSettings> {
         ..Default::default()
     };
     vec![
-        of(Mode::Pinhole, SiteRule::Error),
-        of(Mode::Dense, SiteRule::Error),
-        of(Mode::Adaptive, SiteRule::Error),
-        of(Mode::Adaptive, SiteRule::Seed),
+        of(
+            Mode::Pinhole,
+            SamplingRule::ErrorControlled { tolerance: None },
+        ),
+        of(
+            Mode::Dense,
+            SamplingRule::ErrorControlled { tolerance: None },
+        ),
+        of(
+            Mode::Adaptive,
+            SamplingRule::ErrorControlled { tolerance: None },
+        ),
+        of(
+            Mode::Adaptive,
+            SamplingRule::Seed {
+                interval_factor: 0.4,
+                paper_exact: false,
+            },
+        ),
     ]
 }
 

@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use dofray::embree::Device;
-use dofray::render::{Film, Mode, NoProgress, RenderSettings, SiteRule, render};
+use dofray::render::{Film, Mode, NoProgress, RenderSettings, SamplingRule, render};
 use dofray::scene::{self, SceneDesc, World};
 use glam::Vec3;
 
@@ -164,7 +164,7 @@ fn adaptive_checks_coverage_where_colour_cannot_tell() {
     let adaptive = render_with(
         &desc,
         &RenderSettings {
-            rule: SiteRule::Error,
+            rule: SamplingRule::ErrorControlled { tolerance: None },
             ..settings(Mode::Adaptive, true)
         },
     );

@@ -5,7 +5,7 @@
 use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::metrics::{Space, psnr};
-use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, SiteRule, render};
+use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, SamplingRule, render};
 use dofray::scene::{Background, Object, SceneDesc, World, builtin};
 use dofray::shade::Material;
 use glam::Vec3;
@@ -143,7 +143,10 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
         &world,
         &camera,
         RenderSettings {
-            rule: SiteRule::Seed,
+            rule: SamplingRule::Seed {
+                interval_factor: 0.4,
+                paper_exact: false,
+            },
             ..settings.clone()
         },
     );
@@ -199,7 +202,9 @@ fn a_smaller_tolerance_traces_more_and_comes_closer() {
             RenderSettings {
                 mode: Mode::Adaptive,
                 spp: 64,
-                tolerance: Some(tolerance),
+                rule: SamplingRule::ErrorControlled {
+                    tolerance: Some(tolerance),
+                },
                 ..Default::default()
             },
         );

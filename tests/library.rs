@@ -2,8 +2,9 @@
 
 use dofray::embree::Device;
 use dofray::glam::Vec3;
-use dofray::overrides::{OverrideError, Overrides, Param, SettingsOverrides};
-use dofray::render::{NoProgress, SiteRule};
+use dofray::overrides::{OverrideError, Overrides};
+use dofray::params::Param;
+use dofray::render::{NoProgress, RulePatch, SamplingRule, SettingsPatch};
 use dofray::renderer::{Renderer, RendererError};
 use dofray::scene::{Object, SceneDesc};
 use dofray::shade::{Light, Material};
@@ -41,8 +42,11 @@ fn a_scene_from_the_defaults_renders_with_overrides() {
         "{}",
         camera.focus_distance()
     );
-    let settings = SettingsOverrides::default().settings(r.desc()).unwrap();
-    assert_eq!(settings.rule, SiteRule::Error);
+    let settings = r.settings(&SettingsPatch::default()).unwrap();
+    assert_eq!(
+        settings.rule,
+        SamplingRule::ErrorControlled { tolerance: None }
+    );
     let (film, _) = r.render(&settings, &NoProgress).unwrap();
     let centre = film.color[12 * 32 + 16];
     assert!(
@@ -72,24 +76,52 @@ fn override_errors_name_the_field_and_classify_as_usage() {
         "f_number must be a finite number > 0, got -2"
     );
     assert_eq!(dofray::exit::classify(&e).name(), "usage");
-    let scene_interval = SceneDesc {
-        interval_factor: Some(0.2),
-        ..sphere_scene()
-    };
-    let settings = SettingsOverrides::default()
-        .settings(&scene_interval)
-        .unwrap();
-    assert_eq!(
-        (settings.rule, settings.interval_factor),
-        (SiteRule::Seed, 0.2)
-    );
-    let flags = SettingsOverrides {
-        tolerance: Some(0.5),
+    let scene_interval = SettingsPatch {
+        rule: Some(RulePatch::Seed {
+            interval_factor: Some(0.2),
+            paper_exact: false,
+        }),
         ..Default::default()
     };
-    let settings = flags.settings(&scene_interval).unwrap();
+    let settings = SettingsPatch::default()
+        .over(&scene_interval)
+        .resolve()
+        .unwrap();
     assert_eq!(
-        (settings.rule, settings.tolerance),
-        (SiteRule::Error, Some(0.5))
+        settings.rule,
+        SamplingRule::Seed {
+            interval_factor: 0.2,
+            paper_exact: false
+        }
+    );
+    // The flags' rule replaces the scene's.
+    let flags = SettingsPatch {
+        rule: Some(RulePatch::ErrorControlled {
+            tolerance: Some(0.5),
+        }),
+        ..Default::default()
+    };
+    let settings = flags.over(&scene_interval).resolve().unwrap();
+    assert_eq!(
+        (settings.rule, settings.tolerance()),
+        (
+            SamplingRule::ErrorControlled {
+                tolerance: Some(0.5)
+            },
+            Some(0.5)
+        )
+    );
+    // Setting errors name the parameter as each front end does.
+    let e = SettingsPatch {
+        spp: Some(0),
+        ..Default::default()
+    }
+    .resolve()
+    .unwrap_err();
+    assert_eq!(e.to_string(), "spp must be 1 to 65536, got 0");
+    assert_eq!(e.message(Param::flag), "--spp must be 1 to 65536, got 0");
+    assert_eq!(
+        e.message(Param::setter_name),
+        "dofray_scene_set_spp must be 1 to 65536, got 0"
     );
 }

@@ -5,7 +5,7 @@
 use dofray::camera::Camera;
 use dofray::embree::Device;
 use dofray::render::{
-    Film, Mode, NoProgress, Region, RenderSettings, SiteRule, render, render_region,
+    Film, Mode, NoProgress, Region, RenderSettings, SamplingRule, render, render_region,
 };
 use dofray::scene::{World, builtin};
 
@@ -30,7 +30,9 @@ fn settings() -> Vec<(&'static str, RenderSettings)> {
             "adaptive, error rule, transparent, tight",
             RenderSettings {
                 transparent: true,
-                tolerance: Some(0.5),
+                rule: SamplingRule::ErrorControlled {
+                    tolerance: Some(0.5),
+                },
                 spp: 32,
                 ..base.clone()
             },
@@ -38,15 +40,20 @@ fn settings() -> Vec<(&'static str, RenderSettings)> {
         (
             "adaptive, seed rule",
             RenderSettings {
-                rule: SiteRule::Seed,
+                rule: SamplingRule::Seed {
+                    interval_factor: 0.4,
+                    paper_exact: false,
+                },
                 ..base.clone()
             },
         ),
         (
             "adaptive, paper exact",
             RenderSettings {
-                rule: SiteRule::Seed,
-                paper_exact: true,
+                rule: SamplingRule::Seed {
+                    interval_factor: 0.4,
+                    paper_exact: true,
+                },
                 ..base.clone()
             },
         ),

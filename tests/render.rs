@@ -3,7 +3,7 @@
 use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
 use dofray::embree::{Device, EMBREE_MAJOR, PacketWidth, limited_isas};
 use dofray::metrics::{Space, psnr};
-use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, SiteRule, render};
+use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, SamplingRule, render};
 use dofray::scene::{Background, Object, SceneDesc, World, builtin};
 use dofray::shade::Material;
 use glam::Vec3;
@@ -34,8 +34,10 @@ fn run(
     // covers the error-controlled rule).
     let settings = RenderSettings {
         mode,
-        rule: SiteRule::Seed,
-        interval_factor: k,
+        rule: SamplingRule::Seed {
+            interval_factor: k,
+            paper_exact: false,
+        },
         spp,
         seed: 3,
         ..Default::default()
@@ -136,8 +138,10 @@ fn conservative_intervals_never_reach_an_in_focus_pixel() {
     // The paper-exact rule does interpolate next to in-focus pixels somewhere in this scene.
     let settings = RenderSettings {
         mode: Mode::Adaptive,
-        rule: SiteRule::Seed,
-        paper_exact: true,
+        rule: SamplingRule::Seed {
+            interval_factor: 0.4,
+            paper_exact: true,
+        },
         ..Default::default()
     };
     let (exact, _) = render(&world, &camera, &settings, &NoProgress).unwrap();
@@ -223,11 +227,17 @@ fn bad_settings_are_rejected() {
             ..Default::default()
         },
         RenderSettings {
-            interval_factor: 0.0,
+            rule: SamplingRule::Seed {
+                interval_factor: 0.0,
+                paper_exact: false,
+            },
             ..Default::default()
         },
         RenderSettings {
-            interval_factor: f32::NAN,
+            rule: SamplingRule::Seed {
+                interval_factor: f32::NAN,
+                paper_exact: false,
+            },
             ..Default::default()
         },
         RenderSettings {
@@ -235,11 +245,15 @@ fn bad_settings_are_rejected() {
             ..Default::default()
         },
         RenderSettings {
-            tolerance: Some(0.0),
+            rule: SamplingRule::ErrorControlled {
+                tolerance: Some(0.0),
+            },
             ..Default::default()
         },
         RenderSettings {
-            tolerance: Some(f32::INFINITY),
+            rule: SamplingRule::ErrorControlled {
+                tolerance: Some(f32::INFINITY),
+            },
             ..Default::default()
         },
     ] {

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use dofray::camera::{CameraLens, Focus, LensSpec};
 use dofray::embree::Device;
 use dofray::limits::{BYTES_PER_PIXEL, check_image_memory, check_image_memory_against};
-use dofray::render::{Film, Mode, NoProgress, RenderSettings, render};
+use dofray::render::{Film, Mode, NoProgress, RenderSettings, RulePatch, render};
 use dofray::scene::{self, LoadError, MeshMaterials, Object, SceneDesc, World, builtin};
 use dofray::shade::{Light, Texture};
 use glam::{Vec2, Vec3};
@@ -649,7 +649,7 @@ fn defaults_fill_what_the_file_leaves_out() {
     assert_eq!(desc.camera.lens, LensSpec::Pinhole);
     assert_eq!(desc.camera.focus, Focus::Point(Vec3::ZERO));
     assert_eq!(desc.lights.len(), 1, "a default light");
-    assert_eq!(desc.spp, None);
+    assert_eq!(desc.settings.spp, None);
     assert_eq!(desc.materials.len(), 1, "the default material");
     let cam = desc.camera.build(|_| None).unwrap();
     let p = cam.project(Vec3::ZERO).unwrap();
@@ -669,8 +669,21 @@ fn every_camera_key_is_read() {
         "vfov = 30\naperture_radius = 0.1\nfocus_distance = 4\nblades = 6\nblade_rotation = 10\nanamorphic = 1.5",
     );
     assert_eq!(
-        (d.camera.width, d.camera.height, d.spp, d.interval_factor),
-        (100, 50, Some(8), Some(0.2))
+        (
+            d.camera.width,
+            d.camera.height,
+            d.settings.spp,
+            d.settings.rule
+        ),
+        (
+            100,
+            50,
+            Some(8),
+            Some(RulePatch::Seed {
+                interval_factor: Some(0.2),
+                paper_exact: false
+            })
+        )
     );
     assert_eq!(d.camera.vfov_deg, 30.0);
     assert_eq!(d.camera.lens, LensSpec::Aperture { radius: 0.1 });
@@ -1475,10 +1488,10 @@ fn render_table_sets_samples_and_the_pixel_filter() {
         )],
     )
     .unwrap();
-    assert_eq!((d.spp, d.aa), (Some(8), Some(2)));
+    assert_eq!((d.settings.spp, d.settings.aa), (Some(8), Some(2)));
     assert_eq!(
-        d.pixel_filter,
-        Some(PixelFilter::new(PixelFilterKind::Gaussian))
+        d.settings.resolve().unwrap().pixel_filter,
+        PixelFilter::new(PixelFilterKind::Gaussian)
     );
     let d = load_files(
         "render-box",
@@ -1489,7 +1502,7 @@ fn render_table_sets_samples_and_the_pixel_filter() {
         )],
     )
     .unwrap();
-    let f = d.pixel_filter.unwrap();
+    let f = d.settings.resolve().unwrap().pixel_filter;
     assert_eq!((f.kind, f.width), (PixelFilterKind::Box, 2.0));
     let m = error_of(
         "render-wide",

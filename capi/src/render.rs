@@ -6,8 +6,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use dofray::embree::Device;
+use dofray::params::Param;
 use dofray::render::Progress;
-use dofray::renderer::Renderer;
+use dofray::renderer::{Renderer, RendererError};
 
 use crate::args::{arg_mut, out_arg, put};
 use crate::cancel::DofrayCancel;
@@ -172,6 +173,14 @@ pub unsafe extern "C" fn dofray_render(
     })
 }
 
+/// A renderer's error as C gets it: an override or a setting named by its setter.
+fn usage(e: RendererError) -> Failure {
+    match e.param_message(Param::setter_name) {
+        Some(message) => Failure::new(DofrayStatus::DOFRAY_USAGE, message),
+        None => e.into(),
+    }
+}
+
 fn render(
     scene: &mut DofrayScene,
     device: Option<&DofrayDevice>,
@@ -214,14 +223,17 @@ fn render(
         // Drop the old world before building the new one: only one in memory at a time.
         scene.cache = None;
         let renderer =
-            Renderer::with_overrides(scene.desc.clone(), scene.overrides.clone(), &device.device)?;
+            Renderer::with_overrides(scene.desc.clone(), scene.overrides.clone(), &device.device)
+                .map_err(usage)?;
         scene.cache = Some((device.id, scene.overrides.clone(), renderer));
     }
     let Some((_, _, renderer)) = &scene.cache else {
         unreachable!("set above")
     };
-    let settings = scene.settings.settings(renderer.desc())?;
-    let (film, stats) = renderer.render_frame(scene.frame, None, &settings, &progress)?;
+    let settings = renderer.settings(&scene.settings).map_err(usage)?;
+    let (film, stats) = renderer
+        .render_frame(scene.frame, None, &settings, &progress)
+        .map_err(usage)?;
     if progress.was_cancelled() {
         return Err(cancelled());
     }

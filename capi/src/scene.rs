@@ -3,8 +3,8 @@
 use std::ffi::{c_char, c_int};
 use std::path::Path;
 
-use dofray::overrides::{Overrides, SettingsOverrides};
-use dofray::render::Mode;
+use dofray::overrides::Overrides;
+use dofray::render::{Mode, RulePatch, SettingsPatch};
 use dofray::renderer::Renderer;
 use dofray::scene::SceneDesc;
 
@@ -18,12 +18,12 @@ use crate::status::{DofrayStatus, Failure, guard};
 /// The `dofray_scene_set_*` functions store their value as given (they fail only for a NULL
 /// scene or an unknown mode name); every value is checked when the scene is rendered, all
 /// together (some depend on each other and on the scene): a bad one fails `dofray_render`
-/// with `DOFRAY_USAGE` and a message naming the parameter (`f_number must be a finite number
-/// > 0, got -1`). `dofray_scene_reset_overrides` clears them all.
+/// with `DOFRAY_USAGE` and a message naming the setter (`dofray_scene_set_f_number must be a
+/// finite number > 0, got -1`). `dofray_scene_reset_overrides` clears them all.
 pub struct DofrayScene {
     pub(crate) desc: SceneDesc,
     pub(crate) overrides: Overrides,
-    pub(crate) settings: SettingsOverrides,
+    pub(crate) settings: SettingsPatch,
     pub(crate) frame: Option<i64>,
     /// The renderer of the last render: its device's id and overrides, then itself.
     pub(crate) cache: Option<(u64, Overrides, Renderer)>,
@@ -36,7 +36,7 @@ impl DofrayScene {
         Self {
             desc,
             overrides: Overrides::default(),
-            settings: SettingsOverrides::default(),
+            settings: SettingsPatch::default(),
             frame: None,
             cache: None,
             own_device: None,
@@ -142,7 +142,7 @@ pub unsafe extern "C" fn dofray_scene_reset_overrides(scene: *mut DofrayScene) -
     unsafe {
         with_scene(scene, |s| {
             s.overrides = Overrides::default();
-            s.settings = SettingsOverrides::default();
+            s.settings = SettingsPatch::default();
             s.frame = None;
             Ok(())
         })
@@ -334,7 +334,9 @@ pub unsafe extern "C" fn dofray_scene_set_tolerance(
     // SAFETY: the function's contract.
     unsafe {
         with_scene(scene, |s| {
-            s.settings.tolerance = Some(tolerance);
+            s.settings.rule = Some(RulePatch::ErrorControlled {
+                tolerance: Some(tolerance),
+            });
             Ok(())
         })
     }

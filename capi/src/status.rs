@@ -17,7 +17,7 @@ pub enum DofrayStatus {
     DOFRAY_OK = 0,
     /// Anything not classified otherwise (a bug, a non-finite render, a failed Embree call).
     DOFRAY_INTERNAL = 1,
-    /// A bad override or setting (its message names the parameter and what was expected),
+    /// A bad override or setting (its message names the setter and what was expected),
     /// an unknown image extension.
     DOFRAY_USAGE = 2,
     /// A scene, model or texture that cannot be read or is invalid.

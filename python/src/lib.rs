@@ -19,8 +19,9 @@ use std::time::Duration;
 
 use dofray::embree::Device;
 use dofray::exit::ErrorKind;
-use dofray::overrides::{OverrideError, Overrides, Param, SettingsOverrides};
-use dofray::render::{CancelFlag, Film, Mode, Progress, RenderStats};
+use dofray::overrides::Overrides;
+use dofray::params::Param;
+use dofray::render::{CancelFlag, Film, Mode, Progress, RenderStats, RulePatch, SettingsPatch};
 use dofray::renderer::{Renderer, RendererError};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray2, PyArray3};
@@ -47,13 +48,13 @@ impl Failure {
     }
 
     /// The library's error: its kind ([`dofray::exit::classify`]) and its message with its
-    /// causes (`outer: inner`), the overrides named as the Python keywords are.
+    /// causes (`outer: inner`), overrides and settings named as the Python keywords are.
     fn from_error(error: &(dyn StdError + 'static)) -> Self {
         let kind = dofray::exit::classify(error);
-        let message = match error.downcast_ref::<RendererError>() {
-            Some(RendererError::Override(e)) => override_message(e),
-            _ => dofray::exit::full_message(error),
-        };
+        let message = error
+            .downcast_ref::<RendererError>()
+            .and_then(|e| e.param_message(Param::keyword_name))
+            .unwrap_or_else(|| dofray::exit::full_message(error));
         Self { kind, message }
     }
 
@@ -76,20 +77,6 @@ impl Failure {
         // Only a broken installation (no `dofray` package around the module) gets here.
         made.unwrap_or_else(|e| e)
     }
-}
-
-/// The keyword `render` takes for an override parameter.
-fn keyword(param: Param) -> &'static str {
-    match param {
-        Param::FocalLength => "focal_length",
-        Param::SensorWidth => "sensor_width",
-        Param::BladeRotation => "blade_rotation",
-        other => other.field(),
-    }
-}
-
-fn override_message(e: &OverrideError) -> String {
-    e.message(keyword)
 }
 
 /// An integer keyword that must fit a `u32`.
@@ -119,7 +106,7 @@ struct Job {
     scene: String,
     frame: Option<i64>,
     overrides: Overrides,
-    settings: SettingsOverrides,
+    settings: SettingsPatch,
 }
 
 /// The Embree device, made once per process (making one starts Embree's thread pool).
@@ -141,10 +128,7 @@ impl Job {
         let fail = |e: RendererError| Failure::from_error(&e);
         let desc = dofray::scene::load(&self.scene).map_err(|e| fail(e.into()))?;
         let renderer = Renderer::with_overrides(desc, self.overrides, &device()?).map_err(fail)?;
-        let settings = self
-            .settings
-            .settings(renderer.desc())
-            .map_err(|e| fail(e.into()))?;
+        let settings = renderer.settings(&self.settings).map_err(fail)?;
         renderer
             .render_frame(self.frame, None, &settings, progress)
             .map_err(fail)
@@ -456,11 +440,11 @@ fn render(
                 blades: to_u32("blades", blades)?,
                 ..Default::default()
             },
-            settings: SettingsOverrides {
+            settings: SettingsPatch {
                 mode: to_mode(mode)?,
                 spp: to_u32("spp", spp)?,
                 aa: to_u32("aa", aa)?,
-                tolerance,
+                rule: tolerance.map(|t| RulePatch::ErrorControlled { tolerance: Some(t) }),
                 seed,
                 exposure,
                 transparent,

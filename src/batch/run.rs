@@ -10,7 +10,7 @@ use super::jobs::{self, Job};
 use super::summary::{EmbreeSummary, JobFacts, JobSummary, RunSummary};
 use crate::exit::{self, ErrorKind};
 use crate::output::{self, ExrCompression, OutputError};
-use crate::overrides::Param;
+use crate::params::Param;
 use crate::render::{self, NoProgress, Progress, Region, RenderError, RenderSettings};
 use crate::renderer::{Renderer, RendererError};
 
@@ -48,7 +48,10 @@ impl JobError {
     /// The whole message (with its sources), parameters named by `name` (e.g. [`Param::flag`]).
     pub fn message(&self, name: impl Fn(Param) -> &'static str) -> String {
         match self {
-            Self::Renderer(RendererError::Override(e)) => e.message(name),
+            Self::Renderer(e) => e
+                .param_message(name)
+                .unwrap_or_else(|| exit::full_message(self)),
+            Self::Render(RenderError::Setting(e)) => e.message(name),
             e => exit::full_message(e),
         }
     }

@@ -8,7 +8,7 @@ use serde::Serialize;
 
 use crate::camera::Camera;
 use crate::filter::PixelFilterKind;
-use crate::render::{Mode, RenderSettings, RenderStats, SiteRule};
+use crate::render::{Mode, RenderSettings, RenderStats, SamplingRule, SiteRule};
 
 /// Which Embree ran a render and how (`embree` in a render's summary).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -134,7 +134,13 @@ impl JobSummary {
         camera: &Camera,
         stats: RenderStats,
     ) -> Self {
-        let error_rule = settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error;
+        let (interval_factor, paper_exact) = match settings.rule {
+            SamplingRule::Seed {
+                interval_factor,
+                paper_exact,
+            } => (Some(json_f32(interval_factor)), paper_exact),
+            SamplingRule::ErrorControlled { .. } => (None, false),
+        };
         Self {
             schema_version: crate::exit::SCHEMA_VERSION,
             dofray_version: crate::VERSION,
@@ -150,11 +156,12 @@ impl JobSummary {
             aa: settings.aa,
             pixel_filter: settings.pixel_filter.kind,
             pixel_filter_width: json_f32(settings.pixel_filter.width),
-            rule: settings.rule,
-            tolerance: error_rule.then(|| json_f32(settings.tolerance())),
-            interval_factor: (settings.rule == SiteRule::Seed)
-                .then(|| json_f32(settings.interval_factor)),
-            paper_exact: settings.paper_exact,
+            rule: settings.rule.site_rule(),
+            tolerance: (settings.mode == Mode::Adaptive)
+                .then(|| settings.tolerance().map(json_f32))
+                .flatten(),
+            interval_factor,
+            paper_exact,
             transparent: settings.transparent,
             exposure: json_f32(settings.exposure),
             rounds: stats.rounds,

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use super::{BenchError, median, reference};
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
-use crate::render::{self, Mode, Progress, RenderSettings, RenderStats, SiteRule};
+use crate::render::{self, Mode, Progress, RenderSettings, RenderStats, SamplingRule};
 use crate::scene::{SceneDesc, World};
 
 /// The rungs when none are given: samples per defocused site.
@@ -107,8 +107,7 @@ impl Method {
             },
             spp,
             aa,
-            rule: SiteRule::Error,
-            tolerance: None,
+            rule: SamplingRule::ErrorControlled { tolerance: None },
             seed,
             ..Default::default()
         }
@@ -372,7 +371,8 @@ pub fn run(
     for spp in &ladder {
         Method::Dense
             .settings(*spp, config.aa.at(*spp), config.seed)
-            .validate()?;
+            .validate()
+            .map_err(render::RenderError::from)?;
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
     let (reference, reference_cached, reference_seconds) = reference(

@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use dofray::bench::{self, BenchConfig, equal_error};
 use dofray::camera::Camera;
 use dofray::output;
-use dofray::render::RenderSettings;
+use dofray::render::{RenderSettings, SettingsPatch};
 
 use super::args::BenchArgs;
 use super::report::{print_equal_error, print_table, versioned_json};
@@ -31,23 +31,27 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
     if a.equal_error {
         return run_equal_error(a, &p, &camera);
     }
+    // The flags' sample counts, else the scene's, else the defaults; checked as a render's.
+    let samples = SettingsPatch {
+        spp: a.spp,
+        aa: a.aa,
+        ..Default::default()
+    };
+    let settings = p.renderer.settings(&samples).map_err(cli_error)?;
     let config = BenchConfig {
-        spp: a.spp.or(p.renderer.desc().spp).unwrap_or(16),
-        aa: a.aa.or(p.renderer.desc().aa).unwrap_or(4),
+        spp: settings.spp,
+        aa: settings.aa,
         repeat: a.repeat,
         reference_spp: a.reference_spp,
         seed: a.scene.seed,
         cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
     };
     let max = RenderSettings::MAX_SAMPLES;
-    for (flag, n) in [
-        ("--spp", config.spp),
-        ("--aa", config.aa),
-        ("--reference-spp", config.reference_spp),
-    ] {
-        if n == 0 || n > max {
-            usage!("{flag} must be 1 to {max}, got {n}");
-        }
+    if config.reference_spp == 0 || config.reference_spp > max {
+        usage!(
+            "--reference-spp must be 1 to {max}, got {}",
+            config.reference_spp
+        );
     }
     if config.repeat == 0 {
         usage!("--repeat must be at least 1");
@@ -103,9 +107,13 @@ pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> R
     // The scene's in-focus to defocused ratio of samples (4 : 16 by default), at every rung.
     let aa = match a.aa {
         Some(n) => equal_error::RungAa::Fixed(n),
-        None => equal_error::RungAa::Ratio(
-            p.renderer.desc().aa.unwrap_or(4) as f64 / p.renderer.desc().spp.unwrap_or(16) as f64,
-        ),
+        None => {
+            let scene = p
+                .renderer
+                .settings(&SettingsPatch::default())
+                .map_err(cli_error)?;
+            equal_error::RungAa::Ratio(scene.aa as f64 / scene.spp as f64)
+        }
     };
     let config = equal_error::EqualErrorConfig {
         ladder: a.ladder.clone(),

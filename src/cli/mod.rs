@@ -2,7 +2,8 @@
 
 use anyhow::{Context, Result};
 use dofray::embree::Device;
-use dofray::overrides::{Overrides, Param};
+use dofray::overrides::Overrides;
+use dofray::params::Param;
 use dofray::render::Progress;
 use dofray::renderer::{Renderer, RendererError};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -78,11 +79,11 @@ pub(crate) fn overrides(a: &SceneArgs) -> Overrides {
     }
 }
 
-/// A renderer's error, an override's worded for the command line (flag names).
+/// A renderer's error, an override's or a setting's worded for the command line (flag names).
 pub(crate) fn cli_error(e: RendererError) -> anyhow::Error {
-    match e {
-        RendererError::Override(e) => dofray::exit::UsageError(e.message(Param::flag)).into(),
-        e => e.into(),
+    match e.param_message(Param::flag) {
+        Some(message) => dofray::exit::UsageError(message).into(),
+        None => e.into(),
     }
 }
 

@@ -10,8 +10,9 @@ use dofray::batch::run::{JobFailure, RunOptions, RunProgress};
 use dofray::batch::shard::Shard;
 use dofray::batch::{Batch, FrameRequest, FrameSelectError, ImageOptions, JobError, JobSummary};
 use dofray::output;
-use dofray::overrides::{Param, SettingsOverrides};
-use dofray::render::{self, Progress, Region, RenderSettings};
+use dofray::params::Param;
+use dofray::render::{RulePatch, SettingsPatch};
+use dofray::render::{Progress, Region, RenderSettings};
 use dofray::scene::SceneDesc;
 
 use super::args::{MergeArgs, RenderArgs};
@@ -19,23 +20,31 @@ use super::{Bar, cli_error, prepare};
 
 /// The render settings the flags and the scene ask for.
 pub(crate) fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<RenderSettings> {
-    let flags = SettingsOverrides {
+    // clap keeps --tolerance apart from -k and --paper-exact.
+    let rule = match (a.tolerance, a.interval_factor, a.paper_exact) {
+        (Some(t), ..) => Some(RulePatch::ErrorControlled { tolerance: Some(t) }),
+        (None, None, false) => None,
+        (None, k, paper_exact) => Some(RulePatch::Seed {
+            interval_factor: k,
+            paper_exact,
+        }),
+    };
+    let flags = SettingsPatch {
         mode: Some(a.mode),
         spp: a.spp,
         aa: a.aa,
         pixel_filter: a.pixel_filter,
         pixel_filter_width: a.pixel_filter_width,
-        tolerance: a.tolerance,
-        interval_factor: a.interval_factor,
-        paper_exact: a.paper_exact,
+        rule,
         transparent: a.transparent,
         exposure: a.exposure,
         seed: Some(a.scene.seed),
         lens_filter: Some(a.filter),
     };
     Ok(flags
-        .settings(desc)
-        .map_err(|e| dofray::exit::UsageError(cli_message(&e)))?)
+        .over(&desc.settings)
+        .resolve()
+        .map_err(|e| dofray::exit::UsageError(e.message(Param::flag)))?)
 }
 
 /// The frames the flags (or, for a frame pattern, the scene's animation) ask for; `None` for
@@ -320,37 +329,4 @@ pub(crate) fn run_merge(a: &MergeArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// Render-setting errors worded for the command line (flag names, not field names).
-pub(crate) fn cli_message(e: &render::RenderError) -> String {
-    match e {
-        render::RenderError::BadSpp(n) => {
-            format!(
-                "--spp must be 1 to {}, got {n}",
-                render::RenderSettings::MAX_SAMPLES
-            )
-        }
-        render::RenderError::BadAa(n) => {
-            format!(
-                "--aa must be 1 to {}, got {n}",
-                render::RenderSettings::MAX_SAMPLES
-            )
-        }
-        render::RenderError::BadPixelFilterWidth(w) => format!(
-            "--pixel-filter-width must be a number in (0, {}], got {w}",
-            dofray::filter::PixelFilter::MAX_WIDTH
-        ),
-        render::RenderError::BadIntervalFactor(k) => {
-            format!("--interval-factor must be a finite number > 0, got {k}")
-        }
-        render::RenderError::BadExposure(e) => format!(
-            "--exposure must be a finite number of stops from -{max} to {max}, got {e}",
-            max = render::RenderSettings::MAX_EXPOSURE
-        ),
-        render::RenderError::BadTolerance(t) => format!(
-            "--tolerance must be a finite number > 0 (8-bit sRGB code values, e.g. 1), got {t}"
-        ),
-        other => other.to_string(),
-    }
 }

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use crate::camera::Camera;
-use crate::render::{Mode, RenderSettings, RenderStats, SiteRule};
+use crate::render::{Mode, RenderSettings, RenderStats, SamplingRule};
 
 /// Ordered `(key, value)` pairs. Keys are ASCII (PNG keywords: 1 to 79 Latin-1 characters);
 /// values are any text.
@@ -62,16 +62,20 @@ impl Metadata {
         }
         m.push("dofray:mode", settings.mode.name());
         if settings.mode == Mode::Adaptive {
-            match settings.rule {
-                SiteRule::Error => {
-                    m.push("dofray:rule", "error");
-                    m.push("dofray:tolerance", settings.tolerance());
+            m.push("dofray:rule", settings.rule.site_rule().name());
+            match (settings.rule, settings.tolerance()) {
+                (_, Some(tolerance)) => m.push("dofray:tolerance", tolerance),
+                (
+                    SamplingRule::Seed {
+                        interval_factor,
+                        paper_exact,
+                    },
+                    _,
+                ) => {
+                    m.push("dofray:interval_factor", interval_factor);
+                    m.push("dofray:paper_exact", paper_exact);
                 }
-                SiteRule::Seed => {
-                    m.push("dofray:rule", "seed");
-                    m.push("dofray:interval_factor", settings.interval_factor);
-                    m.push("dofray:paper_exact", settings.paper_exact);
-                }
+                (SamplingRule::ErrorControlled { .. }, None) => {}
             }
         }
         m.push("dofray:spp", settings.spp);

@@ -8,8 +8,8 @@
 //! - `dense` (Cook's distributed ray tracing): every pixel is a site.
 //! - `adaptive` (the seed's method): sites on power-of-two lattices whose spacing follows the
 //!   CoC; the pixels between them are interpolated. By default an error estimate sets the
-//!   spacing and each site's samples ([`refine`], [`SiteRule::Error`]); [`SiteRule::Seed`] is
-//!   the seed's fixed rule ([`maps::interval_map`], [`interpolate`]).
+//!   spacing and each site's samples ([`refine`], [`SamplingRule::ErrorControlled`]);
+//!   [`SamplingRule::Seed`] is the seed's fixed rule ([`maps::interval_map`], [`interpolate`]).
 //!
 //! Every mode starts with the depth pass: one ray per pixel through the pixel centre and the
 //! lens centre, intersected only, for the depth and CoC maps. In dense and adaptive mode a site
@@ -26,6 +26,7 @@ pub mod interpolate;
 pub mod maps;
 pub mod refine;
 pub mod region;
+pub mod settings;
 pub mod site;
 pub mod trace;
 
@@ -33,145 +34,18 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use crate::camera::{Camera, LensFilter};
+use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
-use crate::filter::PixelFilter;
 use crate::scene::World;
 use estimate::Estimate;
 pub use film::Film;
 pub use region::{Region, RegionError};
+pub use settings::{
+    Mode, RenderSettings, RulePatch, SamplingRule, SettingError, SettingsPatch, SiteRule,
+    UnknownMode,
+};
 pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
-
-/// Where sample sites are placed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
-#[serde(rename_all = "lowercase")]
-pub enum Mode {
-    /// Every pixel a site, sampled through the lens centre: no depth of field.
-    Pinhole,
-    /// Every pixel a site, sampled over pixel x lens (Cook's distributed ray tracing): the
-    /// reference the other modes are measured against.
-    Dense,
-    /// Sites only where needed, spaced by the CoC; the pixels between them interpolated.
-    Adaptive,
-}
-
-impl Mode {
-    /// Every mode, in the order the command line lists them.
-    pub const ALL: [Mode; 3] = [Mode::Pinhole, Mode::Dense, Mode::Adaptive];
-
-    /// The mode's lowercase name, as the command line and JSON spell it (`"pinhole"`, `"dense"`,
-    /// `"adaptive"`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Pinhole => "pinhole",
-            Self::Dense => "dense",
-            Self::Adaptive => "adaptive",
-        }
-    }
-}
-
-/// A name that is not a [`Mode`]'s.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("mode must be \"pinhole\", \"dense\" or \"adaptive\", got {0:?}")]
-pub struct UnknownMode(pub String);
-
-/// Parses a mode's [`Mode::name`] (for bindings and configuration files).
-///
-/// ```rust
-/// use dofray::render::Mode;
-///
-/// assert_eq!("dense".parse::<Mode>(), Ok(Mode::Dense));
-/// assert!("fast".parse::<Mode>().unwrap_err().to_string().contains("\"fast\""));
-/// ```
-impl std::str::FromStr for Mode {
-    type Err = UnknownMode;
-
-    fn from_str(name: &str) -> Result<Self, UnknownMode> {
-        Mode::ALL
-            .into_iter()
-            .find(|m| m.name() == name)
-            .ok_or_else(|| UnknownMode(name.to_string()))
-    }
-}
-
-/// How adaptive mode decides where sample sites go and how many samples each takes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum SiteRule {
-    /// From an error estimate: intervals and sample counts are refined until interpolation
-    /// and sampling error are within the tolerance (see [`refine`]).
-    #[default]
-    Error,
-    /// The seed's fixed rule: interval = max(2, k x CoC) in power-of-two layers, `spp` samples
-    /// per defocused site (for reproducing the paper's table).
-    Seed,
-}
-
-/// How to render.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RenderSettings {
-    /// Where sample sites are placed.
-    pub mode: Mode,
-    /// Samples (of pixel x lens) per sample site that blur reaches (16 fill one packet).
-    pub spp: u32,
-    /// Samples per in-focus site, and per pixel in pinhole mode: the anti-aliasing samples.
-    pub aa: u32,
-    /// The pixel (reconstruction) filter the samples' film positions are drawn from.
-    pub pixel_filter: PixelFilter,
-    /// How adaptive mode places sample sites and sets their sample counts.
-    pub rule: SiteRule,
-    /// Error-controlled rule: the largest error accepted where pixels are interpolated or a
-    /// site stops sampling early, in 8-bit sRGB code values (1 = one step of 255). `None`:
-    /// [`RenderSettings::default_tolerance`] for `spp`.
-    pub tolerance: Option<f32>,
-    /// Seed rule: the seed's k, sample interval = k x CoC in defocused regions.
-    pub interval_factor: f32,
-    /// Seed rule: the seed's plain per-pixel interval rule instead of the conservative one.
-    pub paper_exact: bool,
-    /// Largest interval (power of two).
-    pub max_interval: u32,
-    /// Seed of every pixel's sample stream: renders with the same seed (and everything else the
-    /// same) are bit-identical; another seed gives another, equally valid, noise pattern.
-    pub seed: u64,
-    /// How lens samples are weighted when a site's samples are averaged (the bokeh's profile).
-    pub filter: LensFilter,
-    /// Mirror bounces after the first hit.
-    pub bounces: u32,
-    /// Keep every traced packet in [`RenderStats::ray_log`] (for intersect-only benchmarks).
-    pub record_rays: bool,
-    /// Leave the background out of the image (Blender's "Film > Transparent"): camera rays
-    /// that miss contribute black, so [`Film::color`] is premultiplied by [`Film::alpha`], the
-    /// coverage, and the render composites over a plate. Otherwise alpha is 1 everywhere.
-    pub transparent: bool,
-    /// Exposure in stops: every sample's radiance is scaled by 2^exposure before it is
-    /// averaged, so the error-controlled rule's tolerance is measured in the exposed image's
-    /// code values (as a camera's exposure would be). 0 leaves radiance as it is.
-    pub exposure: f32,
-}
-
-impl Default for RenderSettings {
-    fn default() -> Self {
-        Self {
-            mode: Mode::Adaptive,
-            spp: 16,
-            aa: 4,
-            pixel_filter: PixelFilter::default(),
-            rule: SiteRule::Error,
-            tolerance: None,
-            interval_factor: 0.4,
-            paper_exact: false,
-            max_interval: 64,
-            seed: 0,
-            filter: LensFilter::Box,
-            bounces: 1,
-            record_rays: false,
-            transparent: false,
-            exposure: 0.0,
-        }
-    }
-}
 
 /// Why a render could not start (or did not finish).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -180,28 +54,9 @@ pub enum RenderError {
     /// sorts it as `interrupted` (exit code 130, as SIGINT): the caller stopped it.
     #[error("the render was cancelled")]
     Cancelled,
-    /// `spp` is 0 or above [`RenderSettings::MAX_SAMPLES`].
-    #[error("spp must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
-    BadSpp(u32),
-    /// `aa` is 0 or above [`RenderSettings::MAX_SAMPLES`].
-    #[error("aa must be 1 to {max}, got {0}", max = RenderSettings::MAX_SAMPLES)]
-    BadAa(u32),
-    /// The pixel filter's width (in pixels) is not a finite number in
-    /// (0, [`PixelFilter::MAX_WIDTH`]].
-    #[error("the pixel filter width must be a number in (0, {max}] pixels, got {0}", max = PixelFilter::MAX_WIDTH)]
-    BadPixelFilterWidth(f32),
-    /// The tolerance is not a finite number > 0.
-    #[error("tolerance must be a finite number > 0 (8-bit sRGB code values), got {0}")]
-    BadTolerance(f32),
-    /// The interval factor is not a finite number > 0.
-    #[error("interval factor must be a finite number > 0, got {0}")]
-    BadIntervalFactor(f32),
-    /// The largest interval is not a power of two.
-    #[error("max interval must be a power of two >= 1, got {0}")]
-    BadMaxInterval(u32),
-    /// The exposure is not finite or beyond +-[`RenderSettings::MAX_EXPOSURE`] stops.
-    #[error("exposure must be a finite number of stops from -{max} to {max}, got {0}", max = RenderSettings::MAX_EXPOSURE)]
-    BadExposure(f32),
+    /// A setting is out of range ([`RenderSettings::validate`]).
+    #[error(transparent)]
+    Setting(#[from] SettingError),
     /// The region to render is empty or reaches beyond the image.
     #[error(transparent)]
     BadRegion(#[from] RegionError),
@@ -218,55 +73,6 @@ pub enum RenderError {
         /// Row of the first such pixel, in full-image coordinates.
         y: usize,
     },
-}
-
-impl RenderSettings {
-    /// The most samples per site `spp` and `aa` accept (2^16: far beyond convergence for
-    /// any image, few enough that a typo cannot start a render of days).
-    pub const MAX_SAMPLES: u32 = 1 << 16;
-    /// The largest exposure, in stops either way.
-    pub const MAX_EXPOSURE: f32 = 64.0;
-
-    /// The tolerance when none is given: 4 / sqrt(spp) code values (1 at 16 spp), so the
-    /// accepted error shrinks with the noise a site has at `spp` samples.
-    pub fn default_tolerance(spp: u32) -> f32 {
-        4.0 / (spp.max(1) as f32).sqrt()
-    }
-
-    /// The tolerance in effect.
-    pub fn tolerance(&self) -> f32 {
-        self.tolerance
-            .unwrap_or_else(|| Self::default_tolerance(self.spp))
-    }
-
-    /// Checks every setting's range, without rendering: `Err` names the first bad one (the same
-    /// check [`render`] and [`render_region`] start with).
-    pub fn validate(&self) -> Result<(), RenderError> {
-        if self.spp == 0 || self.spp > Self::MAX_SAMPLES {
-            return Err(RenderError::BadSpp(self.spp));
-        }
-        if self.aa == 0 || self.aa > Self::MAX_SAMPLES {
-            return Err(RenderError::BadAa(self.aa));
-        }
-        if !self.pixel_filter.is_valid() {
-            return Err(RenderError::BadPixelFilterWidth(self.pixel_filter.width));
-        }
-        if !(self.interval_factor.is_finite() && self.interval_factor > 0.0) {
-            return Err(RenderError::BadIntervalFactor(self.interval_factor));
-        }
-        if let Some(t) = self.tolerance
-            && !(t.is_finite() && t > 0.0)
-        {
-            return Err(RenderError::BadTolerance(t));
-        }
-        if !self.max_interval.is_power_of_two() {
-            return Err(RenderError::BadMaxInterval(self.max_interval));
-        }
-        if !self.exposure.is_finite() || self.exposure.abs() > Self::MAX_EXPOSURE {
-            return Err(RenderError::BadExposure(self.exposure));
-        }
-        Ok(())
-    }
 }
 
 /// What a render did and how long it took.
@@ -540,13 +346,20 @@ fn fixed_sites(
     // The pixels the region needs traced: its own, and the sites its pixels interpolate from.
     let mut need = vec![false; w * h];
     let mut sites = None;
-    if settings.mode == Mode::Adaptive {
+    if let (
+        Mode::Adaptive,
+        SamplingRule::Seed {
+            interval_factor,
+            paper_exact,
+        },
+    ) = (settings.mode, settings.rule)
+    {
         film.interval = maps::interval_map(
             &film.coc,
             w,
             h,
-            settings.interval_factor,
-            settings.paper_exact,
+            interval_factor,
+            paper_exact,
             settings.max_interval,
         );
         let mask = maps::site_mask(&film.interval, w, h);
@@ -638,9 +451,11 @@ pub fn render_region(
         pixel_filter: &pixel_filter,
     };
     let blurred = maps::blurred(&film.coc, w, h);
-    if settings.mode == Mode::Adaptive && settings.rule == SiteRule::Error {
+    if let (Mode::Adaptive, Some(tolerance)) = (settings.mode, settings.tolerance()) {
         // Maps, sites and interpolation interleave in rounds: timed as shading.
-        let refined = refine::refine(&shader, &film.coc, &blurred, region, progress, &mut tally)?;
+        let refined = refine::refine(
+            &shader, tolerance, &film.coc, &blurred, region, progress, &mut tally,
+        )?;
         stats.rounds = refined.rounds;
         film.set_rgba(&refined.color);
         film.interval = refined.interval;

@@ -460,12 +460,14 @@ impl Bucket {
 
 /// The frame-wide maps every bucket reads (all from the depth pass).
 struct Maps<'a> {
+    /// The error-controlled rule's tolerance in effect.
+    tolerance: f32,
     blurred: &'a [bool],
     start: Vec<u32>,
     reach: Vec<u8>,
 }
 
-/// Renders with the error-controlled rule, given the CoC map and which pixels blur reaches,
+/// Renders with the error-controlled rule at `tolerance`, given the CoC map and which pixels blur reaches,
 /// the pixels of `region` (and of the buckets around them; the rest of the returned maps is
 /// left empty: colour 0, no samples).
 ///
@@ -474,6 +476,7 @@ struct Maps<'a> {
 /// samples, so any region of the image renders to the same pixels as the whole frame.
 pub fn refine(
     shader: &SiteShader,
+    tolerance: f32,
     coc: &[f32],
     blurred: &[bool],
     region: &super::Region,
@@ -483,8 +486,9 @@ pub fn refine(
     let s = shader.settings;
     let (width, height) = (shader.camera.width as usize, shader.camera.height as usize);
     let maps = Maps {
+        tolerance,
         blurred,
-        start: maps::start_intervals(coc, width, height, start_k(s.tolerance()), s.max_interval),
+        start: maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval),
         reach: reach_levels(coc, s.max_interval),
     };
     let size = s.max_interval as usize;
@@ -541,7 +545,7 @@ fn refine_bucket(
     let s = shader.settings;
     let full_width = shader.camera.width as usize;
     let (width, height) = (b.w, b.h);
-    let tolerance = s.tolerance();
+    let tolerance = maps.tolerance;
     let blurred = b.slice(maps.blurred, full_width);
     let target = |p: usize| if blurred[p] { s.spp } else { s.aa };
     let first = |p: usize| {

@@ -123,21 +123,9 @@ pub struct SceneDesc {
     pub ambient: Vec3,
     /// What rays that hit nothing see.
     pub background: Background,
-    /// Samples per defocused site the scene asks for (the command line may override it).
-    pub spp: Option<u32>,
-    /// Samples per in-focus site (anti-aliasing) the scene asks for (likewise).
-    pub aa: Option<u32>,
-    /// The pixel filter the scene asks for (likewise).
-    pub pixel_filter: Option<crate::filter::PixelFilter>,
-    /// The seed's interval factor k the scene asks for: the seed's rule (the command line may
-    /// override it).
-    pub interval_factor: Option<f32>,
-    /// The error-controlled rule's tolerance the scene asks for, 8-bit sRGB code values
-    /// (likewise).
-    pub tolerance: Option<f32>,
-    /// Leave the background out of the image, with alpha = coverage
-    /// ([`crate::render::RenderSettings::transparent`]).
-    pub transparent: bool,
+    /// The render settings the scene asks for (the command line's flags and the bindings'
+    /// keywords go over them: [`crate::render::SettingsPatch::over`]).
+    pub settings: crate::render::SettingsPatch,
     /// What the files the scene was loaded from use but dofray ignores (glTF extensions it
     /// does not implement, light ranges, animations, ...): at most one line per file, naming
     /// the file. Empty for built-in scenes.
@@ -163,12 +151,7 @@ impl Default for SceneDesc {
             lights: Vec::new(),
             ambient: Vec3::splat(0.1),
             background: model::default_background(),
-            spp: None,
-            aa: None,
-            pixel_filter: None,
-            interval_factor: None,
-            tolerance: None,
-            transparent: false,
+            settings: Default::default(),
             warnings: Vec::new(),
             animation: None,
         }

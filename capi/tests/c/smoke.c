@@ -189,14 +189,15 @@ int main(int argc, char **argv) {
     image = NULL;
     dofray_cancel_free(token);
 
-    /* Bad overrides: the render fails naming the parameter; the scene stays usable. */
+    /* Bad overrides: the render fails naming the setter; the scene stays usable. */
     CHECK(dofray_scene_set_f_number(scene, -1.0f) == DOFRAY_OK);
     CHECK_ERROR(dofray_render(scene, device, NULL, NULL, NULL, &image), DOFRAY_USAGE,
-                "f_number");
+                "dofray_scene_set_f_number must be a finite number > 0");
     CHECK(image == NULL);
     CHECK(dofray_scene_set_f_number(scene, 4.0f) == DOFRAY_OK);
     CHECK(dofray_scene_set_spp(scene, 0) == DOFRAY_OK);
-    CHECK_ERROR(dofray_render(scene, device, NULL, NULL, NULL, &image), DOFRAY_USAGE, "spp");
+    CHECK_ERROR(dofray_render(scene, device, NULL, NULL, NULL, &image), DOFRAY_USAGE,
+                "dofray_scene_set_spp must be 1 to 65536");
     CHECK_ERROR(dofray_scene_set_mode(scene, "fast"), DOFRAY_INVALID_ARGUMENT, "fast");
     CHECK(dofray_scene_reset_overrides(scene) == DOFRAY_OK);
     CHECK(dofray_scene_set_size(scene, 32, 0) == DOFRAY_OK); /* the height follows */

@@ -25,7 +25,8 @@ use super::input::{self, LoadOptions};
 use super::model::{self, Transform};
 use super::texture::TextureCache;
 use crate::camera::{DEFAULT_HEIGHT, DEFAULT_WIDTH};
-use crate::filter::PixelFilter;
+use crate::params::Param;
+use crate::render::{RulePatch, SettingsPatch};
 
 /// The scene file being built: its path and text, for error locations and relative paths.
 struct Ctx<'a> {
@@ -156,8 +157,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         .transpose()?;
     let lights = lights::lights(ctx, raw.lights, objects.lights, &camera)?;
     let background = lights::background(ctx, raw.background)?;
-    let render = raw.render.unwrap_or_default();
-    let (tolerance, pixel_filter) = sampling(ctx, &render)?;
+    let settings = render_settings(ctx, raw.render.unwrap_or_default())?;
     let name = raw.name.unwrap_or_else(|| {
         ctx.path
             .file_stem()
@@ -171,12 +171,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         lights,
         ambient: lights::ambient(raw.ambient),
         background,
-        spp: render.spp.map(|s| s.0),
-        aa: render.aa.map(|s| s.0),
-        pixel_filter,
-        interval_factor: render.interval_factor.map(|k| k.0),
-        tolerance,
-        transparent: render.transparent.unwrap_or(false),
+        settings,
         warnings: objects.warnings,
         animation,
     })
@@ -219,13 +214,11 @@ fn image_size(
     Ok((width, height))
 }
 
-/// The `[render]` table's tolerance (refused beside the seed's `interval_factor`) and pixel
-/// filter.
-fn sampling(
-    ctx: &Ctx,
-    render: &RawRender,
-) -> Result<(Option<f32>, Option<PixelFilter>), LoadError> {
-    let tolerance = match (&render.tolerance, render.interval_factor) {
+/// The `[render]` table as a settings patch (`tolerance` refused beside the seed's
+/// `interval_factor`), checked as the render will check it: a value out of range is an error
+/// at its key, worded from the parameter table as every front end words it.
+fn render_settings(ctx: &Ctx, render: RawRender) -> Result<SettingsPatch, LoadError> {
+    let rule = match (&render.tolerance, &render.interval_factor) {
         (Some(t), Some(_)) => {
             return Err(ctx.invalid(
                 t.span(),
@@ -234,26 +227,37 @@ fn sampling(
                  seed's fixed rule), not both",
             ));
         }
-        (t, _) => t.as_ref().map(|t| t.get_ref().0),
-    };
-    let pixel_filter = match (render.pixel_filter, &render.pixel_filter_width) {
+        (Some(t), None) => Some(RulePatch::ErrorControlled {
+            tolerance: Some(t.get_ref().0),
+        }),
+        (None, Some(k)) => Some(RulePatch::Seed {
+            interval_factor: Some(k.get_ref().0),
+            paper_exact: false,
+        }),
         (None, None) => None,
-        (kind, width) => {
-            let mut filter = PixelFilter::new(kind.unwrap_or_default());
-            if let Some(w) = width {
-                filter.width = w.get_ref().0;
-                if !filter.is_valid() {
-                    return Err(ctx.invalid(
-                        w.span(),
-                        "render.pixel_filter_width",
-                        "a width in pixels up to 16",
-                    ));
-                }
-            }
-            Some(filter)
-        }
     };
-    Ok((tolerance, pixel_filter))
+    let patch = SettingsPatch {
+        spp: render.spp.as_ref().map(|s| s.get_ref().0),
+        aa: render.aa.as_ref().map(|s| s.get_ref().0),
+        pixel_filter: render.pixel_filter,
+        pixel_filter_width: render.pixel_filter_width.as_ref().map(|w| w.get_ref().0),
+        rule,
+        transparent: render.transparent.unwrap_or(false),
+        ..Default::default()
+    };
+    if let Err(e) = patch.resolve() {
+        let span = match e.param() {
+            Param::Spp => render.spp.map(|s| s.span()),
+            Param::Aa => render.aa.map(|s| s.span()),
+            Param::PixelFilterWidth => render.pixel_filter_width.map(|s| s.span()),
+            Param::Tolerance => render.tolerance.map(|s| s.span()),
+            Param::IntervalFactor => render.interval_factor.map(|s| s.span()),
+            _ => None,
+        };
+        let at = ctx.at(span.unwrap_or(0..0));
+        return Err(LoadError::invalid(at, e.message(Param::key_name)));
+    }
+    Ok(patch)
 }
 
 /// Loads a mesh file by its extension (`UnknownScene` when the extension is not a mesh's).

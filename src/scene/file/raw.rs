@@ -336,9 +336,9 @@ pub(super) struct RawImage {
 #[derive(Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct RawRender {
-    pub(super) spp: Option<AtLeastOne>,
-    pub(super) aa: Option<AtLeastOne>,
-    pub(super) interval_factor: Option<Positive>,
+    pub(super) spp: Option<Spanned<AtLeastOne>>,
+    pub(super) aa: Option<Spanned<AtLeastOne>>,
+    pub(super) interval_factor: Option<Spanned<Positive>>,
     pub(super) tolerance: Option<Spanned<Positive>>,
     pub(super) pixel_filter: Option<crate::filter::PixelFilterKind>,
     pub(super) pixel_filter_width: Option<Spanned<Positive>>,
