@@ -1511,7 +1511,14 @@ fn render_table_sets_samples_and_the_pixel_filter() {
     assert_names(
         &m,
         "scene.toml:2:",
-        &["render.pixel_filter_width", "up to 16"],
+        &["render.pixel_filter_width must be a number in (0, 16], got 100"],
+    );
+    // Checked as the render checks it, named by its key.
+    let m = error_of("render-spp", &format!("[render]\nspp = 100000\n{SPHERE}"));
+    assert_names(
+        &m,
+        "scene.toml:2:",
+        &["render.spp must be 1 to 65536, got 100000"],
     );
     let m = error_of(
         "render-kind",
