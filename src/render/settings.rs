@@ -64,7 +64,7 @@ impl std::str::FromStr for Mode {
 #[serde(rename_all = "lowercase")]
 pub enum SiteRule {
     /// From an error estimate: intervals and sample counts are refined until interpolation
-    /// and sampling error are within the tolerance (see [`refine`]).
+    /// and sampling error are within the tolerance (see [`super::refine`]).
     #[default]
     Error,
     /// The seed's fixed rule: interval = max(2, k x CoC) in power-of-two layers, `spp` samples
