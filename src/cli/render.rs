@@ -11,8 +11,8 @@ use dofray::batch::shard::Shard;
 use dofray::batch::{Batch, FrameRequest, FrameSelectError, ImageOptions, JobError, JobSummary};
 use dofray::output;
 use dofray::params::Param;
-use dofray::render::{RulePatch, SettingsPatch};
 use dofray::render::{Progress, Region, RenderSettings};
+use dofray::render::{RulePatch, SettingsPatch};
 use dofray::scene::SceneDesc;
 
 use super::args::{MergeArgs, RenderArgs};
