@@ -75,6 +75,7 @@ pub mod render;
 pub mod renderer;
 pub mod sampler;
 pub mod scene;
+pub mod settings;
 pub mod shade;
 
 /// The vector maths crate of dofray's public types (`Vec3` in scenes, cameras and lights),

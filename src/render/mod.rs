@@ -26,7 +26,6 @@ pub mod interpolate;
 pub mod maps;
 pub mod refine;
 pub mod region;
-pub mod settings;
 pub mod site;
 pub mod trace;
 
@@ -37,13 +36,13 @@ use rayon::prelude::*;
 use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::scene::World;
-use estimate::Estimate;
-pub use film::Film;
-pub use region::{Region, RegionError};
-pub use settings::{
+pub use crate::settings::{
     Mode, RenderSettings, RulePatch, SamplingRule, SettingError, SettingsPatch, SiteRule,
     UnknownMode,
 };
+use estimate::Estimate;
+pub use film::Film;
+pub use region::{Region, RegionError};
 pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 

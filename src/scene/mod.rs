@@ -125,7 +125,7 @@ pub struct SceneDesc {
     pub background: Background,
     /// The render settings the scene asks for (the command line's flags and the bindings'
     /// keywords go over them: [`crate::render::SettingsPatch::over`]).
-    pub settings: crate::render::SettingsPatch,
+    pub settings: crate::settings::SettingsPatch,
     /// What the files the scene was loaded from use but dofray ignores (glTF extensions it
     /// does not implement, light ranges, animations, ...): at most one line per file, naming
     /// the file. Empty for built-in scenes.

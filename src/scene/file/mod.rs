@@ -26,7 +26,7 @@ use super::model::{self, Transform};
 use super::texture::TextureCache;
 use crate::camera::{DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::params::Param;
-use crate::render::{RulePatch, SettingsPatch};
+use crate::settings::{RulePatch, SettingsPatch};
 
 /// The scene file being built: its path and text, for error locations and relative paths.
 struct Ctx<'a> {

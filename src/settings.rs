@@ -2,9 +2,9 @@
 //! reads) and [`SettingsPatch`], what a layer (scene file, flags, keywords) gives, resolved once
 //! into settings by the one function that holds the defaults and the checks.
 
+use crate::camera::LensFilter;
 use crate::filter::{PixelFilter, PixelFilterKind};
 use crate::params::Param;
-use crate::camera::LensFilter;
 
 /// Where sample sites are placed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -64,7 +64,7 @@ impl std::str::FromStr for Mode {
 #[serde(rename_all = "lowercase")]
 pub enum SiteRule {
     /// From an error estimate: intervals and sample counts are refined until interpolation
-    /// and sampling error are within the tolerance (see [`super::refine`]).
+    /// and sampling error are within the tolerance (see [`crate::render::refine`]).
     #[default]
     Error,
     /// The seed's fixed rule: interval = max(2, k x CoC) in power-of-two layers, `spp` samples
@@ -135,12 +135,12 @@ pub struct RenderSettings {
     pub filter: LensFilter,
     /// Mirror bounces after the first hit.
     pub bounces: u32,
-    /// Keep every traced packet in [`super::RenderStats::ray_log`] (for intersect-only
+    /// Keep every traced packet in [`crate::render::RenderStats::ray_log`] (for intersect-only
     /// benchmarks).
     pub record_rays: bool,
     /// Leave the background out of the image (Blender's "Film > Transparent"): camera rays
-    /// that miss contribute black, so [`super::Film::color`] is premultiplied by
-    /// [`super::Film::alpha`], the coverage, and the render composites over a plate. Otherwise
+    /// that miss contribute black, so [`crate::render::Film::color`] is premultiplied by
+    /// [`crate::render::Film::alpha`], the coverage, and the render composites over a plate. Otherwise
     /// alpha is 1 everywhere.
     pub transparent: bool,
     /// Exposure in stops: every sample's radiance is scaled by 2^exposure before it is
@@ -183,7 +183,7 @@ impl RenderSettings {
     }
 
     /// Checks every setting's range, without rendering: `Err` names the first bad one (the
-    /// check [`SettingsPatch::resolve`] ends with, and [`super::render`] starts with).
+    /// check [`SettingsPatch::resolve`] ends with, and [`crate::render::render`] starts with).
     pub fn validate(&self) -> Result<(), SettingError> {
         let samples = |param, value| {
             if value == 0 || value > Self::MAX_SAMPLES {
