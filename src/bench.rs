@@ -416,22 +416,7 @@ pub fn run(
     let mut replayed = 0;
     for _ in 0..config.repeat {
         for (i, (_, mode, k, exact)) in modes.iter().enumerate() {
-            let settings = RenderSettings {
-                mode: *mode,
-                spp: config.spp,
-                // The seed's "plain ray tracing": one ray per pixel.
-                aa: if *mode == Mode::Pinhole { 1 } else { config.aa },
-                // The error-controlled row has no k; the others are the seed's fixed rule.
-                rule: match *k {
-                    Some(interval_factor) => SamplingRule::Seed {
-                        interval_factor,
-                        paper_exact: *exact,
-                    },
-                    None => SamplingRule::ErrorControlled { tolerance: None },
-                },
-                seed: config.seed,
-                ..Default::default()
-            };
+            let settings = row_settings(config, *mode, *k, *exact);
             let (film, stats) = render::render(world, camera, &settings, progress)?;
             runs[i].push(stats);
             images[i].get_or_insert(film);
@@ -448,47 +433,18 @@ pub fn run(
     let intersect_only_seconds = median(replay_times);
     let intersect_only_mrays_per_s = replayed as f64 / intersect_only_seconds / 1e6;
 
-    // The median over repeats of one figure of one mode.
-    let median_of =
-        |i: usize, figure: fn(&RenderStats) -> f64| median(runs[i].iter().map(figure).collect());
-    let pinhole_seconds = median_of(0, |s| s.seconds);
-    let dense_seconds = median_of(1, |s| s.seconds);
-    let dense_rgb = images[1].as_ref().map(Film::rgb).unwrap_or_default();
+    let compare = Compare {
+        reference: &reference,
+        dense_rgb: images[1].as_ref().map(Film::rgb).unwrap_or_default(),
+        size: (w, h),
+        pinhole_seconds: median_of(&runs[0], |s| s.seconds),
+        dense_seconds: median_of(&runs[1], |s| s.seconds),
+    };
     let mut rows = Vec::new();
     let mut films = Vec::new();
     for (i, (label, mode, k, exact)) in modes.into_iter().enumerate() {
         let film = images[i].take().expect("every mode ran at least once");
-        // Ray and site counts are the same in every repeat.
-        let stats = &runs[i][0];
-        let seconds = median_of(i, |s| s.seconds);
-        let rgb = film.rgb();
-        let vs_ref = |space| metrics::psnr(&rgb, &reference, w, h, space);
-        let ssim_ref = |space| metrics::ssim(&rgb, &reference, w, h, space);
-        rows.push(BenchRow {
-            label: label.clone(),
-            mode,
-            interval_factor: k,
-            paper_exact: exact,
-            seconds,
-            pinhole_seconds: median_of(i, |s| s.pinhole_seconds),
-            maps_seconds: median_of(i, |s| s.maps_seconds),
-            sites_seconds: median_of(i, |s| s.sites_seconds),
-            interpolate_seconds: median_of(i, |s| s.interpolate_seconds),
-            rays: stats.rays.total(),
-            primary_rays: stats.rays.primary,
-            shadow_rays: stats.rays.shadow,
-            secondary_rays: stats.rays.secondary,
-            mrays_per_s: stats.rays.total() as f64 / seconds / 1e6,
-            sample_sites: stats.sample_sites,
-            time_vs_pinhole: seconds / pinhole_seconds,
-            speedup_vs_dense: dense_seconds / seconds,
-            psnr_vs_dense: metrics::psnr(&rgb, &dense_rgb, w, h, Space::Srgb)?,
-            psnr_vs_reference: vs_ref(Space::Srgb)?,
-            ssim_vs_reference: ssim_ref(Space::Srgb)?,
-            psnr_vs_reference_linear: vs_ref(Space::Linear)?,
-            ssim_vs_reference_linear: ssim_ref(Space::Linear)?,
-            max_error_vs_reference: metrics::max_abs_error(&rgb, &reference, w, h, Space::Srgb)?,
-        });
+        rows.push(compare.row((label.clone(), mode, k, exact), &runs[i], &film)?);
         films.push((label, film));
     }
     Ok((
@@ -510,6 +466,84 @@ pub fn run(
         },
         BenchImages { films, reference },
     ))
+}
+
+/// The settings of one row of the table: `mode`, with the seed's rule at `k` (the error-controlled
+/// rule without one).
+fn row_settings(config: &BenchConfig, mode: Mode, k: Option<f32>, exact: bool) -> RenderSettings {
+    RenderSettings {
+        mode,
+        spp: config.spp,
+        // The seed's "plain ray tracing": one ray per pixel.
+        aa: if mode == Mode::Pinhole { 1 } else { config.aa },
+        rule: match k {
+            Some(interval_factor) => SamplingRule::Seed {
+                interval_factor,
+                paper_exact: exact,
+            },
+            None => SamplingRule::ErrorControlled { tolerance: None },
+        },
+        seed: config.seed,
+        ..Default::default()
+    }
+}
+
+/// The median over repeats of one figure of one mode's runs.
+fn median_of(runs: &[RenderStats], figure: fn(&RenderStats) -> f64) -> f64 {
+    median(runs.iter().map(figure).collect())
+}
+
+/// What every row of the table is compared with.
+struct Compare<'a> {
+    reference: &'a [[f32; 3]],
+    dense_rgb: Vec<[f32; 3]>,
+    size: (usize, usize),
+    pinhole_seconds: f64,
+    dense_seconds: f64,
+}
+
+impl Compare<'_> {
+    /// The row of a mode (label, mode, k, paper-exact) from its repeats' stats and its image.
+    fn row(
+        &self,
+        (label, mode, k, exact): (String, Mode, Option<f32>, bool),
+        runs: &[RenderStats],
+        film: &Film,
+    ) -> Result<BenchRow, BenchError> {
+        let (w, h) = self.size;
+        let reference = self.reference;
+        // Ray and site counts are the same in every repeat.
+        let stats = &runs[0];
+        let seconds = median_of(runs, |s| s.seconds);
+        let rgb = film.rgb();
+        let vs_ref = |space| metrics::psnr(&rgb, reference, w, h, space);
+        let ssim_ref = |space| metrics::ssim(&rgb, reference, w, h, space);
+        Ok(BenchRow {
+            label,
+            mode,
+            interval_factor: k,
+            paper_exact: exact,
+            seconds,
+            pinhole_seconds: median_of(runs, |s| s.pinhole_seconds),
+            maps_seconds: median_of(runs, |s| s.maps_seconds),
+            sites_seconds: median_of(runs, |s| s.sites_seconds),
+            interpolate_seconds: median_of(runs, |s| s.interpolate_seconds),
+            rays: stats.rays.total(),
+            primary_rays: stats.rays.primary,
+            shadow_rays: stats.rays.shadow,
+            secondary_rays: stats.rays.secondary,
+            mrays_per_s: stats.rays.total() as f64 / seconds / 1e6,
+            sample_sites: stats.sample_sites,
+            time_vs_pinhole: seconds / self.pinhole_seconds,
+            speedup_vs_dense: self.dense_seconds / seconds,
+            psnr_vs_dense: metrics::psnr(&rgb, &self.dense_rgb, w, h, Space::Srgb)?,
+            psnr_vs_reference: vs_ref(Space::Srgb)?,
+            ssim_vs_reference: ssim_ref(Space::Srgb)?,
+            psnr_vs_reference_linear: vs_ref(Space::Linear)?,
+            ssim_vs_reference_linear: ssim_ref(Space::Linear)?,
+            max_error_vs_reference: metrics::max_abs_error(&rgb, reference, w, h, Space::Srgb)?,
+        })
+    }
 }
 
 #[cfg(test)]

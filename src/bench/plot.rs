@@ -143,6 +143,36 @@ fn log_ticks(x0: f64, x1: f64) -> (Vec<f64>, Vec<f64>) {
     (bold, light)
 }
 
+/// Guides at the report's PSNR levels, labelled at the left edge.
+fn draw_guides<DB: DrawingBackend, X: Ranged<ValueType = f64>, Y: Ranged<ValueType = f64>>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
+    report: &EqualErrorReport,
+    (x0, x1): (f64, f64),
+) -> Result<(), String> {
+    let guide = RGBColor(110, 110, 110);
+    for level in &report.levels {
+        let y = level.psnr_db;
+        chart
+            .draw_series(DashedLineSeries::new(
+                [(x0, y), (x1, y)],
+                8,
+                6,
+                guide.stroke_width(1),
+            ))
+            .map_err(|e| e.to_string())?;
+        chart
+            .draw_series(std::iter::once(Text::new(
+                format!("{y} dB"),
+                (x0 * 1.04, y),
+                TextStyle::from((FONT, 15).into_font())
+                    .color(&guide)
+                    .pos(Pos::new(HPos::Left, VPos::Bottom)),
+            )))
+            .map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
 fn draw(report: &EqualErrorReport, root: &DrawingArea<BitMapBackend, Shift>) -> Result<(), String> {
     register_font();
     let err = |e: &dyn std::fmt::Display| e.to_string();
@@ -180,28 +210,7 @@ fn draw(report: &EqualErrorReport, root: &DrawingArea<BitMapBackend, Shift>) -> 
         .draw()
         .map_err(|e| err(&e))?;
 
-    // Guides at the levels, labelled at the left edge.
-    let guide = RGBColor(110, 110, 110);
-    for level in &report.levels {
-        let y = level.psnr_db;
-        chart
-            .draw_series(DashedLineSeries::new(
-                [(x0, y), (x1, y)],
-                8,
-                6,
-                guide.stroke_width(1),
-            ))
-            .map_err(|e| err(&e))?;
-        chart
-            .draw_series(std::iter::once(Text::new(
-                format!("{y} dB"),
-                (x0 * 1.04, y),
-                TextStyle::from((FONT, 15).into_font())
-                    .color(&guide)
-                    .pos(Pos::new(HPos::Left, VPos::Bottom)),
-            )))
-            .map_err(|e| err(&e))?;
-    }
+    draw_guides(&mut chart, report, (x0, x1))?;
 
     for method in [Method::Dense, Method::Adaptive] {
         let pts = drawable(report, method);
