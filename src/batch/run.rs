@@ -9,7 +9,7 @@ use std::time::Instant;
 use super::jobs::{self, Job};
 use super::summary::{EmbreeSummary, JobFacts, JobSummary, RunSummary};
 use crate::exit::{self, ErrorKind};
-use crate::output::{self, ExrCompression, OutputError};
+use crate::output::{self, ExrCompression, OutputError, RenderTargets};
 use crate::params::Param;
 use crate::render::{self, NoProgress, Progress, Region, RenderError, RenderSettings};
 use crate::renderer::{Renderer, RendererError};
@@ -280,8 +280,26 @@ pub fn refuse_existing(job: &Job, no_overwrite: bool) -> Result<(), JobError> {
 }
 
 impl Batch<'_> {
-    /// Renders one job (a frame, a tile of one, or the single image) and writes it.
+    /// The files `job` writes (its image and, with [`ImageOptions::aov_dir`], the AOV
+    /// pictures), each checked ([`RenderTargets::new`]).
+    pub fn targets(&self, job: &Job) -> Result<RenderTargets, OutputError> {
+        RenderTargets::new(&job.output, self.image.aov_dir.as_deref())
+    }
+
+    /// Renders one job (a frame, a tile of one, or the single image) and writes it, its
+    /// outputs checked first ([`Batch::targets`]).
     pub fn render_job(&self, job: &Job, progress: &dyn Progress) -> Result<JobSummary, JobError> {
+        self.render_job_to(job, &self.targets(job)?, progress)
+    }
+
+    /// [`Batch::render_job`] to targets already checked: the image and, when `targets` has
+    /// them, the AOV pictures.
+    pub fn render_job_to(
+        &self,
+        job: &Job,
+        targets: &RenderTargets,
+        progress: &dyn Progress,
+    ) -> Result<JobSummary, JobError> {
         let renderer = self.renderer;
         let camera = renderer.camera(job.frame)?;
         let full = Region::full(camera.width, camera.height);
@@ -312,9 +330,9 @@ impl Batch<'_> {
             exr_compression: self.image.exr_compression,
             region: (region != full).then_some((region, (camera.width, camera.height))),
         };
-        output::write_film_with(&job.output, &film, &options)?;
-        if let Some(dir) = &self.image.aov_dir {
-            write_aovs(dir, &film)?;
+        output::write_film_to(&targets.image, &film, &options)?;
+        if let Some(aovs) = &targets.aovs {
+            output::write_aov_pictures(aovs, &film)?;
         }
         let facts = JobFacts {
             scene: renderer.desc().name.clone(),
@@ -394,10 +412,8 @@ impl Batch<'_> {
 
     /// Refuses, checks, renders and writes one job of a run.
     fn attempt(&self, job: &Job, options: RunOptions, progress: &dyn RunProgress) -> JobOutcome {
-        let result = refuse_existing(job, options.no_overwrite).and_then(|()| {
-            output::check_render_outputs(&job.output, None)?;
-            self.render_job(job, &*progress.job_progress(job))
-        });
+        let result = refuse_existing(job, options.no_overwrite)
+            .and_then(|()| self.render_job(job, &*progress.job_progress(job)));
         match result {
             Ok(summary) => {
                 progress.rendered(job, &summary);
@@ -442,15 +458,4 @@ impl Batch<'_> {
             }
         }
     }
-}
-
-/// The depth, interval and samples pictures of `film` in `dir`.
-fn write_aovs(dir: &Path, film: &render::Film) -> Result<(), OutputError> {
-    let (w, h) = (film.width, film.height);
-    let depth = output::depth_picture(film);
-    output::write_png_rgb(&dir.join(output::AOV_DEPTH), w, h, &depth)?;
-    let interval = output::interval_picture(film);
-    output::write_png_rgb(&dir.join(output::AOV_INTERVAL), w, h, &interval)?;
-    let samples = output::samples_picture(film);
-    output::write_png_rgb(&dir.join(output::AOV_SAMPLES), w, h, &samples)
 }

@@ -185,11 +185,11 @@ pub(crate) fn run_render(a: &RenderArgs) -> Result<ExitCode> {
     let all = jobs::plan(&a.output, frames.as_deref(), tiles.as_deref());
     if !sequence {
         // One image: its targets (and --aov-dir) are checked before rendering.
-        output::check_render_outputs(&a.output, a.aov_dir.as_deref())?;
         let job = &all[0];
+        let targets = batch.targets(job)?;
         dofray::batch::run::refuse_existing(job, a.no_overwrite).map_err(job_error)?;
         let summary = batch
-            .render_job(job, &Bar::new(a.quiet || a.json))
+            .render_job_to(job, &targets, &Bar::new(a.quiet || a.json))
             .map_err(job_error)?;
         if !a.quiet && !a.json {
             print_rendered(job, &summary);

@@ -14,14 +14,12 @@
 //! The channel letters follow Blender's own: `RGBA` for a colour pass, `Z` for depth, `X` for
 //! any other single value (Cycles' value AOVs, sample count, object index).
 
-use std::path::Path;
 use std::result::Result; // not the prelude's
 use std::str::FromStr;
 
 use ::exr::prelude::*;
 
-use super::atomic::write_atomic;
-use super::{Metadata, OutputError, target};
+use super::{Metadata, OutputError, Target};
 use crate::render::Region;
 use crate::render::film::Film;
 
@@ -235,10 +233,10 @@ pub struct ExrOptions {
     pub region: Option<(Region, (u32, u32))>,
 }
 
-/// Writes `film` as an EXR (see the module documentation), atomically. The film's buffers
-/// must already have been checked against its size.
+/// Writes `film` as an EXR (see the module documentation) to `target`, atomically. The film's
+/// buffers must already have been checked against its size.
 pub(super) fn write_exr(
-    path: &Path,
+    target: &Target,
     film: &Film,
     metadata: &Metadata,
     options: ExrOptions,
@@ -285,7 +283,7 @@ pub(super) fn write_exr(
         metadata,
         options.compression,
     );
-    write_image(path, &image)
+    write_image(target, &image)
 }
 
 /// One layer of `channels` (any order) of `size` pixels with dofray's attributes, placed as
@@ -342,13 +340,13 @@ pub(super) fn layer_image(
     }
 }
 
-/// Writes an EXR image atomically.
+/// Writes an EXR image to `target` atomically.
 pub(super) fn write_image(
-    path: &Path,
+    target: &Target,
     image: &Image<Layer<AnyChannels<FlatSamples>>>,
 ) -> Result<(), OutputError> {
-    let resolved = target::check_target(path)?;
-    write_atomic(path, &resolved, |file| {
+    let path = target.path();
+    target.write_atomic(|file| {
         image
             .write()
             .to_unbuffered(&mut *file)

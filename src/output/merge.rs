@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use ::exr::prelude::*;
 use std::result::Result; // not the prelude's
 
-use super::{ImageFormat, Metadata, OutputError, exr as dofray_exr, png as dofray_png};
+use super::{ImageFormat, Metadata, OutputError, Target, exr as dofray_exr, png as dofray_png};
 use crate::render::Region;
 
 /// Metadata keys that may differ between tiles of one image (they describe where, when and
@@ -199,6 +199,11 @@ pub struct Merged {
 /// Assembles `tiles` into `output` (atomically), checking that they are tiles of one render
 /// that cover the image exactly once. The output's format must be the tiles'.
 pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
+    merge_into(tiles, &Target::new(output)?)
+}
+
+/// [`merge`] into a target made once ([`Target::new`]).
+pub fn merge_into(tiles: &[PathBuf], output: &Target) -> Result<Merged, MergeError> {
     if tiles.is_empty() {
         return Err(MergeError::NoTiles);
     }
@@ -226,7 +231,7 @@ pub fn merge(tiles: &[PathBuf], output: &Path) -> Result<Merged, MergeError> {
 }
 
 /// The tiles share one format and one render's settings, and `output` has their format.
-fn check_one_render(tiles: &[Tile], output: &Path) -> Result<(), MergeError> {
+fn check_one_render(tiles: &[Tile], output: &Target) -> Result<(), MergeError> {
     let first = &tiles[0];
     for t in &tiles[1..] {
         if t.format() != first.format() {
@@ -239,14 +244,13 @@ fn check_one_render(tiles: &[Tile], output: &Path) -> Result<(), MergeError> {
         }
         check_same_render(first, t)?;
     }
-    let out_format = ImageFormat::from_path(output)?;
     let wanted = match first.pixels {
         Pixels::Exr { .. } => ImageFormat::Exr,
         Pixels::Png { .. } => ImageFormat::Png,
     };
-    if out_format != wanted {
+    if output.format() != wanted {
         return Err(MergeError::OutputFormat {
-            path: output.to_path_buf(),
+            path: output.path().to_path_buf(),
             format: first.format(),
         });
     }
@@ -283,7 +287,7 @@ fn write_exr(
     tiles: &[Tile],
     (w, h): (usize, usize),
     metadata: &Metadata,
-    output: &Path,
+    output: &Target,
 ) -> Result<(), MergeError> {
     let first = &tiles[0];
     let Pixels::Exr {
@@ -327,7 +331,7 @@ fn write_png(
     tiles: &[Tile],
     (w, h): (usize, usize),
     metadata: &Metadata,
-    output: &Path,
+    output: &Target,
 ) -> Result<(), MergeError> {
     let first = &tiles[0];
     let Pixels::Png {

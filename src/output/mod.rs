@@ -17,17 +17,29 @@
 //! over the target only once everything has been written, removing the temporary file on any
 //! error, so a failed or interrupted write never leaves a partial image behind; a process that
 //! exits on a signal removes it with [`atomic::remove_all_for_exit`].
-//! Targets are checked first ([`target`]): symbolic links are written through to the file
-//! they name, and read-only files, directories and devices are refused.
 //!
-//! The picture helpers ([`depth_picture`], [`interval_picture`], [`heat_picture`]) return
-//! *linear* RGB buffers for [`write_png_rgb`]; their colours are chosen in display (sRGB)
-//! space and linearised, so the PNG shows exactly the intended grey ramps and palettes.
+//! Where a file goes is settled once, in a [`Target`] ([`target`]): the extension names the
+//! format, symbolic links are followed to the file they name, and read-only files,
+//! directories and devices are refused; [`RenderTargets`] adds a render's AOV pictures, which
+//! must be distinct from its image. The writers ([`write_film_to`], [`write_png_rgb_to`],
+//! [`write_aov_pictures`], [`merge::merge_into`]) take targets and do not look at the path
+//! again; the path-taking functions ([`write_film`], [`write_png_rgb`], ...) make the target
+//! and call them.
+//!
+//! The picture helpers ([`pictures`]: [`depth_picture`], [`interval_picture`],
+//! [`samples_picture`], [`heat_picture`]) return *linear* RGB buffers for [`write_png_rgb`];
+//! their colours are chosen in display (sRGB) space and linearised, so the PNG shows exactly
+//! the intended grey ramps and palettes.
+//!
+//! A new format is a variant of [`ImageFormat`] (its extension in [`ImageFormat::from_path`]),
+//! a writer module beside [`png`] and [`exr`] that writes through [`Target`], and its arm in
+//! [`write_film_to`].
 
 pub mod atomic;
 pub mod exr;
 pub mod merge;
 pub mod metadata;
+pub mod pictures;
 pub mod png;
 pub mod target;
 
@@ -40,8 +52,10 @@ use crate::render::film::Film;
 pub use atomic::{TempFile, remove_all_for_exit};
 pub use exr::{CompressionError, ExrCompression};
 pub use metadata::Metadata;
+pub use pictures::{depth_picture, heat_picture, interval_picture, samples_picture, srgb8, srgb16};
 pub use target::{
-    AOV_DEPTH, AOV_INTERVAL, AOV_SAMPLES, AOVS, check_render_outputs, resolve_target, same_file,
+    AOV_DEPTH, AOV_INTERVAL, AOV_SAMPLES, AOVS, AovTargets, ImageFormat, RenderTargets, Target,
+    check_render_outputs, check_writable, resolve_target, same_file,
 };
 
 /// Why an image could not be written.
@@ -115,47 +129,6 @@ pub enum OutputError {
     },
 }
 
-/// The file formats [`write_film`] writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ImageFormat {
-    /// 8- or 16-bit sRGB colour, optionally with straight alpha.
-    Png,
-    /// Float linear colour and alpha plus depth, CoC, interval and sample-count passes.
-    Exr,
-}
-
-impl ImageFormat {
-    /// The format named by `path`'s extension (case-insensitive).
-    pub fn from_path(path: &Path) -> Result<Self, OutputError> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        match ext.as_deref() {
-            Some("png") => Ok(Self::Png),
-            Some("exr") => Ok(Self::Exr),
-            _ => Err(OutputError::UnknownExtension {
-                path: path.to_path_buf(),
-            }),
-        }
-    }
-}
-
-/// Checks up front that `path` has a known extension, that what it names may be replaced (see
-/// [`target`]: links followed, read-only files, directories and devices refused) and that its
-/// directory is writable (by creating and removing a temporary file there), so the CLI can
-/// fail before a long render rather than after it.
-pub fn check_writable(path: &Path) -> Result<ImageFormat, OutputError> {
-    let format = ImageFormat::from_path(path)?;
-    let resolved = target::check_target(path)?;
-    // A probe: created, then removed again when it drops at the end of the statement.
-    TempFile::create(&resolved).map_err(|source| OutputError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    Ok(format)
-}
-
 /// How [`write_film_with`] writes.
 #[derive(Debug, Clone, Default)]
 pub struct WriteOptions {
@@ -212,8 +185,16 @@ pub fn write_film_with(
     film: &Film,
     options: &WriteOptions,
 ) -> Result<(), OutputError> {
-    let format = ImageFormat::from_path(path)?;
-    check_film(path, film)?;
+    write_film_to(&Target::new(path)?, film, options)
+}
+
+/// [`write_film_with`] to a target made once ([`Target::new`]), in its format.
+pub fn write_film_to(
+    target: &Target,
+    film: &Film,
+    options: &WriteOptions,
+) -> Result<(), OutputError> {
+    check_film(target.path(), film)?;
     let mut tile_metadata;
     let options = match options.region {
         Some((region, _)) => {
@@ -223,7 +204,7 @@ pub fn write_film_with(
         }
         None => options,
     };
-    match format {
+    match target.format() {
         ImageFormat::Png => {
             let (sixteen, alpha) = (options.png_16bit, options.png_alpha);
             let data = png::film_samples(film, sixteen, alpha);
@@ -234,7 +215,7 @@ pub fn write_film_with(
                 sixteen,
                 alpha,
             };
-            png.write(path, &options.metadata)
+            png.write(target, &options.metadata)
         }
         ImageFormat::Exr => {
             let exr_options = exr::ExrOptions {
@@ -242,7 +223,7 @@ pub fn write_film_with(
                 compression: options.exr_compression,
                 region: options.region,
             };
-            exr::write_exr(path, film, &options.metadata, exr_options)
+            exr::write_exr(target, film, &options.metadata, exr_options)
         }
     }
 }
@@ -255,12 +236,27 @@ pub fn write_png_rgb(
     height: usize,
     rgb: &[Vec3],
 ) -> Result<(), OutputError> {
-    check_len(path, width, height, rgb.len(), "colour")?;
+    write_png_rgb_to(
+        &Target::with_format(path, ImageFormat::Png)?,
+        width,
+        height,
+        rgb,
+    )
+}
+
+/// [`write_png_rgb`] to a target made once; a PNG whatever the target's name says.
+pub fn write_png_rgb_to(
+    target: &Target,
+    width: usize,
+    height: usize,
+    rgb: &[Vec3],
+) -> Result<(), OutputError> {
+    check_len(target.path(), width, height, rgb.len(), "colour")?;
     let bytes: Vec<u8> = rgb
         .iter()
         .flat_map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
         .collect();
-    write_png_srgb8(path, width, height, &bytes)
+    srgb8_png(width, height, &bytes).write(target, &Metadata::new())
 }
 
 /// Writes an 8-bit PNG of bytes that are already sRGB (`width x height` RGB triples, top row
@@ -271,135 +267,28 @@ pub fn write_png_srgb8(
     height: usize,
     bytes: &[u8],
 ) -> Result<(), OutputError> {
-    let png = png::Png {
+    let target = Target::with_format(path, ImageFormat::Png)?;
+    srgb8_png(width, height, bytes).write(&target, &Metadata::new())
+}
+
+/// 8-bit sRGB RGB bytes as a PNG to write.
+fn srgb8_png(width: usize, height: usize, bytes: &[u8]) -> png::Png<'_> {
+    png::Png {
         width,
         height,
         data: bytes,
         sixteen: false,
         alpha: false,
-    };
-    png.write(path, &Metadata::new())
-}
-
-/// The seed's figure 2: depth as a grey picture, near = white, far = dark grey, misses black.
-/// Depth is normalised by the film's finite depth range; the grey ramp is linear in display
-/// (sRGB) space, from 1 at the nearest surface down to 0.15 at the farthest.
-pub fn depth_picture(film: &Film) -> Vec<Vec3> {
-    const FAR_GREY: f32 = 0.15;
-    let (near, far) = film
-        .depth
-        .iter()
-        .filter(|d| d.is_finite())
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &d| {
-            (lo.min(d), hi.max(d))
-        });
-    let range = far - near;
-    film.depth
-        .iter()
-        .map(|&d| {
-            if !d.is_finite() {
-                return Vec3::ZERO;
-            }
-            let t = if range > 0.0 {
-                ((d - near) / range).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            Vec3::splat(srgb_to_linear(1.0 - (1.0 - FAR_GREY) * t))
-        })
-        .collect()
-}
-
-/// Display-space (sRGB) colours of the interval layers, interval 1, 2, 4, ... 128 and larger:
-/// samples of the "inferno" colour map, so larger intervals are brighter and warmer.
-const INTERVAL_PALETTE: [[f32; 3]; 8] = [
-    [0.000, 0.000, 0.016],
-    [0.160, 0.040, 0.350],
-    [0.400, 0.080, 0.430],
-    [0.630, 0.170, 0.360],
-    [0.830, 0.290, 0.220],
-    [0.960, 0.490, 0.050],
-    [0.980, 0.750, 0.160],
-    [0.990, 1.000, 0.640],
-];
-
-/// The seed's figure 3: the sample-interval map, one distinct colour per power-of-two layer
-/// (interval 1 = black, then purple, red, orange, yellow, up to pale yellow for 128 and more).
-/// An interval that is not a power of two takes its largest power-of-two layer below.
-pub fn interval_picture(film: &Film) -> Vec<Vec3> {
-    let palette = INTERVAL_PALETTE.map(|c| Vec3::from_array(c.map(srgb_to_linear)));
-    film.interval
-        .iter()
-        .map(|&i| {
-            let level = i.max(1).ilog2() as usize;
-            palette[level.min(palette.len() - 1)]
-        })
-        .collect()
-}
-
-/// The samples map: samples traced per pixel as a heat map from black (0: interpolated) to
-/// white (the most any pixel took), so where the renderer spent its rays shows at a glance.
-pub fn samples_picture(film: &Film) -> Vec<Vec3> {
-    let max = film.samples.iter().copied().max().unwrap_or(0) as f32;
-    let values: Vec<f32> = film.samples.iter().map(|&n| n as f32).collect();
-    heat_picture(&values, max)
-}
-
-/// Heat map of a per-pixel error in `[0, max]`: black -> red -> yellow -> white, linear in
-/// display (sRGB) space. Values are clamped to the range; NaN shows as the maximum (white),
-/// so broken pixels stand out. If `max` is not positive, any positive value is white.
-pub fn heat_picture(values: &[f32], max: f32) -> Vec<Vec3> {
-    values
-        .iter()
-        .map(|&v| {
-            let t = if v.is_nan() {
-                1.0
-            } else if max > 0.0 {
-                (v / max).clamp(0.0, 1.0)
-            } else if v > 0.0 {
-                1.0
-            } else {
-                0.0
-            };
-            // Three equal segments: red rises, then green, then blue.
-            let s = t * 3.0;
-            let display = Vec3::new(
-                s.clamp(0.0, 1.0),
-                (s - 1.0).clamp(0.0, 1.0),
-                (s - 2.0).clamp(0.0, 1.0),
-            );
-            Vec3::new(
-                srgb_to_linear(display.x),
-                srgb_to_linear(display.y),
-                srgb_to_linear(display.z),
-            )
-        })
-        .collect()
-}
-
-/// sRGB-encodes one linear channel, clamped to `[0, 1]` (NaN counts as 0), to 8 bits.
-pub fn srgb8(v: f32) -> u8 {
-    (srgb_unit(v) * 255.0).round().clamp(0.0, 255.0) as u8
-}
-
-/// [`srgb8`] to 16 bits.
-pub fn srgb16(v: f32) -> u16 {
-    (srgb_unit(v) * 65535.0).round().clamp(0.0, 65535.0) as u16
-}
-
-/// The sRGB encoding of one linear channel in `[0, 1]` (clamped; NaN counts as 0).
-fn srgb_unit(v: f32) -> f32 {
-    crate::metrics::srgb_curve(if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) })
-}
-
-/// The inverse of the sRGB transfer function: display value in `[0, 1]` to linear.
-fn srgb_to_linear(e: f32) -> f32 {
-    let e = e.clamp(0.0, 1.0);
-    if e <= 0.040_45 {
-        e / 12.92
-    } else {
-        ((e + 0.055) / 1.055).powf(2.4)
     }
+}
+
+/// Writes the AOV pictures of `film` ([`depth_picture`], [`interval_picture`],
+/// [`samples_picture`]) to their targets.
+pub fn write_aov_pictures(aovs: &AovTargets, film: &Film) -> Result<(), OutputError> {
+    let (w, h) = (film.width, film.height);
+    write_png_rgb_to(&aovs.depth, w, h, &depth_picture(film))?;
+    write_png_rgb_to(&aovs.interval, w, h, &interval_picture(film))?;
+    write_png_rgb_to(&aovs.samples, w, h, &samples_picture(film))
 }
 
 /// Checks that every buffer of `film` has `width * height` entries.
@@ -434,7 +323,6 @@ fn check_len(
 
 #[cfg(test)]
 mod tests {
-    use super::atomic::write_atomic;
     use super::*;
     use std::io::Write;
     use std::sync::atomic::{AtomicU64, Ordering};
@@ -488,46 +376,6 @@ mod tests {
         }
         film.color[0] = Vec3::new(2.0, -1.0, 0.5); // out of range: clamped
         film
-    }
-
-    #[test]
-    fn srgb8_known_values() {
-        assert_eq!(srgb8(0.0), 0);
-        assert_eq!(srgb8(1.0), 255);
-        assert_eq!(srgb8(0.5), 188);
-        assert_eq!(srgb8(-3.0), 0);
-        assert_eq!(srgb8(7.0), 255);
-        assert_eq!(srgb8(f32::NAN), 0);
-        // The linear segment near black.
-        assert_eq!(srgb8(0.001), (0.001f32 * 12.92 * 255.0).round() as u8);
-        // Inverse transfer round-trips every 8-bit level.
-        for b in 0..=255u8 {
-            assert_eq!(srgb8(srgb_to_linear(b as f32 / 255.0)), b);
-        }
-    }
-
-    #[test]
-    fn format_from_extension() {
-        assert_eq!(
-            ImageFormat::from_path(Path::new("a/b.png")).unwrap(),
-            ImageFormat::Png
-        );
-        assert_eq!(
-            ImageFormat::from_path(Path::new("B.PNG")).unwrap(),
-            ImageFormat::Png
-        );
-        assert_eq!(
-            ImageFormat::from_path(Path::new("x.ExR")).unwrap(),
-            ImageFormat::Exr
-        );
-        for bad in ["x.jpg", "x.txt", "x", "png", ".png.bak"] {
-            let err = ImageFormat::from_path(Path::new(bad)).unwrap_err();
-            assert!(
-                matches!(&err, OutputError::UnknownExtension { path } if path == Path::new(bad)),
-                "{bad}: {err:?}"
-            );
-            assert!(err.to_string().contains(".png or .exr"), "{err}");
-        }
     }
 
     #[test]
@@ -857,14 +705,16 @@ mod tests {
         // A failure inside the writer removes the temp file and keeps the previous target.
         let target = dir.0.join("keep.png");
         std::fs::write(&target, b"old").unwrap();
-        let err = write_atomic(&target, &target, |file| {
-            file.write_all(b"partial").unwrap();
-            Err(OutputError::Encode {
-                path: target.clone(),
-                message: "boom".into(),
+        let err = Target::new(&target)
+            .unwrap()
+            .write_atomic(|file| {
+                file.write_all(b"partial").unwrap();
+                Err(OutputError::Encode {
+                    path: target.clone(),
+                    message: "boom".into(),
+                })
             })
-        })
-        .unwrap_err();
+            .unwrap_err();
         assert!(matches!(err, OutputError::Encode { .. }));
         assert_eq!(std::fs::read(&target).unwrap(), b"old");
         assert_eq!(dir.entries(), vec!["keep.png".to_owned()]);
@@ -873,66 +723,5 @@ mod tests {
         write_film(&target, &test_film()).unwrap();
         assert_eq!(image::open(&target).unwrap().to_rgb8().dimensions(), (4, 3));
         assert_eq!(dir.entries(), vec!["keep.png".to_owned()]);
-    }
-
-    #[test]
-    fn depth_picture_near_white_far_dark_miss_black() {
-        let mut film = Film::new(4, 1);
-        film.depth = vec![2.0, 4.0, 6.0, f32::INFINITY];
-        let pic = depth_picture(&film);
-        let bytes: Vec<u8> = pic.iter().map(|c| srgb8(c.x)).collect();
-        assert_eq!(bytes[0], 255);
-        assert_eq!(bytes[3], 0);
-        assert!(
-            bytes[0] > bytes[1] && bytes[1] > bytes[2] && bytes[2] > 0,
-            "{bytes:?}"
-        );
-        assert_eq!(bytes[1], ((1.0 - 0.85 * 0.5) * 255.0f32).round() as u8);
-        assert!(pic.iter().all(|c| c.x == c.y && c.y == c.z));
-        // A single finite depth is white; no finite depth at all is black.
-        film.depth = vec![3.0, 3.0, f32::INFINITY, f32::INFINITY];
-        let pic = depth_picture(&film);
-        assert_eq!(pic[0], Vec3::ONE);
-        assert_eq!(pic[2], Vec3::ZERO);
-        film.depth = vec![f32::INFINITY; 4];
-        assert!(depth_picture(&film).iter().all(|&c| c == Vec3::ZERO));
-    }
-
-    #[test]
-    fn interval_picture_distinct_and_brightening() {
-        let mut film = Film::new(9, 1);
-        film.interval = (0..9).map(|k| 1u32 << k).collect();
-        let pic = interval_picture(&film);
-        let luma = |c: Vec3| c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
-        assert!(luma(pic[0]) < 0.01, "interval 1 is dark");
-        for k in 1..8 {
-            assert_ne!(pic[k], pic[k - 1]);
-            assert!(luma(pic[k]) > luma(pic[k - 1]), "layer {k} brighter");
-        }
-        assert_eq!(pic[8], pic[7], "256 shares the last colour");
-        // Non-powers of two take the layer below; 0 counts as 1.
-        film.interval = vec![3, 2, 0, 1, 5, 4, 1, 1, 1];
-        let pic2 = interval_picture(&film);
-        assert_eq!(pic2[0], pic2[1]);
-        assert_eq!(pic2[2], pic2[3]);
-        assert_eq!(pic2[4], pic2[5]);
-    }
-
-    #[test]
-    fn heat_picture_ramp() {
-        let pic = heat_picture(&[0.0, 1.0, 2.0, 3.0, 10.0, -1.0, f32::NAN], 3.0);
-        let bytes: Vec<[u8; 3]> = pic
-            .iter()
-            .map(|c| [srgb8(c.x), srgb8(c.y), srgb8(c.z)])
-            .collect();
-        assert_eq!(bytes[0], [0, 0, 0]);
-        assert_eq!(bytes[1], [255, 0, 0]);
-        assert_eq!(bytes[2], [255, 255, 0]);
-        assert_eq!(bytes[3], [255, 255, 255]);
-        assert_eq!(bytes[4], [255, 255, 255]);
-        assert_eq!(bytes[5], [0, 0, 0]);
-        assert_eq!(bytes[6], [255, 255, 255]);
-        assert_eq!(heat_picture(&[0.5], 3.0)[0].y, 0.0);
-        assert_eq!(heat_picture(&[0.0, 1.0], 0.0), vec![Vec3::ZERO, Vec3::ONE]);
     }
 }

@@ -5,12 +5,10 @@
 //! by its alpha: an RGBA PNG stores `colour / alpha` (where alpha > 0) sRGB-encoded, and alpha
 //! itself unencoded.
 
-use std::io::{BufWriter, Write};
-use std::path::Path;
-
-use super::atomic::write_atomic;
-use super::{Metadata, OutputError, check_len, srgb8, srgb16, target};
+use super::pictures::{srgb8, srgb16};
+use super::{Metadata, OutputError, Target, check_len};
 use crate::render::film::Film;
+use std::io::{BufWriter, Write};
 
 /// The film as PNG samples: sRGB colour (straight, when `alpha`) and, when `alpha`, the
 /// linear alpha; 8-bit bytes or 16-bit big-endian pairs.
@@ -66,9 +64,10 @@ pub(super) struct Png<'a> {
 }
 
 impl Png<'_> {
-    /// Writes it atomically with an `sRGB` chunk (so viewers and compositors know the
-    /// encoding) and one text chunk per metadata entry (`tEXt`, or `iTXt` for non-Latin-1).
-    pub fn write(&self, path: &Path, metadata: &Metadata) -> Result<(), OutputError> {
+    /// Writes it to `target` atomically with an `sRGB` chunk (so viewers and compositors know
+    /// the encoding) and one text chunk per metadata entry (`tEXt`, or `iTXt` for non-Latin-1).
+    pub fn write(&self, target: &Target, metadata: &Metadata) -> Result<(), OutputError> {
+        let path = target.path();
         let encode = |message: String| OutputError::Encode {
             path: path.to_path_buf(),
             message,
@@ -94,8 +93,7 @@ impl Png<'_> {
                 self.width, self.height
             )));
         };
-        let resolved = target::check_target(path)?;
-        write_atomic(path, &resolved, |file| {
+        target.write_atomic(|file| {
             let png_error = |e: ::png::EncodingError| match e {
                 ::png::EncodingError::IoError(source) => OutputError::Io {
                     path: path.to_path_buf(),
