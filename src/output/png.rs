@@ -5,10 +5,11 @@
 //! by its alpha: an RGBA PNG stores `colour / alpha` (where alpha > 0) sRGB-encoded, and alpha
 //! itself unencoded.
 
+use std::io::{BufWriter, Write};
+
 use super::pictures::{srgb8, srgb16};
 use super::{Metadata, OutputError, Target, check_len};
 use crate::render::film::Film;
-use std::io::{BufWriter, Write};
 
 /// The film as PNG samples: sRGB colour (straight, when `alpha`) and, when `alpha`, the
 /// linear alpha; 8-bit bytes or 16-bit big-endian pairs.
