@@ -22,6 +22,7 @@ use ::exr::prelude::*;
 
 use super::atomic::write_atomic;
 use super::{Metadata, OutputError, target};
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::render::Region;
 use crate::render::film::Film;
 
@@ -363,6 +364,12 @@ pub(super) fn write_image(
                 },
             })
     })
+}
+
+impl HasKind for CompressionError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
+    }
 }
 
 #[cfg(test)]
