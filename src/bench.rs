@@ -15,6 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::camera::Camera;
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::metrics::{self, Space};
 use crate::output::TempFile;
 use crate::output::metadata::Fnv1a;
@@ -543,6 +544,17 @@ impl Compare<'_> {
             ssim_vs_reference_linear: ssim_ref(Space::Linear)?,
             max_error_vs_reference: metrics::max_abs_error(&rgb, reference, w, h, Space::Srgb)?,
         })
+    }
+}
+
+impl HasKind for BenchError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            Self::Render(e) => e.kind(),
+            Self::Metrics(e) => e.kind(),
+            Self::Cache { .. } | Self::CacheDir { .. } => ErrorKind::Io,
+            _ => ErrorKind::Usage,
+        }
     }
 }
 

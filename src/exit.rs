@@ -11,101 +11,33 @@
 //! | 5 | `resource_limit` | an image too large for memory, an input beyond a `LoadOptions` limit |
 //! | 128 + N | `interrupted` | SIGINT (130), SIGTERM (143) or SIGHUP (129) |
 //!
-//! [`classify`] walks an error's `source()` chain from the outside in and returns the kind of the
-//! first error it recognises; `anyhow` context messages are skipped that way too.
+//! # How an error gets its kind
+//!
+//! Each error type says its kind where it is defined, with an `impl` [`HasKind`] in its own
+//! module; a composite error asks its source's `kind()`. [`ErrorKind`], [`HasKind`], the exit
+//! codes and the JSON error objects live in [`crate::error_kind`] (re-exported here), which
+//! imports nothing of dofray, so the layers depend on it, not on this module, which sits above
+//! them all.
+//!
+//! [`classify`] takes an untyped error (an `anyhow` chain in the binary, a `dyn Error` in the
+//! bindings), walks its `source()` chain from the outside in and returns the kind of the first
+//! error it recognises (so `anyhow` context messages are skipped), else
+//! [`ErrorKind::Internal`]. It recognises the types in one `classified!` list below, which
+//! generates the downcasts. Forgetting a type does not compile:
+//! - a listed type must implement [`HasKind`] (the downcast calls its `kind()`);
+//! - [`HasKind`] requires a sealed marker trait that only that list implements, so a type with
+//!   a kind must be listed (the compiler says so, naming the list);
+//! - the job loop ([`crate::batch::Batch`]) and the C and Python bindings call `.kind()` on the
+//!   typed errors they hold, so a new error type they receive needs a kind.
+//!
+//! For a listed type `e`, `classify(&e) == e.kind()`.
 
 use std::error::Error;
 
-#[cfg(feature = "bench")]
-use crate::bench::{BenchError, plot::PlotError};
-use crate::camera::CameraError;
-use crate::embree::{EmbreeError, ErrorCode};
-use crate::limits::MemoryError;
-use crate::output::OutputError;
-use crate::overrides::OverrideError;
-use crate::render::{RenderError, SettingError};
-use crate::renderer::RendererError;
-use crate::scene::{LoadError, SceneError};
-
-/// Exit status of a successful run.
-pub const OK: u8 = 0;
-/// Exit status of an internal error (anything not classified otherwise).
-pub const INTERNAL: u8 = 1;
-/// Exit status of a usage error (bad flags or flag values). clap uses it too.
-pub const USAGE: u8 = 2;
-/// Exit status of an input (scene, model, texture) that cannot be read or is invalid.
-pub const BAD_INPUT: u8 = 3;
-/// Exit status of an output that cannot be written.
-pub const IO: u8 = 4;
-/// Exit status of a resource limit (memory, input size caps).
-pub const RESOURCE_LIMIT: u8 = 5;
-
-/// What kind of failure stopped a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum ErrorKind {
-    /// Bad command-line flags or values.
-    Usage,
-    /// A scene, model or texture that cannot be read or is invalid.
-    BadInput,
-    /// An output that cannot be written.
-    Io,
-    /// A resource limit: the image's buffers exceed the available memory, or an input exceeds
-    /// a [`crate::scene::LoadOptions`] limit, or Embree ran out of memory.
-    ResourceLimit,
-    /// Stopped by a signal (its number).
-    Interrupted(i32),
-    /// Anything else.
-    Internal,
-}
-
-impl ErrorKind {
-    /// The process exit status for this kind (see the module documentation).
-    pub fn exit_code(self) -> u8 {
-        match self {
-            Self::Usage => USAGE,
-            Self::BadInput => BAD_INPUT,
-            Self::Io => IO,
-            Self::ResourceLimit => RESOURCE_LIMIT,
-            Self::Interrupted(signal) => u8::try_from(128 + signal.clamp(0, 127)).unwrap_or(255),
-            Self::Internal => INTERNAL,
-        }
-    }
-
-    /// The kind's name in JSON error objects (`"bad_input"`, ...).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Usage => "usage",
-            Self::BadInput => "bad_input",
-            Self::Io => "io",
-            Self::ResourceLimit => "resource_limit",
-            Self::Interrupted(_) => "interrupted",
-            Self::Internal => "internal",
-        }
-    }
-}
-
-/// The version of the `--json` objects' layout (`schema_version`, docs/json.md). Raised when a
-/// field is removed or changes meaning; new fields may appear within a version.
-pub const SCHEMA_VERSION: u32 = 1;
-
-/// The JSON error object `dofray --json` prints on stdout when it fails:
-/// `{"schema_version": 1, "error": {"kind": ..., "message": ..., "exit_code": ...}}`.
-pub fn json_error(kind: ErrorKind, message: &str) -> serde_json::Value {
-    serde_json::json!({
-        "schema_version": SCHEMA_VERSION,
-        "error": error_object(kind, message),
-    })
-}
-
-/// The `error` member of [`json_error`]: `kind`, `message` and `exit_code` (also a failed
-/// job's entry in a run's summary).
-pub fn error_object(kind: ErrorKind, message: &str) -> serde_json::Value {
-    serde_json::json!({
-        "kind": kind.name(),
-        "message": message,
-        "exit_code": kind.exit_code(),
-    })
-}
+pub use crate::error_kind::{
+    BAD_INPUT, ErrorKind, HasKind, INTERNAL, IO, OK, RESOURCE_LIMIT, SCHEMA_VERSION, USAGE,
+    error_object, full_message, json_error,
+};
 
 /// A usage error found after the command line was parsed: a flag's value out of range, flags
 /// that contradict each other or the scene. Its message names the flag.
@@ -123,17 +55,16 @@ pub struct KindError {
     pub message: String,
 }
 
-/// `error`'s message followed by those of its sources, `outer: inner: innermost` (what the
-/// command line prints, for bindings that report a message).
-pub fn full_message(error: &(dyn Error + 'static)) -> String {
-    let mut message = error.to_string();
-    let mut source = error.source();
-    while let Some(e) = source {
-        message.push_str(": ");
-        message.push_str(&e.to_string());
-        source = e.source();
+impl HasKind for UsageError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
     }
-    message
+}
+
+impl HasKind for KindError {
+    fn kind(&self) -> ErrorKind {
+        self.kind
+    }
 }
 
 /// What a caught panic's payload says (`"(no message)"` when it is not a string).
@@ -150,7 +81,7 @@ pub fn panic_text(payload: &(dyn std::any::Any + Send)) -> &str {
 pub fn classify(error: &(dyn Error + 'static)) -> ErrorKind {
     let mut next = Some(error);
     while let Some(e) = next {
-        if let Some(kind) = kind_of(e) {
+        if let Some(kind) = CLASSIFIED.iter().find_map(|kind_of| kind_of(e)) {
             return kind;
         }
         next = e.source();
@@ -158,146 +89,111 @@ pub fn classify(error: &(dyn Error + 'static)) -> ErrorKind {
     ErrorKind::Internal
 }
 
-/// The kind of this one error, if it is one dofray knows.
-fn kind_of(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
-    if e.is::<UsageError>() {
-        return Some(ErrorKind::Usage);
-    }
-    if let Some(e) = e.downcast_ref::<KindError>() {
-        return Some(e.kind);
-    }
-    if e.is::<MemoryError>() {
-        return Some(ErrorKind::ResourceLimit);
-    }
-    if e.is::<OverrideError>() || e.is::<SettingError>() {
-        return Some(ErrorKind::Usage);
-    }
-    if let Some(e) = e.downcast_ref::<RendererError>() {
-        return Some(renderer_kind(e));
-    }
-    if let Some(e) = e.downcast_ref::<LoadError>() {
-        return Some(load_kind(e));
-    }
-    if let Some(e) = e.downcast_ref::<SceneError>() {
-        return Some(scene_kind(e));
-    }
-    if e.is::<CameraError>() {
-        return Some(ErrorKind::BadInput);
-    }
-    if let Some(e) = e.downcast_ref::<EmbreeError>() {
-        return Some(embree_kind(e, ErrorKind::Internal));
-    }
-    if let Some(e) = e.downcast_ref::<RenderError>() {
-        return Some(render_kind(e));
-    }
-    if let Some(e) = e.downcast_ref::<OutputError>() {
-        return Some(output_kind(e));
-    }
-    if let Some(e) = e.downcast_ref::<crate::output::merge::MergeError>() {
-        return Some(match e {
-            crate::output::merge::MergeError::Output(e) => output_kind(e),
-            crate::output::merge::MergeError::NoTiles
-            | crate::output::merge::MergeError::OutputFormat { .. } => ErrorKind::Usage,
-            _ => ErrorKind::BadInput,
-        });
-    }
-    #[cfg(feature = "bench")]
-    if let Some(kind) = bench_kind(e) {
-        return Some(kind);
-    }
-    if let Some(e) = e.downcast_ref::<std::io::Error>() {
-        return Some(match e.kind() {
-            std::io::ErrorKind::OutOfMemory => ErrorKind::ResourceLimit,
-            std::io::ErrorKind::Interrupted => ErrorKind::Interrupted(2),
-            _ => ErrorKind::Io,
-        });
-    }
-    None
+/// `e`'s kind if it is a `T`.
+fn kind_as<T: HasKind>(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
+    e.downcast_ref::<T>().map(T::kind)
 }
 
-/// The kind of a benchmark's error (only with the `bench` feature).
-#[cfg(feature = "bench")]
-fn bench_kind(e: &(dyn Error + 'static)) -> Option<ErrorKind> {
-    if let Some(e) = e.downcast_ref::<BenchError>() {
-        return Some(match e {
-            BenchError::Render(e) => render_kind(e),
-            BenchError::Metrics(_) => ErrorKind::Internal,
-            BenchError::Cache { .. } | BenchError::CacheDir { .. } => ErrorKind::Io,
-            _ => ErrorKind::Usage,
-        });
-    }
-    if let Some(e) = e.downcast_ref::<PlotError>() {
-        return Some(match e {
-            PlotError::Output(e) => output_kind(e),
-            PlotError::Draw { .. } => ErrorKind::Io,
-        });
-    }
-    None
-}
+/// The errors [`classify`] recognises: every type with a [`HasKind`] impl, each once (an entry
+/// may carry a `#[cfg(...)]`). Generates `CLASSIFIED` (one downcast per type) and the sealed
+/// marker impls [`HasKind`] requires.
+macro_rules! classified {
+    ($($(#[$attr:meta])* $ty:ty),+ $(,)?) => {
+        $($(#[$attr])* impl crate::error_kind::sealed::Listed for $ty {})+
 
-fn renderer_kind(e: &RendererError) -> ErrorKind {
-    match e {
-        RendererError::Load(e) => load_kind(e),
-        RendererError::Scene { source, .. } => scene_kind(source),
-        RendererError::Override(_) => ErrorKind::Usage,
-        RendererError::Memory(_) => ErrorKind::ResourceLimit,
-        // The caller asked for this camera.
-        RendererError::Camera {
-            overridden: true, ..
-        } => ErrorKind::Usage,
-        RendererError::Camera { .. } | RendererError::ScaledFocusPixelMisses { .. } => {
-            ErrorKind::BadInput
+        /// One downcast per classified type.
+        const CLASSIFIED: &[fn(&(dyn Error + 'static)) -> Option<ErrorKind>] =
+            &[$($(#[$attr])* kind_as::<$ty>),+];
+
+        /// The classified types, for the tests to check they construct each.
+        #[cfg(test)]
+        fn classified_types() -> Vec<(std::any::TypeId, &'static str)> {
+            vec![$($(#[$attr])* (std::any::TypeId::of::<$ty>(), stringify!($ty))),+]
         }
-        RendererError::Render(e) => render_kind(e),
-    }
+    };
 }
 
-fn scene_kind(e: &SceneError) -> ErrorKind {
-    match e {
-        SceneError::Embree(e) => embree_kind(e, ErrorKind::BadInput),
-        _ => ErrorKind::BadInput,
-    }
-}
-
-fn load_kind(e: &LoadError) -> ErrorKind {
-    match e.root() {
-        LoadError::TooLarge { .. } | LoadError::Limit { .. } => ErrorKind::ResourceLimit,
-        _ => ErrorKind::BadInput,
-    }
-}
-
-fn embree_kind(e: &EmbreeError, otherwise: ErrorKind) -> ErrorKind {
-    match e {
-        EmbreeError::Embree {
-            code: ErrorCode::OutOfMemory,
-            ..
-        } => ErrorKind::ResourceLimit,
-        EmbreeError::InvalidGeometry(_) => ErrorKind::BadInput,
-        _ => otherwise,
-    }
-}
-
-fn render_kind(e: &RenderError) -> ErrorKind {
-    match e {
-        RenderError::NonFinite { .. } => ErrorKind::Internal,
-        // The caller stopped it, as SIGINT would.
-        RenderError::Cancelled => ErrorKind::Interrupted(2),
-        _ => ErrorKind::Usage,
-    }
-}
-
-fn output_kind(e: &OutputError) -> ErrorKind {
-    match e {
-        // The value of -o or --aov-dir is wrong, not the file system.
-        OutputError::UnknownExtension { .. } | OutputError::Collision { .. } => ErrorKind::Usage,
-        _ => ErrorKind::Io,
-    }
+classified! {
+    std::io::Error,
+    UsageError,
+    KindError,
+    crate::limits::MemoryError,
+    crate::overrides::OverrideError,
+    crate::renderer::RendererError,
+    crate::scene::LoadError,
+    crate::scene::SceneError,
+    crate::camera::CameraError,
+    crate::embree::EmbreeError,
+    crate::render::RenderError,
+    crate::render::RegionError,
+    crate::settings::UnknownMode,
+    crate::settings::SettingError,
+    crate::output::OutputError,
+    crate::output::CompressionError,
+    crate::output::merge::MergeError,
+    crate::batch::FrameSpecError,
+    crate::batch::FrameSelectError,
+    crate::batch::JobError,
+    crate::batch::PatternError,
+    crate::batch::ShardError,
+    crate::metrics::MetricsError,
+    #[cfg(feature = "bench")]
+    crate::bench::BenchError,
+    #[cfg(feature = "bench")]
+    crate::bench::plot::PlotError,
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::batch::{FrameSelectError, FrameSpecError, JobError, PatternError, ShardError};
+    #[cfg(feature = "bench")]
+    use crate::bench::{BenchError, plot::PlotError};
+    use crate::camera::CameraError;
+    use crate::embree::{EmbreeError, ErrorCode};
+    use crate::metrics::MetricsError;
+    use crate::output::merge::MergeError;
+    use crate::output::{CompressionError, OutputError};
+    use crate::overrides::OverrideError;
+    use crate::params::Param;
+    use crate::render::{RegionError, RenderError};
+    use crate::renderer::RendererError;
+    use crate::scene::{LoadError, Location, SceneError};
+    use crate::settings::{SettingError, UnknownMode};
+    use std::any::TypeId;
     use std::path::PathBuf;
+
+    // Every listed type has a kind (the list's downcasts need it too; this says it first).
+    const _: fn() = || {
+        fn has_kind<T: HasKind>() {}
+        has_kind::<std::io::Error>();
+        has_kind::<UsageError>();
+        has_kind::<KindError>();
+        has_kind::<crate::limits::MemoryError>();
+        has_kind::<OverrideError>();
+        has_kind::<RendererError>();
+        has_kind::<LoadError>();
+        has_kind::<SceneError>();
+        has_kind::<CameraError>();
+        has_kind::<EmbreeError>();
+        has_kind::<RenderError>();
+        has_kind::<RegionError>();
+        has_kind::<UnknownMode>();
+        has_kind::<SettingError>();
+        has_kind::<OutputError>();
+        has_kind::<CompressionError>();
+        has_kind::<MergeError>();
+        has_kind::<FrameSpecError>();
+        has_kind::<FrameSelectError>();
+        has_kind::<JobError>();
+        has_kind::<PatternError>();
+        has_kind::<ShardError>();
+        has_kind::<MetricsError>();
+        #[cfg(feature = "bench")]
+        has_kind::<BenchError>();
+        #[cfg(feature = "bench")]
+        has_kind::<PlotError>();
+    };
 
     #[test]
     fn codes_are_distinct_and_documented() {
@@ -316,37 +212,232 @@ mod tests {
         assert_eq!(ErrorKind::BadInput.name(), "bad_input");
     }
 
+    /// An error, its type and the kind it must have.
+    struct Case {
+        error: anyhow::Error,
+        own: ErrorKind,
+        ty: TypeId,
+        expected: ErrorKind,
+    }
+
+    fn case<E: HasKind + Send + Sync>(error: E, expected: ErrorKind) -> Case {
+        Case {
+            own: error.kind(),
+            ty: TypeId::of::<E>(),
+            error: anyhow::Error::new(error),
+            expected,
+        }
+    }
+
+    fn io(kind: std::io::ErrorKind) -> std::io::Error {
+        std::io::Error::from(kind)
+    }
+
+    fn path() -> PathBuf {
+        PathBuf::from("x.png")
+    }
+
+    fn too_large() -> LoadError {
+        LoadError::TooLarge {
+            path: path(),
+            limit: 1,
+        }
+    }
+
+    fn embree(code: ErrorCode) -> EmbreeError {
+        EmbreeError::Embree {
+            code,
+            message: "rtcCommitScene".into(),
+        }
+    }
+
+    fn camera_error() -> CameraError {
+        CameraError::FocusPixelMisses { x: 1, y: 2 }
+    }
+
+    fn output_io() -> OutputError {
+        OutputError::Io {
+            path: path(),
+            source: io(std::io::ErrorKind::PermissionDenied),
+        }
+    }
+
+    fn unknown_extension() -> OutputError {
+        OutputError::UnknownExtension { path: path() }
+    }
+
+    fn zero_spp() -> SettingError {
+        SettingError::Samples {
+            param: Param::Spp,
+            value: 0,
+        }
+    }
+
+    fn metrics_error() -> MetricsError {
+        MetricsError::Empty {
+            width: 0,
+            height: 0,
+        }
+    }
+
+    /// One error (or more, for composites) of every classified type, with its kind as the
+    /// command line's exit codes and tests/cli.rs expect it.
+    fn cases() -> Vec<Case> {
+        use ErrorKind::*;
+        let memory = crate::limits::check_image_memory_against(100, 100, 1, true).unwrap_err();
+        let override_error = || OverrideError::ZeroSize(Param::Width);
+        let renderer_camera = |overridden| RendererError::Camera {
+            source: camera_error(),
+            overridden,
+        };
+        let mut cases = vec![
+            case(io(std::io::ErrorKind::NotFound), Io),
+            case(io(std::io::ErrorKind::OutOfMemory), ResourceLimit),
+            case(io(std::io::ErrorKind::Interrupted), Interrupted(2)),
+            case(UsageError("--x".into()), Usage),
+            case(
+                KindError {
+                    kind: Io,
+                    message: "exists".into(),
+                },
+                Io,
+            ),
+            case(memory.clone(), ResourceLimit),
+            case(override_error(), Usage),
+            case(RendererError::from(override_error()), Usage),
+            case(RendererError::from(memory), ResourceLimit),
+            case(RendererError::from(too_large()), ResourceLimit),
+            case(
+                RendererError::Scene {
+                    name: "paper".into(),
+                    source: SceneError::Empty,
+                },
+                BadInput,
+            ),
+            case(renderer_camera(true), Usage),
+            case(renderer_camera(false), BadInput),
+            case(
+                RendererError::ScaledFocusPixelMisses {
+                    x0: 0,
+                    y0: 0,
+                    w0: 1,
+                    h0: 1,
+                    x: 0,
+                    y: 0,
+                    width: 2,
+                    height: 2,
+                },
+                BadInput,
+            ),
+            case(RendererError::from(RenderError::Cancelled), Interrupted(2)),
+            case(
+                LoadError::Io {
+                    path: path(),
+                    error: io(std::io::ErrorKind::NotFound),
+                },
+                BadInput,
+            ),
+            case(too_large(), ResourceLimit),
+            case(
+                LoadError::Referenced {
+                    at: Location::file(&path()),
+                    what: "texture",
+                    cause: Box::new(too_large()),
+                },
+                ResourceLimit,
+            ),
+            case(SceneError::Empty, BadInput),
+            case(
+                SceneError::from(embree(ErrorCode::OutOfMemory)),
+                ResourceLimit,
+            ),
+            case(SceneError::from(embree(ErrorCode::Unknown)), BadInput),
+            case(camera_error(), BadInput),
+            case(embree(ErrorCode::OutOfMemory), ResourceLimit),
+            case(EmbreeError::InvalidGeometry("NaN".into()), BadInput),
+            case(embree(ErrorCode::UnsupportedCpu), Internal),
+            case(RenderError::from(zero_spp()), Usage),
+            case(zero_spp(), Usage),
+            case(RenderError::Cancelled, Interrupted(2)),
+            case(RegionError::Syntax("1,2".into()), Usage),
+            case(UnknownMode("fast".into()), Usage),
+            case(unknown_extension(), Usage),
+            case(output_io(), Io),
+            case(
+                CompressionError::Unknown {
+                    name: "lzma".into(),
+                },
+                Usage,
+            ),
+            case(MergeError::NoTiles, Usage),
+            case(
+                MergeError::Read {
+                    path: path(),
+                    message: "truncated".into(),
+                },
+                BadInput,
+            ),
+            case(MergeError::from(output_io()), Io),
+            case(FrameSpecError::Empty, Usage),
+            case(FrameSelectError::NoStart, Usage),
+            case(FrameSelectError::List(FrameSpecError::Empty), Usage),
+            case(JobError::Exists { path: path() }, Io),
+            case(JobError::from(output_io()), Io),
+            case(JobError::from(renderer_camera(true)), Usage),
+            case(JobError::from(RenderError::Cancelled), Interrupted(2)),
+            case(PatternError::Mixed { path: path() }, Usage),
+            case(ShardError::ZeroCount { index: 0 }, Usage),
+            case(metrics_error(), Internal),
+        ];
+        #[cfg(feature = "bench")]
+        cases.extend(bench_cases());
+        cases
+    }
+
+    #[cfg(feature = "bench")]
+    fn bench_cases() -> Vec<Case> {
+        use ErrorKind::*;
+        vec![
+            case(BenchError::ZeroRepeat, Usage),
+            case(BenchError::from(RenderError::from(zero_spp())), Usage),
+            case(BenchError::from(metrics_error()), Internal),
+            case(
+                BenchError::Cache {
+                    path: path(),
+                    error: io(std::io::ErrorKind::PermissionDenied),
+                },
+                Io,
+            ),
+            case(
+                PlotError::Draw {
+                    path: path(),
+                    message: "font".into(),
+                },
+                Io,
+            ),
+            case(PlotError::from(unknown_extension()), Usage),
+        ]
+    }
+
+    #[test]
+    fn every_classified_type_has_its_kind() {
+        let cases = cases();
+        for c in &cases {
+            assert_eq!(c.own, c.expected, "{:?}", c.error);
+            assert_eq!(classify(c.error.as_ref()), c.expected, "{:?}", c.error);
+        }
+        for (ty, name) in classified_types() {
+            assert!(cases.iter().any(|c| c.ty == ty), "no case for {name}");
+        }
+        assert_eq!(CLASSIFIED.len(), classified_types().len());
+    }
+
     #[test]
     fn typed_errors_are_classified_through_contexts() {
-        let memory = crate::limits::check_image_memory_against(100, 100, 1, true).unwrap_err();
-        let e = anyhow::Error::new(memory).context("outer");
-        assert_eq!(classify(e.as_ref()), ErrorKind::ResourceLimit);
-        let load = LoadError::Io {
-            path: PathBuf::from("x.obj"),
-            error: std::io::Error::from(std::io::ErrorKind::NotFound),
-        };
-        assert_eq!(classify(&load), ErrorKind::BadInput);
-        let too_large = LoadError::TooLarge {
-            path: PathBuf::from("x.obj"),
-            limit: 1,
-        };
-        assert_eq!(classify(&too_large), ErrorKind::ResourceLimit);
-        let write = OutputError::Io {
-            path: PathBuf::from("o.png"),
-            source: std::io::Error::from(std::io::ErrorKind::PermissionDenied),
-        };
-        assert_eq!(classify(&write), ErrorKind::Io);
-        let ext = OutputError::UnknownExtension {
-            path: PathBuf::from("o.jpg"),
-        };
-        assert_eq!(classify(&ext), ErrorKind::Usage);
-        assert_eq!(
-            classify(&RenderError::from(SettingError::Samples {
-                param: crate::params::Param::Spp,
-                value: 0
-            })),
-            ErrorKind::Usage
-        );
+        for c in cases() {
+            let e = c.error.context("while rendering").context("job 1");
+            assert_eq!(classify(e.as_ref()), c.expected, "{e:#}");
+        }
         let e = anyhow::Error::new(UsageError("--x must be 1".into())).context("while parsing");
         assert_eq!(classify(e.as_ref()), ErrorKind::Usage);
         assert_eq!(

@@ -64,6 +64,7 @@ pub mod camera;
 // The only module with FFI; its unsafe blocks are documented (clippy::undocumented_unsafe_blocks).
 #[allow(unsafe_code)]
 pub mod embree;
+pub mod error_kind;
 pub mod exit;
 pub mod filter;
 pub mod limits;

@@ -3,6 +3,8 @@
 
 use std::fmt;
 
+use crate::error_kind::{ErrorKind, HasKind};
+
 /// Bytes the renderer needs per image pixel, estimated with a safety margin. The film holds
 /// colour (12 B), depth, CoC, interval and sample count (4 B each); the render modes make about
 /// three more full-size temporary copies of the colour and the maps, and output conversion
@@ -131,6 +133,12 @@ pub fn check_image_memory_against(
         })
     } else {
         Ok(())
+    }
+}
+
+impl HasKind for MemoryError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::ResourceLimit
     }
 }
 

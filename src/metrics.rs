@@ -46,6 +46,8 @@
 
 use rayon::prelude::*;
 
+use crate::error_kind::{ErrorKind, HasKind};
+
 /// Which space to compare images in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -332,6 +334,13 @@ pub fn ssim(
         })
         .collect();
     Ok(row_sums.iter().sum::<f64>() / (ow * oh) as f64)
+}
+
+impl HasKind for MetricsError {
+    /// The images compared are dofray's own renders: a mismatch is a bug.
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Internal
+    }
 }
 
 #[cfg(test)]

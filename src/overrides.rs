@@ -9,6 +9,7 @@
 use glam::Vec3;
 
 use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec, Photographic, check_vfov};
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::params::Param;
 use crate::scene::SceneDesc;
 use crate::shade::Light;
@@ -369,5 +370,11 @@ impl Overrides {
             || self.blades.is_some()
             || self.blade_rotation_deg.is_some()
             || self.anamorphic.is_some()
+    }
+}
+
+impl HasKind for OverrideError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
     }
 }

@@ -2,6 +2,7 @@
 
 use crate::camera::{Camera, CameraError, CameraSpec, Focus};
 use crate::embree::Device;
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::limits::MemoryError;
 use crate::overrides::{OverrideError, Overrides};
 use crate::params::Param;
@@ -10,9 +11,9 @@ use crate::render::{
 };
 use crate::scene::{LoadError, SceneDesc, SceneError, World};
 
-/// Why a [`Renderer`] could not be made or could not render. [`crate::exit::classify`] sorts
-/// it as the command line does: overrides (and a camera they made invalid) are usage errors,
-/// the scene's own faults bad input, memory a resource limit.
+/// Why a [`Renderer`] could not be made or could not render. Its [`HasKind`] kind is the
+/// command line's: overrides (and a camera they made invalid) are usage errors, the scene's
+/// own faults bad input, memory a resource limit.
 #[derive(Debug, thiserror::Error)]
 pub enum RendererError {
     /// The scene file or model could not be read or parsed.
@@ -250,5 +251,22 @@ impl Renderer {
             region.unwrap_or(&full),
             progress,
         )?)
+    }
+}
+
+impl HasKind for RendererError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            Self::Load(e) => e.kind(),
+            Self::Scene { source, .. } => source.kind(),
+            Self::Override(e) => e.kind(),
+            Self::Memory(e) => e.kind(),
+            // The caller asked for this camera.
+            Self::Camera {
+                overridden: true, ..
+            } => ErrorKind::Usage,
+            Self::Camera { .. } | Self::ScaledFocusPixelMisses { .. } => ErrorKind::BadInput,
+            Self::Render(e) => e.kind(),
+        }
     }
 }

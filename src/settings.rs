@@ -3,6 +3,7 @@
 //! into settings by the one function that holds the defaults and the checks.
 
 use crate::camera::LensFilter;
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::filter::{PixelFilter, PixelFilterKind};
 use crate::params::Param;
 
@@ -445,6 +446,18 @@ impl SettingsPatch {
         };
         settings.validate()?;
         Ok(settings)
+    }
+}
+
+impl HasKind for UnknownMode {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
+    }
+}
+
+impl HasKind for SettingError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
     }
 }
 

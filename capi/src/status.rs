@@ -4,7 +4,7 @@ use std::cell::RefCell;
 use std::ffi::{CStr, CString, c_char, c_int};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
-use dofray::exit::ErrorKind;
+use dofray::exit::{ErrorKind, HasKind};
 
 /// What a function did. `DOFRAY_INTERNAL` to `DOFRAY_RESOURCE_LIMIT` have the values of the
 /// `dofray` command's exit codes for the same kinds of failure. Later versions may add
@@ -80,17 +80,18 @@ impl Failure {
         Self::new(DofrayStatus::DOFRAY_INVALID_ARGUMENT, message)
     }
 
-    /// A library error: classified as the command line does, its message with its sources
+    /// A library error: its kind, as the command line has it, and its message with its sources
     /// (`outer: inner: innermost`).
-    fn of(error: &(dyn std::error::Error + 'static)) -> Self {
+    fn of(error: &impl HasKind) -> Self {
         Self::new(
-            DofrayStatus::from_kind(dofray::exit::classify(error)),
+            DofrayStatus::from_kind(error.kind()),
             dofray::exit::full_message(error),
         )
     }
 }
 
-impl<E: std::error::Error + 'static> From<E> for Failure {
+/// Only errors with a kind: a new library error type does not compile here until it has one.
+impl<E: HasKind> From<E> for Failure {
     fn from(error: E) -> Self {
         Self::of(&error)
     }

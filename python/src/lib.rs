@@ -18,7 +18,7 @@ use std::sync::{Mutex, PoisonError};
 use std::time::Duration;
 
 use dofray::embree::Device;
-use dofray::exit::ErrorKind;
+use dofray::exit::{ErrorKind, HasKind};
 use dofray::overrides::Overrides;
 use dofray::params::Param;
 use dofray::render::{CancelFlag, Film, Mode, Progress, RenderStats, RulePatch, SettingsPatch};
@@ -47,10 +47,12 @@ impl Failure {
         }
     }
 
-    /// The library's error: its kind ([`dofray::exit::classify`]) and its message with its
-    /// causes (`outer: inner`), overrides and settings named as the Python keywords are.
-    fn from_error(error: &(dyn StdError + 'static)) -> Self {
-        let kind = dofray::exit::classify(error);
+    /// The library's error: its kind and its message with its causes (`outer: inner`),
+    /// overrides and settings named as the Python keywords are. Only errors with a kind: a new
+    /// library error type does not compile here until it has one.
+    fn from_error(error: &impl HasKind) -> Self {
+        let kind = error.kind();
+        let error: &(dyn StdError + 'static) = error;
         let message = error
             .downcast_ref::<RendererError>()
             .and_then(|e| e.param_message(Param::keyword_name))

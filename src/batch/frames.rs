@@ -11,6 +11,8 @@
 
 use std::collections::HashSet;
 
+use crate::error_kind::{ErrorKind, HasKind};
+
 /// The most frames one list may hold (repeats included).
 pub const MAX_FRAMES: usize = 1_000_000;
 
@@ -261,6 +263,12 @@ fn take_int(item: &str, rest: &mut &str) -> Result<Option<i64>, FrameSpecError> 
         })?;
     *rest = tail;
     Ok(Some(value))
+}
+
+impl HasKind for FrameSpecError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
+    }
 }
 
 #[cfg(test)]

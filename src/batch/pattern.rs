@@ -16,6 +16,8 @@
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
+use crate::error_kind::{ErrorKind, HasKind};
+
 /// An output path that cannot take one image per frame.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum PatternError {
@@ -215,6 +217,12 @@ pub fn tile_path(path: &Path, index: usize, count: usize) -> PathBuf {
 /// The number of decimal digits of `n`.
 fn digits(n: usize) -> usize {
     n.checked_ilog10().map_or(1, |d| d as usize + 1)
+}
+
+impl HasKind for PatternError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
+    }
 }
 
 #[cfg(test)]

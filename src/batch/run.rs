@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use super::jobs::{self, Job};
 use super::summary::{EmbreeSummary, JobFacts, JobSummary, RunSummary};
-use crate::exit::{self, ErrorKind};
+use crate::error_kind::{self, ErrorKind, HasKind};
 use crate::output::{self, ExrCompression, OutputError, RenderTargets};
 use crate::params::Param;
 use crate::render::{self, NoProgress, Progress, Region, RenderError, RenderSettings};
@@ -34,25 +34,26 @@ pub enum JobError {
     Render(#[from] RenderError),
 }
 
-impl JobError {
-    /// Its kind, as [`exit::classify`] sorts the error inside.
-    pub fn kind(&self) -> ErrorKind {
+impl HasKind for JobError {
+    fn kind(&self) -> ErrorKind {
         match self {
             Self::Exists { .. } => ErrorKind::Io,
-            Self::Output(e) => exit::classify(e),
-            Self::Renderer(e) => exit::classify(e),
-            Self::Render(e) => exit::classify(e),
+            Self::Output(e) => e.kind(),
+            Self::Renderer(e) => e.kind(),
+            Self::Render(e) => e.kind(),
         }
     }
+}
 
+impl JobError {
     /// The whole message (with its sources), parameters named by `name` (e.g. [`Param::flag`]).
     pub fn message(&self, name: impl Fn(Param) -> &'static str) -> String {
         match self {
             Self::Renderer(e) => e
                 .param_message(name)
-                .unwrap_or_else(|| exit::full_message(self)),
+                .unwrap_or_else(|| error_kind::full_message(self)),
             Self::Render(RenderError::Setting(e)) => e.message(name),
-            e => exit::full_message(e),
+            e => error_kind::full_message(e),
         }
     }
 }
@@ -169,7 +170,7 @@ impl serde::Serialize for JobResult {
             }
             JobOutcome::Skipped => serde_json::json!({}),
             JobOutcome::Failed(f) => {
-                serde_json::json!({ "error": exit::error_object(f.kind, &f.message) })
+                serde_json::json!({ "error": error_kind::error_object(f.kind, &f.message) })
             }
         };
         // The job's own fields win over the summary's (a frame's region is its tile's).
@@ -229,7 +230,7 @@ impl RunReport {
     ) -> RunSummary<'a> {
         let failed = self.failed();
         RunSummary {
-            schema_version: exit::SCHEMA_VERSION,
+            schema_version: error_kind::SCHEMA_VERSION,
             dofray_version: crate::VERSION,
             git_commit: crate::GIT_COMMIT,
             scene: &renderer.desc().name,
@@ -246,7 +247,7 @@ impl RunReport {
             frames: &self.results,
             warnings: &renderer.desc().warnings,
             error: self.first_failure.map(|kind| {
-                exit::error_object(kind, &format!("{failed} of {} jobs failed", self.count))
+                error_kind::error_object(kind, &format!("{failed} of {} jobs failed", self.count))
             }),
         }
     }
@@ -449,8 +450,8 @@ impl Batch<'_> {
                 Err(e) => {
                     let failure = JobFailure {
                         error: None,
-                        kind: exit::classify(&e),
-                        message: exit::full_message(&e),
+                        kind: e.kind(),
+                        message: error_kind::full_message(&e),
                     };
                     progress.merge_failed(&image, &failure);
                     report.first_failure.get_or_insert(failure.kind);

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use super::frames::{FrameSpecError, frame_range, parse_frames};
 use super::pattern::has_frame_pattern;
+use crate::error_kind::{ErrorKind, HasKind};
 
 /// The frames asked for. `list` and the range fields exclude each other.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -88,6 +89,13 @@ pub fn select_frames(
         return Err(FrameSelectError::NoPattern { count, output });
     }
     Ok(frames)
+}
+
+impl HasKind for FrameSelectError {
+    /// The frames asked for (flags, keywords) do not fit the scene or the output.
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
+    }
 }
 
 #[cfg(test)]

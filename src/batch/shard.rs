@@ -30,6 +30,8 @@ use std::str::FromStr;
 
 use serde::Serialize;
 
+use crate::error_kind::{ErrorKind, HasKind};
+
 /// Slurm: the task's array index.
 pub const SLURM_ARRAY_TASK_ID: &str = "SLURM_ARRAY_TASK_ID";
 /// Slurm: the lowest array index.
@@ -366,6 +368,12 @@ impl FromStr for Shard {
     /// [`Shard::parse`].
     fn from_str(text: &str) -> Result<Shard, ShardError> {
         Shard::parse(text)
+    }
+}
+
+impl HasKind for ShardError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
     }
 }
 

@@ -142,7 +142,7 @@ impl JobSummary {
             SamplingRule::ErrorControlled { .. } => (None, false),
         };
         Self {
-            schema_version: crate::exit::SCHEMA_VERSION,
+            schema_version: crate::error_kind::SCHEMA_VERSION,
             dofray_version: crate::VERSION,
             git_commit: crate::GIT_COMMIT,
             scene: facts.scene,

@@ -14,6 +14,7 @@ use plotters::style::FontStyle;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::equal_error::{EqualErrorReport, Method};
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::output::{self, OutputError};
 
 /// The file name of the plot in the bench's `--out` directory.
@@ -262,6 +263,15 @@ fn draw(report: &EqualErrorReport, root: &DrawingArea<BitMapBackend, Shift>) -> 
         .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(())
+}
+
+impl HasKind for PlotError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            Self::Output(e) => e.kind(),
+            Self::Draw { .. } => ErrorKind::Io,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -15,6 +15,7 @@ pub use aperture::{ApertureShape, LensFilter};
 pub use lens::{CameraLens, Lens, Photographic, ThinLens};
 
 use crate::embree::{LANES, Ray};
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::limits::MAX_COORDINATE;
 
 /// Default image width in pixels.
@@ -452,6 +453,12 @@ impl Camera {
             (sx + 1.0) * 0.5 * self.width as f32,
             (1.0 - sy) * 0.5 * self.height as f32,
         ))
+    }
+}
+
+impl HasKind for CameraError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::BadInput
     }
 }
 

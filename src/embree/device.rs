@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::{self, ThreadId};
 
 use super::sys;
+use crate::error_kind::{ErrorKind, HasKind};
 
 /// Embree's error codes (`RTCError`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -320,6 +321,27 @@ impl Device {
             }),
             None => Ok(()),
         }
+    }
+}
+
+impl EmbreeError {
+    /// Out of memory is a resource limit and rejected geometry bad input; anything else is
+    /// `otherwise` (what the caller was doing decides).
+    pub fn kind_or(&self, otherwise: ErrorKind) -> ErrorKind {
+        match self {
+            Self::Embree {
+                code: ErrorCode::OutOfMemory,
+                ..
+            } => ErrorKind::ResourceLimit,
+            Self::InvalidGeometry(_) => ErrorKind::BadInput,
+            _ => otherwise,
+        }
+    }
+}
+
+impl HasKind for EmbreeError {
+    fn kind(&self) -> ErrorKind {
+        self.kind_or(ErrorKind::Internal)
     }
 }
 

@@ -20,6 +20,7 @@ use std::str::FromStr;
 use ::exr::prelude::*;
 
 use super::{Metadata, OutputError, Target};
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::render::Region;
 use crate::render::film::Film;
 
@@ -361,6 +362,12 @@ pub(super) fn write_image(
                 },
             })
     })
+}
+
+impl HasKind for CompressionError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
+    }
 }
 
 #[cfg(test)]

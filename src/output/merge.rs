@@ -16,6 +16,7 @@ use ::exr::prelude::*;
 use std::result::Result; // not the prelude's
 
 use super::{ImageFormat, Metadata, OutputError, Target, exr as dofray_exr, png as dofray_png};
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::render::Region;
 
 /// Metadata keys that may differ between tiles of one image (they describe where, when and
@@ -658,4 +659,14 @@ fn tile_place(path: &Path, metadata: &Metadata) -> Result<(Region, (u32, u32)), 
         .check(size.0, size.1)
         .map_err(|e| not_a_tile("dofray:region", e.to_string()))?;
     Ok((region, size))
+}
+
+impl HasKind for MergeError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            Self::Output(e) => e.kind(),
+            Self::NoTiles | Self::OutputFormat { .. } => ErrorKind::Usage,
+            _ => ErrorKind::BadInput,
+        }
+    }
 }

@@ -47,6 +47,7 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::render::Region;
 use crate::render::film::Film;
 pub use atomic::{TempFile, remove_all_for_exit};
@@ -318,6 +319,16 @@ fn check_len(
             path: path.to_path_buf(),
             message: format!("{what} buffer has {len} pixels, expected {width}x{height}"),
         }),
+    }
+}
+
+impl HasKind for OutputError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            // The value of -o or --aov-dir is wrong, not the file system.
+            Self::UnknownExtension { .. } | Self::Collision { .. } => ErrorKind::Usage,
+            _ => ErrorKind::Io,
+        }
     }
 }
 

@@ -35,6 +35,7 @@ use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::scene::World;
 pub use crate::settings::{
     Mode, RenderSettings, RulePatch, SamplingRule, SettingError, SettingsPatch, SiteRule,
@@ -49,8 +50,8 @@ pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
 /// Why a render could not start (or did not finish).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum RenderError {
-    /// [`Progress::cancelled`] returned true; no image was made. [`crate::exit::classify`]
-    /// sorts it as `interrupted` (exit code 130, as SIGINT): the caller stopped it.
+    /// [`Progress::cancelled`] returned true; no image was made. Its [`HasKind`] kind is
+    /// `interrupted` (exit code 130, as SIGINT): the caller stopped it.
     #[error("the render was cancelled")]
     Cancelled,
     /// A setting is out of range ([`RenderSettings::validate`]).
@@ -505,4 +506,16 @@ pub fn render_region(
     stats.ray_log = tally.log;
     stats.seconds = start.elapsed().as_secs_f64();
     Ok((film, stats))
+}
+
+impl HasKind for RenderError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            Self::NonFinite { .. } => ErrorKind::Internal,
+            // The caller stopped it, as SIGINT would.
+            Self::Cancelled => ErrorKind::Interrupted(2),
+            Self::Setting(e) => e.kind(),
+            Self::BadRegion(e) => e.kind(),
+        }
+    }
 }

@@ -8,6 +8,8 @@
 use std::fmt;
 use std::str::FromStr;
 
+use crate::error_kind::{ErrorKind, HasKind};
+
 /// Columns `x0..x1` and rows `y0..y1` of an image (half-open: `x1` and `y1` are not in it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Region {
@@ -230,6 +232,12 @@ pub fn parse_grid(s: &str) -> Result<(u32, u32), RegionError> {
     match s.split_once(['x', 'X']) {
         Some((c, r)) => Ok((n(c)?, n(r)?)),
         None => n(s).map(|v| (v, v)),
+    }
+}
+
+impl HasKind for RegionError {
+    fn kind(&self) -> ErrorKind {
+        ErrorKind::Usage
     }
 }
 

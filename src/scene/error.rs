@@ -4,6 +4,7 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::limits::Bytes;
 
 /// Where in an input file something went wrong.
@@ -376,6 +377,16 @@ pub fn key_path(src: &str, offset: usize) -> Option<String> {
         (None, Some(k)) => Some(k),
         (Some(t), None) => Some(t),
         (None, None) => None,
+    }
+}
+
+impl HasKind for LoadError {
+    /// A limit is a resource limit, wherever the loader met it; anything else is bad input.
+    fn kind(&self) -> ErrorKind {
+        match self.root() {
+            Self::TooLarge { .. } | Self::Limit { .. } => ErrorKind::ResourceLimit,
+            _ => ErrorKind::BadInput,
+        }
     }
 }
 

@@ -11,6 +11,7 @@ use crate::embree::{
     self, CandidateHit, Device, EmbreeError, Geometry, Hit, HitFilter, LANES, Ray, RayPacket16,
     SceneBuilder, Spheres, TriangleMesh,
 };
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::limits::MAX_COORDINATE;
 use crate::shade::{Alpha, AlphaMode, Light, Material, SurfacePoint, SurfacePoints16, Texture};
 
@@ -593,6 +594,16 @@ impl World {
             position,
             normal,
             uv,
+        }
+    }
+}
+
+impl HasKind for SceneError {
+    fn kind(&self) -> ErrorKind {
+        match self {
+            // Geometry Embree refused came from the scene.
+            Self::Embree(e) => e.kind_or(ErrorKind::BadInput),
+            _ => ErrorKind::BadInput,
         }
     }
 }
