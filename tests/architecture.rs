@@ -18,15 +18,8 @@ use std::path::{Path, PathBuf};
 /// its definition, so the module that names the kinds needs none of them; `exit`, which
 /// classifies any error chain by trying every error type, is at the top.
 const LAYERS: &[&[&str]] = &[
-    &[
-        "embree",
-        "limits",
-        "filter",
-        "sampler",
-        "metrics",
-        "error_kind",
-        "params",
-    ],
+    &["error_kind", "params"],
+    &["embree", "limits", "filter", "sampler", "metrics"],
     &["camera"],
     &["shade", "settings"],
     &["scene"],
