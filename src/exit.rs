@@ -290,7 +290,7 @@ mod tests {
             source: camera_error(),
             overridden,
         };
-        let mut cases = vec![
+        let cases = vec![
             case(io(std::io::ErrorKind::NotFound), Io),
             case(io(std::io::ErrorKind::OutOfMemory), ResourceLimit),
             case(io(std::io::ErrorKind::Interrupted), Interrupted(2)),
@@ -390,7 +390,7 @@ mod tests {
             case(metrics_error(), Internal),
         ];
         #[cfg(feature = "bench")]
-        cases.extend(bench_cases());
+        let cases: Vec<Case> = cases.into_iter().chain(bench_cases()).collect();
         cases
     }
 
