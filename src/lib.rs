@@ -35,6 +35,43 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
+//! # Architecture
+//!
+//! The modules form layers; each imports only from the layers below it (`tests/architecture.rs`
+//! checks this on the source, and that no function is over 100 lines):
+//!
+//! | layer | modules | what they hold |
+//! |---|---|---|
+//! | 0 | [`error_kind`], [`params`] | the kinds of failure (exit codes, JSON kinds); the parameter table (flag, scene key, Python keyword, C setter) |
+//! | 1 | [`embree`], [`limits`], [`filter`], [`sampler`], [`metrics`] | Embree (the only `unsafe`), resource limits, the pixel filter, sample numbers, image metrics |
+//! | 2 | [`camera`] | the camera makes rays: spec, focus, the lens seam ([`camera::lens`]), apertures |
+//! | 3 | [`shade`], [`settings`] | materials, textures, lights; render settings resolved once from patches |
+//! | 4 | [`scene`] | descriptions and loaders (TOML by concept, OBJ, glTF) and the Embree world |
+//! | 5 | [`render`] | depth pass and maps, sites, error estimate and refinement, packets, film |
+//! | 6 | [`overrides`], [`output`] | what flags change in a scene; the output target, PNG / EXR, merge, atomic files |
+//! | 7 | [`renderer`] | a scene, its overrides and its world, built once; any frame or region |
+//! | 8 | [`batch`] | frames, tiles, shards and the job loop the command line, C and Python share |
+//! | 9 | `bench` | the seed's table and equal-error studies (feature `bench`) |
+//! | 10 | [`exit`] | classifies any error chain (it knows every error type) |
+//!
+//! The `dofray` binary (`src/main.rs`, `src/cli/`) only parses flags, prints and handles
+//! signals; the C library (`capi/`) and the Python module (`python/`) are the other front ends
+//! over the same library.
+//!
+//! Where to add:
+//! - **a lens** (a traced prescription beside the thin lens): a type implementing
+//!   [`camera::Lens`] (the rays of a sample site from film and lens sample numbers, and the
+//!   blur bound `coc_px` the adaptive sampler trusts), a variant of [`camera::CameraLens`] with
+//!   its dispatch line, and a [`camera::LensSpec`] that builds it;
+//! - **an output format**: an [`output::ImageFormat`] for its extension, a writer under
+//!   `src/output/` that takes the resolved [`output::Target`], and a tile reader in
+//!   `output::merge` if its tiles are to be merged;
+//! - **an error estimator or site rule**: a [`settings::SamplingRule`] variant resolved by
+//!   [`settings::SettingsPatch::resolve`], its refinement beside `src/render/refine.rs`, and its
+//!   parameters as [`params::Param`] rows;
+//! - **an error type**: derive `thiserror::Error`, implement [`error_kind::HasKind`] beside it
+//!   and list it in `exit`'s `classified!` registry (it does not compile until listed).
+//!
 //! # Features
 //!
 //! `cli` (default) builds the `dofray` command and the crates only it needs (clap, indicatif,
