@@ -29,9 +29,10 @@ pub mod summary;
 
 pub use frames::{FrameSpecError, MAX_FRAMES, frame_range, parse_frames};
 pub use pattern::{PatternError, check_frame_pattern, frame_path, has_frame_pattern, tile_path};
+pub use run::RunSummary;
 pub use run::{
     Batch, ImageOptions, JobError, JobOutcome, JobResult, RunOptions, RunProgress, RunReport,
 };
 pub use select::{FrameRequest, FrameSelectError, select_frames};
 pub use shard::{Shard, ShardError, ShardSource};
-pub use summary::{JobSummary, RunSummary};
+pub use summary::JobSummary;

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::jobs::{self, Job};
-use super::summary::{EmbreeSummary, JobFacts, JobSummary, RunSummary};
+use super::summary::{EmbreeSummary, JobFacts, JobSummary};
 use crate::error_kind::{self, ErrorKind, HasKind};
 use crate::output::{self, ExrCompression, OutputError, RenderTargets};
 use crate::params::Param;
@@ -459,4 +459,29 @@ impl Batch<'_> {
             }
         }
     }
+}
+
+/// A run of jobs: `dofray render --json`'s object for frames, tiles and shards.
+#[derive(Debug, Clone, serde::Serialize)]
+#[allow(missing_docs)] // the fields are documented in docs/json.md, one row each
+pub struct RunSummary<'a> {
+    pub schema_version: u32,
+    pub dofray_version: &'static str,
+    pub git_commit: &'static str,
+    pub scene: &'a str,
+    pub output: &'a std::path::Path,
+    pub shard: Option<String>,
+    pub shard_source: Option<&'a str>,
+    pub jobs: usize,
+    pub rendered: usize,
+    pub skipped: usize,
+    pub failed: usize,
+    pub not_run: usize,
+    pub merged: &'a [PathBuf],
+    pub seconds: f64,
+    pub frames: &'a [JobResult],
+    pub warnings: &'a [String],
+    /// The first failure's kind and exit code, with a message counting the failed jobs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<serde_json::Value>,
 }

@@ -1,5 +1,5 @@
 //! What a render and a run of jobs report, as the serde types of the `--json` summaries
-//! (docs/json.md): [`JobSummary`] for one rendered image or tile, [`RunSummary`] for a run of
+//! (docs/json.md): [`JobSummary`] for one rendered image or tile, [`RunSummary`](super::RunSummary) for a run of
 //! frames, tiles or shards. Serialised through [`serde_json::Value`], keys come out sorted.
 
 use std::path::PathBuf;
@@ -187,29 +187,4 @@ impl JobSummary {
             stats,
         }
     }
-}
-
-/// A run of jobs: `dofray render --json`'s object for frames, tiles and shards.
-#[derive(Debug, Clone, Serialize)]
-#[allow(missing_docs)] // the fields are documented in docs/json.md, one row each
-pub struct RunSummary<'a> {
-    pub schema_version: u32,
-    pub dofray_version: &'static str,
-    pub git_commit: &'static str,
-    pub scene: &'a str,
-    pub output: &'a std::path::Path,
-    pub shard: Option<String>,
-    pub shard_source: Option<&'a str>,
-    pub jobs: usize,
-    pub rendered: usize,
-    pub skipped: usize,
-    pub failed: usize,
-    pub not_run: usize,
-    pub merged: &'a [PathBuf],
-    pub seconds: f64,
-    pub frames: &'a [super::run::JobResult],
-    pub warnings: &'a [String],
-    /// The first failure's kind and exit code, with a message counting the failed jobs.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub error: Option<serde_json::Value>,
 }

@@ -8,7 +8,7 @@
 //! error-controlled rule at its default tolerance, so whatever that rule does, the study
 //! measures it: nothing here depends on how adaptive places its sites.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use super::{BenchError, median, reference};
 use crate::camera::Camera;
@@ -447,14 +447,6 @@ pub fn run(
         highest_common,
         plot: None,
     })
-}
-
-/// Writes the report's plot as `equal-error.png` in `dir` and records its path in the report.
-pub fn write_plot(report: &mut EqualErrorReport, dir: &Path) -> Result<(), super::plot::PlotError> {
-    let path = dir.join(super::plot::EQUAL_ERROR_PNG);
-    super::plot::write_png(report, &path)?;
-    report.plot = Some(path);
-    Ok(())
 }
 
 #[cfg(test)]

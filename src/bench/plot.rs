@@ -274,6 +274,14 @@ impl HasKind for PlotError {
     }
 }
 
+/// Writes the report's plot as `equal-error.png` in `dir` and records its path in the report.
+pub fn write_plot(report: &mut EqualErrorReport, dir: &Path) -> Result<(), PlotError> {
+    let path = dir.join(EQUAL_ERROR_PNG);
+    write_png(report, &path)?;
+    report.plot = Some(path);
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::equal_error::{self, Rung, RungAa};
@@ -344,7 +352,7 @@ mod tests {
             let rgb = img.to_rgb8();
             assert!(rgb.pixels().any(|p| p.0 != [255, 255, 255]), "case {i}");
             // write_plot names the file and records it.
-            equal_error::write_plot(&mut r, &dir).unwrap();
+            write_plot(&mut r, &dir).unwrap();
             assert_eq!(r.plot.as_deref(), Some(dir.join(EQUAL_ERROR_PNG).as_path()));
         }
         std::fs::remove_dir_all(dir).unwrap();

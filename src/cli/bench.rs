@@ -129,7 +129,7 @@ pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> R
         equal_error::run(p.renderer.desc(), p.renderer.world(), camera, &config, &bar)
     })?;
     if let Some(dir) = &a.out {
-        equal_error::write_plot(&mut report, dir)?;
+        bench::plot::write_plot(&mut report, dir)?;
     }
     if a.json {
         println!("{}", versioned_json(&report)?);
