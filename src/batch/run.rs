@@ -214,9 +214,19 @@ impl RunReport {
     pub fn failed(&self) -> usize {
         self.count("failed")
     }
-    /// Jobs not attempted (`fail_fast`).
+    /// Jobs not attempted (`fail_fast`, or cancelled).
     pub fn not_run(&self) -> usize {
         self.count - self.results.len()
+    }
+    /// Whether the run was cancelled: its last job's render was ([`RenderError::Cancelled`],
+    /// from the job's [`Progress::cancelled`]), and the run stopped there.
+    pub fn cancelled(&self) -> bool {
+        self.results.last().is_some_and(|r| match &r.outcome {
+            JobOutcome::Failed(f) => {
+                matches!(f.error, Some(JobError::Render(RenderError::Cancelled)))
+            }
+            _ => false,
+        })
     }
 
     /// The run's JSON summary: `scene` and its `warnings`, `output` as given, this run's
@@ -354,6 +364,8 @@ impl Batch<'_> {
     /// folder is made first (a folder that cannot be made fails the run once, not every job);
     /// then each job is skipped, refused, rendered or failed as `options` say, and with
     /// `merge_tiles` each image whose tiles all rendered is assembled and its tiles removed.
+    /// A job whose render is cancelled (its progress's [`Progress::cancelled`]) ends the run
+    /// there ([`RunReport::cancelled`]).
     pub fn run(
         &self,
         jobs: &[Job],
@@ -399,6 +411,9 @@ impl Batch<'_> {
                 job: job.clone(),
                 outcome,
             });
+            if report.cancelled() {
+                break; // the front end asked to stop: no more jobs, no merge
+            }
             if report.first_failure.is_some() && options.fail_fast {
                 progress.stopping(jobs.len() - i - 1, jobs.len());
                 break;
