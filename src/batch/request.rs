@@ -91,7 +91,11 @@ mod tests {
             .plan(Path::new("shot_##.png"), None, (64, 48))
             .unwrap();
         assert_eq!(plan.all.len(), 6);
-        let mine: Vec<_> = plan.mine.iter().map(|j| j.output.to_str().unwrap()).collect();
+        let mine: Vec<_> = plan
+            .mine
+            .iter()
+            .map(|j| j.output.to_str().unwrap())
+            .collect();
         assert_eq!(
             mine,
             [
