@@ -198,16 +198,32 @@ fn report(
 /// The render thread's outcome (`Ok`), or the Python exception that stopped the wait.
 type Outcome = PyResult<Result<(Film, RenderStats), Failure>>;
 
-/// Runs `job` on a thread of its own; the calling thread waits without the GIL, taking it
-/// every [`POLL`] for signals and the progress callback.
+/// Runs `job` on a thread of its own, reporting its progress to `callback`.
 fn run_job(py: Python<'_>, job: Job, callback: Option<Py<PyAny>>) -> Outcome {
     let shared = Shared::default();
+    let mut last = (0, 0);
+    run_detached(
+        py,
+        &shared.cancel,
+        || job.run(&shared),
+        |py| report(py, callback.as_ref(), &shared, &mut last),
+    )
+}
+
+/// Runs `work` on a thread of its own; the calling thread waits without the GIL, taking it
+/// every [`POLL`] for signals and `poll` (the progress callback), and once more at the end.
+/// When either raises, `cancel` is cancelled and the exception returned once `work` stopped.
+fn run_detached<T: Send>(
+    py: Python<'_>,
+    cancel: &CancelFlag,
+    work: impl FnOnce() -> Result<T, Failure> + Send,
+    mut poll: impl FnMut(Python<'_>) -> PyResult<()> + Send,
+) -> PyResult<Result<T, Failure>> {
     py.detach(|| {
         std::thread::scope(|scope| {
             let (tx, rx) = mpsc::channel();
-            let shared = &shared;
             scope.spawn(move || {
-                let result = catch_unwind(AssertUnwindSafe(|| job.run(shared)));
+                let result = catch_unwind(AssertUnwindSafe(work));
                 let result = result.unwrap_or_else(|panic| {
                     let what = dofray::exit::panic_text(&*panic);
                     Err(Failure {
@@ -218,21 +234,20 @@ fn run_job(py: Python<'_>, job: Job, callback: Option<Py<PyAny>>) -> Outcome {
                 // The receiver waits for this message unless it is gone, which it is not.
                 let _ = tx.send(result);
             });
-            let mut last = (0, 0);
             loop {
                 match rx.recv_timeout(POLL) {
                     Ok(result) => {
                         // The last progress (done = total) before the result.
-                        Python::attach(|py| report(py, callback.as_ref(), shared, &mut last))?;
+                        Python::attach(&mut poll)?;
                         return Ok(result);
                     }
                     Err(RecvTimeoutError::Timeout) => {
                         let polled = Python::attach(|py| {
                             py.check_signals()?;
-                            report(py, callback.as_ref(), shared, &mut last)
+                            poll(py)
                         });
                         if let Err(e) = polled {
-                            shared.cancel.cancel();
+                            cancel.cancel();
                             // The render stops within a row's or a round's time.
                             let _ = rx.recv();
                             return Err(e);
@@ -461,10 +476,13 @@ fn render(
     }
 }
 
+mod jobs;
+
 /// The extension module.
 #[pymodule]
 fn _dofray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(jobs::render_jobs, m)?)?;
     m.add_class::<Render>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -1,0 +1,347 @@
+//! [`render_jobs`]: a scene's frames and tiles rendered to files by the library's job loop
+//! (`dofray::batch::Batch::run`, as `dofray render` runs it), on a thread of its own while the
+//! calling thread waits without the GIL (as [`super::render`] does). The result is the
+//! object `dofray render --json` prints for a run of jobs, as a dict.
+
+use std::path::PathBuf;
+use std::sync::{Mutex, PoisonError};
+
+use dofray::batch::jobs::Job;
+use dofray::batch::run::RunProgress;
+use dofray::batch::{Batch, FrameRequest, ImageOptions, JobError, JobOutcome, JobRequest};
+use dofray::batch::{RunOptions, Shard};
+use dofray::exit::ErrorKind;
+use dofray::overrides::{Overrides, SettingsOverrides};
+use dofray::render::{CancelFlag, NoProgress, Progress};
+use dofray::renderer::{Renderer, RendererError};
+use pyo3::conversion::FromPyObjectOwned;
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::{Failure, device, json_to_py, keyword, run_detached, to_mode, to_u32};
+
+/// The scene keywords `render_jobs` takes in `**overrides`: those of `render` but `frame`.
+#[derive(Default)]
+struct SceneKeywords {
+    width: Option<i64>,
+    height: Option<i64>,
+    f_number: Option<f32>,
+    focal_length: Option<f32>,
+    sensor_width: Option<f32>,
+    focus_distance: Option<f32>,
+    autofocus: Option<(i64, i64)>,
+    aperture_radius: Option<f32>,
+    blades: Option<i64>,
+    spp: Option<i64>,
+    aa: Option<i64>,
+    mode: Option<String>,
+    tolerance: Option<f32>,
+    seed: Option<u64>,
+    exposure: Option<f32>,
+    transparent: bool,
+}
+
+/// `value` as keyword `name` takes it, or a `TypeError` naming the keyword.
+fn item<'py, T: FromPyObjectOwned<'py>>(name: &str, value: &Bound<'py, PyAny>) -> PyResult<T> {
+    value.extract::<T>().map_err(|e| {
+        let e: PyErr = e.into();
+        PyTypeError::new_err(format!("render_jobs() keyword {name}: {e}"))
+    })
+}
+
+impl SceneKeywords {
+    /// The keywords of `overrides`; `None` leaves a value as the scene has it.
+    fn from_dict(overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let mut k = Self::default();
+        for (key, value) in overrides.into_iter().flat_map(|d| d.iter()) {
+            let name: String = key.extract()?;
+            if value.is_none() {
+                continue;
+            }
+            let v = &value;
+            match name.as_str() {
+                "width" => k.width = item(&name, v)?,
+                "height" => k.height = item(&name, v)?,
+                "f_number" => k.f_number = item(&name, v)?,
+                "focal_length" => k.focal_length = item(&name, v)?,
+                "sensor_width" => k.sensor_width = item(&name, v)?,
+                "focus_distance" => k.focus_distance = item(&name, v)?,
+                "autofocus" => k.autofocus = item(&name, v)?,
+                "aperture_radius" => k.aperture_radius = item(&name, v)?,
+                "blades" => k.blades = item(&name, v)?,
+                "spp" => k.spp = item(&name, v)?,
+                "aa" => k.aa = item(&name, v)?,
+                "mode" => k.mode = item(&name, v)?,
+                "tolerance" => k.tolerance = item(&name, v)?,
+                "seed" => k.seed = item(&name, v)?,
+                "exposure" => k.exposure = item(&name, v)?,
+                "transparent" => k.transparent = item(&name, v)?,
+                _ => {
+                    return Err(PyTypeError::new_err(format!(
+                        "render_jobs() got an unexpected keyword argument '{name}'"
+                    )));
+                }
+            }
+        }
+        Ok(k)
+    }
+
+    /// The scene overrides and render settings the keywords ask for, checked for range by the
+    /// library when the scene is rendered.
+    fn parts(self) -> Result<(Overrides, SettingsOverrides), Failure> {
+        let autofocus = match self.autofocus {
+            Some((x, y)) => Some((
+                to_u32("autofocus x", Some(x))?.unwrap_or(0),
+                to_u32("autofocus y", Some(y))?.unwrap_or(0),
+            )),
+            None => None,
+        };
+        let overrides = Overrides {
+            width: to_u32("width", self.width)?,
+            height: to_u32("height", self.height)?,
+            f_number: self.f_number,
+            focal_length_mm: self.focal_length,
+            sensor_width_mm: self.sensor_width,
+            focus_distance: self.focus_distance,
+            autofocus,
+            aperture_radius: self.aperture_radius,
+            blades: to_u32("blades", self.blades)?,
+            ..Default::default()
+        };
+        let settings = SettingsOverrides {
+            mode: to_mode(self.mode.as_deref())?,
+            spp: to_u32("spp", self.spp)?,
+            aa: to_u32("aa", self.aa)?,
+            tolerance: self.tolerance,
+            seed: self.seed,
+            exposure: self.exposure,
+            transparent: self.transparent,
+            ..Default::default()
+        };
+        Ok((overrides, settings))
+    }
+}
+
+/// `frames=`: a frame list as `--frames` takes it (`"1-48x2"`), or frame numbers.
+#[derive(FromPyObject)]
+pub(crate) enum Frames {
+    Spec(String),
+    Numbers(Vec<i64>),
+}
+
+/// What the render thread does: load, build, plan and run.
+struct JobsCall {
+    scene: String,
+    output: PathBuf,
+    overrides: Overrides,
+    settings: SettingsOverrides,
+    request: JobRequest,
+    run: RunOptions,
+}
+
+/// A job as it starts: the progress callback's arguments (index, count, frame, output).
+type JobStart = (usize, usize, Option<i64>, String);
+
+/// The jobs started, for the Python thread to report, and the flag that cancels the run.
+#[derive(Default)]
+struct Started {
+    cancel: CancelFlag,
+    jobs: Mutex<Vec<JobStart>>,
+}
+
+impl RunProgress for Started {
+    fn starting(&self, index: usize, count: usize, job: &Job, _seconds_left: Option<f64>) {
+        let output = job.output.to_string_lossy().into_owned();
+        let mut jobs = self.jobs.lock().unwrap_or_else(PoisonError::into_inner);
+        jobs.push((index, count, job.frame, output));
+    }
+
+    fn job_progress(&self, _job: &Job) -> Box<dyn Progress + '_> {
+        Box::new(self.cancel.with(&NoProgress))
+    }
+}
+
+impl JobsCall {
+    /// Loads, builds and renders the jobs (on the calling thread), reporting to `started`:
+    /// the run's summary as JSON.
+    fn run(self, started: &Started) -> Result<serde_json::Value, Failure> {
+        let fail = |e: RendererError| Failure::from_error(&e);
+        let desc = dofray::scene::load(&self.scene).map_err(|e| fail(e.into()))?;
+        let renderer = Renderer::with_overrides(desc, self.overrides, &device()?).map_err(fail)?;
+        let settings = self
+            .settings
+            .settings(renderer.desc())
+            .map_err(|e| fail(e.into()))?;
+        let desc = renderer.desc();
+        let animation = desc.animation.as_ref().map(|a| a.frames());
+        let size = (desc.camera.width, desc.camera.height);
+        let plan = self
+            .request
+            .plan(&self.output, animation, size)
+            .map_err(|e| Failure::usage(e.to_string()))?;
+        let batch = Batch {
+            renderer: &renderer,
+            settings: &settings,
+            pool: None,
+            image: ImageOptions {
+                scene_file: Some(self.scene.clone().into()),
+                ..Default::default()
+            },
+            region: None,
+            param_name: keyword,
+        };
+        let run = RunOptions {
+            merge_tiles: plan.merge_tiles,
+            ..self.run
+        };
+        let report = batch
+            .run(&plan.mine, run, started)
+            .map_err(|e| Failure::from_error(&e))?;
+        if report.cancelled() {
+            return Err(Failure {
+                kind: ErrorKind::Interrupted(2),
+                message: "the run was cancelled".into(),
+            });
+        }
+        let shard = self.request.shard.as_ref().map(|s| (s, "shard"));
+        let summary = report.summary(&renderer, &self.output, shard, plan.all.len());
+        let mut value = serde_json::to_value(&summary).map_err(|e| Failure {
+            kind: ErrorKind::Internal,
+            message: format!("internal error in dofray: the summary: {e}"),
+        })?;
+        // The option refusing to overwrite, named as the keyword.
+        let entries = value["frames"].as_array_mut().into_iter().flatten();
+        for (result, entry) in report.results.iter().zip(entries) {
+            if let JobOutcome::Failed(f) = &result.outcome
+                && let Some(JobError::Exists { path }) = &f.error
+            {
+                entry["error"]["message"] = format!(
+                    "{} exists and no_overwrite refuses to replace it",
+                    path.display()
+                )
+                .into();
+            }
+        }
+        Ok(value)
+    }
+}
+
+/// Calls `callback(index, count, frame, output)` for each job started since the last call.
+fn report_started(py: Python<'_>, callback: Option<&Py<PyAny>>, started: &Started) -> PyResult<()> {
+    let Some(callback) = callback else {
+        return Ok(());
+    };
+    let jobs = std::mem::take(&mut *started.jobs.lock().unwrap_or_else(PoisonError::into_inner));
+    for job in jobs {
+        callback.call1(py, job)?;
+    }
+    Ok(())
+}
+
+/// The job request and run options of the keywords.
+fn request(
+    frames: Option<Frames>,
+    tiles: Option<(i64, i64)>,
+    shard: Option<(i64, i64)>,
+    skip_existing: bool,
+    no_overwrite: bool,
+    fail_fast: bool,
+) -> Result<(JobRequest, RunOptions), Failure> {
+    if skip_existing && no_overwrite {
+        return Err(Failure::usage(
+            "skip_existing and no_overwrite exclude each other".into(),
+        ));
+    }
+    let list = frames.map(|f| match f {
+        Frames::Spec(spec) => spec,
+        Frames::Numbers(n) => n.iter().map(i64::to_string).collect::<Vec<_>>().join(","),
+    });
+    let pair = |name: &str, (a, b): (i64, i64)| -> Result<(u32, u32), Failure> {
+        let a = to_u32(name, Some(a))?.unwrap_or(0);
+        Ok((a, to_u32(name, Some(b))?.unwrap_or(0)))
+    };
+    let tiles = tiles.map(|t| pair("tiles", t)).transpose()?;
+    let shard = match shard {
+        Some(s) => {
+            let (index, count) = pair("shard", s)?;
+            let shard =
+                Shard::new(index, count).map_err(|e| Failure::usage(format!("shard: {e}")))?;
+            Some(shard)
+        }
+        None => None,
+    };
+    let request = JobRequest {
+        frames: FrameRequest {
+            list,
+            ..Default::default()
+        },
+        tiles,
+        shard,
+    };
+    let run = RunOptions {
+        skip_existing,
+        no_overwrite,
+        fail_fast,
+        merge_tiles: false, // the plan says
+    };
+    Ok((request, run))
+}
+
+/// Renders `scene`'s frames and tiles to `output`; see the Python package's
+/// `dofray.render_jobs` for the keywords.
+#[pyfunction]
+#[pyo3(signature = (
+    scene, output, *, frames=None, tiles=None, skip_existing=false, no_overwrite=false,
+    fail_fast=false, shard=None, progress=None, **overrides
+))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn render_jobs<'py>(
+    py: Python<'py>,
+    scene: PathBuf,
+    output: PathBuf,
+    frames: Option<Frames>,
+    tiles: Option<(i64, i64)>,
+    skip_existing: bool,
+    no_overwrite: bool,
+    fail_fast: bool,
+    shard: Option<(i64, i64)>,
+    progress: Option<Py<PyAny>>,
+    overrides: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    if let Some(callback) = &progress
+        && !callback.bind(py).is_callable()
+    {
+        return Err(PyTypeError::new_err(
+            "progress must be callable (index, count, frame, output)",
+        ));
+    }
+    let keywords = SceneKeywords::from_dict(overrides)?;
+    let call = (|| -> Result<JobsCall, Failure> {
+        let (overrides, settings) = keywords.parts()?;
+        let (request, run) = request(frames, tiles, shard, skip_existing, no_overwrite, fail_fast)?;
+        let scene = scene.to_str().map(str::to_owned).ok_or_else(|| {
+            Failure::usage(format!("scene path {} is not valid UTF-8", scene.display()))
+        })?;
+        Ok(JobsCall {
+            scene,
+            output,
+            overrides,
+            settings,
+            request,
+            run,
+        })
+    })()
+    .map_err(|f| f.into_pyerr(py))?;
+    let started = Started::default();
+    let outcome = run_detached(
+        py,
+        &started.cancel,
+        || call.run(&started),
+        |py| report_started(py, progress.as_ref(), &started),
+    )?;
+    match outcome {
+        Err(failure) => Err(failure.into_pyerr(py)),
+        Ok(summary) => json_to_py(py, &summary),
+    }
+}
