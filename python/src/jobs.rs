@@ -4,7 +4,7 @@
 //! object `dofray render --json` prints for a run of jobs, as a dict.
 
 use std::path::PathBuf;
-use std::sync::{Mutex, PoisonError};
+use std::sync::{Condvar, Mutex, PoisonError};
 
 use dofray::batch::jobs::Job;
 use dofray::batch::run::RunProgress;
@@ -143,29 +143,60 @@ struct JobsCall {
 /// A job as it starts: the progress callback's arguments (index, count, frame, output).
 type JobStart = (usize, usize, Option<i64>, String);
 
-/// The jobs started, for the Python thread to report, and the flag that cancels the run.
+/// The jobs started and not yet reported, and how many of them were.
+#[derive(Default)]
+struct Queue {
+    waiting: Vec<JobStart>,
+    sent: usize,
+    reported: usize,
+}
+
+/// The jobs started, handed from the render thread to the Python thread, which reports each
+/// to the callback before the job renders; and the flag that cancels the run.
 #[derive(Default)]
 struct Started {
     cancel: CancelFlag,
-    jobs: Mutex<Vec<JobStart>>,
+    /// Whether there is a callback to wait for.
+    callback: bool,
+    queue: Mutex<Queue>,
+    reported: Condvar,
 }
 
-impl RunProgress for Started {
+/// [`RunProgress`] on the render thread: each job waits for the callback to have seen it.
+struct Announce<'a> {
+    started: &'a Started,
+    /// Wakes the Python thread.
+    wake: &'a (dyn Fn() + Sync),
+}
+
+impl RunProgress for Announce<'_> {
     fn starting(&self, index: usize, count: usize, job: &Job, _seconds_left: Option<f64>) {
+        let started = self.started;
+        if !started.callback {
+            return;
+        }
         let output = job.output.to_string_lossy().into_owned();
-        let mut jobs = self.jobs.lock().unwrap_or_else(PoisonError::into_inner);
-        jobs.push((index, count, job.frame, output));
+        let mut queue = started.queue.lock().unwrap_or_else(PoisonError::into_inner);
+        queue.waiting.push((index, count, job.frame, output));
+        queue.sent += 1;
+        let mine = queue.sent;
+        (self.wake)();
+        // Until reported, or cancelled (the callback raised: the job's render stops at once).
+        while queue.reported < mine && !started.cancel.is_cancelled() {
+            let waited = started.reported.wait_timeout(queue, crate::POLL);
+            queue = waited.unwrap_or_else(PoisonError::into_inner).0;
+        }
     }
 
     fn job_progress(&self, _job: &Job) -> Box<dyn Progress + '_> {
-        Box::new(self.cancel.with(&NoProgress))
+        Box::new(self.started.cancel.with(&NoProgress))
     }
 }
 
 impl JobsCall {
-    /// Loads, builds and renders the jobs (on the calling thread), reporting to `started`:
+    /// Loads, builds and renders the jobs (on the calling thread), reporting to `announce`:
     /// the run's summary as JSON.
-    fn run(self, started: &Started) -> Result<serde_json::Value, Failure> {
+    fn run(self, announce: &Announce<'_>) -> Result<serde_json::Value, Failure> {
         let fail = |e: RendererError| Failure::from_error(&e);
         let desc = dofray::scene::load(&self.scene).map_err(|e| fail(e.into()))?;
         let renderer = Renderer::with_overrides(desc, self.overrides, &device()?).map_err(fail)?;
@@ -196,7 +227,7 @@ impl JobsCall {
             ..self.run
         };
         let report = batch
-            .run(&plan.mine, run, started)
+            .run(&plan.mine, run, announce)
             .map_err(|e| Failure::from_error(&e))?;
         if report.cancelled() {
             return Err(Failure {
@@ -227,15 +258,23 @@ impl JobsCall {
     }
 }
 
-/// Calls `callback(index, count, frame, output)` for each job started since the last call.
+/// Calls `callback(index, count, frame, output)` for each job started since the last call,
+/// then lets them render.
 fn report_started(py: Python<'_>, callback: Option<&Py<PyAny>>, started: &Started) -> PyResult<()> {
     let Some(callback) = callback else {
         return Ok(());
     };
-    let jobs = std::mem::take(&mut *started.jobs.lock().unwrap_or_else(PoisonError::into_inner));
+    let jobs = {
+        let mut queue = started.queue.lock().unwrap_or_else(PoisonError::into_inner);
+        std::mem::take(&mut queue.waiting)
+    };
+    let count = jobs.len();
     for job in jobs {
         callback.call1(py, job)?;
     }
+    let mut queue = started.queue.lock().unwrap_or_else(PoisonError::into_inner);
+    queue.reported += count;
+    started.reported.notify_all();
     Ok(())
 }
 
@@ -333,11 +372,19 @@ pub(crate) fn render_jobs<'py>(
         })
     })()
     .map_err(|f| f.into_pyerr(py))?;
-    let started = Started::default();
+    let started = Started {
+        callback: progress.is_some(),
+        ..Default::default()
+    };
     let outcome = run_detached(
         py,
         &started.cancel,
-        || call.run(&started),
+        |wake| {
+            call.run(&Announce {
+                started: &started,
+                wake,
+            })
+        },
         |py| report_started(py, progress.as_ref(), &started),
     )?;
     match outcome {

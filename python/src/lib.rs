@@ -205,25 +205,37 @@ fn run_job(py: Python<'_>, job: Job, callback: Option<Py<PyAny>>) -> Outcome {
     run_detached(
         py,
         &shared.cancel,
-        || job.run(&shared),
+        |_wake| job.run(&shared),
         |py| report(py, callback.as_ref(), &shared, &mut last),
     )
 }
 
+/// What the work thread of [`run_detached`] tells the waiting thread.
+enum Message<T> {
+    /// Poll now: there is news for the progress callback.
+    Wake,
+    /// The work's result.
+    Done(Result<T, Failure>),
+}
+
 /// Runs `work` on a thread of its own; the calling thread waits without the GIL, taking it
-/// every [`POLL`] for signals and `poll` (the progress callback), and once more at the end.
-/// When either raises, `cancel` is cancelled and the exception returned once `work` stopped.
+/// every [`POLL`] (or when `work` calls the wake function it is given) for signals and
+/// `poll` (the progress callback), and once more at the end. When either raises, `cancel` is
+/// cancelled and the exception returned once `work` stopped.
 fn run_detached<T: Send>(
     py: Python<'_>,
     cancel: &CancelFlag,
-    work: impl FnOnce() -> Result<T, Failure> + Send,
+    work: impl FnOnce(&(dyn Fn() + Sync)) -> Result<T, Failure> + Send,
     mut poll: impl FnMut(Python<'_>) -> PyResult<()> + Send,
 ) -> PyResult<Result<T, Failure>> {
     py.detach(|| {
         std::thread::scope(|scope| {
             let (tx, rx) = mpsc::channel();
             scope.spawn(move || {
-                let result = catch_unwind(AssertUnwindSafe(work));
+                let wake = || {
+                    let _ = tx.send(Message::Wake);
+                };
+                let result = catch_unwind(AssertUnwindSafe(|| work(&wake)));
                 let result = result.unwrap_or_else(|panic| {
                     let what = dofray::exit::panic_text(&*panic);
                     Err(Failure {
@@ -232,16 +244,16 @@ fn run_detached<T: Send>(
                     })
                 });
                 // The receiver waits for this message unless it is gone, which it is not.
-                let _ = tx.send(result);
+                let _ = tx.send(Message::Done(result));
             });
             loop {
                 match rx.recv_timeout(POLL) {
-                    Ok(result) => {
+                    Ok(Message::Done(result)) => {
                         // The last progress (done = total) before the result.
                         Python::attach(&mut poll)?;
                         return Ok(result);
                     }
-                    Err(RecvTimeoutError::Timeout) => {
+                    Ok(Message::Wake) | Err(RecvTimeoutError::Timeout) => {
                         let polled = Python::attach(|py| {
                             py.check_signals()?;
                             poll(py)
@@ -249,7 +261,7 @@ fn run_detached<T: Send>(
                         if let Err(e) = polled {
                             cancel.cancel();
                             // The render stops within a row's or a round's time.
-                            let _ = rx.recv();
+                            while let Ok(Message::Wake) = rx.recv() {}
                             return Err(e);
                         }
                     }

@@ -24,7 +24,7 @@ def test_frames_then_skip_existing(tmp_path):
     assert [job["output"] for job in run["frames"]] == outputs
     assert [job["frame"] for job in run["frames"]] == [1, 2, 3]
     assert all(job["status"] == "rendered" for job in run["frames"])
-    assert run["frames"][0]["width"] == 32 and run["frames"][0]["rays"]["primary"] > 0
+    assert run["frames"][0]["width"] == 32 and run["frames"][0]["primary_rays"] > 0
     assert calls == [(i, 3, i + 1, outputs[i]) for i in range(3)]
     assert all(os.path.isfile(p) for p in outputs)
 
@@ -104,8 +104,9 @@ def test_progress_exception_cancels_the_run(tmp_path):
         dofray.render_jobs(
             FOCUS_PULL, tmp_path / "s_##.png", frames="1-3", progress=progress, **TINY
         )
+    # Each job waits for the callback: the second never rendered.
     assert (tmp_path / "s_01.png").is_file()
-    assert not (tmp_path / "s_03.png").exists()
+    assert not (tmp_path / "s_02.png").exists() and not (tmp_path / "s_03.png").exists()
 
 
 def test_keyboard_interrupt_cancels_the_run(tmp_path):
