@@ -11,10 +11,11 @@ use dofray::batch::jobs::Job;
 use dofray::batch::run::{JobFailure, RunProgress};
 use dofray::batch::{Batch, FrameRequest, ImageOptions, JobError, JobOutcome, JobRequest};
 use dofray::batch::{RunOptions, RunReport, Shard};
-use dofray::overrides::Param;
+use dofray::params::Param;
 use dofray::render::Progress;
 
 use crate::args::{arg_mut, free, out_arg, put, str_arg};
+use crate::cached::usage;
 use crate::cancel::DofrayCancel;
 use crate::device::DofrayDevice;
 use crate::scene::DofrayScene;
@@ -357,7 +358,7 @@ fn render_jobs(
     }
     let patch = scene.settings.clone();
     let renderer = scene.renderer(device)?;
-    let settings = patch.settings(renderer.desc())?;
+    let settings = renderer.settings(&patch).map_err(usage)?;
     let desc = renderer.desc();
     let animation = desc.animation.as_ref().map(|a| a.frames());
     let size = (desc.camera.width, desc.camera.height);
@@ -370,7 +371,7 @@ fn render_jobs(
         pool: None,
         image: ImageOptions::default(),
         region: None,
-        param_name: Param::field,
+        param_name: Param::setter_name,
     };
     let run = RunOptions {
         merge_tiles: plan.merge_tiles,

@@ -11,117 +11,15 @@ use dofray::batch::run::RunProgress;
 use dofray::batch::{Batch, FrameRequest, ImageOptions, JobError, JobOutcome, JobRequest};
 use dofray::batch::{RunOptions, Shard};
 use dofray::exit::ErrorKind;
-use dofray::overrides::{Overrides, SettingsOverrides};
-use dofray::render::{CancelFlag, NoProgress, Progress};
-use dofray::renderer::{Renderer, RendererError};
-use pyo3::conversion::FromPyObjectOwned;
+use dofray::overrides::Overrides;
+use dofray::params::Param;
+use dofray::render::{CancelFlag, NoProgress, Progress, SettingsPatch};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use crate::{Failure, device, json_to_py, keyword, run_detached, to_mode, to_u32};
-
-/// The scene keywords `render_jobs` takes in `**overrides`: those of `render` but `frame`.
-#[derive(Default)]
-struct SceneKeywords {
-    width: Option<i64>,
-    height: Option<i64>,
-    f_number: Option<f32>,
-    focal_length: Option<f32>,
-    sensor_width: Option<f32>,
-    focus_distance: Option<f32>,
-    autofocus: Option<(i64, i64)>,
-    aperture_radius: Option<f32>,
-    blades: Option<i64>,
-    spp: Option<i64>,
-    aa: Option<i64>,
-    mode: Option<String>,
-    tolerance: Option<f32>,
-    seed: Option<u64>,
-    exposure: Option<f32>,
-    transparent: bool,
-}
-
-/// `value` as keyword `name` takes it, or a `TypeError` naming the keyword.
-fn item<'py, T: FromPyObjectOwned<'py>>(name: &str, value: &Bound<'py, PyAny>) -> PyResult<T> {
-    value.extract::<T>().map_err(|e| {
-        let e: PyErr = e.into();
-        PyTypeError::new_err(format!("render_jobs() keyword {name}: {e}"))
-    })
-}
-
-impl SceneKeywords {
-    /// The keywords of `overrides`; `None` leaves a value as the scene has it.
-    fn from_dict(overrides: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut k = Self::default();
-        for (key, value) in overrides.into_iter().flat_map(|d| d.iter()) {
-            let name: String = key.extract()?;
-            if value.is_none() {
-                continue;
-            }
-            let v = &value;
-            match name.as_str() {
-                "width" => k.width = item(&name, v)?,
-                "height" => k.height = item(&name, v)?,
-                "f_number" => k.f_number = item(&name, v)?,
-                "focal_length" => k.focal_length = item(&name, v)?,
-                "sensor_width" => k.sensor_width = item(&name, v)?,
-                "focus_distance" => k.focus_distance = item(&name, v)?,
-                "autofocus" => k.autofocus = item(&name, v)?,
-                "aperture_radius" => k.aperture_radius = item(&name, v)?,
-                "blades" => k.blades = item(&name, v)?,
-                "spp" => k.spp = item(&name, v)?,
-                "aa" => k.aa = item(&name, v)?,
-                "mode" => k.mode = item(&name, v)?,
-                "tolerance" => k.tolerance = item(&name, v)?,
-                "seed" => k.seed = item(&name, v)?,
-                "exposure" => k.exposure = item(&name, v)?,
-                "transparent" => k.transparent = item(&name, v)?,
-                _ => {
-                    return Err(PyTypeError::new_err(format!(
-                        "render_jobs() got an unexpected keyword argument '{name}'"
-                    )));
-                }
-            }
-        }
-        Ok(k)
-    }
-
-    /// The scene overrides and render settings the keywords ask for, checked for range by the
-    /// library when the scene is rendered.
-    fn parts(self) -> Result<(Overrides, SettingsOverrides), Failure> {
-        let autofocus = match self.autofocus {
-            Some((x, y)) => Some((
-                to_u32("autofocus x", Some(x))?.unwrap_or(0),
-                to_u32("autofocus y", Some(y))?.unwrap_or(0),
-            )),
-            None => None,
-        };
-        let overrides = Overrides {
-            width: to_u32("width", self.width)?,
-            height: to_u32("height", self.height)?,
-            f_number: self.f_number,
-            focal_length_mm: self.focal_length,
-            sensor_width_mm: self.sensor_width,
-            focus_distance: self.focus_distance,
-            autofocus,
-            aperture_radius: self.aperture_radius,
-            blades: to_u32("blades", self.blades)?,
-            ..Default::default()
-        };
-        let settings = SettingsOverrides {
-            mode: to_mode(self.mode.as_deref())?,
-            spp: to_u32("spp", self.spp)?,
-            aa: to_u32("aa", self.aa)?,
-            tolerance: self.tolerance,
-            seed: self.seed,
-            exposure: self.exposure,
-            transparent: self.transparent,
-            ..Default::default()
-        };
-        Ok((overrides, settings))
-    }
-}
+use crate::keywords::{SceneKeywords, to_u32};
+use crate::{Failure, json_to_py, prepare, run_detached, scene_name};
 
 /// `frames=`: a frame list as `--frames` takes it (`"1-48x2"`), or frame numbers.
 #[derive(FromPyObject)]
@@ -135,7 +33,7 @@ struct JobsCall {
     scene: String,
     output: PathBuf,
     overrides: Overrides,
-    settings: SettingsOverrides,
+    settings: SettingsPatch,
     request: JobRequest,
     run: RunOptions,
 }
@@ -197,13 +95,7 @@ impl JobsCall {
     /// Loads, builds and renders the jobs (on the calling thread), reporting to `announce`:
     /// the run's summary as JSON.
     fn run(self, announce: &Announce<'_>) -> Result<serde_json::Value, Failure> {
-        let fail = |e: RendererError| Failure::from_error(&e);
-        let desc = dofray::scene::load(&self.scene).map_err(|e| fail(e.into()))?;
-        let renderer = Renderer::with_overrides(desc, self.overrides, &device()?).map_err(fail)?;
-        let settings = self
-            .settings
-            .settings(renderer.desc())
-            .map_err(|e| fail(e.into()))?;
+        let (renderer, settings) = prepare(&self.scene, self.overrides, &self.settings)?;
         let desc = renderer.desc();
         let animation = desc.animation.as_ref().map(|a| a.frames());
         let size = (desc.camera.width, desc.camera.height);
@@ -220,7 +112,7 @@ impl JobsCall {
                 ..Default::default()
             },
             region: None,
-            param_name: keyword,
+            param_name: Param::keyword_name,
         };
         let run = RunOptions {
             merge_tiles: plan.merge_tiles,
@@ -359,11 +251,8 @@ pub(crate) fn render_jobs<'py>(
     let call = (|| -> Result<JobsCall, Failure> {
         let (overrides, settings) = keywords.parts()?;
         let (request, run) = request(frames, tiles, shard, skip_existing, no_overwrite, fail_fast)?;
-        let scene = scene.to_str().map(str::to_owned).ok_or_else(|| {
-            Failure::usage(format!("scene path {} is not valid UTF-8", scene.display()))
-        })?;
         Ok(JobsCall {
-            scene,
+            scene: scene_name(&scene)?,
             output,
             overrides,
             settings,

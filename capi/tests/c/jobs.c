@@ -192,6 +192,12 @@ static void bad_arguments(DofrayScene *scene) {
           DOFRAY_INVALID_ARGUMENT);
     CHECK(dofray_render_jobs(scene, NULL, "t.png", NULL, NULL, NULL, NULL, NULL) ==
           DOFRAY_INVALID_ARGUMENT);
+    /* A bad setting is named by its setter. */
+    CHECK(dofray_scene_set_spp(scene, 0) == DOFRAY_OK);
+    CHECK(dofray_render_jobs(scene, NULL, "t.png", NULL, NULL, NULL, NULL, &jobs) ==
+          DOFRAY_USAGE);
+    CHECK(strstr(dofray_last_error_message(), "dofray_scene_set_spp") != NULL);
+    CHECK(dofray_scene_set_spp(scene, 4) == DOFRAY_OK);
     CHECK(dofray_jobs_count(NULL) == 0 && dofray_jobs_output(NULL, 0) == NULL);
     CHECK(dofray_jobs_first_failure(NULL) == DOFRAY_INVALID_ARGUMENT);
     dofray_jobs_free(NULL);
