@@ -359,12 +359,6 @@ fn render_jobs(
     let patch = scene.settings.clone();
     let renderer = scene.renderer(device)?;
     let settings = renderer.settings(&patch).map_err(usage)?;
-    let desc = renderer.desc();
-    let animation = desc.animation.as_ref().map(|a| a.frames());
-    let size = (desc.camera.width, desc.camera.height);
-    let plan = request
-        .plan(output, animation, size)
-        .map_err(|e| Failure::new(DofrayStatus::DOFRAY_USAGE, e.to_string()))?;
     let batch = Batch {
         renderer,
         settings: &settings,
@@ -373,6 +367,9 @@ fn render_jobs(
         region: None,
         param_name: Param::setter_name,
     };
+    let plan = batch
+        .plan(output, request)
+        .map_err(|e| Failure::new(DofrayStatus::DOFRAY_USAGE, e.to_string()))?;
     let run = RunOptions {
         merge_tiles: plan.merge_tiles,
         ..run

@@ -96,13 +96,6 @@ impl JobsCall {
     /// the run's summary as JSON.
     fn run(self, announce: &Announce<'_>) -> Result<serde_json::Value, Failure> {
         let (renderer, settings) = prepare(&self.scene, self.overrides, &self.settings)?;
-        let desc = renderer.desc();
-        let animation = desc.animation.as_ref().map(|a| a.frames());
-        let size = (desc.camera.width, desc.camera.height);
-        let plan = self
-            .request
-            .plan(&self.output, animation, size)
-            .map_err(|e| Failure::usage(e.to_string()))?;
         let batch = Batch {
             renderer: &renderer,
             settings: &settings,
@@ -114,6 +107,9 @@ impl JobsCall {
             region: None,
             param_name: Param::keyword_name,
         };
+        let plan = batch
+            .plan(&self.output, &self.request)
+            .map_err(|e| Failure::usage(e.to_string()))?;
         let run = RunOptions {
             merge_tiles: plan.merge_tiles,
             ..self.run

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::jobs::{self, Job};
+use super::request::{JobRequest, RequestError, RequestPlan};
 use super::summary::{EmbreeSummary, JobFacts, JobSummary, RunSummary};
 use crate::error_kind::{self, ErrorKind, HasKind};
 use crate::output::{self, ExrCompression, OutputError, RenderTargets};
@@ -291,6 +292,13 @@ pub fn refuse_existing(job: &Job, no_overwrite: bool) -> Result<(), JobError> {
 }
 
 impl Batch<'_> {
+    /// The jobs of `request` writing to `output`, for this scene's animation and image size.
+    pub fn plan(&self, output: &Path, request: &JobRequest) -> Result<RequestPlan, RequestError> {
+        let desc = self.renderer.desc();
+        let animation = desc.animation.as_ref().map(|a| a.frames());
+        request.plan(output, animation, (desc.camera.width, desc.camera.height))
+    }
+
     /// The files `job` writes (its image and, with [`ImageOptions::aov_dir`], the AOV
     /// pictures), each checked ([`RenderTargets::new`]).
     pub fn targets(&self, job: &Job) -> Result<RenderTargets, OutputError> {
