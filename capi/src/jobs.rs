@@ -367,9 +367,7 @@ fn render_jobs(
         region: None,
         param_name: Param::setter_name,
     };
-    let plan = batch
-        .plan(output, request)
-        .map_err(|e| Failure::new(DofrayStatus::DOFRAY_USAGE, e.to_string()))?;
+    let plan = batch.plan(output, request)?;
     let run = RunOptions {
         merge_tiles: plan.merge_tiles,
         ..run

@@ -109,7 +109,7 @@ impl JobsCall {
         };
         let plan = batch
             .plan(&self.output, &self.request)
-            .map_err(|e| Failure::usage(e.to_string()))?;
+            .map_err(|e| Failure::from_error(&e))?;
         let run = RunOptions {
             merge_tiles: plan.merge_tiles,
             ..self.run

@@ -9,6 +9,7 @@ use std::path::Path;
 use super::jobs::{self, Job};
 use super::select::{FrameRequest, FrameSelectError, select_frames};
 use super::shard::Shard;
+use crate::error_kind::{ErrorKind, HasKind};
 use crate::render::{Region, RegionError};
 
 /// What a run renders, beyond the scene and its settings.
@@ -29,8 +30,18 @@ pub enum RequestError {
     #[error(transparent)]
     Frames(#[from] FrameSelectError),
     /// The tile grid does not fit the image.
-    #[error("tiles: {0}")]
+    #[error("tiles")]
     Tiles(#[source] RegionError),
+}
+
+impl HasKind for RequestError {
+    /// What was asked for does not fit the scene or the output.
+    fn kind(&self) -> ErrorKind {
+        match self {
+            Self::Frames(e) => e.kind(),
+            Self::Tiles(e) => e.kind(),
+        }
+    }
 }
 
 /// The jobs of a request.
@@ -121,6 +132,23 @@ mod tests {
         };
         let error = fine.plan(Path::new("a.png"), None, (64, 48)).unwrap_err();
         assert!(matches!(error, RequestError::Tiles(_)), "{error}");
-        assert!(error.to_string().starts_with("tiles: "), "{error}");
+        let message = crate::error_kind::full_message(&error);
+        assert!(message.starts_with("tiles: "), "{message}");
+        assert_eq!(message.matches("65").count(), 1, "{message}");
+
+        let list = JobRequest {
+            frames: FrameRequest {
+                list: Some("1-x".into()),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let error = list.plan(Path::new("f_#.png"), None, (64, 48)).unwrap_err();
+        let message = crate::error_kind::full_message(&error);
+        assert!(
+            message.starts_with("the frame list: cannot read `1-x`"),
+            "{message}"
+        );
+        assert_eq!(message.matches("cannot read").count(), 1, "{message}");
     }
 }
