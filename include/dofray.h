@@ -65,6 +65,29 @@ typedef enum DofrayStatus {
 } DofrayStatus;
 
 /**
+ * What became of one job of a run.
+ */
+typedef enum DofrayJobStatus {
+    /**
+     * Rendered and written.
+     */
+    DOFRAY_JOB_RENDERED = 0,
+    /**
+     * Its output existed (`skip_existing`).
+     */
+    DOFRAY_JOB_SKIPPED = 1,
+    /**
+     * It failed (`dofray_jobs_error` and `dofray_jobs_error_message` say why).
+     */
+    DOFRAY_JOB_FAILED = 2,
+    /**
+     * Not attempted: the run stopped at an earlier failure (`fail_fast`). Also what
+     * `dofray_jobs_status` returns for a NULL summary or an index out of range.
+     */
+    DOFRAY_JOB_NOT_RUN = 3,
+} DofrayJobStatus;
+
+/**
  * A cancellation token: `dofray_cancel` from any thread stops the renders given it.
  */
 typedef struct DofrayCancel DofrayCancel;
@@ -78,6 +101,12 @@ typedef struct DofrayDevice DofrayDevice;
  * A rendered image: linear RGBA, depth and CoC per pixel, and the render's statistics.
  */
 typedef struct DofrayImage DofrayImage;
+
+/**
+ * The summary of a run of `dofray_render_jobs`: how many jobs were rendered, skipped and
+ * failed, and each job's output path, frame, status and error. Freed by `dofray_jobs_free`.
+ */
+typedef struct DofrayJobs DofrayJobs;
 
 /**
  * A scene with its overrides. Rendering builds its Embree world once and keeps it for the
@@ -102,6 +131,67 @@ typedef struct DofrayScene DofrayScene;
  * threads at once. It must not unwind (throw a C++ exception or `longjmp`) into dofray.
  */
 typedef int (*DofrayProgressFn)(const char *phase, uint64_t done, uint64_t total, void *user_data);
+
+/**
+ * What `dofray_render_jobs` renders and how: the flags of `dofray render` of the same
+ * names. All zero (`DofrayJobOptions options = {0};`, or a NULL pointer) renders what the
+ * output path names: every frame of the scene's animation for a path with a frame pattern,
+ * else one image; whole images; replacing existing files; going on after a failure.
+ */
+typedef struct DofrayJobOptions {
+    /**
+     * The frames, as `--frames` takes them (`"1-48"`, `"1-240x2"`, `"1,5,10..20"`,
+     * `"-5--1"`): NULL for the animation's frames (or one image), as above. Several frames
+     * need a frame pattern in the output path.
+     */
+    const char *frames;
+    /**
+     * Each image as `tile_columns` x `tile_rows` tiles (`--tiles`), each written next to the
+     * image (`still.tile-003.exr`), merged into it once all are rendered (without a shard)
+     * and removed. Both 0: whole images.
+     */
+    uint32_t tile_columns;
+    /**
+     * See `tile_columns`.
+     */
+    uint32_t tile_rows;
+    /**
+     * Nonzero: skip a job whose output (or whole image) exists (`--skip-existing`).
+     */
+    int skip_existing;
+    /**
+     * Nonzero: a job whose output (or whole image) exists fails (`--no-overwrite`).
+     */
+    int no_overwrite;
+    /**
+     * Nonzero: stop at the first failed job (`--fail-fast`).
+     */
+    int fail_fast;
+    /**
+     * Render only jobs `shard_index`, `shard_index + shard_count`, ... (`--shard I/N`; the
+     * scheduler's environment is not read). `shard_count` 0: every job.
+     */
+    uint32_t shard_index;
+    /**
+     * See `shard_index`.
+     */
+    uint32_t shard_count;
+} DofrayJobOptions;
+
+/**
+ * Before each job that renders (not a skipped one): `index` (0-based) of the `count` jobs
+ * of this run, its frame (`has_frame` nonzero; else `frame` is 0 and the job is a single
+ * image or a tile of one), the file it writes (a NUL-terminated string valid during the
+ * call), and the `user_data` given to `dofray_render_jobs`. Return 0 to go on, nonzero to
+ * cancel the run. It is called on the thread that called `dofray_render_jobs`, and must not
+ * unwind into dofray.
+ */
+typedef int (*DofrayJobProgressFn)(size_t index,
+                                   size_t count,
+                                   int64_t frame,
+                                   int has_frame,
+                                   const char *output,
+                                   void *user_data);
 
 #ifdef __cplusplus
 extern "C" {
@@ -462,6 +552,158 @@ double dofray_image_seconds(const struct DofrayImage *image);
  * `image` is NULL or a live image; `path` is NULL or a NUL-terminated string.
  */
 enum DofrayStatus dofray_image_write(const struct DofrayImage *image, const char *path);
+
+/**
+ * Renders the scene, with its overrides and settings, to image files: one per frame, or per
+ * tile of each frame, as `options` ask (NULL: what `output` names; see `DofrayJobOptions`),
+ * as `dofray render -o OUTPUT` with the same flags does. `output` is the image's path,
+ * PNG or EXR by its extension; a run of `#` in it becomes the zero-padded frame number
+ * (`shot_####.exr` -> `shot_0007.exr`). Folders are made as needed; each file is written
+ * to a temporary file and renamed, so a file that exists is complete.
+ *
+ * `device`: as for `dofray_render` (NULL: the scene's own). `progress` (may be NULL) is
+ * called before each job that renders, with `user_data`, as `DofrayJobProgressFn` says; a
+ * nonzero return cancels the run. `cancel` (may be NULL) is a token another thread may
+ * cancel.
+ *
+ * A run that goes through returns `DOFRAY_OK` and its summary in `*out`, even when jobs
+ * failed: `dofray_jobs_failed` counts them and `dofray_jobs_first_failure` gives the first
+ * failure's status. A bad option, override or setting fails with `DOFRAY_USAGE`, a folder
+ * that cannot be made with `DOFRAY_IO`; a cancelled run returns `DOFRAY_CANCELLED` and no
+ * summary (the files written so far stay; `skip_existing` resumes).
+ *
+ * # Safety
+ * `scene` is NULL or a live scene used by no other thread; `device` is NULL or a live
+ * device; `output` is NULL or a NUL-terminated string; `options` is NULL or points to a
+ * `DofrayJobOptions` whose `frames` is NULL or a NUL-terminated string; `progress` is NULL
+ * or a function of that signature; `cancel` is NULL or a live token; `out` is NULL or points
+ * to writable storage for a pointer.
+ */
+enum DofrayStatus dofray_render_jobs(struct DofrayScene *scene,
+                                     const struct DofrayDevice *device,
+                                     const char *output,
+                                     const struct DofrayJobOptions *options,
+                                     DofrayJobProgressFn progress,
+                                     void *user_data,
+                                     const struct DofrayCancel *cancel,
+                                     struct DofrayJobs **out);
+
+/**
+ * Frees a run's summary (NULL: nothing); its strings go with it.
+ *
+ * # Safety
+ * `jobs` is NULL or a summary from `dofray_render_jobs`, not used afterwards (nor its
+ * strings).
+ */
+void dofray_jobs_free(struct DofrayJobs *jobs);
+
+/**
+ * The number of jobs the run was given (its shard's share; 0 for NULL): the indexes of the
+ * per-job functions go from 0 to this, in the order the jobs were planned.
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+size_t dofray_jobs_count(const struct DofrayJobs *jobs);
+
+/**
+ * The number of jobs rendered (0 for NULL).
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+size_t dofray_jobs_rendered(const struct DofrayJobs *jobs);
+
+/**
+ * The number of jobs skipped because their output existed (0 for NULL).
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+size_t dofray_jobs_skipped(const struct DofrayJobs *jobs);
+
+/**
+ * The number of jobs that failed (0 for NULL).
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+size_t dofray_jobs_failed(const struct DofrayJobs *jobs);
+
+/**
+ * The number of images assembled from their tiles (and the tiles removed; 0 for NULL).
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+size_t dofray_jobs_merged(const struct DofrayJobs *jobs);
+
+/**
+ * The status of the run's first failure (a job's, or an image's that could not be assembled
+ * from its tiles): `DOFRAY_OK` when nothing failed, `DOFRAY_INVALID_ARGUMENT` for NULL. Its
+ * message is `dofray_jobs_first_failure_message`.
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+enum DofrayStatus dofray_jobs_first_failure(const struct DofrayJobs *jobs);
+
+/**
+ * The message of the run's first failure: empty when nothing failed (or for NULL). It
+ * belongs to the summary and lives as long as it.
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+const char *dofray_jobs_first_failure_message(const struct DofrayJobs *jobs);
+
+/**
+ * The file job `index` writes (a tile's file for a tile); NULL for a NULL summary or an
+ * index out of range. The string belongs to the summary and lives as long as it.
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+const char *dofray_jobs_output(const struct DofrayJobs *jobs, size_t index);
+
+/**
+ * Whether job `index` renders a frame of several (then `*frame`, when `frame` is not NULL,
+ * is set to it): 1, else 0 (also for a NULL summary or an index out of range).
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary; `frame` is NULL or points to writable storage for an
+ * `int64_t`.
+ */
+int dofray_jobs_frame(const struct DofrayJobs *jobs, size_t index, int64_t *frame);
+
+/**
+ * What became of job `index`: `DOFRAY_JOB_NOT_RUN` also for a NULL summary or an index out
+ * of range.
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+enum DofrayJobStatus dofray_jobs_status(const struct DofrayJobs *jobs, size_t index);
+
+/**
+ * Why job `index` failed, as a status (`DOFRAY_IO`, `DOFRAY_USAGE`, ...): `DOFRAY_OK` for a
+ * job that did not fail, `DOFRAY_INVALID_ARGUMENT` for a NULL summary or an index out of
+ * range.
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+enum DofrayStatus dofray_jobs_error(const struct DofrayJobs *jobs, size_t index);
+
+/**
+ * Why job `index` failed (the whole message, naming the file or parameter at fault): empty
+ * for a job that did not fail, a NULL summary or an index out of range. Never NULL; the
+ * string belongs to the summary and lives as long as it.
+ *
+ * # Safety
+ * `jobs` is NULL or a live summary.
+ */
+const char *dofray_jobs_error_message(const struct DofrayJobs *jobs, size_t index);
 
 #ifdef __cplusplus
 }  // extern "C"

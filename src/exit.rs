@@ -133,6 +133,7 @@ classified! {
     crate::output::merge::MergeError,
     crate::batch::FrameSpecError,
     crate::batch::FrameSelectError,
+    crate::batch::RequestError,
     crate::batch::JobError,
     crate::batch::PatternError,
     crate::batch::ShardError,
@@ -146,6 +147,7 @@ classified! {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::batch::RequestError;
     use crate::batch::{FrameSelectError, FrameSpecError, JobError, PatternError, ShardError};
     #[cfg(feature = "bench")]
     use crate::bench::{BenchError, plot::PlotError};
@@ -185,6 +187,7 @@ mod tests {
         has_kind::<MergeError>();
         has_kind::<FrameSpecError>();
         has_kind::<FrameSelectError>();
+        has_kind::<RequestError>();
         has_kind::<JobError>();
         has_kind::<PatternError>();
         has_kind::<ShardError>();
@@ -381,6 +384,7 @@ mod tests {
             case(FrameSpecError::Empty, Usage),
             case(FrameSelectError::NoStart, Usage),
             case(FrameSelectError::List(FrameSpecError::Empty), Usage),
+            case(RequestError::from(FrameSelectError::NoStart), Usage),
             case(JobError::Exists { path: path() }, Io),
             case(JobError::from(output_io()), Io),
             case(JobError::from(renderer_camera(true)), Usage),

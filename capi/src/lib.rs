@@ -5,9 +5,10 @@
 //! Conventions of every function:
 //!
 //! - Handles are opaque: `DofrayDevice` (an Embree device), `DofrayScene` (a loaded scene and
-//!   the overrides set on it), `DofrayImage` (a rendered image and its statistics) and
-//!   `DofrayCancel` (a cancellation token). Each is freed by its own `*_free` function;
-//!   freeing NULL does nothing.
+//!   the overrides set on it), `DofrayImage` (a rendered image and its statistics),
+//!   `DofrayCancel` (a cancellation token) and `DofrayJobs` (the summary of a run of frames
+//!   and tiles rendered to files). Each is freed by its own `*_free` function; freeing NULL
+//!   does nothing.
 //! - Functions that can fail return a `DofrayStatus` (`DOFRAY_OK` = 0) and give their
 //!   results through out-pointers, which are set to NULL (or left unchanged, for plain
 //!   values) when they fail. Every such call also sets this thread's message
@@ -42,6 +43,11 @@ pub use render::*;
 
 mod image;
 pub use image::*;
+
+mod cached;
+
+mod jobs;
+pub use jobs::*;
 
 use std::ffi::{CString, c_char};
 use std::sync::OnceLock;

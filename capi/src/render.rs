@@ -5,14 +5,12 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use dofray::embree::Device;
-use dofray::params::Param;
 use dofray::render::Progress;
-use dofray::renderer::{Renderer, RendererError};
 
 use crate::args::{arg_mut, out_arg, put};
+use crate::cached::usage;
 use crate::cancel::DofrayCancel;
-use crate::device::{DofrayDevice, next_device_id};
+use crate::device::DofrayDevice;
 use crate::image::DofrayImage;
 use crate::scene::DofrayScene;
 use crate::status::{DofrayStatus, Failure, guard};
@@ -173,14 +171,6 @@ pub unsafe extern "C" fn dofray_render(
     })
 }
 
-/// A renderer's error as C gets it: an override or a setting named by its setter.
-fn usage(e: RendererError) -> Failure {
-    match e.param_message(Param::setter_name) {
-        Some(message) => Failure::new(DofrayStatus::DOFRAY_USAGE, message),
-        None => e.into(),
-    }
-}
-
 fn render(
     scene: &mut DofrayScene,
     device: Option<&DofrayDevice>,
@@ -205,34 +195,11 @@ fn render(
     if progress.was_cancelled() {
         return Err(cancelled());
     }
-    let device = match device {
-        Some(d) => d,
-        None => {
-            if scene.own_device.is_none() {
-                scene.own_device = Some(DofrayDevice {
-                    device: Device::new()?,
-                    id: next_device_id(),
-                });
-            }
-            scene.own_device.as_ref().expect("just made")
-        }
-    };
-    let cached =
-        matches!(&scene.cache, Some((id, o, _)) if *id == device.id && *o == scene.overrides);
-    if !cached {
-        // Drop the old world before building the new one: only one in memory at a time.
-        scene.cache = None;
-        let renderer =
-            Renderer::with_overrides(scene.desc.clone(), scene.overrides.clone(), &device.device)
-                .map_err(usage)?;
-        scene.cache = Some((device.id, scene.overrides.clone(), renderer));
-    }
-    let Some((_, _, renderer)) = &scene.cache else {
-        unreachable!("set above")
-    };
-    let settings = renderer.settings(&scene.settings).map_err(usage)?;
+    let (patch, frame) = (scene.settings.clone(), scene.frame);
+    let renderer = scene.renderer(device)?;
+    let settings = renderer.settings(&patch).map_err(usage)?;
     let (film, stats) = renderer
-        .render_frame(scene.frame, None, &settings, &progress)
+        .render_frame(frame, None, &settings, &progress)
         .map_err(usage)?;
     if progress.was_cancelled() {
         return Err(cancelled());

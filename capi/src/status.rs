@@ -50,7 +50,7 @@ impl DofrayStatus {
         }
     }
 
-    fn from_kind(kind: ErrorKind) -> Self {
+    pub(crate) fn from_kind(kind: ErrorKind) -> Self {
         match kind {
             ErrorKind::Usage => Self::DOFRAY_USAGE,
             ErrorKind::BadInput => Self::DOFRAY_BAD_INPUT,

@@ -1,4 +1,5 @@
-//! Compiles the C programs (`capi/tests/c/smoke.c`, the README's `capi/examples/render.c`)
+//! Compiles the C programs (`capi/tests/c/smoke.c` and `jobs.c`, the README's
+//! `capi/examples/render.c`)
 //! with the system's C compiler against `include/dofray.h`, links them with `libdofray.so`
 //! and with `libdofray.a`, and runs them.
 //!
@@ -187,6 +188,29 @@ fn smoke_with_the_shared_library() {
 #[test]
 fn smoke_with_the_static_library() {
     smoke(false);
+}
+
+/// capi/tests/c/jobs.c: frames of scenes/focus_pull.toml rendered, re-run skipping them,
+/// refused, a tiled still merged, cancelled runs, bad options.
+#[test]
+fn render_jobs() {
+    if under_foreign_loader() {
+        return;
+    }
+    let lib_dir = lib_dir();
+    let dir = out_dir("jobs");
+    let exe = dir.join("jobs");
+    compile(&root().join("capi/tests/c/jobs.c"), &exe, &lib_dir, true);
+    let scene = root().join("scenes/focus_pull.toml");
+    let text = run(&exe, &[&scene], &dir);
+    assert!(text.contains("all checks passed"), "{text}");
+    for file in ["frames/shot_01.png", "frames/shot_03.png", "still.png"] {
+        assert!(dir.join(file).is_file(), "{file} was not written");
+    }
+    assert!(
+        !dir.join("still.tile-000.png").exists(),
+        "the tiles were not removed"
+    );
 }
 
 /// The README's example is capi/examples/render.c, which compiles and renders paper.png.

@@ -8,17 +8,24 @@
 
 ``render`` runs on threads of its own with the GIL released; Ctrl-C (KeyboardInterrupt)
 cancels it, and so does an exception raised by the ``progress`` callback.
+
+``render_jobs`` renders frames and tiles to files as ``dofray render -o`` does:
+
+>>> run = dofray.render_jobs("scenes/focus_pull.toml", "out/shot_####.exr", frames="1-3")
+>>> run["rendered"], [job["output"] for job in run["frames"]]
+(3, ['out/shot_0001.exr', 'out/shot_0002.exr', 'out/shot_0003.exr'])
 """
 
 from __future__ import annotations
 
 import os
-from typing import Callable, Optional, Tuple, Union
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple, Union
 
 from ._dofray import Render, __version__
 from ._dofray import render as _render
+from ._dofray import render_jobs as _render_jobs
 
-__all__ = ["Error", "UsageError", "Render", "render", "__version__"]
+__all__ = ["Error", "UsageError", "Render", "render", "render_jobs", "__version__"]
 
 
 class Error(RuntimeError):
@@ -108,4 +115,71 @@ def render(
         transparent=transparent,
         frame=frame,
         progress=progress,
+    )
+
+
+JobProgressCallback = Callable[[int, int, Optional[int], str], object]
+
+
+def render_jobs(
+    scene: Union[str, "os.PathLike[str]"],
+    output: Union[str, "os.PathLike[str]"],
+    *,
+    frames: Optional[Union[str, Sequence[int]]] = None,
+    tiles: Optional[Tuple[int, int]] = None,
+    skip_existing: bool = False,
+    no_overwrite: bool = False,
+    fail_fast: bool = False,
+    shard: Optional[Tuple[int, int]] = None,
+    progress: Optional[JobProgressCallback] = None,
+    **overrides: Any,
+) -> Dict[str, Any]:
+    """Render ``scene``'s frames, or tiles, to image files, as ``dofray render -o output``
+    with the flags of the same names does, and return the run's summary.
+
+    ``output`` is the image's path, PNG or EXR by its extension; a run of ``#`` in it
+    becomes the zero-padded frame number (``shot_####.exr`` -> ``shot_0007.exr``). Folders
+    are made; each file is written to a temporary file and renamed, so a file that exists is
+    complete.
+
+    - ``frames``: a frame list as ``--frames`` takes it (``"1-48"``, ``"1-240x2"``,
+      ``"1,5,10..20"``) or a sequence of frame numbers; by default every frame of the
+      scene's animation when ``output`` has a frame pattern, else one image;
+    - ``tiles``: ``(columns, rows)``: each image rendered as tiles written next to it
+      (``still.tile-003.exr``), merged into it and removed once all are rendered (without
+      ``shard``);
+    - ``skip_existing``: skip a job whose file (or whole image) exists; ``no_overwrite``:
+      such a job fails instead; ``fail_fast``: stop at the first failure;
+    - ``shard``: ``(index, count)``: render only jobs ``index``, ``index + count``, ... of
+      the whole run (a render farm's worker);
+    - ``progress``: called on the calling thread as ``progress(index, count, frame,
+      output)`` before each job that renders (``frame`` is None for a single image); if it
+      raises, the run is cancelled and the exception propagates;
+    - ``overrides``: the keywords of :func:`render` but ``frame`` (``width``, ``f_number``,
+      ``spp``, ``mode``, ...).
+
+    The summary is the object ``dofray render --json`` prints for a run of jobs: the counts
+    ``rendered``, ``skipped``, ``failed``, ``not_run`` (after ``fail_fast``) and ``jobs``
+    (every shard's), ``merged`` (images assembled from tiles), ``seconds``, and ``frames``,
+    one dict per job attempted: ``frame``, ``tile``, ``output``, ``status``
+    (``"rendered"``, ``"skipped"`` or ``"failed"``), a rendered job's statistics, a failed
+    job's ``error`` (``kind``, ``message``). A job that fails does not raise.
+
+    Raises :class:`UsageError` for a bad keyword value or combination (frames without a
+    frame pattern in ``output``, ``skip_existing`` with ``no_overwrite``, ...),
+    :class:`Error` for a scene that cannot be loaded or a folder that cannot be made,
+    ``KeyboardInterrupt`` when interrupted (the files written so far stay; rerun with
+    ``skip_existing`` to resume).
+    """
+    return _render_jobs(
+        os.fspath(scene),
+        os.fspath(output),
+        frames=frames,
+        tiles=tiles,
+        skip_existing=skip_existing,
+        no_overwrite=no_overwrite,
+        fail_fast=fail_fast,
+        shard=shard,
+        progress=progress,
+        **overrides,
     )

@@ -1,6 +1,6 @@
 """Type hints of the extension module (see dofray/__init__.py for the documented API)."""
 
-from typing import Any, Callable, Dict, Optional, Tuple
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -51,3 +51,17 @@ def render(
     frame: Optional[int] = ...,
     progress: Optional[Callable[[str, int, int], object]] = ...,
 ) -> Render: ...
+
+def render_jobs(
+    scene: str,
+    output: str,
+    *,
+    frames: Optional[Union[str, Sequence[int]]] = ...,
+    tiles: Optional[Tuple[int, int]] = ...,
+    skip_existing: bool = ...,
+    no_overwrite: bool = ...,
+    fail_fast: bool = ...,
+    shard: Optional[Tuple[int, int]] = ...,
+    progress: Optional[Callable[[int, int, Optional[int], str], object]] = ...,
+    **overrides: Any,
+) -> Dict[str, Any]: ...

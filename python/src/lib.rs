@@ -11,7 +11,7 @@
 
 use std::error::Error as StdError;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::{Mutex, PoisonError};
@@ -21,13 +21,18 @@ use dofray::embree::Device;
 use dofray::exit::{ErrorKind, HasKind};
 use dofray::overrides::Overrides;
 use dofray::params::Param;
-use dofray::render::{CancelFlag, Film, Mode, Progress, RenderStats, RulePatch, SettingsPatch};
+use dofray::render::{CancelFlag, Film, Progress, RenderSettings, RenderStats, SettingsPatch};
 use dofray::renderer::{Renderer, RendererError};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{IntoPyArray, PyArray2, PyArray3};
 use pyo3::IntoPyObjectExt;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+
+mod jobs;
+mod keywords;
+
+use keywords::SceneKeywords;
 
 /// How often the waiting thread takes the GIL to check for signals and report progress.
 const POLL: Duration = Duration::from_millis(50);
@@ -81,28 +86,6 @@ impl Failure {
     }
 }
 
-/// An integer keyword that must fit a `u32`.
-fn to_u32(name: &str, value: Option<i64>) -> Result<Option<u32>, Failure> {
-    value
-        .map(|v| {
-            u32::try_from(v).map_err(|_| {
-                Failure::usage(format!(
-                    "{name} must be an integer from 0 to {}, got {v}",
-                    u32::MAX
-                ))
-            })
-        })
-        .transpose()
-}
-
-fn to_mode(mode: Option<&str>) -> Result<Option<Mode>, Failure> {
-    mode.map(|m| {
-        m.parse()
-            .map_err(|e: dofray::render::UnknownMode| Failure::usage(e.to_string()))
-    })
-    .transpose()
-}
-
 /// What to render: the scene and the keyword overrides, checked for range by the library.
 struct Job {
     scene: String,
@@ -124,16 +107,34 @@ fn device() -> Result<Device, Failure> {
     Ok(d)
 }
 
+/// The scene argument as the library takes it.
+fn scene_name(scene: &Path) -> Result<String, Failure> {
+    scene
+        .to_str()
+        .map(str::to_owned)
+        .ok_or_else(|| Failure::usage(format!("scene path {} is not valid UTF-8", scene.display())))
+}
+
+/// Loads `scene` and builds it with `overrides`, and the render settings `settings` ask of it.
+fn prepare(
+    scene: &str,
+    overrides: Overrides,
+    settings: &SettingsPatch,
+) -> Result<(Renderer, RenderSettings), Failure> {
+    let fail = |e: RendererError| Failure::from_error(&e);
+    let desc = dofray::scene::load(scene).map_err(|e| fail(e.into()))?;
+    let renderer = Renderer::with_overrides(desc, overrides, &device()?).map_err(fail)?;
+    let settings = renderer.settings(settings).map_err(fail)?;
+    Ok((renderer, settings))
+}
+
 impl Job {
     /// Loads, builds and renders (on the calling thread), reporting to `progress`.
     fn run(self, progress: &Shared) -> Result<(Film, RenderStats), Failure> {
-        let fail = |e: RendererError| Failure::from_error(&e);
-        let desc = dofray::scene::load(&self.scene).map_err(|e| fail(e.into()))?;
-        let renderer = Renderer::with_overrides(desc, self.overrides, &device()?).map_err(fail)?;
-        let settings = renderer.settings(&self.settings).map_err(fail)?;
+        let (renderer, settings) = prepare(&self.scene, self.overrides, &self.settings)?;
         renderer
             .render_frame(self.frame, None, &settings, progress)
-            .map_err(fail)
+            .map_err(|e| Failure::from_error(&e))
     }
 }
 
@@ -198,16 +199,44 @@ fn report(
 /// The render thread's outcome (`Ok`), or the Python exception that stopped the wait.
 type Outcome = PyResult<Result<(Film, RenderStats), Failure>>;
 
-/// Runs `job` on a thread of its own; the calling thread waits without the GIL, taking it
-/// every [`POLL`] for signals and the progress callback.
+/// Runs `job` on a thread of its own, reporting its progress to `callback`.
 fn run_job(py: Python<'_>, job: Job, callback: Option<Py<PyAny>>) -> Outcome {
     let shared = Shared::default();
+    let mut last = (0, 0);
+    run_detached(
+        py,
+        &shared.cancel,
+        |_wake| job.run(&shared),
+        |py| report(py, callback.as_ref(), &shared, &mut last),
+    )
+}
+
+/// What the work thread of [`run_detached`] tells the waiting thread.
+enum Message<T> {
+    /// Poll now: there is news for the progress callback.
+    Wake,
+    /// The work's result.
+    Done(Result<T, Failure>),
+}
+
+/// Runs `work` on a thread of its own; the calling thread waits without the GIL, taking it
+/// every [`POLL`] (or when `work` calls the wake function it is given) for signals and
+/// `poll` (the progress callback), and once more at the end. When either raises, `cancel` is
+/// cancelled and the exception returned once `work` stopped.
+fn run_detached<T: Send>(
+    py: Python<'_>,
+    cancel: &CancelFlag,
+    work: impl FnOnce(&(dyn Fn() + Sync)) -> Result<T, Failure> + Send,
+    mut poll: impl FnMut(Python<'_>) -> PyResult<()> + Send,
+) -> PyResult<Result<T, Failure>> {
     py.detach(|| {
         std::thread::scope(|scope| {
             let (tx, rx) = mpsc::channel();
-            let shared = &shared;
             scope.spawn(move || {
-                let result = catch_unwind(AssertUnwindSafe(|| job.run(shared)));
+                let wake = || {
+                    let _ = tx.send(Message::Wake);
+                };
+                let result = catch_unwind(AssertUnwindSafe(|| work(&wake)));
                 let result = result.unwrap_or_else(|panic| {
                     let what = dofray::exit::panic_text(&*panic);
                     Err(Failure {
@@ -216,25 +245,24 @@ fn run_job(py: Python<'_>, job: Job, callback: Option<Py<PyAny>>) -> Outcome {
                     })
                 });
                 // The receiver waits for this message unless it is gone, which it is not.
-                let _ = tx.send(result);
+                let _ = tx.send(Message::Done(result));
             });
-            let mut last = (0, 0);
             loop {
                 match rx.recv_timeout(POLL) {
-                    Ok(result) => {
+                    Ok(Message::Done(result)) => {
                         // The last progress (done = total) before the result.
-                        Python::attach(|py| report(py, callback.as_ref(), shared, &mut last))?;
+                        Python::attach(&mut poll)?;
                         return Ok(result);
                     }
-                    Err(RecvTimeoutError::Timeout) => {
+                    Ok(Message::Wake) | Err(RecvTimeoutError::Timeout) => {
                         let polled = Python::attach(|py| {
                             py.check_signals()?;
-                            report(py, callback.as_ref(), shared, &mut last)
+                            poll(py)
                         });
                         if let Err(e) = polled {
-                            shared.cancel.cancel();
+                            cancel.cancel();
                             // The render stops within a row's or a round's time.
-                            let _ = rx.recv();
+                            while let Ok(Message::Wake) = rx.recv() {}
                             return Err(e);
                         }
                     }
@@ -416,42 +444,31 @@ fn render(
             "progress must be callable (phase, done, total)",
         ));
     }
+    let keywords = SceneKeywords {
+        width,
+        height,
+        f_number,
+        focal_length,
+        sensor_width,
+        focus_distance,
+        autofocus,
+        aperture_radius,
+        blades,
+        spp,
+        aa,
+        mode: mode.map(str::to_owned),
+        tolerance,
+        seed,
+        exposure,
+        transparent,
+    };
     let job = (|| -> Result<Job, Failure> {
-        let autofocus = match autofocus {
-            Some((x, y)) => Some((
-                to_u32("autofocus x", Some(x))?.unwrap_or(0),
-                to_u32("autofocus y", Some(y))?.unwrap_or(0),
-            )),
-            None => None,
-        };
-        let scene = scene.to_str().map(str::to_owned).ok_or_else(|| {
-            Failure::usage(format!("scene path {} is not valid UTF-8", scene.display()))
-        })?;
+        let (overrides, settings) = keywords.parts()?;
         Ok(Job {
-            scene,
+            scene: scene_name(&scene)?,
             frame,
-            overrides: Overrides {
-                width: to_u32(Param::Width.keyword_name(), width)?,
-                height: to_u32(Param::Height.keyword_name(), height)?,
-                f_number,
-                focal_length_mm: focal_length,
-                sensor_width_mm: sensor_width,
-                focus_distance,
-                autofocus,
-                aperture_radius,
-                blades: to_u32(Param::Blades.keyword_name(), blades)?,
-                ..Default::default()
-            },
-            settings: SettingsPatch {
-                mode: to_mode(mode)?,
-                spp: to_u32(Param::Spp.keyword_name(), spp)?,
-                aa: to_u32(Param::Aa.keyword_name(), aa)?,
-                rule: tolerance.map(|t| RulePatch::ErrorControlled { tolerance: Some(t) }),
-                seed,
-                exposure,
-                transparent,
-                ..Default::default()
-            },
+            overrides,
+            settings,
         })
     })()
     .map_err(|f| f.into_pyerr(py))?;
@@ -465,6 +482,7 @@ fn render(
 #[pymodule]
 fn _dofray(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_function(wrap_pyfunction!(jobs::render_jobs, m)?)?;
     m.add_class::<Render>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -14,6 +14,8 @@
 //!   or read from a Slurm job array or a Kubernetes Indexed Job.
 //! - [`select`]: the frames a run renders, from a list, a range or the scene's animation.
 //! - [`jobs`]: the plan: one job per frame, or per tile of each frame, with the file it writes.
+//! - [`request`]: frames, tiles and a shard asked for together, made into this worker's jobs
+//!   (what C and Python ask a run for).
 //!
 //! [`run`] is the job loop every front end shares (it does render and write): each job of a
 //! plan rendered, skipped or failed, tiles merged, typed results ([`summary`]: the JSON
@@ -22,6 +24,7 @@
 pub mod frames;
 pub mod jobs;
 pub mod pattern;
+pub mod request;
 pub mod run;
 pub mod select;
 pub mod shard;
@@ -29,6 +32,7 @@ pub mod summary;
 
 pub use frames::{FrameSpecError, MAX_FRAMES, frame_range, parse_frames};
 pub use pattern::{PatternError, check_frame_pattern, frame_path, has_frame_pattern, tile_path};
+pub use request::{JobRequest, RequestError, RequestPlan};
 pub use run::RunSummary;
 pub use run::{
     Batch, ImageOptions, JobError, JobOutcome, JobResult, RunOptions, RunProgress, RunReport,

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use super::jobs::{self, Job};
+use super::request::{JobRequest, RequestError, RequestPlan};
 use super::summary::{EmbreeSummary, JobFacts, JobSummary};
 use crate::error_kind::{self, ErrorKind, HasKind};
 use crate::output::{self, ExrCompression, OutputError, RenderTargets};
@@ -214,9 +215,19 @@ impl RunReport {
     pub fn failed(&self) -> usize {
         self.count("failed")
     }
-    /// Jobs not attempted (`fail_fast`).
+    /// Jobs not attempted (`fail_fast`, or cancelled).
     pub fn not_run(&self) -> usize {
         self.count - self.results.len()
+    }
+    /// Whether the run was cancelled: its last job's render was ([`RenderError::Cancelled`],
+    /// from the job's [`Progress::cancelled`]), and the run stopped there.
+    pub fn cancelled(&self) -> bool {
+        self.results.last().is_some_and(|r| match &r.outcome {
+            JobOutcome::Failed(f) => {
+                matches!(f.error, Some(JobError::Render(RenderError::Cancelled)))
+            }
+            _ => false,
+        })
     }
 
     /// The run's JSON summary: `scene` and its `warnings`, `output` as given, this run's
@@ -281,6 +292,13 @@ pub fn refuse_existing(job: &Job, no_overwrite: bool) -> Result<(), JobError> {
 }
 
 impl Batch<'_> {
+    /// The jobs of `request` writing to `output`, for this scene's animation and image size.
+    pub fn plan(&self, output: &Path, request: &JobRequest) -> Result<RequestPlan, RequestError> {
+        let desc = self.renderer.desc();
+        let animation = desc.animation.as_ref().map(|a| a.frames());
+        request.plan(output, animation, (desc.camera.width, desc.camera.height))
+    }
+
     /// The files `job` writes (its image and, with [`ImageOptions::aov_dir`], the AOV
     /// pictures), each checked ([`RenderTargets::new`]).
     pub fn targets(&self, job: &Job) -> Result<RenderTargets, OutputError> {
@@ -354,6 +372,8 @@ impl Batch<'_> {
     /// folder is made first (a folder that cannot be made fails the run once, not every job);
     /// then each job is skipped, refused, rendered or failed as `options` say, and with
     /// `merge_tiles` each image whose tiles all rendered is assembled and its tiles removed.
+    /// A job whose render is cancelled (its progress's [`Progress::cancelled`]) ends the run
+    /// there ([`RunReport::cancelled`]).
     pub fn run(
         &self,
         jobs: &[Job],
@@ -399,6 +419,9 @@ impl Batch<'_> {
                 job: job.clone(),
                 outcome,
             });
+            if report.cancelled() {
+                break; // the front end asked to stop: no more jobs, no merge
+            }
             if report.first_failure.is_some() && options.fail_fast {
                 progress.stopping(jobs.len() - i - 1, jobs.len());
                 break;

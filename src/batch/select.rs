@@ -25,7 +25,7 @@ pub struct FrameRequest {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum FrameSelectError {
     /// The frame list cannot be read.
-    #[error("the frame list: {0}")]
+    #[error("the frame list")]
     List(#[source] FrameSpecError),
     /// The range cannot be made.
     #[error(transparent)]
