@@ -1,0 +1,207 @@
+//! Materials: what a surface is made of, with its optional glTF maps.
+
+use std::sync::Arc;
+
+use glam::{Vec2, Vec3};
+
+use super::texture::{ImageTexture, Texture};
+
+/// A surface: Lambertian diffuse, optional Blinn-Phong highlight, optional perfect mirror,
+/// optional emission.
+#[derive(Debug, Clone)]
+pub struct Material {
+    /// Diffuse (Lambertian) albedo, linear RGB.
+    pub diffuse: Texture,
+    /// Specular colour (zero for none).
+    pub specular: Vec3,
+    /// Blinn-Phong exponent.
+    pub shininess: f32,
+    /// Fraction of light reflected as a perfect mirror (one bounce).
+    pub mirror: f32,
+    /// Radiance the surface emits (linear RGB, zero for none), added wherever a camera ray or
+    /// a mirror reflection sees it. It is not a light source: it lights no other surface and
+    /// casts no shadows (use point or directional lights for that).
+    pub emission: Vec3,
+    /// An image the emission is multiplied by (glTF `emissiveTexture`), if any.
+    pub emission_texture: Option<Arc<ImageTexture>>,
+    /// Alpha, a metallic-roughness texture and a normal map (glTF materials); none by default.
+    pub maps: MaterialMaps,
+}
+
+/// How a material's alpha makes it transparent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum AlphaMode {
+    /// A hole wherever alpha < cutoff (glTF `MASK`, `alphaCutoff`).
+    Mask {
+        /// Alpha below which the surface is a hole; at or above it, it is opaque.
+        cutoff: f32,
+    },
+    /// Stochastic transparency (glTF `BLEND`): each ray passes with probability 1 - alpha,
+    /// decided by a hash of the ray and the triangle, so renders are deterministic and the
+    /// many pixel x lens samples average to the blend.
+    Blend,
+}
+
+/// A material's opacity: `factor` times the texture's alpha channel.
+#[derive(Debug, Clone)]
+pub struct Alpha {
+    /// Constant opacity (glTF `baseColorFactor`'s alpha, a scene file's `alpha`), multiplied
+    /// by the texture's alpha.
+    pub factor: f32,
+    /// Image whose alpha channel gives per-texel opacity (only kept when it has one).
+    pub texture: Option<Arc<ImageTexture>>,
+    /// Whether alpha cuts holes or blends stochastically.
+    pub mode: AlphaMode,
+}
+
+impl Alpha {
+    /// The alpha of `factor` times `texture`'s alpha channel (if it has one) in `mode`, or
+    /// `None` when it can never make a hole (MASK: never below the cutoff; BLEND: never below
+    /// 1), so the surface needs no hit filter.
+    pub fn new(factor: f32, texture: Option<Arc<ImageTexture>>, mode: AlphaMode) -> Option<Alpha> {
+        let texture = texture.filter(|t| t.alpha.is_some());
+        let lowest_texel = texture
+            .as_ref()
+            .and_then(|t| t.alpha.as_ref())
+            .map_or(1.0, |a| a.iter().copied().fold(1.0f32, f32::min));
+        let lowest = factor * lowest_texel;
+        let holes = match mode {
+            AlphaMode::Mask { cutoff } => lowest < cutoff,
+            AlphaMode::Blend => lowest < 1.0,
+        };
+        holes.then_some(Alpha {
+            factor,
+            texture,
+            mode,
+        })
+    }
+
+    /// Opacity at texture coordinates `uv`.
+    pub fn at(&self, uv: Vec2) -> f32 {
+        match &self.texture {
+            Some(t) => self.factor * t.sample_alpha(uv),
+            None => self.factor,
+        }
+    }
+}
+
+/// glTF metallic-roughness, evaluated per hit: `factor`s times the texture's blue (metallic)
+/// and green (roughness) channels, mapped by [`pbr_params`].
+#[derive(Debug, Clone)]
+pub struct MetalRough {
+    /// The base colour (glTF `baseColorFactor` times `baseColorTexture`), before it is dimmed
+    /// by metalness into the diffuse colour.
+    pub base: Texture,
+    /// Metalness factor, in [0, 1], multiplied by the texture's blue channel.
+    pub metallic: f32,
+    /// Perceptual roughness factor, in [0, 1], multiplied by the texture's green channel.
+    pub roughness: f32,
+    /// glTF `metallicRoughnessTexture` (blue: metallic, green: roughness; linear).
+    pub texture: Arc<ImageTexture>,
+}
+
+/// A tangent-space normal map (glTF `normalTexture`, linear RGB, +y up as in OpenGL).
+#[derive(Debug, Clone)]
+pub struct NormalMap {
+    /// The normal map image (linear RGB; each channel maps [0, 1] to [-1, 1]).
+    pub image: Arc<ImageTexture>,
+    /// Scales the map's x and y (glTF `scale`).
+    pub scale: f32,
+}
+
+impl NormalMap {
+    /// The shading normal at `uv` for the unit normal `n`, unit tangent `t` (orthogonal to `n`)
+    /// and bitangent sign `w`.
+    pub fn perturb(&self, uv: Vec2, n: Vec3, t: Vec3, w: f32) -> Vec3 {
+        let c = self.image.sample(uv) * 2.0 - Vec3::ONE;
+        let b = n.cross(t) * w;
+        let p = (t * (c.x * self.scale) + b * (c.y * self.scale) + n * c.z).normalize_or_zero();
+        if p == Vec3::ZERO { n } else { p }
+    }
+}
+
+/// Optional material features (all from glTF materials).
+#[derive(Debug, Clone, Default)]
+pub struct MaterialMaps {
+    /// Cut-outs and transparency; `None` when the material is opaque everywhere.
+    pub alpha: Option<Alpha>,
+    /// Per-hit metallic and roughness; `None` when they are constant (already in the
+    /// material's diffuse, specular, shininess and mirror).
+    pub metal_rough: Option<MetalRough>,
+    /// Tangent-space normal map; `None` for none.
+    pub normal: Option<NormalMap>,
+}
+
+/// What shading uses of a material at one point: diffuse albedo, Blinn-Phong specular colour
+/// and exponent, and mirror fraction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Surface {
+    /// Diffuse albedo, linear RGB.
+    pub albedo: Vec3,
+    /// Blinn-Phong specular colour, linear RGB (zero for none).
+    pub specular: Vec3,
+    /// Blinn-Phong exponent.
+    pub shininess: f32,
+    /// Fraction of light reflected as a perfect mirror, in [0, 1].
+    pub mirror: f32,
+}
+
+/// The mapping of glTF metallic-roughness onto dofray's material (see docs/scene-format.md):
+/// the surface of base colour `base`, metalness `metallic` and perceptual roughness
+/// `roughness` (both in [0, 1]).
+pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> Surface {
+    let alpha = (roughness * roughness).max(1e-3);
+    Surface {
+        albedo: base * (1.0 - metallic),
+        specular: Vec3::splat(0.04).lerp(base, metallic) * (1.0 - roughness),
+        shininess: (2.0 / (alpha * alpha) - 2.0).clamp(1.0, 10_000.0),
+        mirror: metallic * (1.0 - roughness) * (1.0 - roughness),
+    }
+}
+
+impl Material {
+    /// A plain diffuse material of linear RGB albedo `color`: no highlight, mirror, emission
+    /// or maps.
+    pub fn diffuse(color: Vec3) -> Self {
+        Self {
+            diffuse: Texture::Constant(color),
+            specular: Vec3::ZERO,
+            shininess: 32.0,
+            mirror: 0.0,
+            emission: Vec3::ZERO,
+            emission_texture: None,
+            maps: MaterialMaps::default(),
+        }
+    }
+
+    /// The material at texture coordinates `uv`.
+    #[inline]
+    pub fn surface(&self, uv: Vec2) -> Surface {
+        match &self.maps.metal_rough {
+            None => Surface {
+                albedo: self.diffuse.sample(uv),
+                specular: self.specular,
+                shininess: self.shininess,
+                mirror: self.mirror,
+            },
+            Some(mr) => {
+                let t = mr.texture.sample(uv);
+                let metallic = (mr.metallic * t.z).clamp(0.0, 1.0);
+                let roughness = (mr.roughness * t.y).clamp(0.0, 1.0);
+                pbr_params(mr.base.sample(uv), metallic, roughness)
+            }
+        }
+    }
+
+    /// The radiance the surface emits at texture coordinates `uv` (zero for most materials).
+    #[inline]
+    pub fn emitted(&self, uv: Vec2) -> Vec3 {
+        if self.emission == Vec3::ZERO {
+            return Vec3::ZERO;
+        }
+        match &self.emission_texture {
+            Some(image) => self.emission * image.sample(uv),
+            None => self.emission,
+        }
+    }
+}
