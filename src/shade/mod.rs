@@ -1,10 +1,12 @@
 //! Materials, textures and lights: what a surface looks like once a ray has found it.
 //! All colours are linear radiance; sRGB appears only when 8-bit images are written.
 
+mod bsdf;
 mod light;
 mod material;
 mod texture;
 
+pub use bsdf::{Bsdf, BsdfSample, Lobe, basis, cosine_hemisphere};
 pub use light::*;
 pub use material::*;
 pub use texture::*;
