@@ -72,7 +72,7 @@ fn render_desc(desc: &SceneDesc, settings: &RenderSettings) -> Film {
 #[test]
 fn tilted_checker_edges_are_antialiased_in_every_mode() {
     let checker = Material {
-        diffuse: Texture::Procedural {
+        base_color: Texture::Procedural {
             pattern: Pattern::Checker,
             a: Vec3::ZERO,
             b: Vec3::ONE,

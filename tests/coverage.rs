@@ -150,7 +150,7 @@ fn adaptive_checks_coverage_where_colour_cannot_tell() {
     // coverage shows the edge. Its interpolated rim must still follow the silhouette.
     let mut desc = sphere_scene("black", "aperture_radius = 0.25\nfocus_distance = 9");
     desc.materials.iter_mut().for_each(|m| {
-        m.diffuse = dofray::shade::Texture::Constant(Vec3::ZERO);
+        m.base_color = dofray::shade::Texture::Constant(Vec3::ZERO);
     });
     let reference = render_with(
         &desc,

@@ -150,7 +150,7 @@ fn out_of_range_geometry_and_materials_are_refused_by_name() {
         wall_scene(
             5.0,
             Material {
-                diffuse: Texture::Procedural {
+                base_color: Texture::Procedural {
                     pattern: Pattern::Checker,
                     a: Vec3::ZERO,
                     b: Vec3::ONE,
@@ -165,11 +165,11 @@ fn out_of_range_geometry_and_materials_are_refused_by_name() {
         wall_scene(
             5.0,
             Material {
-                specular: Vec3::splat(3e38),
+                roughness: 3e38,
                 ..Material::diffuse(Vec3::ONE)
             },
         ),
-        &["material 0", "specular"],
+        &["material 0", "roughness"],
     );
     // The eye too far out (Embree takes origins up to about 1.8e19; the docs allow 1e15).
     let mut desc = wall_scene(5.0, Material::diffuse(Vec3::ONE));
@@ -184,7 +184,8 @@ fn a_far_mirror_renders_a_finite_image() {
     let mut desc = wall_scene(
         1e13,
         Material {
-            mirror: 1.0,
+            metallic: 1.0,
+            roughness: 0.0,
             ..Material::diffuse(Vec3::splat(0.5))
         },
     );

@@ -294,8 +294,9 @@ fn mirror_reflects_one_bounce() {
         },
         materials: vec![
             Material {
-                mirror: 1.0,
-                ..Material::diffuse(Vec3::ZERO)
+                metallic: 1.0,
+                roughness: 0.0,
+                ..Material::diffuse(Vec3::ONE)
             },
             Material::diffuse(Vec3::new(1.0, 0.0, 0.0)),
         ],

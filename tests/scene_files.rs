@@ -230,7 +230,7 @@ fn the_mesh_scenes_use_meshes_and_image_textures() {
         assert!(
             desc.materials
                 .iter()
-                .any(|m| matches!(m.diffuse, Texture::Image { .. })),
+                .any(|m| matches!(m.base_color, Texture::Image { .. })),
             "{name}: no image texture"
         );
     }
@@ -291,7 +291,7 @@ fn obj_loads_with_mtl_materials_and_textures() {
     assert!(torus.normals().is_some());
     let uvs = torus.uvs().expect("UVs");
     assert!(uvs.iter().any(|uv| uv[0] > 1.5), "tiled u up to 2");
-    match &desc.materials[m].diffuse {
+    match &desc.materials[m].base_color {
         Texture::Image { image, tint } => {
             assert_eq!((image.width, image.height), (128, 32));
             assert_eq!(*tint, Vec3::ONE);
@@ -304,8 +304,9 @@ fn obj_loads_with_mtl_materials_and_textures() {
         }
         other => panic!("expected the map_Kd texture, got {other:?}"),
     }
-    assert_eq!(desc.materials[m].specular, Vec3::splat(0.25));
-    assert_eq!(desc.materials[m].shininess, 64.0);
+    // Ns 64 is the GGX roughness of the same highlight width: sqrt(sqrt(2 / 66)).
+    let r = desc.materials[m].roughness;
+    assert!((r - (2.0f32 / 66.0).sqrt().sqrt()).abs() < 1e-6, "{r}");
 
     let desc = load(&assets().join("pedestal.obj")).unwrap();
     let ms = meshes(&desc);
@@ -314,11 +315,11 @@ fn obj_loads_with_mtl_materials_and_textures() {
         12
     );
     let slate = &desc.materials[ms[0].1];
-    assert!(matches!(slate.diffuse, Texture::Constant(c) if c == Vec3::new(0.22, 0.24, 0.28)));
+    assert!(matches!(slate.base_color, Texture::Constant(c) if c == Vec3::new(0.22, 0.24, 0.28)));
     let top = &desc.materials[ms[1].1];
     assert_eq!(
-        top.mirror, 0.3,
-        "illum 3 makes a mirror of strength max(Ks)"
+        top.metallic, 0.3,
+        "illum 3 makes a metal of strength max(Ks)"
     );
     assert!(ms[0].0.normals().is_none() && ms[0].0.uvs().is_none());
 }
@@ -340,7 +341,7 @@ fn gltf_and_glb_load_nodes_materials_uvs_and_camera() {
             uvs.iter()
                 .all(|uv| (0.0..=3.0).contains(&uv[0]) && (0.0..=1.0).contains(&uv[1]))
         );
-        match &desc.materials[m].diffuse {
+        match &desc.materials[m].base_color {
             Texture::Image { image, tint } => {
                 assert_eq!((image.width, image.height), (64, 64));
                 assert_eq!(*tint, Vec3::new(1.0, 0.9, 0.8), "base-colour factor");
@@ -805,7 +806,7 @@ fn wrong_types_are_rejected() {
         "type4",
         &format!("[[materials]]\nname = \"m\"\ndiffuse = [1, 0]\n{SPHERE}"),
     );
-    assert_names(&m, "scene.toml:3:", &["materials[0].diffuse", "colour"]);
+    assert_names(&m, "scene.toml:3:", &["materials[0].base_color", "colour"]);
     let m = error_of("type5", "objects = 3\n");
     assert_names(&m, "scene.toml:1:", &["objects", "invalid type"]);
 }
@@ -1158,7 +1159,7 @@ fn malformed_and_truncated_obj_files_name_the_line() {
     std::fs::write(dir.join("m.mtl"), "newmtl a\nKd 0.5\n").unwrap();
     let d = load(&dir.join("m.obj")).unwrap();
     let (_, m) = meshes(&d)[0];
-    assert!(matches!(d.materials[m].diffuse, Texture::Constant(c) if c == Vec3::splat(0.5)));
+    assert!(matches!(d.materials[m].base_color, Texture::Constant(c) if c == Vec3::splat(0.5)));
 }
 
 #[test]
@@ -1383,7 +1384,7 @@ fn unreadable_and_truncated_images_are_rejected() {
         &[("scene.toml", scene.as_bytes()), ("t.png", &png)],
     )
     .unwrap();
-    assert!(matches!(&d.materials[0].diffuse, Texture::Image { image, .. } if image.width == 64));
+    assert!(matches!(&d.materials[0].base_color, Texture::Image { image, .. } if image.width == 64));
 }
 
 #[test]

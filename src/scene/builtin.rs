@@ -35,14 +35,13 @@ pub fn paper() -> SceneDesc {
     let eye = Vec3::new(0.0, 1.2, -6.0);
     let look_at = Vec3::new(0.0, 0.5, 4.0);
     let proc = |pattern, a: [f32; 3], b: [f32; 3], scale| Material {
-        diffuse: Texture::Procedural {
+        base_color: Texture::Procedural {
             pattern,
             a: Vec3::from(a),
             b: Vec3::from(b),
             scale,
         },
-        specular: Vec3::splat(0.25),
-        shininess: 48.0,
+        roughness: 0.35,
         ..Material::diffuse(Vec3::ZERO)
     };
     let materials = vec![
@@ -52,13 +51,12 @@ pub fn paper() -> SceneDesc {
         proc(Pattern::Dots, [0.9, 0.55, 0.1], [0.15, 0.05, 0.3], 12.0),
         proc(Pattern::Marble, [0.9, 0.88, 0.82], [0.25, 0.2, 0.35], 2.0),
         Material {
-            diffuse: Texture::Procedural {
+            base_color: Texture::Procedural {
                 pattern: Pattern::Checker,
                 a: Vec3::splat(0.8),
                 b: Vec3::splat(0.12),
                 scale: 1.0,
             },
-            shininess: 1.0,
             ..Material::diffuse(Vec3::ZERO)
         },
     ];

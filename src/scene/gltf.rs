@@ -27,15 +27,20 @@ use super::texture::{TextureCache, decode};
 use super::{MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE};
 use crate::camera::check_vfov;
 use crate::shade::{
-    Alpha, AlphaMode, ImageTexture, LUMENS_PER_WATT, Light, Material, MaterialMaps, MetalRough,
-    NormalMap, Texture, Wrap, pbr_params,
+    Alpha, AlphaMode, ImageTexture, LUMENS_PER_WATT, Light, Material, MaterialMaps,
+    NormalMap, Texture, Wrap,
 };
 
 /// The glTF extensions dofray implements: a file may require these (`extensionsRequired`);
 /// requiring any other is an error, and using any other is named in the file's warning.
 /// Keep this the one list (loaders of new extensions append here).
-pub const SUPPORTED_EXTENSIONS: &[&str] =
-    &["KHR_lights_punctual", "KHR_materials_emissive_strength"];
+pub const SUPPORTED_EXTENSIONS: &[&str] = &[
+    "KHR_lights_punctual",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_materials_volume",
+];
 
 fn gltf_error(path: &Path, message: impl Into<String>) -> LoadError {
     LoadError::Gltf {
@@ -1134,18 +1139,22 @@ impl Loader<'_> {
         };
         let metallic = unit_factor(pbr.metallic_factor(), 0.0);
         let roughness = unit_factor(pbr.roughness_factor(), 1.0);
-        // Constant metalness and roughness: the surface at the factors, the base colour's
-        // texture (if any) tinted by the dimmed colour.
-        let surface = pbr_params(base, metallic, roughness);
+        // KHR_materials_transmission (its texture is not read: the factor applies everywhere),
+        // KHR_materials_ior, and KHR_materials_volume's presence (a solid, not a thin wall).
+        let transmission = m
+            .transmission()
+            .map_or(0.0, |t| unit_factor(t.transmission_factor(), 0.0));
+        let ior = m
+            .ior()
+            .filter(|i| i.is_finite() && (1.0..=10.0).contains(i))
+            .unwrap_or(1.5);
+        let volume = m.volume().is_some_and(|v| v.thickness_factor() > 0.0);
         // A metallic-roughness texture on the mesh's texture coordinates makes metalness and
         // roughness vary per hit; one on another set is ignored (the factors apply).
         let metal_rough = match pbr.metallic_roughness_texture() {
-            Some(info) if info.tex_coord() == uv => Some(MetalRough {
-                base: textured(&base_image, base),
-                metallic,
-                roughness,
-                texture: self.texture_image(&info.texture(), false)?,
-            }),
+            Some(info) if info.tex_coord() == uv => {
+                Some(self.texture_image(&info.texture(), false)?)
+            }
             _ => None,
         };
         let maps = MaterialMaps {
@@ -1160,10 +1169,14 @@ impl Loader<'_> {
         self.materials.push((
             name,
             Material {
-                diffuse: textured(&base_image, surface.albedo),
-                specular: surface.specular,
-                shininess: surface.shininess,
-                mirror: surface.mirror,
+                base_color: textured(&base_image, base),
+                metallic,
+                roughness,
+                transmission,
+                ior,
+                // glTF transmission without KHR_materials_volume is thin-walled; with it, a
+                // solid.
+                thin: !volume,
                 emission,
                 emission_texture,
                 maps,

@@ -790,11 +790,15 @@ fn convert_material(
         None => Texture::Constant(color(m.diffuse, Vec3::splat(0.8))),
     };
     let specular = color(m.specular, Vec3::ZERO);
-    let shininess = m
+    // `Ns` is a Phong exponent; the GGX roughness of the same highlight width follows Walter et
+    // al.'s Beckmann correspondence, alpha = sqrt(2 / (Ns + 2)), roughness = sqrt(alpha).
+    let roughness = m
         .shininess
-        .filter(|s| s.is_finite() && *s >= 1.0)
-        .unwrap_or(32.0);
-    let mirror = match m.illumination_model {
+        .filter(|s| s.is_finite() && *s >= 0.0)
+        .map_or(1.0, |s| (2.0 / (s + 2.0)).sqrt().sqrt().clamp(0.0, 1.0));
+    // Ray-traced reflection (`illum` 3, 5 or 7) makes the surface a metal of colour `Ks` that
+    // strong.
+    let metallic = match m.illumination_model {
         Some(3 | 5 | 7) => specular.max_element().clamp(0.0, 1.0),
         _ => 0.0,
     };
@@ -813,14 +817,17 @@ fn convert_material(
         }
         Some(e) => e.max(Vec3::ZERO),
     };
+    let base_color = match diffuse {
+        Texture::Constant(kd) if metallic > 0.0 => Texture::Constant(kd.lerp(specular, metallic)),
+        other => other,
+    };
     Ok(Material {
-        diffuse,
-        specular,
-        shininess,
-        mirror,
+        base_color,
+        metallic,
+        roughness,
         emission,
         emission_texture: None,
-        maps: Default::default(),
+        ..Material::diffuse(Vec3::ZERO)
     })
 }
 

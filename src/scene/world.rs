@@ -198,9 +198,12 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
     Ok(())
 }
 
+/// The largest index of refraction a material may have (diamond is 2.4).
+const MAX_IOR: f32 = 10.0;
+
 /// [`check_ranges`] of material `i`.
 fn check_material(i: usize, m: &Material) -> Result<(), SceneError> {
-    match &m.diffuse {
+    match &m.base_color {
         Texture::Constant(c) => check_value(
             || format!("material {i}'s colour"),
             colour_ok(*c, MAX_MATERIAL_VALUE),
@@ -225,19 +228,19 @@ fn check_material(i: usize, m: &Material) -> Result<(), SceneError> {
         )?,
     }
     check_value(
-        || format!("material {i}'s specular"),
-        colour_ok(m.specular, MAX_MATERIAL_VALUE),
-        COLOUR,
-    )?;
-    check_value(
-        || format!("material {i}'s shininess"),
-        m.shininess.is_finite() && (0.0..=MAX_MATERIAL_VALUE).contains(&m.shininess),
-        "finite and from 0 to 1e6",
-    )?;
-    check_value(
-        || format!("material {i}'s mirror"),
-        (0.0..=1.0).contains(&m.mirror),
+        || format!("material {i}'s metallic and roughness"),
+        (0.0..=1.0).contains(&m.metallic) && (0.0..=1.0).contains(&m.roughness),
         "from 0 to 1",
+    )?;
+    check_value(
+        || format!("material {i}'s transmission"),
+        (0.0..=1.0).contains(&m.transmission),
+        "from 0 to 1",
+    )?;
+    check_value(
+        || format!("material {i}'s ior"),
+        (1.0..=MAX_IOR).contains(&m.ior),
+        "from 1 to 10",
     )?;
     check_value(
         || format!("material {i}'s emission"),
@@ -254,22 +257,6 @@ fn check_material(i: usize, m: &Material) -> Result<(), SceneError> {
             (0.0..=1.0).contains(&alpha.factor) && cutoff_ok,
             "from 0 to 1, with a finite cutoff >= 0",
         )?;
-    }
-    if let Some(mr) = &m.maps.metal_rough {
-        check_value(
-            || format!("material {i}'s metallic and roughness"),
-            (0.0..=1.0).contains(&mr.metallic) && (0.0..=1.0).contains(&mr.roughness),
-            "from 0 to 1",
-        )?;
-        let base_ok = match &mr.base {
-            Texture::Constant(c) | Texture::Image { tint: c, .. } => {
-                colour_ok(*c, MAX_MATERIAL_VALUE)
-            }
-            Texture::Procedural { a, b, .. } => {
-                colour_ok(*a, MAX_MATERIAL_VALUE) && colour_ok(*b, MAX_MATERIAL_VALUE)
-            }
-        };
-        check_value(|| format!("material {i}'s base colour"), base_ok, COLOUR)?;
     }
     if let Some(normal) = &m.maps.normal {
         check_value(

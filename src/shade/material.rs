@@ -4,23 +4,31 @@ use std::sync::Arc;
 
 use glam::{Vec2, Vec3};
 
+use super::bsdf::Bsdf;
 use super::texture::{ImageTexture, Texture};
 
-/// A surface: Lambertian diffuse, optional Blinn-Phong highlight, optional perfect mirror,
-/// optional emission.
+/// A surface as glTF 2.0 describes it (metallic-roughness, with KHR_materials_transmission and
+/// KHR_materials_ior), plus emission. The path tracer scatters light by the [`Bsdf`] made from
+/// it ([`Material::bsdf`]); the direct integrator by the simpler [`Surface`] ([`Material::surface`]).
 #[derive(Debug, Clone)]
 pub struct Material {
-    /// Diffuse (Lambertian) albedo, linear RGB.
-    pub diffuse: Texture,
-    /// Specular colour (zero for none).
-    pub specular: Vec3,
-    /// Blinn-Phong exponent.
-    pub shininess: f32,
-    /// Fraction of light reflected as a perfect mirror (one bounce).
-    pub mirror: f32,
-    /// Radiance the surface emits (linear RGB, zero for none), added wherever a camera ray or
-    /// a mirror reflection sees it. It is not a light source: it lights no other surface and
-    /// casts no shadows (use point or directional lights for that).
+    /// Base colour (linear RGB): the diffuse albedo of a dielectric, the reflectance of a metal.
+    pub base_color: Texture,
+    /// Metalness, 0 (dielectric) to 1 (metal); times the blue channel of the metallic-roughness
+    /// texture when there is one.
+    pub metallic: f32,
+    /// Perceptual roughness, 0 (smooth: a mirror or clear glass) to 1; times the green channel of
+    /// the metallic-roughness texture when there is one.
+    pub roughness: f32,
+    /// Fraction of the dielectric's diffuse light that is transmitted instead (glass), 0 to 1.
+    pub transmission: f32,
+    /// Index of refraction of the inside (1.5 by default, as glTF's).
+    pub ior: f32,
+    /// Thin-walled: transmitted light passes through without bending (a window pane, a leaf)
+    /// instead of refracting into a solid.
+    pub thin: bool,
+    /// Radiance the surface emits (linear RGB, zero for none): seen by every ray, and in the
+    /// path tracer the surface is a light (sampled by its power).
     pub emission: Vec3,
     /// An image the emission is multiplied by (glTF `emissiveTexture`), if any.
     pub emission_texture: Option<Arc<ImageTexture>>,
@@ -85,21 +93,6 @@ impl Alpha {
     }
 }
 
-/// glTF metallic-roughness, evaluated per hit: `factor`s times the texture's blue (metallic)
-/// and green (roughness) channels, mapped by [`pbr_params`].
-#[derive(Debug, Clone)]
-pub struct MetalRough {
-    /// The base colour (glTF `baseColorFactor` times `baseColorTexture`), before it is dimmed
-    /// by metalness into the diffuse colour.
-    pub base: Texture,
-    /// Metalness factor, in [0, 1], multiplied by the texture's blue channel.
-    pub metallic: f32,
-    /// Perceptual roughness factor, in [0, 1], multiplied by the texture's green channel.
-    pub roughness: f32,
-    /// glTF `metallicRoughnessTexture` (blue: metallic, green: roughness; linear).
-    pub texture: Arc<ImageTexture>,
-}
-
 /// A tangent-space normal map (glTF `normalTexture`, linear RGB, +y up as in OpenGL).
 #[derive(Debug, Clone)]
 pub struct NormalMap {
@@ -125,15 +118,15 @@ impl NormalMap {
 pub struct MaterialMaps {
     /// Cut-outs and transparency; `None` when the material is opaque everywhere.
     pub alpha: Option<Alpha>,
-    /// Per-hit metallic and roughness; `None` when they are constant (already in the
-    /// material's diffuse, specular, shininess and mirror).
-    pub metal_rough: Option<MetalRough>,
+    /// glTF `metallicRoughnessTexture` (blue: metallic, green: roughness; linear), multiplying
+    /// the material's `metallic` and `roughness`; `None` for none.
+    pub metal_rough: Option<Arc<ImageTexture>>,
     /// Tangent-space normal map; `None` for none.
     pub normal: Option<NormalMap>,
 }
 
-/// What shading uses of a material at one point: diffuse albedo, Blinn-Phong specular colour
-/// and exponent, and mirror fraction.
+/// What the direct integrator (`--integrator direct`, the seed's shading) uses of a material at
+/// one point: Lambertian albedo, a normalised Blinn-Phong highlight and a mirror fraction.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Surface {
     /// Diffuse albedo, linear RGB.
@@ -146,9 +139,8 @@ pub struct Surface {
     pub mirror: f32,
 }
 
-/// The mapping of glTF metallic-roughness onto dofray's material (see docs/scene-format.md):
-/// the surface of base colour `base`, metalness `metallic` and perceptual roughness
-/// `roughness` (both in [0, 1]).
+/// The direct integrator's approximation of glTF metallic-roughness: the surface of base colour
+/// `base`, metalness `metallic` and perceptual roughness `roughness` (both in [0, 1]).
 pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> Surface {
     let alpha = (roughness * roughness).max(1e-3);
     Surface {
@@ -160,36 +152,56 @@ pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> Surface {
 }
 
 impl Material {
-    /// A plain diffuse material of linear RGB albedo `color`: no highlight, mirror, emission
-    /// or maps.
+    /// A plain diffuse material of linear RGB albedo `color`: a rough dielectric (metallic 0,
+    /// roughness 1), no emission or maps.
     pub fn diffuse(color: Vec3) -> Self {
         Self {
-            diffuse: Texture::Constant(color),
-            specular: Vec3::ZERO,
-            shininess: 32.0,
-            mirror: 0.0,
+            base_color: Texture::Constant(color),
+            metallic: 0.0,
+            roughness: 1.0,
+            transmission: 0.0,
+            ior: 1.5,
+            thin: false,
             emission: Vec3::ZERO,
             emission_texture: None,
             maps: MaterialMaps::default(),
         }
     }
 
-    /// The material at texture coordinates `uv`.
+    /// Base colour, metalness and roughness at texture coordinates `uv`.
+    #[inline]
+    pub fn metal_rough(&self, uv: Vec2) -> (Vec3, f32, f32) {
+        let base = self.base_color.sample(uv);
+        match &self.maps.metal_rough {
+            None => (base, self.metallic, self.roughness),
+            Some(texture) => {
+                let t = texture.sample(uv);
+                let metallic = (self.metallic * t.z).clamp(0.0, 1.0);
+                let roughness = (self.roughness * t.y).clamp(0.0, 1.0);
+                (base, metallic, roughness)
+            }
+        }
+    }
+
+    /// The direct integrator's surface at texture coordinates `uv`.
     #[inline]
     pub fn surface(&self, uv: Vec2) -> Surface {
-        match &self.maps.metal_rough {
-            None => Surface {
-                albedo: self.diffuse.sample(uv),
-                specular: self.specular,
-                shininess: self.shininess,
-                mirror: self.mirror,
-            },
-            Some(mr) => {
-                let t = mr.texture.sample(uv);
-                let metallic = (mr.metallic * t.z).clamp(0.0, 1.0);
-                let roughness = (mr.roughness * t.y).clamp(0.0, 1.0);
-                pbr_params(mr.base.sample(uv), metallic, roughness)
-            }
+        let (base, metallic, roughness) = self.metal_rough(uv);
+        pbr_params(base, metallic, roughness)
+    }
+
+    /// The path tracer's BSDF at texture coordinates `uv`, seen from outside (`front`) or from
+    /// inside the surface.
+    #[inline]
+    pub fn bsdf(&self, uv: Vec2, front: bool) -> Bsdf {
+        let (base_color, metallic, roughness) = self.metal_rough(uv);
+        Bsdf {
+            base_color,
+            metallic,
+            roughness,
+            transmission: self.transmission,
+            eta: if front { self.ior } else { 1.0 / self.ior },
+            thin: self.thin,
         }
     }
 

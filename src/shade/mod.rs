@@ -58,21 +58,24 @@ impl SurfacePoints16 {
     }
 }
 
-/// Direct lighting from one light through an unoccluded shadow ray: diffuse + highlight.
+/// Direct lighting from one light through an unoccluded shadow ray (the direct integrator):
+/// Lambertian `albedo / pi` plus the energy-normalised Blinn-Phong lobe
+/// `specular (s + 8) / (8 pi) cos_h^s`, times the cosine and the light's irradiance.
 pub fn direct(surface: &Surface, sp: &SurfacePoint, view: Vec3, light: &LightSample) -> Vec3 {
     let cos = sp.normal.dot(light.dir);
     if cos <= 0.0 {
         return Vec3::ZERO;
     }
-    let mut c = surface.albedo * (1.0 - surface.mirror) * cos;
+    let mut f = surface.albedo * ((1.0 - surface.mirror) * std::f32::consts::FRAC_1_PI);
     if surface.specular != Vec3::ZERO {
         let h = (light.dir - view).normalize_or_zero();
         let cos_h = sp.normal.dot(h);
         if cos_h > 0.0 {
-            c += surface.specular * cos_h.powf(surface.shininess);
+            let norm = (surface.shininess + 8.0) / (8.0 * std::f32::consts::PI);
+            f += surface.specular * (norm * cos_h.powf(surface.shininess));
         }
     }
-    c * light.irradiance
+    f * cos * light.irradiance
 }
 
 #[cfg(test)]
@@ -97,7 +100,7 @@ mod tests {
             -Vec3::Y,
             &light.sample(sp.position),
         );
-        assert!((c.x - 1.0).abs() < 1e-6);
+        assert!((c.x - std::f32::consts::FRAC_1_PI).abs() < 1e-6);
         let slanted = Light::Directional {
             direction: Vec3::new(1.0, -1.0, 0.0),
             irradiance: Vec3::ONE,
@@ -108,6 +111,6 @@ mod tests {
             -Vec3::Y,
             &slanted.sample(sp.position),
         );
-        assert!((c.x - std::f32::consts::FRAC_1_SQRT_2).abs() < 1e-6);
+        assert!((c.x - std::f32::consts::FRAC_1_SQRT_2 / std::f32::consts::PI).abs() < 1e-6);
     }
 }

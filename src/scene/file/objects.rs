@@ -194,11 +194,27 @@ fn material(
         Some(e) => e.get_ref().0,
     };
     let alpha = alpha(m, &diffuse);
+    let ior = match &m.ior {
+        None => 1.5,
+        Some(i) if (1.0..=10.0).contains(&i.get_ref().0) => i.get_ref().0,
+        Some(i) => {
+            return Err(ctx.invalid(
+                i.span(),
+                format!("{key}.ior"),
+                format!(
+                    "ior {} is out of range: an index of refraction from 1 to 10",
+                    i.get_ref().0
+                ),
+            ));
+        }
+    };
     Ok(Material {
-        diffuse,
-        specular: m.specular.map_or(Vec3::ZERO, |c| c.0),
-        shininess: m.shininess.map_or(32.0, |s| s.0),
-        mirror: m.mirror.map_or(0.0, |u| u.0),
+        base_color: diffuse,
+        metallic: m.metallic.map_or(0.0, |u| u.0),
+        roughness: m.roughness.map_or(1.0, |u| u.0),
+        transmission: m.transmission.map_or(0.0, |u| u.0),
+        ior,
+        thin: m.thin.unwrap_or(false),
         emission,
         emission_texture: None,
         maps: MaterialMaps {
