@@ -74,6 +74,18 @@ pub enum Param {
     LensFilter,
     /// The largest sample interval (a library setting only).
     MaxInterval,
+    /// How light is carried (path or direct).
+    Integrator,
+    /// Most bounces of any kind.
+    MaxBounces,
+    /// Most diffuse bounces.
+    DiffuseBounces,
+    /// Most glossy bounces.
+    GlossyBounces,
+    /// Most transmission bounces.
+    TransmissionBounces,
+    /// Clamp on indirect samples.
+    ClampIndirect,
 }
 
 /// What each front end calls a [`Param`].
@@ -110,7 +122,7 @@ const fn row(
 
 impl Param {
     /// Every parameter.
-    pub const ALL: [Param; 28] = [
+    pub const ALL: [Param; 34] = [
         Self::Width,
         Self::Height,
         Self::ApertureRadius,
@@ -139,6 +151,12 @@ impl Param {
         Self::Seed,
         Self::LensFilter,
         Self::MaxInterval,
+        Self::Integrator,
+        Self::MaxBounces,
+        Self::DiffuseBounces,
+        Self::GlossyBounces,
+        Self::TransmissionBounces,
+        Self::ClampIndirect,
     ];
 
     /// The table: the parameter's name in each front end.
@@ -173,6 +191,12 @@ impl Param {
             Self::Seed => row("seed", Some("--seed"), None, Some("seed"), Some("dofray_scene_set_seed")),
             Self::LensFilter => row("lens_filter", Some("--filter"), None, None, None),
             Self::MaxInterval => row("max_interval", None, None, None, None),
+            Self::Integrator => row("integrator", Some("--integrator"), Some("render.integrator"), Some("integrator"), None),
+            Self::MaxBounces => row("max_bounces", Some("--max-bounces"), Some("render.max_bounces"), Some("max_bounces"), None),
+            Self::DiffuseBounces => row("diffuse_bounces", Some("--diffuse-bounces"), Some("render.diffuse_bounces"), Some("diffuse_bounces"), None),
+            Self::GlossyBounces => row("glossy_bounces", Some("--glossy-bounces"), Some("render.glossy_bounces"), Some("glossy_bounces"), None),
+            Self::TransmissionBounces => row("transmission_bounces", Some("--transmission-bounces"), Some("render.transmission_bounces"), Some("transmission_bounces"), None),
+            Self::ClampIndirect => row("clamp_indirect", Some("--clamp-indirect"), Some("render.clamp_indirect"), Some("clamp_indirect"), None),
         }
     }
 

@@ -36,6 +36,61 @@ impl Mode {
     }
 }
 
+/// How light is carried from the lights to the camera.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+#[serde(rename_all = "lowercase")]
+pub enum Integrator {
+    /// Paths with next-event estimation and multiple importance sampling: every light kind,
+    /// soft shadows, indirect light, glass. Agrees with Cycles.
+    #[default]
+    Path,
+    /// The seed's shading, for quick previews and the seed's table: direct light from point,
+    /// spot and sun lights with hard shadows, a normalised Blinn-Phong highlight, the world's
+    /// mean radiance as unshadowed ambient light, and `bounces` mirror reflections.
+    Direct,
+}
+
+impl Integrator {
+    /// The integrator's lowercase name (`"path"`, `"direct"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Path => "path",
+            Self::Direct => "direct",
+        }
+    }
+}
+
+/// How long the path tracer's paths may grow (Cycles' "Light Paths" panel, with its defaults),
+/// and the optional clamp on indirect light.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathLimits {
+    /// Most bounces of any kind (Cycles' "Total"; default 12).
+    pub total: u32,
+    /// Most diffuse bounces (default 4).
+    pub diffuse: u32,
+    /// Most glossy bounces (default 4).
+    pub glossy: u32,
+    /// Most transmission bounces (default 12).
+    pub transmission: u32,
+    /// Largest value any colour component of an indirect sample may contribute;
+    /// `f32::INFINITY` (the default) clamps nothing, so the image is unbiased. Cycles' default is
+    /// 10: clamping trades fireflies for energy lost where light is bright and indirect.
+    pub clamp_indirect: f32,
+}
+
+impl Default for PathLimits {
+    fn default() -> Self {
+        Self {
+            total: 12,
+            diffuse: 4,
+            glossy: 4,
+            transmission: 12,
+            clamp_indirect: f32::INFINITY,
+        }
+    }
+}
+
 /// A name that is not a [`Mode`]'s.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("mode must be \"pinhole\", \"dense\" or \"adaptive\", got {0:?}")]
@@ -134,7 +189,11 @@ pub struct RenderSettings {
     pub seed: u64,
     /// How lens samples are weighted when a site's samples are averaged (the bokeh's profile).
     pub filter: LensFilter,
-    /// Mirror bounces after the first hit.
+    /// How light is carried: paths (the default) or the seed's direct shading.
+    pub integrator: Integrator,
+    /// The path tracer's bounce limits and clamp.
+    pub path: PathLimits,
+    /// Mirror bounces after the first hit (the direct integrator).
     pub bounces: u32,
     /// Keep every traced packet in [`crate::render::RenderStats::ray_log`] (for intersect-only
     /// benchmarks).
@@ -166,6 +225,8 @@ impl RenderSettings {
     pub const MAX_SAMPLES: u32 = 1 << 16;
     /// The largest exposure, in stops either way.
     pub const MAX_EXPOSURE: f32 = 64.0;
+    /// The most bounces any path limit allows (Cycles allows 1024).
+    pub const MAX_BOUNCES: u32 = 1024;
 
     /// The tolerance when none is given: 4 / sqrt(spp) code values (1 at 16 spp), so the
     /// accepted error shrinks with the noise a site has at `spp` samples.
@@ -213,6 +274,20 @@ impl RenderSettings {
         if !self.exposure.is_finite() || self.exposure.abs() > Self::MAX_EXPOSURE {
             return Err(SettingError::Exposure(self.exposure));
         }
+        let p = &self.path;
+        for (param, value) in [
+            (Param::MaxBounces, p.total),
+            (Param::DiffuseBounces, p.diffuse),
+            (Param::GlossyBounces, p.glossy),
+            (Param::TransmissionBounces, p.transmission),
+        ] {
+            if value > Self::MAX_BOUNCES {
+                return Err(SettingError::Bounces { param, value });
+            }
+        }
+        if !(p.clamp_indirect > 0.0) {
+            return Err(SettingError::ClampIndirect(p.clamp_indirect));
+        }
         Ok(())
     }
 }
@@ -245,6 +320,17 @@ pub enum SettingError {
     /// The exposure is not finite or beyond +-[`RenderSettings::MAX_EXPOSURE`] stops.
     #[error("{}", self.message(Param::field))]
     Exposure(f32),
+    /// A bounce limit is beyond [`RenderSettings::MAX_BOUNCES`].
+    #[error("{}", self.message(Param::field))]
+    Bounces {
+        /// Which limit.
+        param: Param,
+        /// The value given.
+        value: u32,
+    },
+    /// The indirect clamp is not a number > 0.
+    #[error("{}", self.message(Param::field))]
+    ClampIndirect(f32),
 }
 
 impl SettingError {
@@ -257,6 +343,8 @@ impl SettingError {
             Self::IntervalFactor(_) => Param::IntervalFactor,
             Self::MaxInterval(_) => Param::MaxInterval,
             Self::Exposure(_) => Param::Exposure,
+            Self::Bounces { param, .. } => param,
+            Self::ClampIndirect(_) => Param::ClampIndirect,
         }
     }
 
@@ -283,6 +371,13 @@ impl SettingError {
                 "{name} must be a finite number of stops from -{max} to {max}, got {e}",
                 max = RenderSettings::MAX_EXPOSURE
             ),
+            Self::Bounces { value, .. } => format!(
+                "{name} must be 0 to {}, got {value}",
+                RenderSettings::MAX_BOUNCES
+            ),
+            Self::ClampIndirect(c) => {
+                format!("{name} must be a number > 0 (radiance; inf for no clamp), got {c}")
+            }
         }
     }
 }
@@ -355,6 +450,18 @@ pub struct SettingsPatch {
     pub seed: Option<u64>,
     /// The weighting of lens samples. Default: box.
     pub lens_filter: Option<LensFilter>,
+    /// How light is carried. Default: path.
+    pub integrator: Option<Integrator>,
+    /// Most bounces of any kind. Default: 12.
+    pub max_bounces: Option<u32>,
+    /// Most diffuse bounces. Default: 4.
+    pub diffuse_bounces: Option<u32>,
+    /// Most glossy bounces. Default: 4.
+    pub glossy_bounces: Option<u32>,
+    /// Most transmission bounces. Default: 12.
+    pub transmission_bounces: Option<u32>,
+    /// Clamp on indirect samples. Default: none.
+    pub clamp_indirect: Option<f32>,
 }
 
 impl SettingsPatch {
@@ -407,6 +514,12 @@ impl SettingsPatch {
             exposure: self.exposure.or(lower.exposure),
             seed: self.seed.or(lower.seed),
             lens_filter: self.lens_filter.or(lower.lens_filter),
+            integrator: self.integrator.or(lower.integrator),
+            max_bounces: self.max_bounces.or(lower.max_bounces),
+            diffuse_bounces: self.diffuse_bounces.or(lower.diffuse_bounces),
+            glossy_bounces: self.glossy_bounces.or(lower.glossy_bounces),
+            transmission_bounces: self.transmission_bounces.or(lower.transmission_bounces),
+            clamp_indirect: self.clamp_indirect.or(lower.clamp_indirect),
         }
     }
 
@@ -430,6 +543,7 @@ impl SettingsPatch {
                 paper_exact,
             },
         };
+        let d = PathLimits::default();
         let settings = RenderSettings {
             mode: self.mode.unwrap_or(Mode::Adaptive),
             spp: self.spp.unwrap_or(Self::DEFAULT_SPP),
@@ -439,6 +553,14 @@ impl SettingsPatch {
             max_interval: 64,
             seed: self.seed.unwrap_or(0),
             filter: self.lens_filter.unwrap_or(LensFilter::Box),
+            integrator: self.integrator.unwrap_or_default(),
+            path: PathLimits {
+                total: self.max_bounces.unwrap_or(d.total),
+                diffuse: self.diffuse_bounces.unwrap_or(d.diffuse),
+                glossy: self.glossy_bounces.unwrap_or(d.glossy),
+                transmission: self.transmission_bounces.unwrap_or(d.transmission),
+                clamp_indirect: self.clamp_indirect.unwrap_or(d.clamp_indirect),
+            },
             bounces: 1,
             record_rays: false,
             transparent: self.transparent,

@@ -1384,7 +1384,9 @@ fn unreadable_and_truncated_images_are_rejected() {
         &[("scene.toml", scene.as_bytes()), ("t.png", &png)],
     )
     .unwrap();
-    assert!(matches!(&d.materials[0].base_color, Texture::Image { image, .. } if image.width == 64));
+    assert!(
+        matches!(&d.materials[0].base_color, Texture::Image { image, .. } if image.width == 64)
+    );
 }
 
 #[test]

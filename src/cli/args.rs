@@ -193,6 +193,30 @@ pub(crate) struct RenderArgs {
     /// `--exposure -3` [default: 0].
     #[arg(long, value_name = "STOPS", allow_negative_numbers = true)]
     pub(crate) exposure: Option<f32>,
+    /// How light is carried: `path` (physically based: every light kind, soft shadows,
+    /// indirect light, glass; agrees with Cycles) or `direct` (the seed's quick shading: direct
+    /// light with hard shadows, ambient from the world, mirror bounces) [default: the scene's,
+    /// else path].
+    #[arg(long, value_enum)]
+    pub(crate) integrator: Option<dofray::render::Integrator>,
+    /// Path tracer: most bounces of any kind (Cycles' Light Paths > Total) [default: the
+    /// scene's, else 12].
+    #[arg(long, value_name = "N")]
+    pub(crate) max_bounces: Option<u32>,
+    /// Path tracer: most diffuse bounces [default: the scene's, else 4].
+    #[arg(long, value_name = "N")]
+    pub(crate) diffuse_bounces: Option<u32>,
+    /// Path tracer: most glossy bounces [default: the scene's, else 4].
+    #[arg(long, value_name = "N")]
+    pub(crate) glossy_bounces: Option<u32>,
+    /// Path tracer: most transmission bounces [default: the scene's, else 12].
+    #[arg(long, value_name = "N")]
+    pub(crate) transmission_bounces: Option<u32>,
+    /// Path tracer: no indirect sample contributes more than this radiance in any channel
+    /// (Cycles' Clamping > Indirect Light, whose default is 10). Removes fireflies at the cost
+    /// of bias (bright indirect light gets darker) [default: the scene's, else no clamp].
+    #[arg(long, value_name = "RADIANCE")]
+    pub(crate) clamp_indirect: Option<f32>,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
     /// interval = max(2, k x CoC) in defocused regions, spp samples per defocused site (0.4 is
     /// the paper's; reproduces its table) [default: the scene's].

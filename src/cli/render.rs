@@ -40,6 +40,12 @@ pub(crate) fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<Render
         exposure: a.exposure,
         seed: Some(a.scene.seed),
         lens_filter: Some(a.filter),
+        integrator: a.integrator,
+        max_bounces: a.max_bounces,
+        diffuse_bounces: a.diffuse_bounces,
+        glossy_bounces: a.glossy_bounces,
+        transmission_bounces: a.transmission_bounces,
+        clamp_indirect: a.clamp_indirect,
     };
     Ok(flags
         .over(&desc.settings)

@@ -24,6 +24,7 @@ pub mod estimate;
 pub mod film;
 pub mod interpolate;
 pub mod maps;
+pub mod path;
 pub mod refine;
 pub mod region;
 pub mod site;
@@ -38,8 +39,8 @@ use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::scene::World;
 pub use crate::settings::{
-    Mode, RenderSettings, RulePatch, SamplingRule, SettingError, SettingsPatch, SiteRule,
-    UnknownMode,
+    Integrator, Mode, PathLimits, RenderSettings, RulePatch, SamplingRule, SettingError,
+    SettingsPatch, SiteRule, UnknownMode,
 };
 use estimate::Estimate;
 pub use film::Film;

@@ -18,11 +18,12 @@ use rayon::prelude::*;
 
 use super::estimate::Estimate;
 use super::trace::{self, RayKind, Tally};
+use super::{Integrator, path};
 use super::{Mode, Progress, RenderSettings};
 use crate::camera::{Camera, Lens, LensFilter};
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::FilterSampler;
-use crate::sampler::PixelSampler;
+use crate::sampler::{PixelSampler, sample_key};
 use crate::scene::World;
 
 /// What every site of a render shares.
@@ -43,6 +44,7 @@ pub struct SiteShader<'a> {
 pub struct SiteScratch {
     packet: RayPacket16,
     trace: trace::Scratch,
+    path: path::PathScratch,
     batch: Batch,
 }
 
@@ -59,6 +61,9 @@ struct Batch {
     len: usize,
     /// The estimate (index in the row run being shaded) each sample belongs to.
     pixel: [usize; LANES],
+    /// Each sample's key ([`crate::sampler::sample_key`]): what its path's decisions are drawn
+    /// from.
+    key: [u64; LANES],
     film_x: [f32; LANES],
     film_y: [f32; LANES],
     lens_x: [f32; LANES],
@@ -138,6 +143,7 @@ impl SiteShader<'_> {
                     b.lens_x[slot] = chunk.lens_x[lane];
                     b.lens_y[slot] = chunk.lens_y[lane];
                     b.pixel[slot] = i;
+                    b.key[slot] = chunk.key[lane];
                     b.len += 1;
                     if b.len == LANES {
                         self.flush(scratch, estimates, tally);
@@ -170,9 +176,12 @@ impl SiteShader<'_> {
         };
         let f = self.pixel_filter;
         let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+        let pixel = (y * self.camera.width as usize + x) as u64;
+        let seed = self.settings.seed;
         Batch {
             len: LANES,
             pixel: [slot; LANES],
+            key: std::array::from_fn(|l| sample_key(seed, pixel, first + l as u32)),
             film_x: pu.map(|u| cx + f.offset(u)),
             film_y: pv.map(|v| cy + f.offset(v)),
             lens_x,
@@ -194,7 +203,12 @@ impl SiteShader<'_> {
         estimates: &mut [Estimate],
         tally: &mut Tally,
     ) {
-        let SiteScratch { packet, trace, .. } = scratch;
+        let SiteScratch {
+            packet,
+            trace,
+            path,
+            ..
+        } = scratch;
         let mut origin = [[0.0f32; LANES]; 3];
         let mut dir = [[0.0f32; LANES]; 3];
         // All 16 lanes are computed (lanes past `len` are simply not traced).
@@ -207,17 +221,29 @@ impl SiteShader<'_> {
         packet.set_lanes(b.len, &origin, &dir);
         let mut radiance = [Vec3::ZERO; LANES];
         let mut t_hit = [0.0f32; LANES];
-        trace::trace_and_shade(
-            self.world,
-            packet,
-            RayKind::Primary,
-            RayHint::Coherent,
-            &mut radiance,
-            &mut t_hit,
-            self.settings.bounces,
-            trace,
-            tally,
-        );
+        match self.settings.integrator {
+            Integrator::Path => path::trace_path(
+                self.world,
+                packet,
+                &b.key,
+                &self.settings.path,
+                &mut radiance,
+                &mut t_hit,
+                path,
+                tally,
+            ),
+            Integrator::Direct => trace::trace_and_shade(
+                self.world,
+                packet,
+                RayKind::Primary,
+                RayHint::Coherent,
+                &mut radiance,
+                &mut t_hit,
+                self.settings.bounces,
+                trace,
+                tally,
+            ),
+        }
         let filter = self.settings.filter;
         let transparent = self.settings.transparent;
         let scale = self.settings.exposure.exp2();

@@ -83,7 +83,7 @@ impl Tally {
         }
     }
 
-    fn count(&mut self, kind: RayKind, active: usize) {
+    pub(super) fn count(&mut self, kind: RayKind, active: usize) {
         let n = active as u64;
         match kind {
             RayKind::Primary => self.counts.primary += n,
@@ -92,7 +92,12 @@ impl Tally {
         }
     }
 
-    fn record(&mut self, kind: RayKind, hint: RayHint, lanes: impl Fn(usize) -> Option<Ray>) {
+    pub(super) fn record(
+        &mut self,
+        kind: RayKind,
+        hint: RayHint,
+        lanes: impl Fn(usize) -> Option<Ray>,
+    ) {
         if let Some(log) = &mut self.log {
             let mut packet = RecordedPacket {
                 kind,
@@ -156,7 +161,7 @@ const OFFSET_SCALE: f32 = 16.0 * f32::EPSILON;
 /// leaving the sphere are off by a few units in the last place of these, not of the hit point:
 /// on a radius-1000 ground sphere near the origin that is up to 3e-4, three times an offset
 /// scaled by the hit point's magnitude alone (1e-4 there).
-fn primitive_extent(world: &World, hit: &Hit) -> f32 {
+pub(super) fn primitive_extent(world: &World, hit: &Hit) -> f32 {
     match world.scene.geometry(hit.geometry) {
         Geometry::Spheres(s) => s
             .center(hit.prim)
@@ -177,7 +182,7 @@ fn primitive_extent(world: &World, hit: &Hit) -> f32 {
 /// lies below, weighted by the barycentrics. Without it, points lit by the interpolated normal
 /// but facing away from the light by the flat triangle (or its neighbours) shadow themselves
 /// in facets along the terminator. Zero for spheres and meshes without normals.
-fn terminator_lift(world: &World, hit: &Hit, p: Vec3, facing: Vec3) -> Vec3 {
+pub(super) fn terminator_lift(world: &World, hit: &Hit, p: Vec3, facing: Vec3) -> Vec3 {
     let Geometry::Mesh(m) = world.scene.geometry(hit.geometry) else {
         return Vec3::ZERO;
     };
@@ -212,7 +217,7 @@ fn terminator_lift(world: &World, hit: &Hit, p: Vec3, facing: Vec3) -> Vec3 {
 /// keep tiny offsets (no light leaking under small objects) and huge primitives get the offsets
 /// their rounding needs (no acne). Written over all lanes at once so it vectorises; lanes that
 /// missed (infinite `t`) get non-finite origins and must stay inactive.
-fn leaving_origins(
+pub(super) fn leaving_origins(
     position: &[[f32; LANES]; 3],
     normal: &[[f32; LANES]; 3],
     dir: [&[f32; LANES]; 3],
@@ -351,7 +356,7 @@ pub fn trace_and_shade(
 }
 
 /// Lane `lane` of a structure-of-arrays vector.
-fn lane_vec(v: [&[f32; LANES]; 3], lane: usize) -> Vec3 {
+pub(super) fn lane_vec(v: [&[f32; LANES]; 3], lane: usize) -> Vec3 {
     Vec3::new(v[0][lane], v[1][lane], v[2][lane])
 }
 

@@ -27,8 +27,8 @@ use super::texture::{TextureCache, decode};
 use super::{MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE};
 use crate::camera::check_vfov;
 use crate::shade::{
-    Alpha, AlphaMode, ImageTexture, LUMENS_PER_WATT, Light, Material, MaterialMaps,
-    NormalMap, Texture, Wrap,
+    Alpha, AlphaMode, ImageTexture, LUMENS_PER_WATT, Light, Material, MaterialMaps, NormalMap,
+    Texture, Wrap,
 };
 
 /// The glTF extensions dofray implements: a file may require these (`extensionsRequired`);
@@ -1179,6 +1179,7 @@ impl Loader<'_> {
                 thin: !volume,
                 emission,
                 emission_texture,
+                one_sided: false,
                 maps,
             },
         ));

@@ -3,6 +3,7 @@
 
 pub mod animation;
 pub mod builtin;
+pub mod emitters;
 pub mod error;
 pub mod file;
 pub mod gltf;

@@ -8,8 +8,8 @@ use glam::{Vec2, Vec3};
 
 use super::{Background, MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE, MeshMaterials, Object, SceneDesc};
 use crate::embree::{
-    self, CandidateHit, Device, EmbreeError, Geometry, Hit, HitFilter, LANES, Ray, RayPacket16,
-    SceneBuilder, Spheres, TriangleMesh,
+    self, CandidateHit, Device, EmbreeError, Geometry, GeometryId, Hit, HitFilter, LANES, Ray,
+    RayPacket16, SceneBuilder, Spheres, TriangleMesh,
 };
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::limits::MAX_COORDINATE;
@@ -128,6 +128,8 @@ pub struct World {
     pub ambient: Vec3,
     /// What rays that hit nothing see.
     pub background: Background,
+    /// Everything that emits, as the path tracer samples it.
+    pub emitters: super::emitters::Emitters,
 }
 
 fn check_value(
@@ -397,7 +399,7 @@ impl World {
             builder.add_spheres(Spheres::new(spheres)?)?;
             geometry_materials.push(GeometryMaterials::PerPrimitive(sphere_materials));
         }
-        Ok(World {
+        let mut world = World {
             scene: builder.commit()?,
             materials: desc.materials.clone(),
             geometry_materials,
@@ -405,7 +407,27 @@ impl World {
             lights: desc.lights.clone(),
             ambient: desc.ambient,
             background: desc.background,
-        })
+            emitters: Default::default(),
+        };
+        world.emitters = super::emitters::Emitters::build(&world);
+        Ok(world)
+    }
+
+    /// The material of primitive `prim` of geometry `geometry`.
+    pub fn material_of(&self, geometry: GeometryId, prim: u32) -> &Material {
+        let m = self.geometry_materials[geometry.0 as usize].of(prim);
+        &self.materials[m.expect("the primitive exists")]
+    }
+
+    /// The material of sphere `prim` (spheres share one geometry).
+    pub fn sphere_material(&self, prim: u32) -> &Material {
+        let g = self
+            .scene
+            .geometries()
+            .iter()
+            .position(|g| matches!(g, Geometry::Spheres(_)))
+            .expect("a scene with a sphere emitter has spheres");
+        self.material_of(GeometryId(g as u32), prim)
     }
 
     /// Index into `materials` of the surface a hit found.
@@ -413,6 +435,15 @@ impl World {
         match &self.geometry_materials[hit.geometry.0 as usize] {
             GeometryMaterials::One(m) => *m,
             GeometryMaterials::PerPrimitive(ids) => ids[hit.prim as usize] as usize,
+        }
+    }
+
+    /// Whether `hit` is on the front of its surface for a ray along `dir`: the side a
+    /// triangle's winding order faces, a sphere's outside.
+    pub fn is_front(&self, hit: &Hit, position: Vec3, dir: Vec3) -> bool {
+        match self.scene.geometry(hit.geometry) {
+            Geometry::Mesh(m) => m.face_normal(hit.prim).dot(dir) < 0.0,
+            Geometry::Spheres(s) => (position - s.center(hit.prim)).dot(dir) < 0.0,
         }
     }
 

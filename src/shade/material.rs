@@ -32,6 +32,9 @@ pub struct Material {
     pub emission: Vec3,
     /// An image the emission is multiplied by (glTF `emissiveTexture`), if any.
     pub emission_texture: Option<Arc<ImageTexture>>,
+    /// Emission leaves the front face only (the side the triangle winding faces), as from an
+    /// area light; otherwise both faces emit, as a mesh with an emission shader does in Cycles.
+    pub one_sided: bool,
     /// Alpha, a metallic-roughness texture and a normal map (glTF materials); none by default.
     pub maps: MaterialMaps,
 }
@@ -164,6 +167,7 @@ impl Material {
             thin: false,
             emission: Vec3::ZERO,
             emission_texture: None,
+            one_sided: false,
             maps: MaterialMaps::default(),
         }
     }

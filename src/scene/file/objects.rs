@@ -217,6 +217,7 @@ fn material(
         thin: m.thin.unwrap_or(false),
         emission,
         emission_texture: None,
+        one_sided: false,
         maps: MaterialMaps {
             alpha,
             ..Default::default()

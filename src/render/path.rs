@@ -1,0 +1,410 @@
+//! The path tracer: unidirectional paths with next-event estimation and multiple importance
+//! sampling (power heuristic), Russian roulette, and Cycles' bounce limits per kind, traced
+//! 16 paths at a time. A site's lens samples stay one packet for the camera hit and every
+//! bounce after it (incoherent after the first); each bounce's light samples go as one
+//! `occluded16` packet. Nothing is allocated per ray.
+
+use glam::Vec3;
+
+use super::trace::{self, RayKind, Tally, lane_vec};
+use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
+use crate::sampler::path_numbers;
+use crate::scene::World;
+use crate::scene::emitters::{EmitterSample, emitted_at};
+use crate::settings::PathLimits;
+use crate::shade::{Bsdf, Lobe, SurfacePoints16};
+
+/// Per-thread scratch space for [`trace_path`].
+#[derive(Default)]
+pub struct PathScratch {
+    shadow: ShadowPacket16,
+    points: SurfacePoints16,
+}
+
+/// One path's state between bounces.
+#[derive(Clone, Copy)]
+struct Lane {
+    /// What the path's radiance is multiplied by so far.
+    throughput: Vec3,
+    /// Density of the direction the path last took (for MIS at the emitter it finds).
+    pdf: f32,
+    /// The last direction came from a delta lobe (or the camera): emitters found get full
+    /// weight.
+    delta: bool,
+    /// Where the last bounce left from.
+    from: Vec3,
+    diffuse: u32,
+    glossy: u32,
+    transmission: u32,
+}
+
+/// The power heuristic (beta = 2) weight of a strategy of density `a` against one of `b`.
+#[inline]
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 { a2 / (a2 + b2) } else { 0.0 }
+}
+
+/// `c` scaled down so that no component exceeds `clamp`.
+#[inline]
+fn clamped(c: Vec3, clamp: f32) -> Vec3 {
+    let m = c.max_element();
+    if m > clamp { c * (clamp / m) } else { c }
+}
+
+/// What one bounce found at the lanes that hit, for the next-event and BSDF samples.
+struct Vertices {
+    bsdf: [Bsdf; LANES],
+    origin: [[f32; LANES]; 3],
+    below: [[f32; LANES]; 3],
+    reach: [f32; LANES],
+}
+
+/// Traces the active lanes of `packet` (camera rays) as paths and writes each lane's radiance
+/// to `radiance` and the camera ray's hit distance to `t_hit` (infinite for misses); inactive
+/// lanes are left as they were. `keys` are the samples' keys ([`crate::sampler::sample_key`]).
+#[allow(clippy::too_many_arguments)]
+pub fn trace_path(
+    world: &World,
+    packet: &mut RayPacket16,
+    keys: &[u64; LANES],
+    limits: &PathLimits,
+    radiance: &mut [Vec3; LANES],
+    t_hit: &mut [f32; LANES],
+    scratch: &mut PathScratch,
+    tally: &mut Tally,
+) {
+    let mut lanes = [Lane {
+        throughput: Vec3::ONE,
+        pdf: 1.0,
+        delta: true,
+        from: Vec3::ZERO,
+        diffuse: 0,
+        glossy: 0,
+        transmission: 0,
+    }; LANES];
+    for lane in 0..LANES {
+        if packet.is_active(lane) {
+            radiance[lane] = Vec3::ZERO;
+            lanes[lane].from = packet.ray(lane).origin;
+        }
+    }
+    let mut t = [f32::INFINITY; LANES];
+    let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
+    for bounce in 0..=limits.total {
+        let active: u32 = (0..LANES)
+            .filter(|&l| packet.is_active(l))
+            .fold(0, |m, l| m | 1 << l);
+        if active == 0 {
+            break;
+        }
+        let hits = trace::trace_depth(world, packet, kind, hint, &mut t, tally);
+        if bounce == 0 {
+            for lane in (0..LANES).filter(|&l| active & (1 << l) != 0) {
+                t_hit[lane] = t[lane];
+            }
+        }
+        // Emitters the camera sees or that the first bounce finds are direct light; later
+        // ones indirect (what the clamp limits, as Cycles' "Indirect Light" clamp).
+        let clamp = if bounce < 2 {
+            f32::INFINITY
+        } else {
+            limits.clamp_indirect
+        };
+        add_world(world, packet, active & !hits, &lanes, clamp, radiance);
+        if hits == 0 {
+            break;
+        }
+        let v = vertices(world, packet, hits, &lanes, clamp, scratch, radiance);
+        if bounce == limits.total {
+            break;
+        }
+        let numbers: [[f32; 8]; LANES] = std::array::from_fn(|l| path_numbers(keys[l], bounce));
+        let indirect = if bounce == 0 {
+            f32::INFINITY
+        } else {
+            limits.clamp_indirect
+        };
+        let dir = packet.dirs();
+        let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
+        let at = Shading {
+            hits,
+            v: &v,
+            wo: &wo,
+            numbers: &numbers,
+            lanes: &lanes,
+        };
+        next_event(world, &at, indirect, scratch, radiance, tally);
+        packet.clear();
+        for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+            let n = scratch.points.get(lane).normal;
+            let u = &numbers[lane];
+            if let Some(ray) = scatter(&v, lane, n, wo[lane], u, limits, bounce, &mut lanes[lane]) {
+                packet.set(lane, &ray);
+            }
+        }
+        kind = RayKind::Secondary;
+        hint = RayHint::Incoherent;
+    }
+}
+
+/// Adds the world's radiance to lanes in `missed` (their rays left the scene).
+fn add_world(
+    world: &World,
+    packet: &RayPacket16,
+    missed: u32,
+    lanes: &[Lane; LANES],
+    clamp: f32,
+    radiance: &mut [Vec3; LANES],
+) {
+    if missed == 0 {
+        return;
+    }
+    let dir = packet.dirs();
+    let pdf_light = world.emitters.pdf_world();
+    for lane in (0..LANES).filter(|&l| missed & (1 << l) != 0) {
+        let s = &lanes[lane];
+        let le = world.background.radiance(lane_vec(dir, lane));
+        let w = if s.delta {
+            1.0
+        } else {
+            power_heuristic(s.pdf, pdf_light)
+        };
+        radiance[lane] += clamped(s.throughput * le * w, clamp);
+    }
+}
+
+/// The BSDFs and leaving origins of the lanes in `hits`; adds the emission they see.
+fn vertices(
+    world: &World,
+    packet: &RayPacket16,
+    hits: u32,
+    lanes: &[Lane; LANES],
+    clamp: f32,
+    scratch: &mut PathScratch,
+    radiance: &mut [Vec3; LANES],
+) -> Vertices {
+    let points = &mut scratch.points;
+    world.surface_points16(packet, hits, points);
+    let dir = packet.dirs();
+    let mut bsdf = [Bsdf::diffuse(Vec3::ZERO); LANES];
+    let mut extent = [0.0f32; LANES];
+    let mut lift = [[0.0f32; LANES]; 3];
+    for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+        let hit = packet.hit(lane).expect("lanes in `hits` hit");
+        let sp = points.get(lane);
+        let d = lane_vec(dir, lane);
+        let material = world.material(&hit);
+        let front = world.is_front(&hit, sp.position, d);
+        let le = emitted_at(material, sp.uv, front);
+        if le != Vec3::ZERO {
+            let s = &lanes[lane];
+            let w = if s.delta {
+                1.0
+            } else {
+                let pdf_light = world.emitters.pdf_hit(world, &hit, s.from, sp.position, d);
+                power_heuristic(s.pdf, pdf_light)
+            };
+            radiance[lane] += clamped(s.throughput * le * w, clamp);
+        }
+        bsdf[lane] = material.bsdf(sp.uv, front);
+        extent[lane] = trace::primitive_extent(world, &hit);
+        let up = trace::terminator_lift(world, &hit, sp.position, sp.normal);
+        for k in 0..3 {
+            lift[k][lane] = up[k];
+        }
+    }
+    let (origin, reach) = trace::leaving_origins(
+        &points.position,
+        &points.normal,
+        dir,
+        packet.tfars(),
+        &extent,
+        &lift,
+    );
+    // Transmitted rays leave from the other side: the hit point moved as far the other way.
+    let mut below = [[0.0f32; LANES]; 3];
+    for lane in 0..LANES {
+        for k in 0..3 {
+            let p = points.position[k][lane];
+            below[k][lane] = p - (origin[k][lane] - p - lift[k][lane]);
+        }
+    }
+    Vertices {
+        bsdf,
+        origin,
+        below,
+        reach,
+    }
+}
+
+/// One bounce's vertices as next-event estimation reads them.
+struct Shading<'a> {
+    /// The lanes that hit (bit per lane).
+    hits: u32,
+    v: &'a Vertices,
+    /// Unit directions towards the viewer (the reversed rays).
+    wo: &'a [Vec3; LANES],
+    numbers: &'a [[f32; 8]; LANES],
+    lanes: &'a [Lane; LANES],
+}
+
+/// Next-event estimation: a shadow packet for each always-sampled punctual light, and one for
+/// an emitter drawn per lane from the others, weighted against BSDF sampling by the power
+/// heuristic.
+fn next_event(
+    world: &World,
+    at: &Shading,
+    clamp: f32,
+    scratch: &mut PathScratch,
+    radiance: &mut [Vec3; LANES],
+    tally: &mut Tally,
+) {
+    let emitters = &world.emitters;
+    for light in &emitters.always {
+        let sample = |p: Vec3, _: &[f32; 8]| {
+            let ls = light.sample(p);
+            Some(EmitterSample {
+                dir: ls.dir,
+                distance: ls.distance,
+                radiance: ls.irradiance,
+                pdf: 1.0,
+                delta: true,
+            })
+        };
+        shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
+    }
+    if emitters.has_distribution() {
+        let sample = |p: Vec3, u: &[f32; 8]| emitters.sample(world, p, [u[0], u[1], u[2]]);
+        shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
+    }
+}
+
+/// Draws one light sample per lane that hit with `sample` (from the lane's leaving origin and
+/// numbers), traces them as one shadow packet and adds the unoccluded ones.
+fn shadow_packet(
+    world: &World,
+    at: &Shading,
+    clamp: f32,
+    sample: impl Fn(Vec3, &[f32; 8]) -> Option<EmitterSample>,
+    scratch: &mut PathScratch,
+    radiance: &mut [Vec3; LANES],
+    tally: &mut Tally,
+) {
+    let points = &scratch.points;
+    let mut origin = [[0.0f32; LANES]; 3];
+    let mut to_light = [[0.0f32; LANES]; 3];
+    let mut seg_end = [0.0f32; LANES];
+    let mut contribution = [Vec3::ZERO; LANES];
+    let mut lit = 0u32;
+    let Shading {
+        hits,
+        v,
+        wo,
+        numbers,
+        lanes,
+    } = *at;
+    for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+        let n = points.get(lane).normal;
+        let p = Vec3::new(v.origin[0][lane], v.origin[1][lane], v.origin[2][lane]);
+        let Some(es) = sample(p, &numbers[lane]) else {
+            continue;
+        };
+        let wo = wo[lane];
+        let bsdf = &v.bsdf[lane];
+        let f = bsdf.eval(n, wo, es.dir);
+        if f == Vec3::ZERO {
+            continue;
+        }
+        let w = if es.delta {
+            1.0
+        } else {
+            power_heuristic(es.pdf, bsdf.pdf(n, wo, es.dir))
+        };
+        let c = lanes[lane].throughput * f * es.radiance * (w / es.pdf);
+        if !(c.max_element() > 0.0 && c.is_finite()) {
+            continue;
+        }
+        contribution[lane] = clamped(c, clamp);
+        let side = if es.dir.dot(n) >= 0.0 {
+            &v.origin
+        } else {
+            &v.below
+        };
+        for k in 0..3 {
+            origin[k][lane] = side[k][lane];
+            to_light[k][lane] = es.dir[k];
+        }
+        seg_end[lane] = if es.distance.is_finite() {
+            es.distance * (1.0 - 1e-4) - v.reach[lane]
+        } else {
+            f32::INFINITY
+        };
+        lit |= 1 << lane;
+    }
+    if lit == 0 {
+        return;
+    }
+    let shadow = &mut scratch.shadow;
+    shadow.set_segments(lit, &origin, &to_light, &seg_end);
+    tally.count(RayKind::Shadow, lit.count_ones() as usize);
+    tally.record(RayKind::Shadow, RayHint::Incoherent, |l| {
+        shadow.is_active(l).then(|| shadow.ray(l))
+    });
+    world.scene.occluded16(shadow, RayHint::Incoherent);
+    for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
+        if shadow.is_active(lane) && !shadow.occluded(lane) {
+            radiance[lane] += contribution[lane];
+        }
+    }
+}
+
+/// Draws the next direction of lane `lane` from its BSDF; updates the path's state and
+/// returns the ray to trace, or `None` when the path ends (absorbed, out of bounces for its
+/// kind, or stopped by Russian roulette).
+#[allow(clippy::too_many_arguments)]
+fn scatter(
+    v: &Vertices,
+    lane: usize,
+    n: Vec3,
+    wo: Vec3,
+    u: &[f32; 8],
+    limits: &PathLimits,
+    bounce: u32,
+    s: &mut Lane,
+) -> Option<Ray> {
+    let sample = v.bsdf[lane].sample(n, wo, [u[3], u[4], u[5]])?;
+    let (count, limit) = match sample.lobe {
+        Lobe::Diffuse => (&mut s.diffuse, limits.diffuse),
+        Lobe::Glossy => (&mut s.glossy, limits.glossy),
+        Lobe::Transmission => (&mut s.transmission, limits.transmission),
+    };
+    if *count >= limit {
+        return None;
+    }
+    *count += 1;
+    let mut throughput = s.throughput * sample.weight;
+    // Russian roulette after the third bounce, surviving with the throughput's largest
+    // component (at most 0.95), so paths that carry little stop early and unbiasedly.
+    if bounce >= 3 {
+        let q = throughput.max_element().min(0.95);
+        if !(u[6] < q) {
+            return None;
+        }
+        throughput /= q;
+    }
+    if !(throughput.max_element() > 0.0 && throughput.is_finite()) {
+        return None;
+    }
+    let side = if sample.wi.dot(n) >= 0.0 {
+        &v.origin
+    } else {
+        &v.below
+    };
+    let origin = Vec3::new(side[0][lane], side[1][lane], side[2][lane]);
+    s.throughput = throughput;
+    s.pdf = sample.pdf;
+    s.delta = sample.delta;
+    s.from = origin;
+    Some(Ray::new(origin, sample.wi))
+}

@@ -1,0 +1,401 @@
+//! Everything that emits light, as the path tracer samples it: punctual lights (point, spot,
+//! sun), emissive triangles and spheres (area lights are emissive geometry), and the world.
+//!
+//! One emitter is picked per next-event estimate, with probability proportional to an estimate
+//! of its power (luminance-weighted), then a direction towards it is drawn. [`Emitters::pdf_hit`]
+//! and [`Emitters::pdf_world`] give the same density for a direction a BSDF sample found, so
+//! multiple importance sampling can weigh the two strategies.
+
+use std::collections::HashMap;
+use std::f32::consts::PI;
+
+use glam::{Vec2, Vec3};
+
+use crate::embree::{Geometry, GeometryId, Hit};
+use crate::shade::{Light, Material};
+
+use super::World;
+
+/// One emitter.
+#[derive(Debug, Clone, Copy)]
+enum Emitter {
+    /// A point, spot or directional light (a delta: only next-event estimation finds it).
+    Punctual(Light),
+    /// A triangle of an emissive mesh.
+    Triangle { geometry: u32, prim: u32 },
+    /// An emissive sphere.
+    Sphere { prim: u32 },
+    /// The world (light from every direction rays leave the scene in).
+    World,
+}
+
+/// A direction towards an emitter, drawn from a point.
+#[derive(Debug, Clone, Copy)]
+pub struct EmitterSample {
+    /// Unit direction from the point towards the light.
+    pub dir: Vec3,
+    /// Distance to the light along `dir` (infinite for the sun and the world).
+    pub distance: f32,
+    /// Radiance arriving along `dir` (for punctual lights: the irradiance, intensity / d^2).
+    pub radiance: Vec3,
+    /// Solid-angle density of `dir` including the probability of picking the emitter; for a
+    /// punctual light, the picking probability alone.
+    pub pdf: f32,
+    /// A punctual light: no BSDF sample can find it.
+    pub delta: bool,
+}
+
+/// Luminance of linear Rec.709 RGB.
+pub fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
+/// The emitters of a world and the distribution they are picked from.
+#[derive(Debug, Default)]
+pub struct Emitters {
+    /// Punctual lights sampled at every vertex (when there are at most
+    /// [`Emitters::ALWAYS_SAMPLED`]): each gets its own shadow ray, so a scene of a few lamps
+    /// under a bright sky has no noise from choosing between them.
+    pub always: Vec<Light>,
+    list: Vec<Emitter>,
+    /// Picking probability of each emitter.
+    prob: Vec<f32>,
+    /// Running sum of `prob` (the last entry is 1).
+    cdf: Vec<f32>,
+    /// Emitter index of each emissive triangle or sphere, by (geometry, primitive).
+    by_prim: HashMap<(u32, u32), u32>,
+    /// Index of the world in `list`, when it emits.
+    world: Option<usize>,
+}
+
+impl Emitters {
+    /// The most punctual lights sampled at every vertex; with more, they join the
+    /// distribution the other emitters are picked from.
+    pub const ALWAYS_SAMPLED: usize = 8;
+
+    /// The emitters of `world`: its lights, its emissive primitives, and its background when it
+    /// is not black.
+    pub fn build(world: &World) -> Self {
+        let (lo, hi) = world.scene.bounds();
+        let radius = if lo.cmple(hi).all() {
+            ((hi - lo).length() * 0.5).max(1e-3)
+        } else {
+            1.0
+        };
+        let mut list = Vec::new();
+        let mut power = Vec::new();
+        let mut always = Vec::new();
+        if world.lights.len() <= Self::ALWAYS_SAMPLED {
+            always = world.lights.clone();
+        } else {
+            for light in &world.lights {
+                list.push(Emitter::Punctual(*light));
+                power.push(punctual_power(light, radius));
+            }
+        }
+        let mut by_prim = HashMap::new();
+        for (g, geometry) in world.scene.geometries().iter().enumerate() {
+            let g = g as u32;
+            let count = match geometry {
+                Geometry::Mesh(m) => m.triangle_count(),
+                Geometry::Spheres(s) => s.len(),
+            };
+            for prim in 0..count as u32 {
+                let material = world.material_of(GeometryId(g), prim);
+                if material.emission == Vec3::ZERO {
+                    continue;
+                }
+                let (emitter, area) = match geometry {
+                    Geometry::Mesh(m) => (
+                        Emitter::Triangle { geometry: g, prim },
+                        0.5 * m.face_normal(prim).length(),
+                    ),
+                    Geometry::Spheres(s) => {
+                        let r = s.radius(prim);
+                        (Emitter::Sphere { prim }, 4.0 * PI * r * r)
+                    }
+                };
+                let sides = if material.one_sided { 1.0 } else { 2.0 };
+                let p = sides * PI * area * luminance(material.emission);
+                if p > 0.0 && p.is_finite() {
+                    by_prim.insert((g, prim), list.len() as u32);
+                    list.push(emitter);
+                    power.push(p);
+                }
+            }
+        }
+        let mut world_index = None;
+        let sky = luminance(world.background.horizon.max(world.background.zenith));
+        if sky > 0.0 {
+            world_index = Some(list.len());
+            list.push(Emitter::World);
+            power.push(4.0 * PI * PI * radius * radius * sky);
+        }
+        let total: f64 = power.iter().map(|&p| p as f64).sum();
+        let prob: Vec<f32> = if total > 0.0 && total.is_finite() {
+            power.iter().map(|&p| (p as f64 / total) as f32).collect()
+        } else {
+            vec![1.0 / list.len().max(1) as f32; list.len()]
+        };
+        let mut sum = 0.0f64;
+        let cdf = prob
+            .iter()
+            .map(|&p| {
+                sum += p as f64;
+                sum as f32
+            })
+            .collect();
+        Self {
+            always,
+            list,
+            prob,
+            cdf,
+            by_prim,
+            world: world_index,
+        }
+    }
+
+    /// Whether there is nothing to sample.
+    pub fn is_empty(&self) -> bool {
+        self.list.is_empty() && self.always.is_empty()
+    }
+
+    /// Whether any emitter is drawn by [`Emitters::sample`] (the others are
+    /// [`Emitters::always`]).
+    pub fn has_distribution(&self) -> bool {
+        !self.list.is_empty()
+    }
+
+    /// Picks an emitter with `u0` and draws a direction towards it from `p` with `u1`, `u2`.
+    /// `None` when nothing was drawn (no emitters, or one that sends nothing towards `p`).
+    pub fn sample(&self, world: &World, p: Vec3, u: [f32; 3]) -> Option<EmitterSample> {
+        if self.list.is_empty() {
+            return None;
+        }
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u[0])
+            .min(self.list.len() - 1);
+        let pick = self.prob[i];
+        if pick <= 0.0 {
+            return None;
+        }
+        let u = Vec2::new(u[1], u[2]);
+        let s = match self.list[i] {
+            Emitter::Punctual(light) => {
+                let ls = light.sample(p);
+                EmitterSample {
+                    dir: ls.dir,
+                    distance: ls.distance,
+                    radiance: ls.irradiance,
+                    pdf: 1.0,
+                    delta: true,
+                }
+            }
+            Emitter::Triangle { geometry, prim } => sample_triangle(world, geometry, prim, p, u)?,
+            Emitter::Sphere { prim } => sample_sphere(world, prim, p, u)?,
+            Emitter::World => {
+                let dir = uniform_sphere(u);
+                EmitterSample {
+                    dir,
+                    distance: f32::INFINITY,
+                    radiance: world.background.radiance(dir),
+                    pdf: 1.0 / (4.0 * PI),
+                    delta: false,
+                }
+            }
+        };
+        let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.max_element() > 0.0;
+        ok.then_some(EmitterSample {
+            pdf: s.pdf * pick,
+            ..s
+        })
+    }
+
+    /// The density [`Emitters::sample`] draws direction `dir` from point `from` with, for a ray
+    /// that found emissive primitive `hit` at `at` (zero if it is not an emitter).
+    pub fn pdf_hit(&self, world: &World, hit: &Hit, from: Vec3, at: Vec3, dir: Vec3) -> f32 {
+        let Some(&i) = self.by_prim.get(&(hit.geometry.0, hit.prim)) else {
+            return 0.0;
+        };
+        let pick = self.prob[i as usize];
+        match world.scene.geometry(hit.geometry) {
+            Geometry::Mesh(m) => {
+                let n = m.face_normal(hit.prim);
+                let area = 0.5 * n.length();
+                let cos = n.normalize_or_zero().dot(dir).abs();
+                let d2 = (at - from).length_squared();
+                if cos <= 0.0 || area <= 0.0 {
+                    0.0
+                } else {
+                    pick * d2 / (cos * area)
+                }
+            }
+            Geometry::Spheres(s) => {
+                pick * sphere_pdf(s.center(hit.prim), s.radius(hit.prim), from, at, dir)
+            }
+        }
+    }
+
+    /// The density [`Emitters::sample`] draws world direction `dir` with (zero when the world
+    /// does not emit).
+    pub fn pdf_world(&self) -> f32 {
+        match self.world {
+            Some(i) => self.prob[i] / (4.0 * PI),
+            None => 0.0,
+        }
+    }
+}
+
+/// Estimated power of a punctual light, for picking it (luminance-weighted watts); a sun's
+/// power is what falls on a disc of the scene's `radius`.
+fn punctual_power(light: &Light, radius: f32) -> f32 {
+    match *light {
+        Light::Point { intensity, .. } => 4.0 * PI * luminance(intensity),
+        Light::Spot {
+            intensity,
+            outer_angle,
+            inner_angle,
+            ..
+        } => {
+            let cos = 0.5 * (inner_angle.cos() + outer_angle.cos());
+            2.0 * PI * (1.0 - cos) * luminance(intensity)
+        }
+        Light::Directional { irradiance, .. } => PI * radius * radius * luminance(irradiance),
+    }
+}
+
+/// A uniformly distributed unit direction.
+pub fn uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+fn sample_triangle(world: &World, g: u32, prim: u32, p: Vec3, u: Vec2) -> Option<EmitterSample> {
+    let Geometry::Mesh(m) = world.scene.geometry(GeometryId(g)) else {
+        return None;
+    };
+    let [a, b, c] = m.indices()[prim as usize].map(|v| Vec3::from(m.positions()[v as usize]));
+    // Uniform on the triangle: barycentrics (1 - sqrt(u0), u1 sqrt(u0)) weights of b and c.
+    let s = u.x.sqrt();
+    let (bu, bv) = (s * (1.0 - u.y), s * u.y);
+    let q = a * (1.0 - bu - bv) + b * bu + c * bv;
+    let n = (b - a).cross(c - a);
+    let area = 0.5 * n.length();
+    let d = q - p;
+    let d2 = d.length_squared();
+    if area <= 0.0 || d2 <= 0.0 {
+        return None;
+    }
+    let dist = d2.sqrt();
+    let dir = d / dist;
+    let n = n / (2.0 * area);
+    let cos = n.dot(dir);
+    let material = world.material_of(GeometryId(g), prim);
+    // The front face (winding order) faces away from the ray towards it when cos < 0.
+    if cos == 0.0 || (material.one_sided && cos > 0.0) {
+        return None;
+    }
+    let uv = m.uv(prim, bu, bv).unwrap_or(Vec2::new(q.x, q.z));
+    Some(EmitterSample {
+        dir,
+        distance: dist,
+        radiance: material.emitted(uv),
+        pdf: d2 / (cos.abs() * area),
+        delta: false,
+    })
+}
+
+/// Density of a direction towards a sphere drawn by [`sample_sphere`]: uniform in the cone it
+/// fills as seen from `from` (outside), else uniform over its area.
+fn sphere_pdf(center: Vec3, radius: f32, from: Vec3, at: Vec3, dir: Vec3) -> f32 {
+    let d2 = (center - from).length_squared();
+    let r2 = radius * radius;
+    if d2 > r2 * 1.0001 {
+        let cos_max = (1.0 - r2 / d2).max(0.0).sqrt();
+        1.0 / (2.0 * PI * (1.0 - cos_max)).max(1e-12)
+    } else {
+        let n = (at - center).normalize_or_zero();
+        let cos = n.dot(dir).abs();
+        let area = 4.0 * PI * r2;
+        if cos <= 0.0 {
+            0.0
+        } else {
+            (at - from).length_squared() / (cos * area)
+        }
+    }
+}
+
+fn sample_sphere(world: &World, prim: u32, p: Vec3, u: Vec2) -> Option<EmitterSample> {
+    let Some(Geometry::Spheres(s)) = world
+        .scene
+        .geometries()
+        .iter()
+        .find(|g| matches!(g, Geometry::Spheres(_)))
+    else {
+        return None;
+    };
+    let (center, radius) = (s.center(prim), s.radius(prim));
+    let material = world.sphere_material(prim);
+    let to_c = center - p;
+    let d2 = to_c.length_squared();
+    let r2 = radius * radius;
+    if d2 <= r2 * 1.0001 {
+        // Inside (or on) the sphere: a uniform point on its surface.
+        let n = uniform_sphere(u);
+        let q = center + n * radius;
+        let d = q - p;
+        let dist2 = d.length_squared();
+        if dist2 <= 0.0 {
+            return None;
+        }
+        let dir = d / dist2.sqrt();
+        let pdf = sphere_pdf(center, radius, p, q, dir);
+        return Some(EmitterSample {
+            dir,
+            distance: dist2.sqrt(),
+            radiance: material.emitted(sphere_uv(n)),
+            pdf,
+            delta: false,
+        });
+    }
+    // Uniform in the cone of directions the sphere fills.
+    let cos_max = (1.0 - r2 / d2).max(0.0).sqrt();
+    let cos = 1.0 - u.x * (1.0 - cos_max);
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    let w = to_c / d2.sqrt();
+    let (t, b) = crate::shade::basis(w);
+    let dir = (t * (sin * phi.cos()) + b * (sin * phi.sin()) + w * cos).normalize();
+    // Nearest intersection with the sphere along dir (clamped for rays that graze it).
+    let tc = to_c.dot(dir);
+    let h2 = (r2 - (d2 - tc * tc)).max(0.0);
+    let dist = (tc - h2.sqrt()).max(0.0);
+    let n = ((p + dir * dist) - center).normalize_or_zero();
+    Some(EmitterSample {
+        dir,
+        distance: dist,
+        radiance: material.emitted(sphere_uv(n)),
+        pdf: 1.0 / (2.0 * PI * (1.0 - cos_max)).max(1e-12),
+        delta: false,
+    })
+}
+
+/// Texture coordinates of a unit sphere normal (as surface points compute them).
+fn sphere_uv(d: Vec3) -> Vec2 {
+    Vec2::new(
+        0.5 + d.z.atan2(d.x) / std::f32::consts::TAU,
+        0.5 + d.y.clamp(-1.0, 1.0).asin() / PI,
+    )
+}
+
+/// The material of an emissive hit's primitive (for one-sided emitters, zero on the back).
+pub fn emitted_at(material: &Material, uv: Vec2, front: bool) -> Vec3 {
+    if material.one_sided && !front {
+        Vec3::ZERO
+    } else {
+        material.emitted(uv)
+    }
+}
