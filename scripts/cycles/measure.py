@@ -79,7 +79,7 @@ def light(kind, location, energy, rotation=(0.0, 0.0, 0.0), **props):
     return o
 
 
-def emitter(size, height, strength):
+def emitter(size, height, strength, facing_down=True):
     m = bpy.data.materials.new("Emit")
     m.use_nodes = True
     b = m.node_tree.nodes["Principled BSDF"]
@@ -87,7 +87,8 @@ def emitter(size, height, strength):
     b.inputs["Emission Color"].default_value = (1, 1, 1, 1)
     b.inputs["Emission Strength"].default_value = strength
     b.inputs["Specular IOR Level"].default_value = 0.0
-    bpy.ops.mesh.primitive_plane_add(size=size, location=(0, 0, height), rotation=(math.pi, 0, 0))
+    rot = (math.pi, 0, 0) if facing_down else (0, 0, 0)
+    bpy.ops.mesh.primitive_plane_add(size=size, location=(0, 0, height), rotation=rot)
     o = bpy.context.object
     o.data.materials.append(m)
     o.visible_camera = False
@@ -205,6 +206,9 @@ def cases():
     yield ("emissive square 1 m, strength 10, h = 2",
            lambda: emitter(1.0, h, 10.0),
            {"L = strength": e_area(x, y, h, 10.0, "rect", 1.0)})
+    yield ("emissive square 1 m, strength 10, h = 2, facing away (back side down)",
+           lambda: emitter(1.0, h, 10.0, facing_down=False),
+           {"L = strength (two-sided)": e_area(x, y, h, 10.0, "rect", 1.0)})
 
 
 def world_case(out):

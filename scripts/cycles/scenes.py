@@ -23,7 +23,7 @@ import sys
 import time
 
 import bpy
-from mathutils import Matrix, Vector
+from mathutils import Vector
 
 # ---------------------------------------------------------------------------------------------
 # Small helpers
