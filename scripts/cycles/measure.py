@@ -17,6 +17,9 @@ import sys
 import bpy
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rgbe import write_hdr  # noqa: E402
+
 ROWS = []
 ALBEDO = 0.8
 RES = 64
@@ -232,6 +235,62 @@ def emission_seen(out):
     ROWS.append(f"| emissive plane seen, strength 5 | pixel = strength | {m.mean() / 5.0:.4f} |")
 
 
+def world_orientation(out):
+    """Which way Cycles' equirectangular lookup and the Mapping node's Z rotation turn a map:
+    a map of four bands in u (u = 0.5 blue, 0.75 white, 0 and 1 red, 0.25 green; the top half
+    twice as bright) is seen by a camera looking along +X, +Y, -X, -Y, 30 degrees up."""
+    w, h = 64, 32
+    rgb = np.zeros((h, w, 3))
+    bands = [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)]  # centred on u = 0, .25, .5, .75
+    for r in range(h):  # r = 0 is the top row (v = 1)
+        for i in range(w):
+            c = bands[int((((i + 0.5) / w + 0.125) % 1.0) * 4)]
+            rgb[r, i] = np.array(c) * (2.0 if r < h // 2 else 1.0)
+    path = os.path.join(out, "bands.hdr")
+    write_hdr(path, rgb)
+    names = {(1, 0, 0): "red", (0, 1, 0): "green", (0, 0, 1): "blue", (1, 1, 1): "white"}
+    for rot in (0.0, 90.0):
+        scene = setup(16)
+        for o in list(scene.objects):
+            if o.type == "MESH":
+                bpy.data.objects.remove(o)
+        nt = scene.world.node_tree
+        env = nt.nodes.new("ShaderNodeTexEnvironment")
+        env.image = bpy.data.images.load(path)
+        coord = nt.nodes.new("ShaderNodeTexCoord")
+        mapping = nt.nodes.new("ShaderNodeMapping")
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(rot))
+        nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+        nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+        nt.links.new(env.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+        nt.nodes["Background"].inputs["Strength"].default_value = 1.0
+        cam = scene.camera.data
+        cam.type = "PERSP"
+        cam.lens = 200.0
+        seen = []
+        for label, yaw in (("+X", 0), ("+Y", 90), ("-X", 180), ("-Y", 270)):
+            # Blender cameras look along local -Z: pitch 90 + 30 degrees up, then yaw.
+            scene.camera.rotation_euler = (math.radians(120), 0.0, math.radians(yaw - 90))
+            scene.camera.location = (0, 0, 0)
+            m = render_rgb(out, f"bands_{int(rot)}_{yaw}")
+            k = max(m)
+            colour = names.get(tuple(int(round(c / k)) for c in m), str(m))
+            seen.append(f"{label}: {colour} x{k:.2f}")
+        ROWS.append(f"| world map, Mapping Z rotation {rot:g} | camera 30 degrees up along | "
+                    + ", ".join(seen) + " |")
+
+
+def render_rgb(out, name):
+    import OpenEXR
+
+    path = os.path.join(out, name + ".exr")
+    bpy.context.scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    with OpenEXR.File(path, separate_channels=True) as f:
+        ch = f.channels()
+        return [float(ch[c].pixels.mean()) for c in "RGB"]
+
+
 def main(argv):
     global ARGS
     p = argparse.ArgumentParser()
@@ -247,6 +306,7 @@ def main(argv):
             ROWS.append(f"| {name} | {hname} | {ratio:.4f} |")
     world_case(ARGS.out)
     emission_seen(ARGS.out)
+    world_orientation(ARGS.out)
     # Blender prints its render log on stdout: the table comes last, and into measure.md.
     table = "\n".join(["| case | hypothesis | measured / predicted |", "|---|---|---|"] + ROWS)
     with open(os.path.join(ARGS.out, "measure.md"), "w") as f:

@@ -23,7 +23,11 @@ import sys
 import time
 
 import bpy
+import numpy as np
 from mathutils import Vector
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from rgbe import write_hdr  # noqa: E402
 
 # ---------------------------------------------------------------------------------------------
 # Small helpers
@@ -202,42 +206,23 @@ def punctual_record(obj):
 
 
 def make_sky(path, width=256, height=128):
-    """Writes a small equirectangular float image (Radiance .hdr). Pixel (i, j) with j = 0 the
-    bottom row; Blender's equirectangular v runs from the bottom (elevation -90) to the top."""
-    img = bpy.data.images.new("sky", width, height, alpha=False, float_buffer=True)
-    px = [0.0] * (width * height * 4)
-    sun_u, sun_v = 0.30, 0.5 + 35.0 / 180.0  # azimuth fraction, elevation 35 degrees
-    for j in range(height):
-        elev = ((j + 0.5) / height - 0.5) * math.pi
-        for i in range(width):
-            if elev > 0:
-                t = math.sin(elev)
-                r, g, b = 1.0 - 0.7 * t, 1.1 - 0.6 * t, 1.3 - 0.3 * t
-            else:
-                r, g, b = 0.25, 0.2, 0.15
-            du = min(abs((i + 0.5) / width - sun_u), 1.0 - abs((i + 0.5) / width - sun_u)) * width
-            dv = ((j + 0.5) / height - sun_v) * height
-            if du * du + dv * dv <= 2.5 * 2.5:
-                r, g, b = 400.0, 380.0, 340.0
-            k = 4 * (j * width + i)
-            px[k:k + 4] = [r, g, b, 1.0]
-    img.pixels.foreach_set(px)
-    # Mean radiance over the sphere (rows weighted by their solid angle), for approximations.
-    mean = [0.0, 0.0, 0.0]
-    wsum = 0.0
-    for j in range(height):
-        w = math.cos(((j + 0.5) / height - 0.5) * math.pi)
-        for i in range(width):
-            k = 4 * (j * width + i)
-            for c in range(3):
-                mean[c] += w * px[k + c]
-        wsum += w * width
-    mean = [m / wsum for m in mean]
-    img.filepath_raw = path
-    img.file_format = "HDR"
-    img.save()
-    bpy.data.images.remove(img)
-    return mean
+    """Writes a small equirectangular float image (Radiance .hdr; row 0 the top, elevation +90
+    degrees, as Blender's v = 1) and returns its mean radiance over the sphere (rows weighted by
+    their solid angle)."""
+    elev = (0.5 - (np.arange(height) + 0.5) / height) * math.pi
+    t = np.sin(np.maximum(elev, 0.0))
+    sky = np.stack([1.0 - 0.7 * t, 1.1 - 0.6 * t, 1.3 - 0.3 * t], -1)
+    rows = np.where((elev > 0)[:, None], sky, [0.25, 0.2, 0.15])
+    rgb = np.repeat(rows[:, None, :], width, axis=1)
+    # The sun: a disc of 2.5 pixels' radius at u = 0.3, elevation 35 degrees.
+    u = (np.arange(width) + 0.5) / width
+    du = np.minimum(abs(u - 0.30), 1.0 - abs(u - 0.30)) * width
+    dv = (elev - math.radians(35.0)) / math.pi * height
+    disc = du[None, :] ** 2 + dv[:, None] ** 2 <= 2.5 ** 2
+    rgb[disc] = [400.0, 380.0, 340.0]
+    decoded = write_hdr(path, rgb)
+    w = np.cos(elev)[:, None]
+    return [float((decoded[..., c] * w).sum() / (w.sum() * width)) for c in range(3)]
 
 
 # ---------------------------------------------------------------------------------------------
