@@ -23,6 +23,9 @@ import zlib
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from common import read_rgb  # noqa: E402
+
 GRID = 4
 
 
@@ -115,23 +118,6 @@ def run_dofray(args, toml_path, exr_path, dof):
 
 # ---------------------------------------------------------------------------------------------
 # Images
-
-
-def read_rgb(path):
-    """Linear RGB (H x W x 3, float64) from an EXR: Cycles' R, G, B or dofray's
-    ViewLayer.Combined.R/G/B."""
-    import OpenEXR
-
-    with OpenEXR.File(path, separate_channels=True) as f:
-        ch = f.channels()
-        for prefix in ("", "ViewLayer.Combined.", "Combined."):
-            if all(prefix + c in ch for c in "RGB"):
-                return np.stack([ch[prefix + c].pixels.astype(np.float64) for c in "RGB"], -1)
-        names = [n for n in ch if n.endswith(".R")]
-        if names:
-            p = names[0][:-1]
-            return np.stack([ch[p + c].pixels.astype(np.float64) for c in "RGB"], -1)
-    raise ValueError(f"{path}: no R, G, B channels")
 
 
 def region_means(img):

@@ -18,7 +18,7 @@ import bpy
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from rgbe import write_hdr  # noqa: E402
+from common import configure_cycles, read_rgb, write_hdr  # noqa: E402
 
 ROWS = []
 ALBEDO = 0.8
@@ -29,22 +29,7 @@ HALF = 2.0  # the camera sees x, y in [-HALF, HALF]
 def setup(spp):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device = "CPU"
-    c.samples = spp
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.sample_clamp_indirect = 0.0
-    c.light_sampling_threshold = 0.0
-    c.seed = 0
-    scene.render.resolution_x = RES
-    scene.render.resolution_y = RES
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    s = scene.render.image_settings
-    s.file_format = "OPEN_EXR"
-    s.color_depth = "32"
+    configure_cycles(scene, spp, RES, RES)
     w = bpy.data.worlds.new("World")
     w.use_nodes = True
     w.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
@@ -99,14 +84,11 @@ def emitter(size, height, strength, facing_down=True):
 
 
 def render(out, name):
-    import OpenEXR
-
+    """Renders the scene; returns its linear RGB (H x W x 3)."""
     path = os.path.join(out, name + ".exr")
     bpy.context.scene.render.filepath = path
     bpy.ops.render.render(write_still=True)
-    with OpenEXR.File(path, separate_channels=True) as f:
-        ch = f.channels()
-        return np.mean([ch[c].pixels.astype(np.float64) for c in "RGB"], axis=0)
+    return read_rgb(path)
 
 
 def grid():
@@ -272,23 +254,12 @@ def world_orientation(out):
             # Blender cameras look along local -Z: pitch 90 + 30 degrees up, then yaw.
             scene.camera.rotation_euler = (math.radians(120), 0.0, math.radians(yaw - 90))
             scene.camera.location = (0, 0, 0)
-            m = render_rgb(out, f"bands_{int(rot)}_{yaw}")
+            m = render(out, f"bands_{int(rot)}_{yaw}").mean(axis=(0, 1))
             k = max(m)
             colour = names.get(tuple(int(round(c / k)) for c in m), str(m))
             seen.append(f"{label}: {colour} x{k:.2f}")
         ROWS.append(f"| world map, Mapping Z rotation {rot:g} | camera 30 degrees up along | "
                     + ", ".join(seen) + " |")
-
-
-def render_rgb(out, name):
-    import OpenEXR
-
-    path = os.path.join(out, name + ".exr")
-    bpy.context.scene.render.filepath = path
-    bpy.ops.render.render(write_still=True)
-    with OpenEXR.File(path, separate_channels=True) as f:
-        ch = f.channels()
-        return [float(ch[c].pixels.mean()) for c in "RGB"]
 
 
 def main(argv):
@@ -301,7 +272,7 @@ def main(argv):
     for i, (name, build, hyps) in enumerate(cases()):
         setup(ARGS.spp)
         build()
-        m = render(ARGS.out, f"case{i}")
+        m = render(ARGS.out, f"case{i}").mean(axis=2)
         for hname, ratio in compare(m, hyps).items():
             ROWS.append(f"| {name} | {hname} | {ratio:.4f} |")
     world_case(ARGS.out)

@@ -27,7 +27,7 @@ import numpy as np
 from mathutils import Vector
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from rgbe import write_hdr  # noqa: E402
+from common import configure_cycles, write_hdr  # noqa: E402
 
 # ---------------------------------------------------------------------------------------------
 # Small helpers
@@ -339,40 +339,6 @@ SCENES = {
 # Export and render
 
 
-def configure_cycles(spp, width, height, biased):
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device = "CPU"
-    c.samples = spp
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.seed = 0
-    c.use_animated_seed = False
-    if not biased:
-        # Cycles' defaults clamp indirect light at 10, blur glossy paths and drop lights below a
-        # threshold: all biased. The reference for an unbiased path tracer turns them off.
-        c.sample_clamp_direct = 0.0
-        c.sample_clamp_indirect = 0.0
-        c.blur_glossy = 0.0
-        c.light_sampling_threshold = 0.0
-    scene.render.resolution_x = width
-    scene.render.resolution_y = height
-    scene.render.resolution_percentage = 100
-    scene.render.film_transparent = False
-    vs = scene.view_settings
-    vs.view_transform = "Standard"  # Blender 4.2 defaults to AgX
-    vs.look = "None"
-    vs.exposure = 0.0
-    vs.gamma = 1.0
-    scene.display_settings.display_device = "sRGB"
-    s = scene.render.image_settings
-    s.file_format = "OPEN_EXR"
-    s.color_mode = "RGBA"
-    s.color_depth = "32"
-    s.exr_codec = "ZIP"
-
-
 def export_glb(path):
     bpy.ops.export_scene.gltf(
         filepath=path,
@@ -406,7 +372,7 @@ def build_one(name, args):
     os.makedirs(out_dir, exist_ok=True)
     clear()
     width, height = args.res
-    configure_cycles(args.spp, width, height, args.blender_biased)
+    configure_cycles(bpy.context.scene, args.spp, width, height, args.blender_biased)
     extra = SCENES[name](out_dir)
     scene = bpy.context.scene
     bpy.context.view_layer.update()
