@@ -280,8 +280,9 @@ def report(results, failures, args):
 def main(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="the folder scenes.py wrote")
-    p.add_argument("--dofray", default="/work/main/target/release/dofray",
-                   help="the dofray binary")
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    p.add_argument("--dofray", default=os.path.join(repo, "target", "release", "dofray"),
+                   help="the dofray binary (default: this checkout's release build)")
     p.add_argument("--spp", type=int, default=1024, help="dofray samples per pixel")
     p.add_argument("--only", default="", help="comma-separated scene names (default: all)")
     p.add_argument("--dof", action="store_true", help="compare the f/2 depth-of-field variant")
