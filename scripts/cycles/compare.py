@@ -293,6 +293,10 @@ def main(argv):
                    help="regions whose Cycles mean is below this fraction of the image mean "
                         "are shown but not judged")
     args = p.parse_args(argv)
+    if not os.access(args.dofray, os.X_OK):
+        print(f"no dofray binary at {args.dofray}: build it (cargo build --release) or give "
+              f"--dofray", file=sys.stderr)
+        return 2
     names = [n for n in args.only.split(",") if n] or sorted(
         d for d in os.listdir(args.out)
         if os.path.exists(os.path.join(args.out, d, d + ".json")))
