@@ -4,6 +4,7 @@
 use dofray::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
 use dofray::embree::{Device, TriangleMesh};
 use dofray::filter::{PixelFilter, PixelFilterKind};
+use dofray::render::Integrator;
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, render};
 use dofray::scene::{Background, MeshMaterials, Object, SceneDesc, World};
 use dofray::shade::{Material, Pattern, Texture};
@@ -89,6 +90,7 @@ fn tilted_checker_edges_are_antialiased_in_every_mode() {
     let fine = render_desc(
         &scene(8 * size as u32, 0.05, vec![checker], objects),
         &RenderSettings {
+            integrator: Integrator::Direct,
             mode: Mode::Pinhole,
             aa: 1,
             pixel_filter: PixelFilter::new(PixelFilterKind::Box),
@@ -114,6 +116,7 @@ fn tilted_checker_edges_are_antialiased_in_every_mode() {
         let film = render_desc(
             &desc,
             &RenderSettings {
+                integrator: Integrator::Direct,
                 mode,
                 aa: 64,
                 pixel_filter: PixelFilter::new(PixelFilterKind::Box),
@@ -140,7 +143,13 @@ fn tilted_checker_edges_are_antialiased_in_every_mode() {
     }
 
     // The default filter (Blackman-Harris, 3 px) is smooth: edges are soft, never stepped.
-    let film = render_desc(&desc, &RenderSettings::default());
+    let film = render_desc(
+        &desc,
+        &RenderSettings {
+            integrator: Integrator::Direct,
+            ..Default::default()
+        },
+    );
     let between = film
         .color
         .iter()
@@ -195,6 +204,7 @@ fn a_defocused_sphere_smaller_than_a_pixel_adds_its_energy_wherever_it_sits() {
             let film = render_desc(
                 &desc,
                 &RenderSettings {
+                    integrator: Integrator::Direct,
                     mode,
                     spp: 4096,
                     aa: 4096,

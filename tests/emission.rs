@@ -1,10 +1,12 @@
 //! Emissive materials: `emission` in scene files, `Ke` in MTL files, `emissiveFactor` (with
 //! `KHR_materials_emissive_strength` and `emissiveTexture`) in glTF; range errors that name the
 //! file and key; and renders in which an emissive surface shows its emitted radiance, directly
-//! and in a mirror, without lighting anything else.
+//! and in a mirror, without lighting anything else under the direct integrator (the path tracer
+//! samples emitters as lights: tests/light_transport.rs).
 
 mod scene_assets;
 
+use dofray::render::Integrator;
 use std::path::{Path, PathBuf};
 
 use dofray::embree::Device;
@@ -44,6 +46,7 @@ fn dense(desc: &SceneDesc) -> Film {
     let world = World::build(desc, &Device::new().unwrap()).unwrap();
     let camera = desc.camera.build(|_| None).unwrap();
     let settings = RenderSettings {
+        integrator: Integrator::Direct,
         mode: Mode::Dense,
         spp: 16,
         aa: 16,
@@ -89,7 +92,7 @@ fn scene_files_read_emission_and_default_to_none() {
     assert_eq!(grey.materials[0].emission, Vec3::splat(3.0));
     let none = load_toml(
         "none",
-        &EMITTER.replace("emission = [2, 1, 0.5]\n", "specular = 0.5\n"),
+        &EMITTER.replace("emission = [2, 1, 0.5]\n", "roughness = 0.5\n"),
     )
     .unwrap();
     assert_eq!(none.materials[0].emission, Vec3::ZERO);
@@ -155,7 +158,7 @@ color = 0
 [[materials]]
 name = "wall"
 diffuse = 1
-specular = 1
+roughness = 0.5
 
 {EMITTER}
 
@@ -203,8 +206,9 @@ color = 0
 
 [[materials]]
 name = "mirror"
-diffuse = 0
-mirror = 1
+diffuse = 1
+metallic = 1
+roughness = 0
 
 [[materials]]
 name = "lamp"

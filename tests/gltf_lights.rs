@@ -413,21 +413,21 @@ fn spot_falloff_is_full_inside_zero_outside_and_smooth_between() {
         spot.sample(p).irradiance.x * (Vec3::new(0.0, 2.0, 0.0) - p).length_squared()
     };
     assert!((lit(0.0) - 8.0).abs() < 1e-4);
-    assert!((lit(19.0) - 8.0).abs() < 1e-4);
+    assert!((lit(10.0) - 8.0).abs() < 1e-4);
     assert_eq!(lit(31.0), 0.0);
     assert_eq!(lit(60.0), 0.0);
     let mut last = 8.0;
-    for deg in [21.0, 23.0, 25.0, 27.0, 29.0] {
+    for deg in [24.0, 26.0, 28.0, 29.5] {
         let v = lit(deg);
         assert!(v > 0.0 && v < last, "{deg}: {v} after {last}");
         last = v;
     }
-    // The glTF reference: t = (cos a - cos outer) / (cos inner - cos outer), squared.
-    let t = (25f32.to_radians().cos() - outer.cos()) / (inner.cos() - outer.cos());
-    assert!((lit(25.0) - 8.0 * t * t).abs() < 1e-3);
-    // Equal angles: a hard edge.
-    assert_eq!(spot_falloff(0.95, 0.9, 0.9), 1.0);
-    assert_eq!(spot_falloff(0.85, 0.9, 0.9), 0.0);
+    // Blender's blend (1 - inner / outer = 1/3) and smoothstep.
+    let x = (26f32.to_radians().cos() - outer.cos()) / ((1.0 - outer.cos()) / 3.0);
+    assert!((lit(26.0) - 8.0 * x * x * (3.0 - 2.0 * x)).abs() < 1e-3);
+    // No blend: a hard edge.
+    assert_eq!(spot_falloff(0.95, 0.9, 0.0), 1.0);
+    assert_eq!(spot_falloff(0.85, 0.9, 0.0), 0.0);
 }
 
 #[test]

@@ -5,6 +5,7 @@
 
 mod scene_assets; // for its base64 encoder
 
+use dofray::render::Integrator;
 use std::io::Cursor;
 use std::path::PathBuf;
 
@@ -101,6 +102,7 @@ fn render_with(desc: &SceneDesc, aa: u32, threads: usize, width: PacketWidth) ->
     world.scene.set_packet_width(width);
     let camera = desc.camera.build(|_| None).unwrap();
     let settings = RenderSettings {
+        integrator: Integrator::Direct,
         mode: Mode::Dense,
         pixel_filter: PixelFilter {
             kind: PixelFilterKind::Box,
@@ -195,8 +197,9 @@ fn cell_pixel(cx: usize, cy: usize) -> (usize, usize) {
 fn mask_holes_show_the_wall_and_let_light_through() {
     // Lit from the camera: everything the camera sees through a hole is lit, if the shadow
     // rays pass the hole too.
-    let scene =
-        format!("{VIEW}\n[[lights]]\ntype = \"point\"\nposition = [0, 0, -5]\nintensity = 64\n");
+    let scene = format!(
+        "{VIEW}\n[[lights]]\ntype = \"point\"\nposition = [0, 0, -5]\nintensity = 201.06\n"
+    );
     let desc = load(
         "mask",
         &quad_gltf(mask_material("MASK"), &[checker_alpha()]),
@@ -254,7 +257,7 @@ fn mask_shadows_have_holes() {
     }
     // In a render: a light from the side throws the checker onto the wall beside the quad.
     let scene = format!(
-        "{VIEW}\n[[lights]]\ntype = \"directional\"\ndirection = [-1, 0, 1]\nirradiance = 1\n"
+        "{VIEW}\n[[lights]]\ntype = \"directional\"\ndirection = [-1, 0, 1]\nirradiance = 3.1416\n"
     );
     let lit = |mode: &str| {
         let desc = load(
@@ -402,7 +405,7 @@ fn tilted_with(test: &str, towards_v: bool, light: [f32; 3], tangent: Option<[f3
         "normalTexture": {"index": 0}
     });
     let scene = format!(
-        "{VIEW}\n[[lights]]\ntype = \"directional\"\ndirection = {light:?}\nirradiance = 1\n"
+        "{VIEW}\n[[lights]]\ntype = \"directional\"\ndirection = {light:?}\nirradiance = 3.1416\n"
     );
     let mut gltf = quad_gltf(material, &[map]);
     if let Some(t) = tangent {

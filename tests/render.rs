@@ -3,6 +3,7 @@
 use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
 use dofray::embree::{Device, EMBREE_MAJOR, PacketWidth, limited_isas};
 use dofray::metrics::{Space, psnr};
+use dofray::render::Integrator;
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, RenderStats, SamplingRule, render};
 use dofray::scene::{Background, Object, SceneDesc, World, builtin};
 use dofray::shade::Material;
@@ -33,6 +34,7 @@ fn run(
     // The seed's fixed rule: these tests are about its intervals (tests/error_control.rs
     // covers the error-controlled rule).
     let settings = RenderSettings {
+        integrator: Integrator::Direct,
         mode,
         rule: SamplingRule::Seed {
             interval_factor: k,
@@ -137,6 +139,7 @@ fn conservative_intervals_never_reach_an_in_focus_pixel() {
     assert!(checked > 1000);
     // The paper-exact rule does interpolate next to in-focus pixels somewhere in this scene.
     let settings = RenderSettings {
+        integrator: Integrator::Direct,
         mode: Mode::Adaptive,
         rule: SamplingRule::Seed {
             interval_factor: 0.4,
@@ -186,6 +189,7 @@ fn rendered_blur_disc_matches_coc_px() {
     };
     let (world, camera) = setup(&desc);
     let settings = RenderSettings {
+        integrator: Integrator::Direct,
         mode: Mode::Dense,
         spp: 256,
         ..Default::default()
@@ -223,10 +227,12 @@ fn bad_settings_are_rejected() {
     let (world, camera) = paper(16, 12);
     for settings in [
         RenderSettings {
+            integrator: Integrator::Direct,
             spp: 0,
             ..Default::default()
         },
         RenderSettings {
+            integrator: Integrator::Direct,
             rule: SamplingRule::Seed {
                 interval_factor: 0.0,
                 paper_exact: false,
@@ -234,6 +240,7 @@ fn bad_settings_are_rejected() {
             ..Default::default()
         },
         RenderSettings {
+            integrator: Integrator::Direct,
             rule: SamplingRule::Seed {
                 interval_factor: f32::NAN,
                 paper_exact: false,
@@ -241,16 +248,19 @@ fn bad_settings_are_rejected() {
             ..Default::default()
         },
         RenderSettings {
+            integrator: Integrator::Direct,
             max_interval: 3,
             ..Default::default()
         },
         RenderSettings {
+            integrator: Integrator::Direct,
             rule: SamplingRule::ErrorControlled {
                 tolerance: Some(0.0),
             },
             ..Default::default()
         },
         RenderSettings {
+            integrator: Integrator::Direct,
             rule: SamplingRule::ErrorControlled {
                 tolerance: Some(f32::INFINITY),
             },
@@ -318,6 +328,7 @@ fn mirror_reflects_one_bounce() {
     };
     let (world, camera) = setup(&desc);
     let pinhole = |bounces| RenderSettings {
+        integrator: Integrator::Direct,
         mode: Mode::Pinhole,
         bounces,
         ..Default::default()
@@ -354,6 +365,7 @@ fn every_embree_isa_and_packet_width_renders_the_same_image() {
     desc.camera.height = 60;
     let camera = desc.camera.build(|_| None).unwrap();
     let settings = |mode| RenderSettings {
+        integrator: Integrator::Direct,
         mode,
         seed: 5,
         ..Default::default()

@@ -5,6 +5,7 @@
 
 use dofray::camera::{ApertureShape, Camera, CameraSpec, Focus, LensSpec};
 use dofray::embree::{Device, TriangleMesh};
+use dofray::render::Integrator;
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, render};
 use dofray::scene::{Background, MeshMaterials, Object, SceneDesc, World};
 use dofray::shade::{Light, Material};
@@ -37,9 +38,10 @@ fn scene(camera: CameraSpec, objects: Vec<Object>, light: Vec3, intensity: f32) 
         camera,
         materials: vec![Material::diffuse(Vec3::splat(0.5))],
         objects,
+        // Times pi: the direct integrator's Lambert term has its 1 / pi.
         lights: vec![Light::Point {
             position: light,
-            intensity: Vec3::splat(intensity),
+            intensity: Vec3::splat(intensity * std::f32::consts::PI),
         }],
         ambient: Vec3::splat(0.1),
         background: Background::uniform(Vec3::ZERO),
@@ -74,6 +76,7 @@ fn card(center: Vec3, size: f32) -> Object {
 fn render_film(desc: &SceneDesc, mode: Mode) -> Film {
     let (world, camera) = setup(desc);
     let settings = RenderSettings {
+        integrator: Integrator::Direct,
         mode,
         seed: 5,
         ..Default::default()

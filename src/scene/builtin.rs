@@ -41,7 +41,7 @@ pub fn paper() -> SceneDesc {
             b: Vec3::from(b),
             scale,
         },
-        roughness: 0.35,
+        roughness: 0.45,
         ..Material::diffuse(Vec3::ZERO)
     };
     let materials = vec![
@@ -106,12 +106,12 @@ pub fn paper() -> SceneDesc {
         objects,
         lights: vec![Light::Point {
             position: Vec3::new(-4.0, 8.0, -4.0),
-            intensity: Vec3::splat(110.0),
+            intensity: Vec3::splat(345.6),
         }],
         ambient: Vec3::splat(0.12),
         background: Background {
-            horizon: Vec3::new(0.75, 0.82, 0.95),
-            zenith: Vec3::new(0.3, 0.45, 0.8),
+            horizon: Vec3::new(0.375, 0.41, 0.475),
+            zenith: Vec3::new(0.15, 0.225, 0.4),
         },
         ..Default::default()
     }

@@ -2,6 +2,7 @@
 //! the materials and lights that shade its hits).
 
 pub mod animation;
+pub mod area_light;
 pub mod builtin;
 pub mod emitters;
 pub mod error;

@@ -228,17 +228,21 @@ pub fn default_light(forward: Vec3) -> Light {
     let direction = (forward * 0.5 + right * 0.35 - Vec3::Y).normalize();
     Light::Directional {
         direction,
-        irradiance: Vec3::splat(2.2),
+        irradiance: Vec3::splat(3.0),
     }
 }
 
 /// The sky of scenes that do not set one (the paper scene's).
 pub fn default_background() -> Background {
     Background {
-        horizon: Vec3::new(0.75, 0.82, 0.95),
-        zenith: Vec3::new(0.3, 0.45, 0.8),
+        horizon: Vec3::new(0.375, 0.41, 0.475),
+        zenith: Vec3::new(0.15, 0.225, 0.4),
     }
 }
+
+/// The radiance of Blender's default world (its Background node's grey 0.05 at strength 1):
+/// what a model that brings its own lights is lit by besides them.
+pub const BLENDER_WORLD: f32 = 0.05;
 
 /// Default aperture radius for a bare model, as a fraction of its bounds' diagonal.
 pub const MODEL_APERTURE_FRACTION: f32 = 0.02;
@@ -246,7 +250,8 @@ pub const MODEL_APERTURE_FRACTION: f32 = 0.02;
 /// A scene around a model file: the model's meshes and materials, the glTF camera if it has
 /// one (else a view framing the model; a file whose only camera is orthographic is refused),
 /// a small aperture focused on the bounds' centre, the file's lights (else one key light),
-/// some ambient light and the default sky.
+/// and Blender's default world (a model without lights: a key light, some ambient light and
+/// the default sky).
 pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
     if model.meshes.is_empty() {
         return Err(LoadError::Empty {
@@ -299,14 +304,24 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         },
         materials,
         objects,
-        // The file's own lights replace the key light.
+        // A file with lights was lit by its artist: it gets those and Blender's default world
+        // (uniform grey 0.05), as when it is imported into Blender. A file without gets a key
+        // light and the default sky.
+        ambient: Vec3::splat(if model.lights.is_empty() {
+            0.15
+        } else {
+            BLENDER_WORLD
+        }),
+        background: if model.lights.is_empty() {
+            default_background()
+        } else {
+            Background::uniform(Vec3::splat(BLENDER_WORLD))
+        },
         lights: if model.lights.is_empty() {
             vec![default_light((look_at - eye).normalize_or(Vec3::NEG_Z))]
         } else {
             model.lights
         },
-        ambient: Vec3::splat(0.15),
-        background: default_background(),
         warnings: model.warnings,
         ..Default::default()
     })

@@ -2,38 +2,50 @@
 
 use std::ops::Range;
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use toml::Spanned;
 
 use super::Ctx;
-use super::raw::{Color, Finite, LightKind, RawBackground, RawLight, v3};
+use super::raw::{Color, Finite, LightKind, RawBackground, RawLight, RawSize, v3};
 use crate::camera::CameraSpec;
 use crate::scene::Background;
+use crate::scene::area_light::{AreaLight, AreaShape};
 use crate::scene::error::LoadError;
 use crate::scene::model::{default_background, default_light};
 use crate::shade::Light;
 
-/// The file's lights, else the default key light unless a model brings lights; plus the
-/// models' lights.
+/// One `[[lights]]` entry: a punctual light, or an area light (emissive geometry).
+pub(super) enum FileLight {
+    Punctual(Light),
+    Area(AreaLight),
+}
+
+/// The file's lights (punctual, and area lights to add as geometry), else the default key
+/// light unless a model brings lights; plus the models' lights.
 pub(super) fn lights(
     ctx: &Ctx,
     raw: Option<Vec<Spanned<RawLight>>>,
     model_lights: Vec<Light>,
     camera: &CameraSpec,
-) -> Result<Vec<Light>, LoadError> {
-    let mut lights: Vec<Light> = match raw {
-        None if model_lights.is_empty() => vec![default_light(
+) -> Result<(Vec<Light>, Vec<AreaLight>), LoadError> {
+    let mut lights = Vec::new();
+    let mut areas = Vec::new();
+    match raw {
+        None if model_lights.is_empty() => lights.push(default_light(
             (camera.look_at - camera.eye).normalize_or(Vec3::Z),
-        )],
-        None => Vec::new(),
-        Some(lights) => lights
-            .into_iter()
-            .enumerate()
-            .map(|(i, l)| light(ctx, i, l))
-            .collect::<Result<_, _>>()?,
-    };
+        )),
+        None => {}
+        Some(raw) => {
+            for (i, l) in raw.into_iter().enumerate() {
+                match light(ctx, i, l)? {
+                    FileLight::Punctual(l) => lights.push(l),
+                    FileLight::Area(a) => areas.push(a),
+                }
+            }
+        }
+    }
     lights.extend(model_lights);
-    Ok(lights)
+    Ok((lights, areas))
 }
 
 /// The `[background]`: a uniform `color`, or a sky from `horizon` to `zenith`.
@@ -67,10 +79,31 @@ pub(super) fn ambient(raw: Option<Color>) -> Vec3 {
 }
 
 /// One `[[lights]]` table.
-fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<Light, LoadError> {
+fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<FileLight, LoadError> {
     let span = l.span();
     let l = l.into_inner();
     let key = format!("lights[{i}]");
+    if matches!(
+        l.kind,
+        LightKind::Rect | LightKind::Disk | LightKind::Sphere
+    ) {
+        return area(ctx, &key, span, l).map(FileLight::Area);
+    }
+    let area_keys = [
+        ("size", l.size.is_some()),
+        ("radius", l.radius.is_some()),
+        ("power", l.power.is_some()),
+        ("up", l.up.is_some()),
+    ];
+    for (k, set) in area_keys {
+        if set {
+            return Err(ctx.invalid(
+                span,
+                format!("{key}.{k}"),
+                format!("`{k}` belongs to area lights (type \"rect\", \"disk\" or \"sphere\")"),
+            ));
+        }
+    }
     if l.kind != LightKind::Spot {
         let cone = [
             ("inner_angle", l.inner_angle.is_some()),
@@ -78,11 +111,117 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<Light, LoadError> 
         ];
         refuse(ctx, &span, &key, cone, "belongs to spot lights")?;
     }
-    match l.kind {
+    let color = l.color.map_or(Vec3::ONE, |c| c.0);
+    let light = match l.kind {
         LightKind::Spot => spot(ctx, &key, span, l),
         LightKind::Point => point(ctx, &key, span, l),
-        LightKind::Directional => directional(ctx, &key, span, l),
+        _ => directional(ctx, &key, span, l),
+    }?;
+    Ok(FileLight::Punctual(tinted(light, color)))
+}
+
+/// `light` with its intensity or irradiance multiplied by `color`.
+fn tinted(light: Light, color: Vec3) -> Light {
+    match light {
+        Light::Point {
+            position,
+            intensity,
+        } => Light::Point {
+            position,
+            intensity: intensity * color,
+        },
+        Light::Spot {
+            position,
+            direction,
+            intensity,
+            inner_angle,
+            outer_angle,
+        } => Light::Spot {
+            position,
+            direction,
+            intensity: intensity * color,
+            inner_angle,
+            outer_angle,
+        },
+        Light::Directional {
+            direction,
+            irradiance,
+        } => Light::Directional {
+            direction,
+            irradiance: irradiance * color,
+        },
     }
+}
+
+/// A `rect`, `disk` or `sphere` light: `position`, `power` (watts, as Blender's) times
+/// `color`, `size` or `radius`, and for flat ones the `direction` they face and `up`.
+fn area(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<AreaLight, LoadError> {
+    let punctual = [
+        ("intensity", l.intensity.is_some()),
+        ("irradiance", l.irradiance.is_some()),
+        ("inner_angle", l.inner_angle.is_some()),
+        ("outer_angle", l.outer_angle.is_some()),
+    ];
+    for (k, set) in punctual {
+        if set {
+            return Err(ctx.invalid(
+                span,
+                format!("{key}.{k}"),
+                format!("`{k}` belongs to point, spot and directional lights; an area light takes `power` (watts)"),
+            ));
+        }
+    }
+    let position = l
+        .position
+        .ok_or_else(|| ctx.invalid(span.clone(), key, "an area light needs `position`"))?;
+    let needs = |what: &str| ctx.invalid(span.clone(), key, what.to_string());
+    let shape = match l.kind {
+        LightKind::Rect => AreaShape::Rect {
+            size: match l.size {
+                Some(RawSize::Square(s)) => Vec2::splat(s.0),
+                Some(RawSize::Sides([w, h])) => Vec2::new(w.0, h.0),
+                None => {
+                    return Err(needs(
+                        "a rect light needs `size` (a number or [width, height])",
+                    ));
+                }
+            },
+        },
+        LightKind::Disk => match l.size {
+            Some(RawSize::Square(d)) => AreaShape::Disk { radius: 0.5 * d.0 },
+            _ => return Err(needs("a disk light needs `size` (its diameter, a number)")),
+        },
+        _ => AreaShape::Sphere {
+            radius: l
+                .radius
+                .ok_or_else(|| needs("a sphere light needs `radius`"))?
+                .0,
+        },
+    };
+    let direction = match (&l.direction, l.kind) {
+        (Some(d), _) if v3(*d.get_ref()).normalize_or_zero() == Vec3::ZERO => {
+            return Err(ctx.invalid(
+                d.span(),
+                format!("{key}.direction"),
+                "the direction must not be zero",
+            ));
+        }
+        (Some(d), _) => v3(*d.get_ref()),
+        (None, LightKind::Sphere) => Vec3::NEG_Y,
+        (None, _) => {
+            return Err(needs(
+                "a rect or disk light needs `direction` (the way it faces)",
+            ));
+        }
+    };
+    let power = l.power.map_or(100.0, |p| p.get_ref().0);
+    Ok(AreaLight {
+        shape,
+        position: v3(position),
+        direction,
+        up: l.up.map_or(Vec3::Y, v3),
+        power: l.color.map_or(Vec3::ONE, |c| c.0) * power,
+    })
 }
 
 fn spot(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light, LoadError> {

@@ -155,7 +155,19 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         .animation
         .map(|a| animation::animation(ctx, a, &camera, focus_on_look_at))
         .transpose()?;
-    let lights = lights::lights(ctx, raw.lights, objects.lights, &camera)?;
+    let (lights, areas) = lights::lights(ctx, raw.lights, objects.lights, &camera)?;
+    let (mut material_list, mut object_list) = (materials.list, objects.list);
+    for (i, area) in areas.iter().enumerate() {
+        material_list.push(area.material());
+        let object = area.object(material_list.len() - 1).map_err(|e| {
+            ctx.invalid(
+                0..0,
+                format!("lights[{i}]"),
+                format!("the area light is degenerate: {e}"),
+            )
+        })?;
+        object_list.push(object);
+    }
     let background = lights::background(ctx, raw.background)?;
     let settings = render_settings(ctx, raw.render.unwrap_or_default())?;
     let name = raw.name.unwrap_or_else(|| {
@@ -166,8 +178,8 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
     Ok(SceneDesc {
         name,
         camera,
-        materials: materials.list,
-        objects: objects.list,
+        materials: material_list,
+        objects: object_list,
         lights,
         ambient: lights::ambient(raw.ambient),
         background,
@@ -243,6 +255,12 @@ fn render_settings(ctx: &Ctx, render: RawRender) -> Result<SettingsPatch, LoadEr
         pixel_filter_width: render.pixel_filter_width.as_ref().map(|w| w.get_ref().0),
         rule,
         transparent: render.transparent.unwrap_or(false),
+        integrator: render.integrator,
+        max_bounces: render.max_bounces.as_ref().map(|s| *s.get_ref()),
+        diffuse_bounces: render.diffuse_bounces.as_ref().map(|s| *s.get_ref()),
+        glossy_bounces: render.glossy_bounces.as_ref().map(|s| *s.get_ref()),
+        transmission_bounces: render.transmission_bounces.as_ref().map(|s| *s.get_ref()),
+        clamp_indirect: render.clamp_indirect.as_ref().map(|s| s.get_ref().0),
         ..Default::default()
     };
     if let Err(e) = patch.resolve() {
@@ -252,6 +270,10 @@ fn render_settings(ctx: &Ctx, render: RawRender) -> Result<SettingsPatch, LoadEr
             Param::PixelFilterWidth => render.pixel_filter_width.map(|s| s.span()),
             Param::Tolerance => render.tolerance.map(|s| s.span()),
             Param::IntervalFactor => render.interval_factor.map(|s| s.span()),
+            Param::MaxBounces => render.max_bounces.map(|s| s.span()),
+            Param::DiffuseBounces => render.diffuse_bounces.map(|s| s.span()),
+            Param::GlossyBounces => render.glossy_bounces.map(|s| s.span()),
+            Param::TransmissionBounces => render.transmission_bounces.map(|s| s.span()),
             _ => None,
         };
         let at = ctx.at(span.unwrap_or(0..0));

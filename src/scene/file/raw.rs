@@ -343,6 +343,12 @@ pub(super) struct RawRender {
     pub(super) pixel_filter: Option<crate::filter::PixelFilterKind>,
     pub(super) pixel_filter_width: Option<Spanned<Positive>>,
     pub(super) transparent: Option<bool>,
+    pub(super) integrator: Option<crate::settings::Integrator>,
+    pub(super) max_bounces: Option<Spanned<u32>>,
+    pub(super) diffuse_bounces: Option<Spanned<u32>>,
+    pub(super) glossy_bounces: Option<Spanned<u32>>,
+    pub(super) transmission_bounces: Option<Spanned<u32>>,
+    pub(super) clamp_indirect: Option<Spanned<Positive>>,
 }
 
 #[derive(Default, Deserialize)]
@@ -409,6 +415,17 @@ pub(super) enum LightKind {
     Point,
     Directional,
     Spot,
+    Rect,
+    Disk,
+    Sphere,
+}
+
+/// A rectangle light's size: one number (a square) or `[width, height]`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(untagged)]
+pub(super) enum RawSize {
+    Square(Positive),
+    Sides([Positive; 2]),
 }
 
 #[derive(Deserialize)]
@@ -422,6 +439,11 @@ pub(super) struct RawLight {
     pub(super) irradiance: Option<Color>,
     pub(super) inner_angle: Option<Spanned<Finite>>,
     pub(super) outer_angle: Option<Spanned<Finite>>,
+    pub(super) size: Option<RawSize>,
+    pub(super) radius: Option<Positive>,
+    pub(super) power: Option<Spanned<NonNeg>>,
+    pub(super) color: Option<Color>,
+    pub(super) up: Option<V3>,
 }
 
 #[derive(Deserialize)]

@@ -1,0 +1,235 @@
+//! The path tracer against closed forms: furnaces, a Lambertian plane under a sun, a point
+//! light and a sphere light. Small images, many samples per pixel, means over many pixels.
+
+use std::f32::consts::PI;
+
+use dofray::camera::{CameraSpec, Focus, LensSpec};
+use dofray::embree::{Device, TriangleMesh};
+use dofray::render::{Film, Integrator, Mode, NoProgress, PathLimits, RenderSettings, render};
+use dofray::scene::{Background, MeshMaterials, Object, SceneDesc, World};
+use dofray::shade::{Light, Material};
+use glam::Vec3;
+
+/// A pinhole camera at `eye` looking at `look_at`, 16 x 16 pixels over `vfov` degrees.
+fn camera(eye: Vec3, look_at: Vec3, vfov: f32) -> CameraSpec {
+    CameraSpec {
+        eye,
+        look_at,
+        up: if (look_at - eye).normalize().y.abs() > 0.99 {
+            Vec3::Z
+        } else {
+            Vec3::Y
+        },
+        vfov_deg: vfov,
+        width: 16,
+        height: 16,
+        lens: LensSpec::Pinhole,
+        focus: Focus::Distance(1.0),
+        ..Default::default()
+    }
+}
+
+/// Renders `desc` with the path tracer, `spp` samples per pixel, paths up to `bounces` long.
+fn render_path(desc: &SceneDesc, spp: u32, bounces: u32) -> Film {
+    let device = Device::new().unwrap();
+    let world = World::build(desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    let settings = RenderSettings {
+        mode: Mode::Pinhole,
+        aa: spp,
+        integrator: Integrator::Path,
+        path: PathLimits {
+            total: bounces,
+            diffuse: bounces,
+            glossy: bounces,
+            transmission: bounces,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    render(&world, &camera, &settings, &NoProgress).unwrap().0
+}
+
+fn mean(film: &Film) -> Vec3 {
+    film.color.iter().copied().sum::<Vec3>() / film.color.len() as f32
+}
+
+/// A square of side `2 h` in the plane y = 0, facing +y.
+fn ground(h: f32) -> TriangleMesh {
+    TriangleMesh::new(
+        vec![[-h, 0.0, -h], [h, 0.0, -h], [h, 0.0, h], [-h, 0.0, h]],
+        vec![[0, 2, 1], [0, 3, 2]],
+    )
+    .unwrap()
+}
+
+fn assert_close(got: f32, want: f32, rel: f32, what: &str) {
+    assert!(
+        (got - want).abs() <= rel * want.abs(),
+        "{what}: got {got}, want {want} (within {:.2}%)",
+        rel * 100.0
+    );
+}
+
+/// White furnace: a white Lambertian sphere in a uniform world of radiance 1 cannot be told
+/// from it; a perfect mirror neither.
+#[test]
+fn a_white_sphere_vanishes_in_a_uniform_world() {
+    for material in [
+        Material::diffuse(Vec3::ONE),
+        Material {
+            metallic: 1.0,
+            roughness: 0.0,
+            ..Material::diffuse(Vec3::ONE)
+        },
+    ] {
+        let desc = SceneDesc {
+            camera: camera(Vec3::new(0.0, 0.0, 4.0), Vec3::ZERO, 25.0),
+            materials: vec![material],
+            objects: vec![Object::Sphere {
+                center: Vec3::ZERO,
+                radius: 1.0,
+                material: 0,
+            }],
+            lights: vec![],
+            ambient: Vec3::ZERO,
+            background: Background::uniform(Vec3::ONE),
+            ..Default::default()
+        };
+        let film = render_path(&desc, 64, 8);
+        let m = mean(&film);
+        for c in m.to_array() {
+            assert_close(c, 1.0, 0.01, "furnace mean");
+        }
+        // Every pixel, not just the mean, is close: nothing is lost or gained anywhere.
+        for px in &film.color {
+            assert!((px.x - 1.0).abs() < 0.1, "{px}");
+        }
+    }
+}
+
+/// Inside a closed sphere of albedo 0.8 that emits 0.2, every point sees 0.2 of emission plus
+/// 0.8 of what arrives: radiance 0.2 / (1 - 0.8) = 1 once paths are long enough (0.8^200 is
+/// nothing). Exercises emission, bounces, Russian roulette and MIS of an emitter sampled
+/// from inside.
+#[test]
+fn a_closed_furnace_converges_to_emission_over_one_minus_albedo() {
+    let desc = SceneDesc {
+        camera: camera(Vec3::new(0.3, -0.2, 0.1), Vec3::new(1.0, 0.5, -2.0), 60.0),
+        materials: vec![Material {
+            emission: Vec3::splat(0.2),
+            ..Material::diffuse(Vec3::splat(0.8))
+        }],
+        objects: vec![Object::Sphere {
+            center: Vec3::ZERO,
+            radius: 3.0,
+            material: 0,
+        }],
+        lights: vec![],
+        ambient: Vec3::ZERO,
+        background: Background::uniform(Vec3::ZERO),
+        ..Default::default()
+    };
+    let m = mean(&render_path(&desc, 256, 200));
+    for c in m.to_array() {
+        assert_close(c, 1.0, 0.01, "closed furnace");
+    }
+}
+
+/// A Lambertian plane of albedo `rho` under a sun of irradiance E at angle theta:
+/// L = rho E cos(theta) / pi, exactly (one light sample per pixel, no noise).
+#[test]
+fn a_lambertian_plane_under_a_sun_has_the_closed_form_radiance() {
+    let rho = 0.6;
+    let theta = 30.0f32.to_radians();
+    let e = 3.0;
+    let desc = SceneDesc {
+        camera: camera(Vec3::new(0.0, 2.0, 0.0), Vec3::ZERO, 20.0),
+        materials: vec![Material::diffuse(Vec3::splat(rho))],
+        objects: vec![Object::Mesh {
+            mesh: ground(50.0),
+            materials: MeshMaterials::One(0),
+        }],
+        lights: vec![Light::Directional {
+            direction: Vec3::new(theta.sin(), -theta.cos(), 0.0),
+            irradiance: Vec3::splat(e),
+        }],
+        ambient: Vec3::ZERO,
+        background: Background::uniform(Vec3::ZERO),
+        ..Default::default()
+    };
+    let m = mean(&render_path(&desc, 16, 4));
+    assert_close(m.x, rho * e * theta.cos() / PI, 0.005, "sun on a plane");
+}
+
+/// A point light of intensity I at height h over a Lambertian plane: at the foot of the light,
+/// L = rho I / (pi h^2) (the camera looks at a patch small enough for the falloff to be
+/// negligible: 0.3 degrees wide).
+#[test]
+fn a_lambertian_plane_under_a_point_light_has_the_closed_form_radiance() {
+    let (rho, intensity, h) = (0.5, 40.0, 2.0);
+    let desc = SceneDesc {
+        camera: camera(Vec3::new(0.0, 1.0, 0.0), Vec3::ZERO, 0.3),
+        materials: vec![Material::diffuse(Vec3::splat(rho))],
+        objects: vec![Object::Mesh {
+            mesh: ground(50.0),
+            materials: MeshMaterials::One(0),
+        }],
+        lights: vec![Light::Point {
+            position: Vec3::new(0.0, h, 0.0),
+            intensity: Vec3::splat(intensity),
+        }],
+        ambient: Vec3::ZERO,
+        background: Background::uniform(Vec3::ZERO),
+        ..Default::default()
+    };
+    let m = mean(&render_path(&desc, 16, 4));
+    assert_close(
+        m.x,
+        rho * intensity / (PI * h * h),
+        0.005,
+        "point light on a plane",
+    );
+}
+
+/// A sphere light (an emissive sphere of radius r and radiance Le, centre at height h) gives
+/// the plane below it irradiance pi Le (r / h)^2 at its foot, so L = rho Le (r / h)^2. Both
+/// the light sample (a cone towards the sphere) and the BSDF sample (which can hit it) carry
+/// it, weighted by MIS.
+#[test]
+fn a_sphere_light_lights_a_plane_as_the_closed_form_says() {
+    let (rho, le, r, h) = (0.7, 5.0, 0.5, 2.0);
+    let desc = SceneDesc {
+        // Looking down past the sphere's side at the foot point, from below the sphere.
+        camera: camera(Vec3::new(0.0, 0.6, 0.0), Vec3::ZERO, 0.3),
+        materials: vec![
+            Material::diffuse(Vec3::splat(rho)),
+            Material {
+                emission: Vec3::splat(le),
+                ..Material::diffuse(Vec3::ZERO)
+            },
+        ],
+        objects: vec![
+            Object::Mesh {
+                mesh: ground(50.0),
+                materials: MeshMaterials::One(0),
+            },
+            Object::Sphere {
+                center: Vec3::new(0.0, h, 0.0),
+                radius: r,
+                material: 1,
+            },
+        ],
+        lights: vec![],
+        ambient: Vec3::ZERO,
+        background: Background::uniform(Vec3::ZERO),
+        ..Default::default()
+    };
+    let m = mean(&render_path(&desc, 1024, 1));
+    assert_close(
+        m.x,
+        rho * le * (r / h) * (r / h),
+        0.01,
+        "sphere light on a plane",
+    );
+}
