@@ -340,7 +340,7 @@ pub fn generate() -> String {
 # - in-focus edges (the post, the ball's outline) against a strongly blurred background of
 #   lamps and a far wall of lit windows.
 # Only the lamps' own pixels (and a lit window behind the camera that the chrome balls reflect)
-# glow: emission is not a light source; three point lights and a dim moon light the scene.",
+# glow: the path tracer samples them as lights, with three point lights and a dim moon.",
         focus = num(focus, 2),
         bottom_coc = num(view.coc_px(ground_bottom), 0),
         coc_inf = num(view.coc_inf, 0),
@@ -369,28 +369,28 @@ sensor_width_mm = {sensor}
 focus_point = {focus_point}
 
 [background]
-horizon = [0.05, 0.045, 0.06]
-zenith = [0.006, 0.01, 0.03]
+horizon = [0.025, 0.0225, 0.03]
+zenith = [0.003, 0.005, 0.015]
 
 [[lights]]
 type = "point"
 position = [-1.1, 1.6, -1.3]
-intensity = [2.7, 2.5, 2.2]
+intensity = [8.482, 7.854, 6.912]
 
 [[lights]]
 type = "point"
 position = [1.5, 1.1, 2.3]
-intensity = [1.3, 1.8, 2.7]
+intensity = [4.084, 5.655, 8.482]
 
 [[lights]]
 type = "point"
 position = [-1.7, 1.7, 6]
-intensity = [3.6, 2.7, 1.8]
+intensity = [11.31, 8.482, 5.655]
 
 [[lights]]
 type = "directional"
 direction = [0.3, -1, 0.5]
-irradiance = [0.04, 0.05, 0.08]
+irradiance = [0.1257, 0.1571, 0.2513]
 
 [[textures]]
 name = "ground"
@@ -423,20 +423,17 @@ scale = 0.5
 [[materials]]
 name = "ground"
 texture = "ground"
-specular = 0.05
-shininess = 30
+roughness = 0.50
 
 [[materials]]
 name = "ball"
 texture = "dots"
-specular = 0.5
-shininess = 120
+roughness = 0.36
 
 [[materials]]
 name = "post"
 texture = "post"
-specular = 0.2
-shininess = 40
+roughness = 0.47
 
 [[materials]]
 name = "wall"
@@ -449,10 +446,9 @@ emission = [36, 30, 23]
 
 [[materials]]
 name = "chrome"
-diffuse = 0.04
-specular = 16
-shininess = 400
-mirror = 0.85
+diffuse = 0.9
+metallic = 0.85
+roughness = 0.05
 "#,
         width = WIDTH,
         height = HEIGHT,

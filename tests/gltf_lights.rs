@@ -140,8 +140,9 @@ fn blender_glb_lights_camera_and_required_extension_load() {
     assert!(near(desc.camera.eye, Vec3::new(0.0, 4.0, 8.0), 1e-5));
     assert!((desc.camera.vfov_deg - 0.5274237f32.to_degrees()).abs() < 1e-3);
     assert_eq!((desc.camera.width, desc.camera.height), (640, 480));
-    // The glTF's lights replace the key light; the ambient stays.
-    assert_eq!(desc.ambient, Vec3::splat(0.15));
+    // The glTF's lights replace the key light and it gets Blender's default world.
+    assert_eq!(desc.ambient, Vec3::splat(0.05));
+    assert_eq!(desc.background.zenith, Vec3::splat(0.05));
 }
 
 #[test]

@@ -806,7 +806,7 @@ fn wrong_types_are_rejected() {
         "type4",
         &format!("[[materials]]\nname = \"m\"\ndiffuse = [1, 0]\n{SPHERE}"),
     );
-    assert_names(&m, "scene.toml:3:", &["materials[0].base_color", "colour"]);
+    assert_names(&m, "scene.toml:3:", &["materials[0].diffuse", "colour"]);
     let m = error_of("type5", "objects = 3\n");
     assert_names(&m, "scene.toml:1:", &["objects", "invalid type"]);
 }
