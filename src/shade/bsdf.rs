@@ -119,16 +119,16 @@ struct Setup {
 impl Setup {
     fn new(bsdf: &Bsdf, n: Vec3, wo: Vec3) -> Option<Self> {
         let cos_o = n.dot(wo);
-        if !(cos_o > MIN_COS) {
+        if cos_o.is_nan() || cos_o <= MIN_COS {
             return None;
         }
         let cos_o = cos_o.min(1.0);
-        let roughness = bsdf.roughness.clamp(0.0, 1.0);
+        let roughness = clamp(bsdf.roughness, 0.0, 1.0);
         let alpha = roughness * roughness;
-        let delta = !(alpha >= DELTA_ALPHA);
+        let delta = alpha < DELTA_ALPHA;
         let alpha = alpha.max(DELTA_ALPHA);
         let a2 = alpha * alpha;
-        let mut eta = bsdf.eta.clamp(1e-3, 1e3);
+        let mut eta = clamp(bsdf.eta, 1e-3, 1e3);
         if bsdf.thin {
             // A sheet has the same medium on both sides: only its own index matters.
             eta = eta.max(1.0 / eta);
@@ -142,8 +142,8 @@ impl Setup {
         };
         let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
         let grazing = if f0 > 0.0 { 1.0 } else { 0.0 };
-        let metallic = bsdf.metallic.clamp(0.0, 1.0);
-        let transmission = bsdf.transmission.clamp(0.0, 1.0);
+        let metallic = clamp(bsdf.metallic, 0.0, 1.0);
+        let transmission = clamp(bsdf.transmission, 0.0, 1.0);
         let base = bsdf.base_color.clamp(Vec3::ZERO, Vec3::ONE);
         let base_mean = mean(base);
         let w_diffuse = (1.0 - metallic) * (1.0 - transmission);
@@ -234,7 +234,7 @@ impl Setup {
             }
             return (f, pdf);
         }
-        if !(cos_i < 0.0) || self.delta || self.w_transmit <= 0.0 {
+        if cos_i.is_nan() || cos_i >= 0.0 || self.delta || self.w_transmit <= 0.0 {
             return (Vec3::ZERO, 0.0);
         }
         match self.through {
@@ -285,6 +285,11 @@ impl Setup {
     }
 }
 
+/// `x` clamped to `[lo, hi]`, NaN taken as `lo` (a bad parameter never poisons a path).
+fn clamp(x: f32, lo: f32, hi: f32) -> f32 {
+    if x.is_nan() { lo } else { x.clamp(lo, hi) }
+}
+
 fn mean(v: Vec3) -> f32 {
     (v.x + v.y + v.z) * (1.0 / 3.0)
 }
@@ -317,7 +322,7 @@ impl Bsdf {
     pub fn is_delta(&self) -> bool {
         let alpha = self.roughness * self.roughness;
         let diffuse = (1.0 - self.metallic) * (1.0 - self.transmission) * mean(self.base_color);
-        alpha < DELTA_ALPHA && !(diffuse > 0.0)
+        alpha < DELTA_ALPHA && diffuse <= 0.0
     }
 
     /// Draws a direction from three uniform numbers; `None` when the sample carries nothing.
@@ -329,13 +334,13 @@ impl Bsdf {
         } else {
             let m = s.facet(n, wo, u[1], u[2]);
             let cos = wo.dot(m);
-            if !(cos > 0.0) {
+            if cos.is_nan() || cos <= 0.0 {
                 return None;
             }
             let (fd, spec, p_reflect) = s.split(cos);
             let reflected = (2.0 * cos * m - wo).normalize();
             if u[0] < s.p_micro * p_reflect {
-                let delta = s.delta.then(|| (spec, s.p_micro * p_reflect));
+                let delta = s.delta.then_some((spec, s.p_micro * p_reflect));
                 (reflected, Lobe::Glossy, delta)
             } else {
                 let wi = match s.through {
@@ -472,7 +477,7 @@ mod tests {
         let (t, b) = basis(n);
         for i in 0..rows {
             for j in 0..2 * rows {
-                let u = u3(seed << 32 | i * 2 * rows + j);
+                let u = u3((seed << 32) | (i * 2 * rows + j));
                 let z = 1.0 - 2.0 * (i as f32 + u[0]) / rows as f32;
                 let phi = std::f32::consts::PI * (j as f32 + u[1]) / rows as f32;
                 let r = (1.0 - z * z).max(0.0).sqrt();
