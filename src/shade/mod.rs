@@ -4,6 +4,7 @@
 mod bsdf;
 mod light;
 mod material;
+mod microfacet;
 mod texture;
 
 pub use bsdf::{Bsdf, BsdfSample, Lobe, basis, cosine_hemisphere};
