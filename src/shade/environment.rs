@@ -460,3 +460,348 @@ pub fn uniform_sphere(u: Vec2) -> (Vec3, f32) {
         1.0 / (4.0 * PI),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic uniform generator for the tests (SplitMix64).
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> f32 {
+            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+        }
+
+        fn point(&mut self) -> Vec2 {
+            Vec2::new(self.next(), self.next())
+        }
+    }
+
+    fn map(width: usize, height: usize, texel: impl Fn(usize, usize) -> Vec3) -> Vec<Vec3> {
+        (0..width * height)
+            .map(|i| texel(i % width, i / width))
+            .collect()
+    }
+
+    /// A sky brightening towards the top, one very bright texel (the sun) and a black
+    /// lower half, turned by `rotation`.
+    fn sky_with_sun(rotation: f32) -> EnvironmentMap {
+        let (w, h) = (64, 32);
+        let texels = map(w, h, |x, y| match (x, y) {
+            (40, 9) => Vec3::new(20000.0, 18000.0, 15000.0),
+            (_, y) if y < h / 2 => Vec3::new(0.2, 0.4, 1.0) * (1.0 - y as f32 / h as f32),
+            _ => Vec3::ZERO,
+        });
+        EnvironmentMap::new(w, h, texels, 1.5, rotation).unwrap()
+    }
+
+    /// A sky brightening towards the top with a dimmer lower half, turned by `rotation`.
+    fn sky(rotation: f32) -> EnvironmentMap {
+        let (w, h) = (32, 16);
+        let texels = map(w, h, |x, y| match (x, y) {
+            (20..=22, 4..=6) => Vec3::new(40.0, 30.0, 20.0),
+            (_, y) if y < h / 2 => Vec3::new(0.2, 0.4, 1.0) * (1.0 - y as f32 / h as f32),
+            _ => Vec3::splat(0.05),
+        });
+        EnvironmentMap::new(w, h, texels, 1.0, rotation).unwrap()
+    }
+
+    /// The sum of the pdf times the solid angle over the cells of `m`, the pdf taken at each
+    /// cell's centre: exact for a density constant over each cell. The centres are placed by
+    /// Blender's formula and rotation (inverted here, independently of the map's code).
+    fn sum_over_cells(m: &EnvironmentMap) -> f64 {
+        let (w, h) = (m.width(), m.height());
+        let mut sum = 0.0;
+        for j in 0..h {
+            let (t0, t1) = (j as f64 * PI64 / h as f64, (j + 1) as f64 * PI64 / h as f64);
+            let omega = 2.0 * PI64 / w as f64 * (t0.cos() - t1.cos());
+            let theta = 0.5 * (t0 + t1);
+            for i in 0..w {
+                // u = 0.5 - atan2(b.y, b.x) / 2pi, theta from Blender's +Z.
+                let phi = PI64 * (1.0 - 2.0 * (i as f64 + 0.5) / w as f64);
+                let lookup = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()];
+                let (c, s) = ((m.rotation() as f64).cos(), (m.rotation() as f64).sin());
+                // The lookup vector is Rz(rotation) b.
+                let b = [
+                    c * lookup[0] + s * lookup[1],
+                    c * lookup[1] - s * lookup[0],
+                    lookup[2],
+                ];
+                let d = Vec3::new(b[0] as f32, b[2] as f32, -b[1] as f32);
+                sum += m.pdf(d) as f64 * omega;
+            }
+        }
+        sum
+    }
+
+    /// Integral of `f` over the sphere by the midpoint rule on an `n` x `2n` grid in
+    /// (`y` = cos of the angle from up, azimuth), where the solid angle is uniform.
+    fn integrate(n: usize, f: impl Fn(Vec3) -> f64) -> f64 {
+        let mut sum = 0.0;
+        for i in 0..n {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - y * y).sqrt();
+            for j in 0..2 * n {
+                let phi = PI64 * (j as f64 + 0.5) / n as f64;
+                sum += f(Vec3::new(
+                    (r * phi.cos()) as f32,
+                    y as f32,
+                    (r * phi.sin()) as f32,
+                ));
+            }
+        }
+        sum * 4.0 * PI64 / (2 * n * n) as f64
+    }
+
+    #[test]
+    fn the_pdf_integrates_to_one_and_matches_the_samples() {
+        let maps = [
+            sky(1.0),
+            sky_with_sun(1.0),
+            EnvironmentMap::new(1, 4, map(1, 4, |_, y| Vec3::splat(y as f32)), 1.0, 0.0)
+                .unwrap(),
+            EnvironmentMap::new(5, 1, map(5, 1, |x, _| Vec3::splat(x as f32)), 1.0, 0.3)
+                .unwrap(),
+            EnvironmentMap::new(1, 1, vec![Vec3::ONE], 2.0, 0.0).unwrap(),
+        ];
+        for (k, m) in maps.iter().enumerate() {
+            // Exact for a density constant over each cell; a grid that ignores the cells
+            // converges slowly where a bright cell's edges cut it, hence its tolerance.
+            let cells = sum_over_cells(m);
+            assert!((cells - 1.0).abs() < 1e-4, "map {k}: {cells}");
+            let grid = integrate(600, |d| m.pdf(d) as f64);
+            assert!((grid - 1.0).abs() < 1e-2, "map {k}: {grid}");
+            let mut rng = Rng(k as u64);
+            let mut agree = 0;
+            for _ in 0..20_000 {
+                let s = m.sample(rng.point()).unwrap();
+                assert!((s.dir.length() - 1.0).abs() < 1e-5, "{s:?}");
+                assert!(s.pdf > 0.0 && s.pdf.is_finite(), "{s:?}");
+                assert_eq!(s.radiance, m.radiance(s.dir));
+                if (m.pdf(s.dir) - s.pdf).abs() <= 1e-4 * s.pdf {
+                    agree += 1;
+                }
+            }
+            // Directions that round onto a cell border may be looked up in the neighbour.
+            assert!(agree >= 19_980, "map {k}: {agree} of 20000 agree");
+        }
+    }
+
+    #[test]
+    fn sample_counts_follow_the_pdf() {
+        let m = sky(0.4);
+        // Bins: 6 in azimuth x 4 in y, unrelated to the texel grid.
+        let bin = |d: Vec3| {
+            let a = ((d.z.atan2(d.x) / (2.0 * PI) + 0.5) * 6.0) as usize;
+            let b = ((1.0 - d.y) * 2.0) as usize;
+            a.min(5) + 6 * b.min(3)
+        };
+        let mut expected = [0.0f64; 24];
+        let n = 800;
+        for i in 0..n {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - y * y).sqrt();
+            for j in 0..2 * n {
+                let phi = PI64 * (j as f64 + 0.5) / n as f64;
+                let d = Vec3::new((r * phi.cos()) as f32, y as f32, (r * phi.sin()) as f32);
+                expected[bin(d)] += m.pdf(d) as f64 * 4.0 * PI64 / (2 * n * n) as f64;
+            }
+        }
+        let samples = 200_000;
+        let mut counts = [0u32; 24];
+        let mut rng = Rng(7);
+        for _ in 0..samples {
+            counts[bin(m.sample(rng.point()).unwrap().dir)] += 1;
+        }
+        for (b, (&c, &p)) in counts.iter().zip(&expected).enumerate() {
+            let mean = p * samples as f64;
+            let sigma = mean.max(1.0).sqrt();
+            assert!(
+                (c as f64 - mean).abs() < 5.0 * sigma + 0.002 * mean,
+                "bin {b}: {c} samples, expected {mean:.1}"
+            );
+        }
+        assert!(expected.iter().filter(|&&p| p > 0.0).count() >= 12);
+    }
+
+    /// Mean and standard error of `n` values of `f`.
+    fn estimate(n: usize, mut f: impl FnMut() -> f64) -> (f64, f64) {
+        let (mut s, mut s2) = (0.0, 0.0);
+        for _ in 0..n {
+            let v = f();
+            s += v;
+            s2 += v * v;
+        }
+        let mean = s / n as f64;
+        (mean, ((s2 / n as f64 - mean * mean) / n as f64).sqrt())
+    }
+
+    #[test]
+    fn irradiance_by_importance_and_by_uniform_sampling_agree() {
+        let m = sky_with_sun(0.0);
+        let lum = |c: Vec3| c.dot(Vec3::ONE) as f64 / 3.0;
+        // E on an upward-facing plane: the integral of L cos over the upper hemisphere.
+        let quadrature = integrate(1500, |d| lum(m.radiance(d)) * d.y.max(0.0) as f64);
+        let mut rng = Rng(11);
+        let (importance, se_i) = estimate(50_000, || {
+            let s = m.sample(rng.point()).unwrap();
+            lum(s.radiance) * s.dir.y.max(0.0) as f64 / s.pdf as f64
+        });
+        let (uniform, se_u) = estimate(400_000, || {
+            let (d, pdf) = uniform_sphere(rng.point());
+            lum(m.radiance(d)) * d.y.max(0.0) as f64 / pdf as f64
+        });
+        let noise = (se_i * se_i + se_u * se_u).sqrt();
+        assert!(
+            (importance - uniform).abs() < 4.0 * noise,
+            "importance {importance} +- {se_i}, uniform {uniform} +- {se_u}"
+        );
+        assert!(
+            (importance - quadrature).abs() < 4.0 * se_i + 2e-3 * quadrature,
+            "importance {importance} +- {se_i}, quadrature {quadrature}"
+        );
+        // The sun is most of the light; importance sampling finds it (per sample, far less
+        // noise than uniform sampling).
+        let per_sample = |se: f64, n: f64| se * n.sqrt();
+        assert!(per_sample(se_i, 5e4) * 10.0 < per_sample(se_u, 4e5));
+    }
+
+    #[test]
+    fn a_uniform_map_is_sampled_uniformly() {
+        let c = Vec3::new(0.5, 1.0, 2.0);
+        let m = EnvironmentMap::new(7, 3, vec![c; 21], 3.0, 0.7).unwrap();
+        let mut rng = Rng(3);
+        let quarter_pi = 1.0 / (4.0 * PI);
+        for _ in 0..5000 {
+            let (d, _) = uniform_sphere(rng.point());
+            assert!((m.pdf(d) - quarter_pi).abs() < 1e-5 * quarter_pi, "{d}");
+            assert!((m.radiance(d) - 3.0 * c).abs().max_element() < 1e-5);
+            let s = m.sample(rng.point()).unwrap();
+            assert!((s.pdf - quarter_pi).abs() < 1e-5 * quarter_pi);
+        }
+        assert!((m.average_radiance() - 3.0 * c).abs().max_element() < 1e-5);
+        let r = 2.0;
+        let power = m.power(r);
+        assert!((power - 3.0 * c * 4.0 * PI * PI * r * r).abs().max_element() < 1e-3);
+    }
+
+    /// An 8 x 5 map whose equator (row 2) is red around its centre column (u = 0.5), green
+    /// around u = 0.25, blue around u = 0.75 and white across the seam; the top row is
+    /// yellow and the bottom row cyan.
+    fn compass(rotation: f32) -> EnvironmentMap {
+        let red = Vec3::X;
+        let green = Vec3::Y;
+        let blue = Vec3::Z;
+        let texels = map(8, 5, |x, y| match (y, x) {
+            (0, _) => Vec3::new(1.0, 1.0, 0.0),
+            (4, _) => Vec3::new(0.0, 1.0, 1.0),
+            (2, 3 | 4) => red,
+            (2, 1 | 2) => green,
+            (2, 5 | 6) => blue,
+            (2, 7 | 0) => Vec3::ONE,
+            _ => Vec3::ZERO,
+        });
+        EnvironmentMap::new(8, 5, texels, 1.0, rotation).unwrap()
+    }
+
+    fn assert_close(a: Vec3, b: Vec3, what: &str) {
+        assert!((a - b).abs().max_element() < 1e-5, "{what}: {a} != {b}");
+    }
+
+    #[test]
+    fn the_mapping_is_blenders() {
+        let m = compass(0.0);
+        // Blender +X (dofray +X) sees the centre column, Blender +Y (dofray -Z) the left
+        // quarter, Blender -Y (dofray +Z) the right quarter, Blender -X the seam.
+        assert_close(m.radiance(Vec3::X), Vec3::X, "+X");
+        assert_close(m.radiance(-Vec3::Z), Vec3::Y, "-Z");
+        assert_close(m.radiance(Vec3::Z), Vec3::Z, "+Z");
+        assert_close(m.radiance(-Vec3::X), Vec3::ONE, "-X");
+        assert_close(m.radiance(Vec3::Y), Vec3::new(1.0, 1.0, 0.0), "up");
+        assert_close(m.radiance(-Vec3::Y), Vec3::new(0.0, 1.0, 1.0), "down");
+        // Halfway between two texel centres the lookup blends them.
+        let between = Vec3::new(1.0, 0.0, -1.0).normalize(); // u = 3/8: texels 2 and 3.
+        assert_close(m.radiance(between), Vec3::new(0.5, 0.5, 0.0), "between");
+    }
+
+    #[test]
+    fn a_quarter_turn_moves_the_picture_clockwise_seen_from_above() {
+        // Blender's Mapping node rotates the lookup vector by +90 degrees about up: what was
+        // at Blender +X (red) is now seen at Blender -Y (dofray +Z), what was at Blender +Y
+        // (green, dofray -Z) at Blender +X.
+        let m = compass(std::f32::consts::FRAC_PI_2);
+        assert_close(m.radiance(Vec3::Z), Vec3::X, "+Z");
+        assert_close(m.radiance(Vec3::X), Vec3::Y, "+X");
+        assert_close(m.radiance(-Vec3::Z), Vec3::ONE, "-Z");
+        assert_close(m.radiance(-Vec3::X), Vec3::Z, "-X");
+        assert_close(m.radiance(Vec3::Y), Vec3::new(1.0, 1.0, 0.0), "up");
+        // Sampling turns with the picture: samples of a light around the centre column, just
+        // below the equator, arrive from around +Z.
+        let light = map(32, 16, |x, y| {
+            if y == 8 && (15..=16).contains(&x) {
+                Vec3::X
+            } else {
+                Vec3::ZERO
+            }
+        });
+        let m = EnvironmentMap::new(32, 16, light, 1.0, std::f32::consts::FRAC_PI_2).unwrap();
+        let mut rng = Rng(5);
+        for _ in 0..1000 {
+            let s = m.sample(rng.point()).unwrap();
+            assert!(s.dir.z > 0.85, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn black_maps_cannot_be_sampled() {
+        let black = EnvironmentMap::new(4, 2, vec![Vec3::ZERO; 8], 1.0, 0.0).unwrap();
+        let dark = EnvironmentMap::new(4, 2, vec![Vec3::ONE; 8], 0.0, 0.0).unwrap();
+        for m in [black, dark] {
+            assert!(!m.can_sample());
+            assert!(m.sample(Vec2::new(0.3, 0.6)).is_none());
+            assert_eq!(m.pdf(Vec3::Y), 0.0);
+            assert_eq!(m.radiance(Vec3::X), Vec3::ZERO);
+            assert_eq!(m.average_radiance(), Vec3::ZERO);
+        }
+        // A texel of zero radiance far from any light has density 0; one next to a light
+        // does not (the bilinear lookup reaches into it).
+        let texels = map(8, 4, |x, y| if (x, y) == (2, 1) { Vec3::ONE } else { Vec3::ZERO });
+        let m = EnvironmentMap::new(8, 4, texels, 1.0, 0.0).unwrap();
+        assert!(m.can_sample());
+        assert_eq!(m.pdf(Vec3::X), 0.0);
+        assert_eq!(m.radiance(Vec3::X), Vec3::ZERO);
+        let mut rng = Rng(9);
+        for _ in 0..20_000 {
+            let (d, _) = uniform_sphere(rng.point());
+            assert!(m.radiance(d) == Vec3::ZERO || m.pdf(d) > 0.0, "{d}");
+        }
+    }
+
+    #[test]
+    fn bad_maps_are_refused_naming_the_texel() {
+        let mut texels = vec![Vec3::ONE; 12];
+        texels[6] = Vec3::new(1.0, f32::NAN, 0.0);
+        let e = EnvironmentMap::new(4, 3, texels.clone(), 1.0, 0.0).unwrap_err();
+        assert!(matches!(e, EnvironmentError::BadTexel { x: 2, y: 1, .. }), "{e:?}");
+        assert!(e.to_string().contains("texel (2, 1)"), "{e}");
+        assert!(e.to_string().contains("finite, non-negative"), "{e}");
+        texels[6] = Vec3::new(f32::INFINITY, 0.0, 0.0);
+        assert!(EnvironmentMap::new(4, 3, texels.clone(), 1.0, 0.0).is_err());
+        texels[6] = Vec3::new(0.0, 0.0, -1e-3);
+        let e = EnvironmentMap::new(4, 3, texels.clone(), 1.0, 0.0).unwrap_err();
+        assert!(e.to_string().contains("-0.001"), "{e}");
+        texels[6] = Vec3::ONE;
+        let ok = |w, h, s, r| EnvironmentMap::new(w, h, texels.clone(), s, r).map(|_| ());
+        assert_eq!(ok(4, 3, 1.0, 0.0), Ok(()));
+        assert!(matches!(ok(5, 3, 1.0, 0.0), Err(EnvironmentError::SizeMismatch { .. })));
+        assert!(matches!(ok(0, 3, 1.0, 0.0), Err(EnvironmentError::Empty { .. })));
+        assert!(matches!(ok(4, 3, -1.0, 0.0), Err(EnvironmentError::BadStrength(_))));
+        assert!(matches!(ok(4, 3, f32::NAN, 0.0), Err(EnvironmentError::BadStrength(_))));
+        assert!(matches!(ok(4, 3, 1.0, f32::INFINITY), Err(EnvironmentError::BadRotation(_))));
+    }
+}
