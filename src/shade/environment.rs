@@ -46,9 +46,7 @@ pub enum EnvironmentError {
         height: usize,
     },
     /// The texel array does not match the size.
-    #[error(
-        "the environment image is {width}x{height} ({expected} texels) but has {got} texels"
-    )]
+    #[error("the environment image is {width}x{height} ({expected} texels) but has {got} texels")]
     SizeMismatch {
         /// Width in texels.
         width: usize,
@@ -228,9 +226,7 @@ impl EnvironmentMap {
         let (fx, fy) = (x - x0, y - y0);
         let (w, h) = (self.width as i64, self.height as i64);
         let (x0, y0) = (x0 as i64, y0 as i64);
-        let at = |x: i64, y: i64| {
-            self.texels[(y.clamp(0, h - 1) * w + x.rem_euclid(w)) as usize]
-        };
+        let at = |x: i64, y: i64| self.texels[(y.clamp(0, h - 1) * w + x.rem_euclid(w)) as usize];
         let top = at(x0, y0).lerp(at(x0 + 1, y0), fx);
         let bottom = at(x0, y0 + 1).lerp(at(x0 + 1, y0 + 1), fx);
         top.lerp(bottom, fy) * self.strength
@@ -339,10 +335,10 @@ impl EnvironmentMap {
         filtered.resize(w, 0.0f64);
         let mut row_weights = Vec::new();
         row_weights.try_reserve_exact(h)?;
-        for row in 0..h {
+        for (row, &omega) in solid_angles.iter().enumerate() {
             let total = self.cell_weights(row, &mut filtered);
             push_cdf(&mut self.columns, &filtered, total);
-            row_weights.push(total * solid_angles[row]);
+            row_weights.push(total * omega);
         }
         let total: f64 = row_weights.iter().sum();
         push_cdf(&mut self.rows, &row_weights, total);
@@ -383,7 +379,7 @@ fn check(
     if width == 0 || height == 0 {
         return Err(EnvironmentError::Empty { width, height });
     }
-    let expected = width.checked_mul(height).unwrap_or(usize::MAX);
+    let expected = width.saturating_mul(height);
     if texels.len() != expected {
         return Err(EnvironmentError::SizeMismatch {
             width,
@@ -455,10 +451,7 @@ pub fn uniform_sphere(u: Vec2) -> (Vec3, f32) {
     let y = 1.0 - 2.0 * u.x;
     let r = (1.0 - y * y).max(0.0).sqrt();
     let phi = 2.0 * PI * u.y;
-    (
-        Vec3::new(r * phi.cos(), y, r * phi.sin()),
-        1.0 / (4.0 * PI),
-    )
+    (Vec3::new(r * phi.cos(), y, r * phi.sin()), 1.0 / (4.0 * PI))
 }
 
 #[cfg(test)]
@@ -524,7 +517,11 @@ mod tests {
             for i in 0..w {
                 // u = 0.5 - atan2(b.y, b.x) / 2pi, theta from Blender's +Z.
                 let phi = PI64 * (1.0 - 2.0 * (i as f64 + 0.5) / w as f64);
-                let lookup = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()];
+                let lookup = [
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                ];
                 let (c, s) = ((m.rotation() as f64).cos(), (m.rotation() as f64).sin());
                 // The lookup vector is Rz(rotation) b.
                 let b = [
@@ -563,10 +560,8 @@ mod tests {
         let maps = [
             sky(1.0),
             sky_with_sun(1.0),
-            EnvironmentMap::new(1, 4, map(1, 4, |_, y| Vec3::splat(y as f32)), 1.0, 0.0)
-                .unwrap(),
-            EnvironmentMap::new(5, 1, map(5, 1, |x, _| Vec3::splat(x as f32)), 1.0, 0.3)
-                .unwrap(),
+            EnvironmentMap::new(1, 4, map(1, 4, |_, y| Vec3::splat(y as f32)), 1.0, 0.0).unwrap(),
+            EnvironmentMap::new(5, 1, map(5, 1, |x, _| Vec3::splat(x as f32)), 1.0, 0.3).unwrap(),
             EnvironmentMap::new(1, 1, vec![Vec3::ONE], 2.0, 0.0).unwrap(),
         ];
         for (k, m) in maps.iter().enumerate() {
@@ -687,7 +682,12 @@ mod tests {
         assert!((m.average_radiance() - 3.0 * c).abs().max_element() < 1e-5);
         let r = 2.0;
         let power = m.power(r);
-        assert!((power - 3.0 * c * 4.0 * PI * PI * r * r).abs().max_element() < 1e-3);
+        assert!(
+            (power - 3.0 * c * 4.0 * PI * PI * r * r)
+                .abs()
+                .max_element()
+                < 1e-3
+        );
     }
 
     /// An 8 x 5 map whose equator (row 2) is red around its centre column (u = 0.5), green
@@ -770,7 +770,13 @@ mod tests {
         }
         // A texel of zero radiance far from any light has density 0; one next to a light
         // does not (the bilinear lookup reaches into it).
-        let texels = map(8, 4, |x, y| if (x, y) == (2, 1) { Vec3::ONE } else { Vec3::ZERO });
+        let texels = map(8, 4, |x, y| {
+            if (x, y) == (2, 1) {
+                Vec3::ONE
+            } else {
+                Vec3::ZERO
+            }
+        });
         let m = EnvironmentMap::new(8, 4, texels, 1.0, 0.0).unwrap();
         assert!(m.can_sample());
         assert_eq!(m.pdf(Vec3::X), 0.0);
@@ -787,7 +793,10 @@ mod tests {
         let mut texels = vec![Vec3::ONE; 12];
         texels[6] = Vec3::new(1.0, f32::NAN, 0.0);
         let e = EnvironmentMap::new(4, 3, texels.clone(), 1.0, 0.0).unwrap_err();
-        assert!(matches!(e, EnvironmentError::BadTexel { x: 2, y: 1, .. }), "{e:?}");
+        assert!(
+            matches!(e, EnvironmentError::BadTexel { x: 2, y: 1, .. }),
+            "{e:?}"
+        );
         assert!(e.to_string().contains("texel (2, 1)"), "{e}");
         assert!(e.to_string().contains("finite, non-negative"), "{e}");
         texels[6] = Vec3::new(f32::INFINITY, 0.0, 0.0);
@@ -798,10 +807,25 @@ mod tests {
         texels[6] = Vec3::ONE;
         let ok = |w, h, s, r| EnvironmentMap::new(w, h, texels.clone(), s, r).map(|_| ());
         assert_eq!(ok(4, 3, 1.0, 0.0), Ok(()));
-        assert!(matches!(ok(5, 3, 1.0, 0.0), Err(EnvironmentError::SizeMismatch { .. })));
-        assert!(matches!(ok(0, 3, 1.0, 0.0), Err(EnvironmentError::Empty { .. })));
-        assert!(matches!(ok(4, 3, -1.0, 0.0), Err(EnvironmentError::BadStrength(_))));
-        assert!(matches!(ok(4, 3, f32::NAN, 0.0), Err(EnvironmentError::BadStrength(_))));
-        assert!(matches!(ok(4, 3, 1.0, f32::INFINITY), Err(EnvironmentError::BadRotation(_))));
+        assert!(matches!(
+            ok(5, 3, 1.0, 0.0),
+            Err(EnvironmentError::SizeMismatch { .. })
+        ));
+        assert!(matches!(
+            ok(0, 3, 1.0, 0.0),
+            Err(EnvironmentError::Empty { .. })
+        ));
+        assert!(matches!(
+            ok(4, 3, -1.0, 0.0),
+            Err(EnvironmentError::BadStrength(_))
+        ));
+        assert!(matches!(
+            ok(4, 3, f32::NAN, 0.0),
+            Err(EnvironmentError::BadStrength(_))
+        ));
+        assert!(matches!(
+            ok(4, 3, 1.0, f32::INFINITY),
+            Err(EnvironmentError::BadRotation(_))
+        ));
     }
 }
