@@ -2,12 +2,14 @@
 //! All colours are linear radiance; sRGB appears only when 8-bit images are written.
 
 mod bsdf;
+mod environment;
 mod light;
 mod material;
 mod microfacet;
 mod texture;
 
 pub use bsdf::{Bsdf, BsdfSample, Lobe, basis, cosine_hemisphere};
+pub use environment::{EnvSample, EnvironmentError, EnvironmentMap, uniform_sphere};
 pub use light::*;
 pub use material::*;
 pub use texture::*;
