@@ -286,6 +286,30 @@ unsafe impl Send for Scene {}
 // SAFETY: as above: all &Scene methods are queries on immutable data.
 unsafe impl Sync for Scene {}
 
+/// Hands a 16-ray packet to Embree in calls of the scene's width: the `version` function
+/// `$f16` on the whole packet (its `$rays` field), else `$f8` or `$f4` on each part with an
+/// active lane.
+macro_rules! by_packet_width {
+    ($scene:ident, $packet:ident, $hint:ident, $rays:ident, $f16:ident, $f8:ident, $f4:ident) => {{
+        let (scene, coherent) = ($scene.handle.0, $hint == RayHint::Coherent);
+        match $scene.lanes_per_call {
+            16 => {
+                // SAFETY: the scene is committed and alive for &self; the mask and packet are
+                // 64-byte aligned by their types.
+                unsafe { version::$f16(&$packet.valid, scene, &mut $packet.$rays, coherent) }
+            }
+            8 => $packet.for_each_part8(|valid, part| {
+                // SAFETY: as above, with 32-byte aligned 8-wide types.
+                unsafe { version::$f8(valid, scene, part, coherent) }
+            }),
+            _ => $packet.for_each_part4(|valid, part| {
+                // SAFETY: as above, with 16-byte aligned 4-wide types.
+                unsafe { version::$f4(valid, scene, part, coherent) }
+            }),
+        }
+    }};
+}
+
 impl Scene {
     /// Axis-aligned bounds of everything in the scene (lower, upper).
     pub fn bounds(&self) -> (Vec3, Vec3) {
@@ -363,41 +387,20 @@ impl Scene {
 
     /// Traces the active lanes of a packet; the hits of inactive lanes are not written.
     pub fn intersect16(&self, packet: &mut RayPacket16, hint: RayHint) {
-        let (scene, coherent) = (self.handle.0, hint == RayHint::Coherent);
-        match self.lanes_per_call {
-            16 => {
-                // SAFETY: the scene is committed and alive for &self; the mask and packet are
-                // 64-byte aligned by their types.
-                unsafe { version::intersect16(&packet.valid, scene, &mut packet.rayhit, coherent) }
-            }
-            8 => packet.for_each_part8(|valid, part| {
-                // SAFETY: as above, with 32-byte aligned 8-wide types.
-                unsafe { version::intersect8(valid, scene, part, coherent) }
-            }),
-            _ => packet.for_each_part4(|valid, part| {
-                // SAFETY: as above, with 16-byte aligned 4-wide types.
-                unsafe { version::intersect4(valid, scene, part, coherent) }
-            }),
-        }
+        by_packet_width!(
+            self,
+            packet,
+            hint,
+            rayhit,
+            intersect16,
+            intersect8,
+            intersect4
+        );
     }
 
     /// Tests the active lanes of a shadow packet for occlusion.
     pub fn occluded16(&self, packet: &mut ShadowPacket16, hint: RayHint) {
-        let (scene, coherent) = (self.handle.0, hint == RayHint::Coherent);
-        match self.lanes_per_call {
-            16 => {
-                // SAFETY: as in intersect16.
-                unsafe { version::occluded16(&packet.valid, scene, &mut packet.rays, coherent) }
-            }
-            8 => packet.for_each_part8(|valid, part| {
-                // SAFETY: as in intersect16.
-                unsafe { version::occluded8(valid, scene, part, coherent) }
-            }),
-            _ => packet.for_each_part4(|valid, part| {
-                // SAFETY: as in intersect16.
-                unsafe { version::occluded4(valid, scene, part, coherent) }
-            }),
-        }
+        by_packet_width!(self, packet, hint, rays, occluded16, occluded8, occluded4);
     }
 }
 
