@@ -366,6 +366,18 @@ macro_rules! lane_methods {
                 self.valid.0[lane] != 0
             }
 
+            /// Puts `ray` in `lane` and activates it, or deactivates the lane and returns false
+            /// when Embree cannot trace the ray.
+            fn activate(&mut self, lane: usize, ray: &Ray) -> bool {
+                if !ray.is_traceable() {
+                    self.set_inactive(lane);
+                    return false;
+                }
+                init_ray(&mut self.$field$(.$sub)?, lane, ray);
+                self.valid.0[lane] = -1;
+                true
+            }
+
             /// Number of active lanes.
             pub fn active_count(&self) -> usize {
                 self.valid.0.iter().filter(|&&v| v != 0).count()
@@ -413,18 +425,15 @@ impl RayPacket16 {
     /// # Panics
     /// When `lane >= LANES` (16).
     pub fn set(&mut self, lane: usize, ray: &Ray) -> bool {
-        if !ray.is_traceable() {
-            self.set_inactive(lane);
+        if !self.activate(lane, ray) {
             return false;
         }
-        init_ray(&mut self.rayhit.ray, lane, ray);
         let hit = &mut self.rayhit.hit;
         hit.geomID[lane] = sys::RTC_INVALID_GEOMETRY_ID;
         hit.primID[lane] = sys::RTC_INVALID_GEOMETRY_ID;
         for level in hit.instID.iter_mut() {
             level[lane] = sys::RTC_INVALID_GEOMETRY_ID;
         }
-        self.valid.0[lane] = -1;
         true
     }
 
@@ -530,13 +539,7 @@ impl ShadowPacket16 {
     /// # Panics
     /// When `lane >= LANES` (16).
     pub fn set(&mut self, lane: usize, ray: &Ray) -> bool {
-        if !ray.is_traceable() {
-            self.set_inactive(lane);
-            return false;
-        }
-        init_ray(&mut self.rays, lane, ray);
-        self.valid.0[lane] = -1;
-        true
+        self.activate(lane, ray)
     }
 
     /// Fills every lane with the segment from `origin` along `dir` for `t` in `[0, tfar]`
