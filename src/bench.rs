@@ -30,14 +30,8 @@ pub struct BenchConfig {
     /// Samples per in-focus site in dense and adaptive mode (the pinhole row takes one per
     /// pixel: the seed's plain ray tracing).
     pub aa: u32,
-    /// Timed repeats of each mode; the median is reported.
-    pub repeat: usize,
-    /// Lens samples per pixel of the converged reference (dense).
-    pub reference_spp: u32,
-    /// Seed of every mode's sample streams (the reference's seed is derived from it).
-    pub seed: u64,
-    /// Where the reference is cached (None: not cached).
-    pub cache_dir: Option<PathBuf>,
+    /// Repeats, reference and seed.
+    pub measure: Measure,
 }
 
 impl Default for BenchConfig {
@@ -45,6 +39,27 @@ impl Default for BenchConfig {
         Self {
             spp: 16,
             aa: 4,
+            measure: Measure::default(),
+        }
+    }
+}
+
+/// How both studies measure: repeats, the converged reference, the seed.
+#[derive(Debug, Clone)]
+pub struct Measure {
+    /// Timed repeats of each render; the median is reported.
+    pub repeat: usize,
+    /// Samples per pixel of the converged reference (dense, in focus or not).
+    pub reference_spp: u32,
+    /// Seed of every render's sample streams (the reference's seed is derived from it).
+    pub seed: u64,
+    /// Where the reference is cached (None: not cached).
+    pub cache_dir: Option<PathBuf>,
+}
+
+impl Default for Measure {
+    fn default() -> Self {
+        Self {
             repeat: 3,
             reference_spp: 1024,
             seed: 0,
@@ -334,18 +349,18 @@ pub fn check_cache_dir(dir: &Path) -> Result<(), BenchError> {
 }
 
 /// The converged reference: dense with `reference_spp` samples per pixel and a seed of its own
-/// (derived from `seed`, so its noise is independent of the modes it judges), from the cache
+/// (derived from `seed`, so its noise is independent of the renders it judges), from the cache
 /// in `cache_dir` when possible (an unusable `cache_dir` fails here, before anything is
 /// rendered). Returns the image, whether it was cached, and its render time.
 pub(crate) fn reference(
     desc: &SceneDesc,
     world: &World,
     camera: &Camera,
-    reference_spp: u32,
-    seed: u64,
-    cache_dir: Option<&Path>,
+    measure: &Measure,
     progress: &dyn Progress,
 ) -> Result<(Vec<[f32; 3]>, bool, f64), BenchError> {
+    let (reference_spp, seed) = (measure.reference_spp, measure.seed);
+    let cache_dir = measure.cache_dir.as_deref();
     if let Some(dir) = cache_dir {
         check_cache_dir(dir)?;
     }
@@ -379,26 +394,19 @@ pub fn run(
     config: &BenchConfig,
     progress: &dyn Progress,
 ) -> Result<(BenchReport, BenchImages), BenchError> {
-    if config.repeat == 0 {
+    if config.measure.repeat == 0 {
         return Err(BenchError::ZeroRepeat);
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let (reference, reference_cached, reference_seconds) = reference(
-        desc,
-        world,
-        camera,
-        config.reference_spp,
-        config.seed,
-        config.cache_dir.as_deref(),
-        progress,
-    )?;
+    let (reference, reference_cached, reference_seconds) =
+        reference(desc, world, camera, &config.measure, progress)?;
 
     // Intersect-only: replay exactly the packets dense traces, without shading or sampling.
     let recording = RenderSettings {
         mode: Mode::Dense,
         spp: config.spp,
         aa: config.aa,
-        seed: config.seed,
+        seed: config.measure.seed,
         record_rays: true,
         ..Default::default()
     };
@@ -415,7 +423,7 @@ pub fn run(
     let mut replay_times = Vec::new();
     let mut dense_vs_replay = Vec::new();
     let mut replayed = 0;
-    for _ in 0..config.repeat {
+    for _ in 0..config.measure.repeat {
         for (i, (_, mode, k, exact)) in modes.iter().enumerate() {
             let settings = row_settings(config, *mode, *k, *exact);
             let (film, stats) = render::render(world, camera, &settings, progress)?;
@@ -455,9 +463,9 @@ pub fn run(
             height: h,
             spp: config.spp,
             aa: config.aa,
-            repeat: config.repeat,
+            repeat: config.measure.repeat,
             threads: rayon::current_num_threads(),
-            reference_spp: config.reference_spp,
+            reference_spp: config.measure.reference_spp,
             reference_cached,
             reference_seconds,
             intersect_only_mrays_per_s,
@@ -484,7 +492,7 @@ fn row_settings(config: &BenchConfig, mode: Mode, k: Option<f32>, exact: bool) -
             },
             None => SamplingRule::ErrorControlled { tolerance: None },
         },
-        seed: config.seed,
+        seed: config.measure.seed,
         ..Default::default()
     }
 }

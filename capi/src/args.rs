@@ -3,7 +3,7 @@
 use std::ffi::{CStr, c_char};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
-use crate::status::Failure;
+use crate::status::{Failure, guard_value};
 
 /// `ptr` as a reference, or an invalid-argument failure naming `what`.
 ///
@@ -70,5 +70,18 @@ pub(crate) unsafe fn free<T>(ptr: *mut T) {
             // SAFETY: the caller's contract: a live box that is not used afterwards.
             drop(unsafe { Box::from_raw(ptr) });
         }));
+    }
+}
+
+/// Runs `get` on the handle behind `ptr`, or returns `fallback` for NULL (or a panic): what
+/// every getter that cannot report a status does.
+///
+/// # Safety
+/// `ptr` is NULL or points to a live `T` that nothing mutates during the call.
+pub(crate) unsafe fn value_of<T, V>(ptr: *const T, fallback: V, get: impl FnOnce(&T) -> V) -> V {
+    // SAFETY: the caller's contract: NULL (rejected by as_ref) or a live T, only read.
+    match unsafe { ptr.as_ref() } {
+        Some(handle) => guard_value(fallback, || get(handle)),
+        None => fallback,
     }
 }

@@ -6,8 +6,8 @@ use std::path::Path;
 use dofray::output::WriteOptions;
 use dofray::render::{Film, RenderStats};
 
-use crate::args::{arg, free, str_arg};
-use crate::status::{DofrayStatus, guard, guard_value};
+use crate::args::{arg, free, str_arg, value_of};
+use crate::status::{DofrayStatus, guard};
 
 /// A rendered image: linear RGBA, depth and CoC per pixel, and the render's statistics.
 pub struct DofrayImage {
@@ -27,22 +27,6 @@ pub unsafe extern "C" fn dofray_image_free(image: *mut DofrayImage) {
     unsafe { free(image) }
 }
 
-/// Runs `get` on the image behind `image`, or returns `fallback` for NULL (or a panic).
-///
-/// # Safety
-/// `image` is NULL or a live image.
-unsafe fn image_value<T>(
-    image: *const DofrayImage,
-    fallback: T,
-    get: impl FnOnce(&DofrayImage) -> T,
-) -> T {
-    // SAFETY: the caller's contract: NULL or a live image, only read.
-    match unsafe { image.as_ref() } {
-        Some(image) => guard_value(fallback, || get(image)),
-        None => fallback,
-    }
-}
-
 /// The image's width in pixels (0 for NULL).
 ///
 /// # Safety
@@ -50,7 +34,7 @@ unsafe fn image_value<T>(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_width(image: *const DofrayImage) -> u32 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, 0, |i| i.film.width as u32) }
+    unsafe { value_of(image, 0, |i| i.film.width as u32) }
 }
 
 /// The image's height in pixels (0 for NULL).
@@ -60,7 +44,7 @@ pub unsafe extern "C" fn dofray_image_width(image: *const DofrayImage) -> u32 {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_height(image: *const DofrayImage) -> u32 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, 0, |i| i.film.height as u32) }
+    unsafe { value_of(image, 0, |i| i.film.height as u32) }
 }
 
 /// The pixels: 4 floats per pixel (R, G, B, A), rows top to bottom, width x height pixels.
@@ -73,7 +57,7 @@ pub unsafe extern "C" fn dofray_image_height(image: *const DofrayImage) -> u32 {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_rgba(image: *const DofrayImage) -> *const f32 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, std::ptr::null(), |i| i.rgba.as_ptr()) }
+    unsafe { value_of(image, std::ptr::null(), |i| i.rgba.as_ptr()) }
 }
 
 /// Depth per pixel (width x height floats, rows top to bottom): the distance along the view
@@ -85,7 +69,7 @@ pub unsafe extern "C" fn dofray_image_rgba(image: *const DofrayImage) -> *const 
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_depth(image: *const DofrayImage) -> *const f32 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, std::ptr::null(), |i| i.film.depth.as_ptr()) }
+    unsafe { value_of(image, std::ptr::null(), |i| i.film.depth.as_ptr()) }
 }
 
 /// Circle-of-confusion diameter in pixels per pixel (width x height floats, rows top to
@@ -96,7 +80,7 @@ pub unsafe extern "C" fn dofray_image_depth(image: *const DofrayImage) -> *const
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_coc(image: *const DofrayImage) -> *const f32 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, std::ptr::null(), |i| i.film.coc.as_ptr()) }
+    unsafe { value_of(image, std::ptr::null(), |i| i.film.coc.as_ptr()) }
 }
 
 /// Rays the render traced (camera, shadow and mirror rays; 0 for NULL).
@@ -106,7 +90,7 @@ pub unsafe extern "C" fn dofray_image_coc(image: *const DofrayImage) -> *const f
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_rays(image: *const DofrayImage) -> u64 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, 0, |i| i.stats.rays.total()) }
+    unsafe { value_of(image, 0, |i| i.stats.rays.total()) }
 }
 
 /// Pixels shaded directly, the sample sites (the rest were interpolated; 0 for NULL).
@@ -116,7 +100,7 @@ pub unsafe extern "C" fn dofray_image_rays(image: *const DofrayImage) -> u64 {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_sample_sites(image: *const DofrayImage) -> u64 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, 0, |i| i.stats.sample_sites) }
+    unsafe { value_of(image, 0, |i| i.stats.sample_sites) }
 }
 
 /// Wall-clock seconds the render took, without building the scene (0 for NULL).
@@ -126,7 +110,7 @@ pub unsafe extern "C" fn dofray_image_sample_sites(image: *const DofrayImage) ->
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_image_seconds(image: *const DofrayImage) -> f64 {
     // SAFETY: the function's contract.
-    unsafe { image_value(image, 0.0, |i| i.stats.seconds) }
+    unsafe { value_of(image, 0.0, |i| i.stats.seconds) }
 }
 
 /// Writes the image to `path`, replacing it atomically: `.png` (8-bit sRGB; RGBA with

@@ -14,12 +14,12 @@ use dofray::batch::{RunOptions, RunReport, Shard};
 use dofray::params::Param;
 use dofray::render::Progress;
 
-use crate::args::{arg_mut, free, out_arg, put, str_arg};
+use crate::args::{arg_mut, free, out_arg, put, str_arg, value_of};
 use crate::cached::usage;
 use crate::cancel::DofrayCancel;
 use crate::device::DofrayDevice;
 use crate::scene::DofrayScene;
-use crate::status::{DofrayStatus, Failure, guard, guard_value};
+use crate::status::{DofrayStatus, Failure, guard};
 
 /// What `dofray_render_jobs` renders and how: the flags of `dofray render` of the same
 /// names. All zero (`DofrayJobOptions options = {0};`, or a NULL pointer) renders what the
@@ -391,22 +391,6 @@ pub unsafe extern "C" fn dofray_jobs_free(jobs: *mut DofrayJobs) {
     unsafe { free(jobs) }
 }
 
-/// Runs `get` on the summary behind `jobs`, or returns `fallback` for NULL (or a panic).
-///
-/// # Safety
-/// `jobs` is NULL or a live summary.
-unsafe fn jobs_value<T>(
-    jobs: *const DofrayJobs,
-    fallback: T,
-    get: impl FnOnce(&DofrayJobs) -> T,
-) -> T {
-    // SAFETY: the caller's contract: NULL or a live summary, only read.
-    match unsafe { jobs.as_ref() } {
-        Some(jobs) => guard_value(fallback, || get(jobs)),
-        None => fallback,
-    }
-}
-
 /// The number of jobs the run was given (its shard's share; 0 for NULL): the indexes of the
 /// per-job functions go from 0 to this, in the order the jobs were planned.
 ///
@@ -415,7 +399,7 @@ unsafe fn jobs_value<T>(
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_jobs_count(jobs: *const DofrayJobs) -> usize {
     // SAFETY: the function's contract.
-    unsafe { jobs_value(jobs, 0, |j| j.jobs.len()) }
+    unsafe { value_of(jobs, 0, |j| j.jobs.len()) }
 }
 
 /// The number of jobs rendered (0 for NULL).
@@ -425,7 +409,7 @@ pub unsafe extern "C" fn dofray_jobs_count(jobs: *const DofrayJobs) -> usize {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_jobs_rendered(jobs: *const DofrayJobs) -> usize {
     // SAFETY: the function's contract.
-    unsafe { jobs_value(jobs, 0, |j| j.count(DofrayJobStatus::DOFRAY_JOB_RENDERED)) }
+    unsafe { value_of(jobs, 0, |j| j.count(DofrayJobStatus::DOFRAY_JOB_RENDERED)) }
 }
 
 /// The number of jobs skipped because their output existed (0 for NULL).
@@ -435,7 +419,7 @@ pub unsafe extern "C" fn dofray_jobs_rendered(jobs: *const DofrayJobs) -> usize 
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_jobs_skipped(jobs: *const DofrayJobs) -> usize {
     // SAFETY: the function's contract.
-    unsafe { jobs_value(jobs, 0, |j| j.count(DofrayJobStatus::DOFRAY_JOB_SKIPPED)) }
+    unsafe { value_of(jobs, 0, |j| j.count(DofrayJobStatus::DOFRAY_JOB_SKIPPED)) }
 }
 
 /// The number of jobs that failed (0 for NULL).
@@ -445,7 +429,7 @@ pub unsafe extern "C" fn dofray_jobs_skipped(jobs: *const DofrayJobs) -> usize {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_jobs_failed(jobs: *const DofrayJobs) -> usize {
     // SAFETY: the function's contract.
-    unsafe { jobs_value(jobs, 0, |j| j.count(DofrayJobStatus::DOFRAY_JOB_FAILED)) }
+    unsafe { value_of(jobs, 0, |j| j.count(DofrayJobStatus::DOFRAY_JOB_FAILED)) }
 }
 
 /// The number of images assembled from their tiles (and the tiles removed; 0 for NULL).
@@ -455,7 +439,7 @@ pub unsafe extern "C" fn dofray_jobs_failed(jobs: *const DofrayJobs) -> usize {
 #[unsafe(no_mangle)]
 pub unsafe extern "C" fn dofray_jobs_merged(jobs: *const DofrayJobs) -> usize {
     // SAFETY: the function's contract.
-    unsafe { jobs_value(jobs, 0, |j| j.merged) }
+    unsafe { value_of(jobs, 0, |j| j.merged) }
 }
 
 /// The status of the run's first failure (a job's, or an image's that could not be assembled
@@ -469,7 +453,7 @@ pub unsafe extern "C" fn dofray_jobs_first_failure(jobs: *const DofrayJobs) -> D
     let invalid = DofrayStatus::DOFRAY_INVALID_ARGUMENT;
     // SAFETY: the function's contract.
     unsafe {
-        jobs_value(jobs, invalid, |j| {
+        value_of(jobs, invalid, |j| {
             j.first_failure
                 .as_ref()
                 .map_or(DofrayStatus::DOFRAY_OK, |(status, _)| *status)
@@ -488,7 +472,7 @@ pub unsafe extern "C" fn dofray_jobs_first_failure_message(
 ) -> *const c_char {
     // SAFETY: the function's contract.
     unsafe {
-        jobs_value(jobs, c"".as_ptr(), |j| {
+        value_of(jobs, c"".as_ptr(), |j| {
             j.first_failure
                 .as_ref()
                 .map_or(c"".as_ptr(), |(_, message)| message.as_ptr())
@@ -508,7 +492,7 @@ unsafe fn job_value<T: Copy>(
     get: impl FnOnce(&JobEntry) -> T,
 ) -> T {
     // SAFETY: the caller's contract.
-    unsafe { jobs_value(jobs, fallback, |j| j.jobs.get(index).map_or(fallback, get)) }
+    unsafe { value_of(jobs, fallback, |j| j.jobs.get(index).map_or(fallback, get)) }
 }
 
 /// The file job `index` writes (a tile's file for a tile); NULL for a NULL summary or an

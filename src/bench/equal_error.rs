@@ -10,7 +10,7 @@
 
 use std::path::PathBuf;
 
-use super::{BenchError, median, reference};
+use super::{BenchError, Measure, median, reference};
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
 use crate::render::{self, Mode, Progress, RenderSettings, RenderStats, SamplingRule};
@@ -55,14 +55,8 @@ pub struct EqualErrorConfig {
     pub levels: Vec<f64>,
     /// How each rung's anti-aliasing samples (per in-focus site) are chosen.
     pub aa: RungAa,
-    /// Timed repeats of each rung; the median is reported.
-    pub repeat: usize,
-    /// Samples per pixel of the converged reference (dense, in focus or not).
-    pub reference_spp: u32,
-    /// Seed of every render's sample streams (the reference's seed is derived from it).
-    pub seed: u64,
-    /// Where the reference is cached (None: not cached).
-    pub cache_dir: Option<PathBuf>,
+    /// Repeats (of each rung), reference and seed.
+    pub measure: Measure,
 }
 
 impl Default for EqualErrorConfig {
@@ -71,10 +65,7 @@ impl Default for EqualErrorConfig {
             ladder: DEFAULT_LADDER.to_vec(),
             levels: DEFAULT_LEVELS.to_vec(),
             aa: RungAa::Ratio(0.25),
-            repeat: 3,
-            reference_spp: 1024,
-            seed: 0,
-            cache_dir: None,
+            measure: Measure::default(),
         }
     }
 }
@@ -356,34 +347,27 @@ pub fn run(
     config: &EqualErrorConfig,
     progress: &dyn Progress,
 ) -> Result<EqualErrorReport, BenchError> {
-    if config.repeat == 0 {
+    if config.measure.repeat == 0 {
         return Err(BenchError::ZeroRepeat);
     }
     let ladder = checked_ladder(&config.ladder)?;
     let level_list = checked_levels(&config.levels)?;
     let top = *ladder.last().expect("checked: not empty");
-    if config.reference_spp <= top {
+    if config.measure.reference_spp <= top {
         return Err(BenchError::ReferenceBelowLadder {
-            reference_spp: config.reference_spp,
+            reference_spp: config.measure.reference_spp,
             top,
         });
     }
     for spp in &ladder {
         Method::Dense
-            .settings(*spp, config.aa.at(*spp), config.seed)
+            .settings(*spp, config.aa.at(*spp), config.measure.seed)
             .validate()
             .map_err(render::RenderError::from)?;
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let (reference, reference_cached, reference_seconds) = reference(
-        desc,
-        world,
-        camera,
-        config.reference_spp,
-        config.seed,
-        config.cache_dir.as_deref(),
-        progress,
-    )?;
+    let (reference, reference_cached, reference_seconds) =
+        reference(desc, world, camera, &config.measure, progress)?;
 
     let methods = [Method::Dense, Method::Adaptive];
     // Per method and rung: the stats of every repeat, and from the first repeat the PSNR and
@@ -391,10 +375,10 @@ pub fn run(
     let mut runs: Vec<Vec<Vec<RenderStats>>> = vec![vec![Vec::new(); ladder.len()]; 2];
     let mut quality: Vec<Vec<(f64, u64)>> = vec![Vec::new(); 2];
     // Repeats outermost, so machine noise (these are shared machines) spreads over every rung.
-    for repeat in 0..config.repeat {
+    for repeat in 0..config.measure.repeat {
         for (r, &spp) in ladder.iter().enumerate() {
             for (m, method) in methods.iter().enumerate() {
-                let settings = method.settings(spp, config.aa.at(spp), config.seed);
+                let settings = method.settings(spp, config.aa.at(spp), config.measure.seed);
                 let (film, stats) = render::render(world, camera, &settings, progress)?;
                 if repeat == 0 {
                     let psnr = metrics::psnr(&film.rgb(), &reference, w, h, Space::Srgb)?;
@@ -434,10 +418,10 @@ pub fn run(
         scene: desc.name.clone(),
         width: w,
         height: h,
-        repeat: config.repeat,
+        repeat: config.measure.repeat,
         threads: rayon::current_num_threads(),
-        seed: config.seed,
-        reference_spp: config.reference_spp,
+        seed: config.measure.seed,
+        reference_spp: config.measure.reference_spp,
         reference_cached,
         reference_seconds,
         aa: config.aa,
@@ -450,7 +434,7 @@ pub fn run(
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     fn close(a: f64, b: f64) -> bool {
@@ -520,7 +504,8 @@ mod tests {
         assert_eq!(time_to_reach(&pts, 60.0).seconds, Some(2.0));
     }
 
-    fn rung(spp: u32, seconds: f64, psnr: f64) -> Rung {
+    /// A rung of made-up figures.
+    pub(in crate::bench) fn rung(spp: u32, seconds: f64, psnr: f64) -> Rung {
         Rung {
             spp,
             aa: 1,
@@ -562,15 +547,17 @@ mod tests {
         assert_eq!(highest_common_level(&dense, &[]), None);
     }
 
-    #[test]
-    fn the_json_has_the_documented_shape() {
-        let dense = vec![rung(4, 1.0, 28.0), rung(8, 2.0, 31.0)];
-        let adaptive = vec![rung(4, 0.1, 31.0), rung(8, 0.2, 33.0)];
-        let (levels, highest_common) = levels(&[30.0, 40.0], &dense, &adaptive);
-        let report = EqualErrorReport {
-            scene: "t".into(),
-            width: 4,
-            height: 3,
+    /// A 64x48 study of made-up rungs at the PSNR `levels`.
+    pub(in crate::bench) fn report(
+        dense: Vec<Rung>,
+        adaptive: Vec<Rung>,
+        levels: &[f64],
+    ) -> EqualErrorReport {
+        let (levels, highest_common) = super::levels(levels, &dense, &adaptive);
+        EqualErrorReport {
+            scene: "hand-made".into(),
+            width: 64,
+            height: 48,
             repeat: 1,
             threads: 1,
             seed: 0,
@@ -583,7 +570,14 @@ mod tests {
             levels,
             highest_common,
             plot: None,
-        };
+        }
+    }
+
+    #[test]
+    fn the_json_has_the_documented_shape() {
+        let dense = vec![rung(4, 1.0, 28.0), rung(8, 2.0, 31.0)];
+        let adaptive = vec![rung(4, 0.1, 31.0), rung(8, 0.2, 33.0)];
+        let report = report(dense, adaptive, &[30.0, 40.0]);
         let json = serde_json::to_value(&report).unwrap();
         assert_eq!(json["aa"], serde_json::json!({"ratio": 0.25}));
         assert_eq!(json["dense"][1]["spp"], 8);

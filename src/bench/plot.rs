@@ -284,42 +284,12 @@ pub fn write_plot(report: &mut EqualErrorReport, dir: &Path) -> Result<(), PlotE
 
 #[cfg(test)]
 mod tests {
-    use super::super::equal_error::{self, Rung, RungAa};
+    use super::super::equal_error::tests::rung;
+    use super::super::equal_error::{self, Rung};
     use super::*;
 
-    fn rung(spp: u32, seconds: f64, psnr: f64) -> Rung {
-        Rung {
-            spp,
-            aa: 1,
-            tolerance: None,
-            seconds,
-            rays: 0,
-            primary_rays: 0,
-            sample_sites: 0,
-            samples: 0,
-            psnr_vs_reference: psnr,
-        }
-    }
-
     fn report(dense: Vec<Rung>, adaptive: Vec<Rung>) -> EqualErrorReport {
-        let (levels, highest_common) = equal_error::levels(&[30.0, 35.0], &dense, &adaptive);
-        EqualErrorReport {
-            scene: "hand-made".into(),
-            width: 64,
-            height: 48,
-            repeat: 1,
-            threads: 1,
-            seed: 0,
-            reference_spp: 64,
-            reference_cached: false,
-            reference_seconds: 0.0,
-            aa: RungAa::Ratio(0.25),
-            dense,
-            adaptive,
-            levels,
-            highest_common,
-            plot: None,
-        }
+        equal_error::tests::report(dense, adaptive, &[30.0, 35.0])
     }
 
     #[test]

@@ -41,19 +41,16 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
     let config = BenchConfig {
         spp: settings.spp,
         aa: settings.aa,
-        repeat: a.repeat,
-        reference_spp: a.reference_spp,
-        seed: a.scene.seed,
-        cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
+        measure: measure(a),
     };
     let max = RenderSettings::MAX_SAMPLES;
-    if config.reference_spp == 0 || config.reference_spp > max {
+    if a.reference_spp == 0 || a.reference_spp > max {
         usage!(
             "--reference-spp must be 1 to {max}, got {}",
-            config.reference_spp
+            a.reference_spp
         );
     }
-    if config.repeat == 0 {
+    if a.repeat == 0 {
         usage!("--repeat must be at least 1");
     }
     let bar = Bar::new(a.quiet || a.json);
@@ -76,6 +73,17 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
         print_table(&report);
     }
     Ok(())
+}
+
+/// The flags' repeats, reference and seed; the reference cached in the default directory
+/// unless `--cache-dir` names another.
+fn measure(a: &BenchArgs) -> bench::Measure {
+    bench::Measure {
+        repeat: a.repeat,
+        reference_spp: a.reference_spp,
+        seed: a.scene.seed,
+        cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
+    }
 }
 
 pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> Result<()> {
@@ -119,10 +127,7 @@ pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> R
         ladder: a.ladder.clone(),
         levels: a.levels.clone(),
         aa,
-        repeat: a.repeat,
-        reference_spp: a.reference_spp,
-        seed: a.scene.seed,
-        cache_dir: Some(a.cache_dir.clone().unwrap_or_else(default_cache_dir)),
+        measure: measure(a),
     };
     let bar = Bar::new(a.quiet || a.json);
     let mut report = p.pool.install(|| {

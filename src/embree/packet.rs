@@ -296,6 +296,104 @@ narrow_parts!(
     RTCRay4
 );
 
+/// Fills every lane with the segment from `origin` along `dir` for `t` in `[0, tfar]` and
+/// returns the mask of the lanes among `wanted` that Embree can trace; the others get the idle ray.
+fn fill_segments(
+    raw: &mut sys::RTCRay16,
+    wanted: u32,
+    origin: &[[f32; LANES]; 3],
+    dir: &[[f32; LANES]; 3],
+    tfar: &[f32; LANES],
+) -> Mask16 {
+    raw.org_x = origin[0];
+    raw.org_y = origin[1];
+    raw.org_z = origin[2];
+    raw.dir_x = dir[0];
+    raw.dir_y = dir[1];
+    raw.dir_z = dir[2];
+    raw.tnear = [0.0; LANES];
+    raw.tfar = *tfar;
+    raw.time = [0.0; LANES];
+    raw.mask = [u32::MAX; LANES];
+    raw.id = std::array::from_fn(|lane| lane as u32);
+    raw.flags = [0; LANES];
+    let ok = traceable_lanes(raw, wanted);
+    idle_lanes(raw, !ok);
+    Mask16(std::array::from_fn(|lane| -(((ok >> lane) & 1) as i32)))
+}
+
+/// The lane bookkeeping both packets share; `$($ray).+` names the packet's `RTCRay16`.
+macro_rules! lane_methods {
+    ($packet:ident, $field:ident $(. $sub:ident)?, $ray_doc:literal) => {
+        impl Default for $packet {
+            fn default() -> Self {
+                Self::new()
+            }
+        }
+
+        impl $packet {
+            /// A packet with every lane inactive.
+            pub fn new() -> Self {
+                let mut packet = Self {
+                    $field: Default::default(),
+                    valid: Mask16([0; LANES]),
+                };
+                packet.clear();
+                packet
+            }
+
+            /// Deactivates every lane (each gets the idle ray; hits are left as they were).
+            pub fn clear(&mut self) {
+                self.valid.0 = [0; LANES];
+                idle_lanes(&mut self.$field$(.$sub)?, u32::MAX);
+            }
+
+            /// Deactivates one lane: it gets the idle ray, and no Embree call writes it.
+            ///
+            /// # Panics
+            /// When `lane >= LANES` (16).
+            pub fn set_inactive(&mut self, lane: usize) {
+                assert!(lane < LANES, "lane {lane} out of range");
+                self.valid.0[lane] = 0;
+                idle_lanes(&mut self.$field$(.$sub)?, 1 << lane);
+            }
+
+            /// Whether `lane` will be traced.
+            ///
+            /// # Panics
+            /// When `lane >= LANES` (16).
+            pub fn is_active(&self, lane: usize) -> bool {
+                self.valid.0[lane] != 0
+            }
+
+            /// Puts `ray` in `lane` and activates it, or deactivates the lane and returns false
+            /// when Embree cannot trace the ray.
+            fn activate(&mut self, lane: usize, ray: &Ray) -> bool {
+                if !ray.is_traceable() {
+                    self.set_inactive(lane);
+                    return false;
+                }
+                init_ray(&mut self.$field$(.$sub)?, lane, ray);
+                self.valid.0[lane] = -1;
+                true
+            }
+
+            /// Number of active lanes.
+            pub fn active_count(&self) -> usize {
+                self.valid.0.iter().filter(|&&v| v != 0).count()
+            }
+
+            #[doc = $ray_doc]
+            ///
+            /// # Panics
+            /// When `lane >= LANES` (16).
+            pub fn ray(&self, lane: usize) -> Ray {
+                read_ray(&self.$field$(.$sub)?, lane)
+            }
+        }
+    };
+}
+
 fn read_ray(raw: &sys::RTCRay16, lane: usize) -> Ray {
     Ray {
         origin: Vec3::new(raw.org_x[lane], raw.org_y[lane], raw.org_z[lane]),
@@ -313,29 +411,13 @@ pub struct RayPacket16 {
     pub(super) valid: Mask16,
 }
 
-impl Default for RayPacket16 {
-    fn default() -> Self {
-        Self::new()
-    }
-}
+lane_methods!(
+    RayPacket16,
+    rayhit.ray,
+    "The ray in `lane` (after tracing, `tfar` is the hit distance when it hit)."
+);
 
 impl RayPacket16 {
-    /// A packet with every lane inactive.
-    pub fn new() -> Self {
-        let mut packet = Self {
-            rayhit: sys::RTCRayHit16::default(),
-            valid: Mask16([0; LANES]),
-        };
-        packet.clear();
-        packet
-    }
-
-    /// Deactivates every lane (each gets the idle ray; hits are left as they were).
-    pub fn clear(&mut self) {
-        self.valid.0 = [0; LANES];
-        idle_lanes(&mut self.rayhit.ray, u32::MAX);
-    }
-
     /// Activates `lane` with `ray` and no hit, and returns true; a ray Embree cannot trace
     /// (non-finite, or beyond its range: see [`Ray::is_traceable`]) leaves the lane inactive
     /// and returns false, so no input can abort Embree.
@@ -343,18 +425,15 @@ impl RayPacket16 {
     /// # Panics
     /// When `lane >= LANES` (16).
     pub fn set(&mut self, lane: usize, ray: &Ray) -> bool {
-        if !ray.is_traceable() {
-            self.set_inactive(lane);
+        if !self.activate(lane, ray) {
             return false;
         }
-        init_ray(&mut self.rayhit.ray, lane, ray);
         let hit = &mut self.rayhit.hit;
         hit.geomID[lane] = sys::RTC_INVALID_GEOMETRY_ID;
         hit.primID[lane] = sys::RTC_INVALID_GEOMETRY_ID;
         for level in hit.instID.iter_mut() {
             level[lane] = sys::RTC_INVALID_GEOMETRY_ID;
         }
-        self.valid.0[lane] = -1;
         true
     }
 
@@ -369,19 +448,6 @@ impl RayPacket16 {
         origin: &[[f32; LANES]; 3],
         dir: &[[f32; LANES]; 3],
     ) {
-        let raw = &mut self.rayhit.ray;
-        raw.org_x = origin[0];
-        raw.org_y = origin[1];
-        raw.org_z = origin[2];
-        raw.dir_x = dir[0];
-        raw.dir_y = dir[1];
-        raw.dir_z = dir[2];
-        raw.tnear = [0.0; LANES];
-        raw.tfar = [f32::INFINITY; LANES];
-        raw.time = [0.0; LANES];
-        raw.mask = [u32::MAX; LANES];
-        raw.id = std::array::from_fn(|lane| lane as u32);
-        raw.flags = [0; LANES];
         let hit = &mut self.rayhit.hit;
         hit.geomID = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
         hit.primID = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
@@ -393,9 +459,8 @@ impl RayPacket16 {
         } else {
             (1u32 << active) - 1
         };
-        let ok = traceable_lanes(raw, wanted);
-        self.valid.0 = std::array::from_fn(|lane| -(((ok >> lane) & 1) as i32));
-        idle_lanes(raw, !ok);
+        let tfar = [f32::INFINITY; LANES];
+        self.valid = fill_segments(&mut self.rayhit.ray, wanted, origin, dir, &tfar);
     }
 
     /// Ray origins of all lanes as structure of arrays (x, y, z).
@@ -434,37 +499,6 @@ impl RayPacket16 {
         mask
     }
 
-    /// Deactivates one lane: it gets the idle ray, and no Embree call writes its hit.
-    ///
-    /// # Panics
-    /// When `lane >= LANES` (16).
-    pub fn set_inactive(&mut self, lane: usize) {
-        assert!(lane < LANES, "lane {lane} out of range");
-        self.valid.0[lane] = 0;
-        idle_lanes(&mut self.rayhit.ray, 1 << lane);
-    }
-
-    /// Whether `lane` will be traced.
-    ///
-    /// # Panics
-    /// When `lane >= LANES` (16).
-    pub fn is_active(&self, lane: usize) -> bool {
-        self.valid.0[lane] != 0
-    }
-
-    /// Number of active lanes.
-    pub fn active_count(&self) -> usize {
-        self.valid.0.iter().filter(|&&v| v != 0).count()
-    }
-
-    /// The ray in `lane` (after tracing, `tfar` is the hit distance when it hit).
-    ///
-    /// # Panics
-    /// When `lane >= LANES` (16).
-    pub fn ray(&self, lane: usize) -> Ray {
-        read_ray(&self.rayhit.ray, lane)
-    }
-
     /// The hit in `lane`, or `None` when the lane is inactive or its ray missed.
     ///
     /// # Panics
@@ -492,42 +526,20 @@ pub struct ShadowPacket16 {
     pub(super) valid: Mask16,
 }
 
-impl Default for ShadowPacket16 {
-    fn default() -> Self {
-        Self::new()
-    }
-}
+lane_methods!(
+    ShadowPacket16,
+    rays,
+    "The shadow ray in `lane` (after tracing, `tfar` is -inf when it was blocked)."
+);
 
 impl ShadowPacket16 {
-    /// A packet with every lane inactive.
-    pub fn new() -> Self {
-        let mut packet = Self {
-            rays: sys::RTCRay16::default(),
-            valid: Mask16([0; LANES]),
-        };
-        packet.clear();
-        packet
-    }
-
-    /// Deactivates every lane (each gets the idle ray).
-    pub fn clear(&mut self) {
-        self.valid.0 = [0; LANES];
-        idle_lanes(&mut self.rays, u32::MAX);
-    }
-
     /// Activates `lane` with the shadow ray `ray` and returns true; a ray Embree cannot trace
     /// leaves the lane inactive and returns false (see [`RayPacket16::set`]).
     ///
     /// # Panics
     /// When `lane >= LANES` (16).
     pub fn set(&mut self, lane: usize, ray: &Ray) -> bool {
-        if !ray.is_traceable() {
-            self.set_inactive(lane);
-            return false;
-        }
-        init_ray(&mut self.rays, lane, ray);
-        self.valid.0[lane] = -1;
-        true
+        self.activate(lane, ray)
     }
 
     /// Fills every lane with the segment from `origin` along `dir` for `t` in `[0, tfar]`
@@ -541,53 +553,7 @@ impl ShadowPacket16 {
         dir: &[[f32; LANES]; 3],
         tfar: &[f32; LANES],
     ) {
-        let raw = &mut self.rays;
-        raw.org_x = origin[0];
-        raw.org_y = origin[1];
-        raw.org_z = origin[2];
-        raw.dir_x = dir[0];
-        raw.dir_y = dir[1];
-        raw.dir_z = dir[2];
-        raw.tnear = [0.0; LANES];
-        raw.tfar = *tfar;
-        raw.time = [0.0; LANES];
-        raw.mask = [u32::MAX; LANES];
-        raw.id = std::array::from_fn(|lane| lane as u32);
-        raw.flags = [0; LANES];
-        let ok = traceable_lanes(raw, active);
-        self.valid.0 = std::array::from_fn(|lane| -(((ok >> lane) & 1) as i32));
-        idle_lanes(raw, !ok);
-    }
-
-    /// Deactivates one lane: it gets the idle ray, and no Embree call writes it.
-    ///
-    /// # Panics
-    /// When `lane >= LANES` (16).
-    pub fn set_inactive(&mut self, lane: usize) {
-        assert!(lane < LANES, "lane {lane} out of range");
-        self.valid.0[lane] = 0;
-        idle_lanes(&mut self.rays, 1 << lane);
-    }
-
-    /// Whether `lane` will be traced.
-    ///
-    /// # Panics
-    /// When `lane >= LANES` (16).
-    pub fn is_active(&self, lane: usize) -> bool {
-        self.valid.0[lane] != 0
-    }
-
-    /// Number of active lanes.
-    pub fn active_count(&self) -> usize {
-        self.valid.0.iter().filter(|&&v| v != 0).count()
-    }
-
-    /// The shadow ray in `lane` (after tracing, `tfar` is -inf when it was blocked).
-    ///
-    /// # Panics
-    /// When `lane >= LANES` (16).
-    pub fn ray(&self, lane: usize) -> Ray {
-        read_ray(&self.rays, lane)
+        self.valid = fill_segments(&mut self.rays, active, origin, dir, tfar);
     }
 
     /// True when the active ray in `lane` is blocked (Embree sets its `tfar` to -inf).

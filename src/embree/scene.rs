@@ -138,73 +138,51 @@ impl SceneBuilder {
         filter: Option<Arc<dyn HitFilter>>,
     ) -> Result<GeometryId> {
         let (vertices, vertex_count, indices, triangle_count) = mesh.raw_buffers();
-        self.attach(
-            Geometry::Mesh(mesh),
-            sys::RTC_GEOMETRY_TYPE_TRIANGLE,
-            filter,
-            |geom| {
-                // SAFETY: both buffers are owned by the Geometry that this builder (then the Scene)
-                // keeps until after the scene handle is released; each is padded by one element so
-                // Embree's 16-byte loads of the last item stay in bounds; strides match the layouts.
-                unsafe {
-                    sys::rtcSetSharedGeometryBuffer(
-                        geom,
-                        sys::RTC_BUFFER_TYPE_VERTEX,
-                        0,
-                        sys::RTC_FORMAT_FLOAT3,
-                        vertices.cast(),
-                        0,
-                        12,
-                        vertex_count,
-                    );
-                    sys::rtcSetSharedGeometryBuffer(
-                        geom,
-                        sys::RTC_BUFFER_TYPE_INDEX,
-                        0,
-                        sys::RTC_FORMAT_UINT3,
-                        indices.cast(),
-                        0,
-                        12,
-                        triangle_count,
-                    );
-                }
+        // Each buffer is padded by one element so Embree's 16-byte loads of the last item stay
+        // in bounds.
+        let buffers = [
+            SharedBuffer {
+                kind: sys::RTC_BUFFER_TYPE_VERTEX,
+                format: sys::RTC_FORMAT_FLOAT3,
+                data: vertices.cast(),
+                stride: 12,
+                count: vertex_count,
             },
-        )
+            SharedBuffer {
+                kind: sys::RTC_BUFFER_TYPE_INDEX,
+                format: sys::RTC_FORMAT_UINT3,
+                data: indices.cast(),
+                stride: 12,
+                count: triangle_count,
+            },
+        ];
+        let kind = sys::RTC_GEOMETRY_TYPE_TRIANGLE;
+        self.attach(Geometry::Mesh(mesh), kind, filter, &buffers)
     }
 
     /// Adds a set of analytic spheres (Embree's sphere point geometry).
     pub fn add_spheres(&mut self, spheres: Spheres) -> Result<GeometryId> {
         let (data, count) = spheres.raw_buffer();
-        self.attach(
-            Geometry::Spheres(spheres),
-            sys::RTC_GEOMETRY_TYPE_SPHERE_POINT,
-            None,
-            |geom| {
-                // SAFETY: as in add_mesh; float4 items are 16 bytes, so no padding is needed.
-                unsafe {
-                    sys::rtcSetSharedGeometryBuffer(
-                        geom,
-                        sys::RTC_BUFFER_TYPE_VERTEX,
-                        0,
-                        sys::RTC_FORMAT_FLOAT4,
-                        data.cast(),
-                        0,
-                        16,
-                        count,
-                    );
-                }
-            },
-        )
+        // float4 items are 16 bytes: Embree's loads stay in bounds without padding.
+        let buffer = SharedBuffer {
+            kind: sys::RTC_BUFFER_TYPE_VERTEX,
+            format: sys::RTC_FORMAT_FLOAT4,
+            data: data.cast(),
+            stride: 16,
+            count,
+        };
+        let kind = sys::RTC_GEOMETRY_TYPE_SPHERE_POINT;
+        self.attach(Geometry::Spheres(spheres), kind, None, &[buffer])
     }
 
-    /// Creates a geometry of `kind`, lets `set_buffers` share its buffers with Embree,
-    /// installs `filter` (if any) for its candidate hits, and attaches it to the scene.
+    /// Creates a geometry of `kind`, shares `buffers` (which point into `geometry`) with
+    /// Embree, installs `filter` (if any) for its candidate hits, and attaches it to the scene.
     fn attach(
         &mut self,
         geometry: Geometry,
         kind: sys::RTCGeometryType,
         filter: Option<Arc<dyn HitFilter>>,
-        set_buffers: impl FnOnce(sys::RTCGeometry),
+        buffers: &[SharedBuffer],
     ) -> Result<GeometryId> {
         let id = u32::try_from(self.geometries.len())
             .ok()
@@ -219,7 +197,16 @@ impl SceneBuilder {
             }
             return Err(e);
         }
-        set_buffers(geom);
+        for b in buffers {
+            // SAFETY: every buffer points into `geometry`, which this builder (then the Scene)
+            // keeps until after the scene handle is released; its callers size and pad each
+            // for Embree's loads; strides match the layouts.
+            unsafe {
+                sys::rtcSetSharedGeometryBuffer(
+                    geom, b.kind, 0, b.format, b.data, 0, b.stride, b.count,
+                );
+            }
+        }
         if let Some(filter) = filter {
             // SAFETY: geom is live and not yet committed; the box is kept in the builder, then
             // the Scene, whose field order drops it after the scene handle is released.
@@ -285,6 +272,40 @@ pub struct Scene {
 unsafe impl Send for Scene {}
 // SAFETY: as above: all &Scene methods are queries on immutable data.
 unsafe impl Sync for Scene {}
+
+/// A buffer a geometry shares with Embree (slot 0 of its kind): `count` items of `stride`
+/// bytes in `format` at `data`.
+struct SharedBuffer {
+    kind: sys::RTCBufferType,
+    format: sys::RTCFormat,
+    data: *const std::ffi::c_void,
+    stride: usize,
+    count: usize,
+}
+
+/// Hands a 16-ray packet to Embree in calls of the scene's width: the `version` function
+/// `$f16` on the whole packet (its `$rays` field), else `$f8` or `$f4` on each part with an
+/// active lane.
+macro_rules! by_packet_width {
+    ($scene:ident, $packet:ident, $hint:ident, $rays:ident, $f16:ident, $f8:ident, $f4:ident) => {{
+        let (scene, coherent) = ($scene.handle.0, $hint == RayHint::Coherent);
+        match $scene.lanes_per_call {
+            16 => {
+                // SAFETY: the scene is committed and alive for &self; the mask and packet are
+                // 64-byte aligned by their types.
+                unsafe { version::$f16(&$packet.valid, scene, &mut $packet.$rays, coherent) }
+            }
+            8 => $packet.for_each_part8(|valid, part| {
+                // SAFETY: as above, with 32-byte aligned 8-wide types.
+                unsafe { version::$f8(valid, scene, part, coherent) }
+            }),
+            _ => $packet.for_each_part4(|valid, part| {
+                // SAFETY: as above, with 16-byte aligned 4-wide types.
+                unsafe { version::$f4(valid, scene, part, coherent) }
+            }),
+        }
+    }};
+}
 
 impl Scene {
     /// Axis-aligned bounds of everything in the scene (lower, upper).
@@ -363,41 +384,20 @@ impl Scene {
 
     /// Traces the active lanes of a packet; the hits of inactive lanes are not written.
     pub fn intersect16(&self, packet: &mut RayPacket16, hint: RayHint) {
-        let (scene, coherent) = (self.handle.0, hint == RayHint::Coherent);
-        match self.lanes_per_call {
-            16 => {
-                // SAFETY: the scene is committed and alive for &self; the mask and packet are
-                // 64-byte aligned by their types.
-                unsafe { version::intersect16(&packet.valid, scene, &mut packet.rayhit, coherent) }
-            }
-            8 => packet.for_each_part8(|valid, part| {
-                // SAFETY: as above, with 32-byte aligned 8-wide types.
-                unsafe { version::intersect8(valid, scene, part, coherent) }
-            }),
-            _ => packet.for_each_part4(|valid, part| {
-                // SAFETY: as above, with 16-byte aligned 4-wide types.
-                unsafe { version::intersect4(valid, scene, part, coherent) }
-            }),
-        }
+        by_packet_width!(
+            self,
+            packet,
+            hint,
+            rayhit,
+            intersect16,
+            intersect8,
+            intersect4
+        );
     }
 
     /// Tests the active lanes of a shadow packet for occlusion.
     pub fn occluded16(&self, packet: &mut ShadowPacket16, hint: RayHint) {
-        let (scene, coherent) = (self.handle.0, hint == RayHint::Coherent);
-        match self.lanes_per_call {
-            16 => {
-                // SAFETY: as in intersect16.
-                unsafe { version::occluded16(&packet.valid, scene, &mut packet.rays, coherent) }
-            }
-            8 => packet.for_each_part8(|valid, part| {
-                // SAFETY: as in intersect16.
-                unsafe { version::occluded8(valid, scene, part, coherent) }
-            }),
-            _ => packet.for_each_part4(|valid, part| {
-                // SAFETY: as in intersect16.
-                unsafe { version::occluded4(valid, scene, part, coherent) }
-            }),
-        }
+        by_packet_width!(self, packet, hint, rays, occluded16, occluded8, occluded4);
     }
 }
 
@@ -740,7 +740,7 @@ mod tests {
                 Geometry::Spheres(Spheres::new([(Vec3::ONE, 1.0)]).unwrap()),
                 9999,
                 None,
-                |_| panic!("no buffers are set when rtcNewGeometry fails"),
+                &[],
             )
             .unwrap_err();
         match err {

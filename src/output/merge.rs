@@ -218,9 +218,18 @@ pub fn merge_into(tiles: &[PathBuf], output: &Target) -> Result<Merged, MergeErr
     check_coverage(&tiles, width, height)?;
     let (metadata, seconds, rays) = merged_metadata(&tiles);
     let size = (width as usize, height as usize);
+    let written = (size, &metadata, output);
     match &first.pixels {
-        Pixels::Exr { .. } => write_exr(&tiles, size, &metadata, output)?,
-        Pixels::Png { .. } => write_png(&tiles, size, &metadata, output)?,
+        Pixels::Exr {
+            channels,
+            compression,
+        } => write_exr(&tiles, channels, *compression, written)?,
+        Pixels::Png {
+            bytes_per_pixel,
+            color,
+            depth,
+            ..
+        } => write_png(&tiles, *bytes_per_pixel, (*color, *depth), written)?,
     }
     Ok(Merged {
         width,
@@ -283,21 +292,14 @@ fn merged_metadata(tiles: &[Tile]) -> (Metadata, f64, u64) {
 }
 
 /// Every EXR tile's channels copied into the whole image's, written with the first tile's
-/// compression.
+/// `channels` (their names and sample types) and `compression`.
 fn write_exr(
     tiles: &[Tile],
-    (w, h): (usize, usize),
-    metadata: &Metadata,
-    output: &Target,
+    channels: &[(Text, FlatSamples)],
+    compression: Compression,
+    ((w, h), metadata, output): (Size, &Metadata, &Target),
 ) -> Result<(), MergeError> {
     let first = &tiles[0];
-    let Pixels::Exr {
-        channels,
-        compression,
-    } = &first.pixels
-    else {
-        unreachable!("formats checked")
-    };
     let mut full: Vec<(Text, FlatSamples)> = channels
         .iter()
         .map(|(name, s)| (name.clone(), empty_like(s, w * h)))
@@ -319,7 +321,7 @@ fn write_exr(
         .into_iter()
         .map(|(name, s)| AnyChannel::new(name, s))
         .collect();
-    let compression = dofray_exr::ExrCompression::from_exr(*compression)
+    let compression = dofray_exr::ExrCompression::from_exr(compression)
         .unwrap_or(dofray_exr::ExrCompression::Zip);
     let image = dofray_exr::layer_image(channels, (w, h), None, metadata, compression);
     dofray_exr::write_image(output, &image)?;
@@ -327,24 +329,14 @@ fn write_exr(
 }
 
 /// Every PNG tile's pixels pasted into the whole image's, written with the first tile's
-/// colour type and bit depth.
+/// layout: `bpp` bytes per pixel, colour type and bit depth.
 fn write_png(
     tiles: &[Tile],
-    (w, h): (usize, usize),
-    metadata: &Metadata,
-    output: &Target,
+    bpp: usize,
+    (color, depth): (::png::ColorType, ::png::BitDepth),
+    ((w, h), metadata, output): (Size, &Metadata, &Target),
 ) -> Result<(), MergeError> {
     let first = &tiles[0];
-    let Pixels::Png {
-        bytes_per_pixel,
-        color,
-        depth,
-        ..
-    } = &first.pixels
-    else {
-        unreachable!("formats checked")
-    };
-    let bpp = *bytes_per_pixel;
     let mut data = vec![0u8; w * h * bpp];
     for t in tiles {
         let Pixels::Png {
@@ -371,12 +363,15 @@ fn write_png(
         width: w,
         height: h,
         data: &data,
-        sixteen: *depth == ::png::BitDepth::Sixteen,
-        alpha: *color == ::png::ColorType::Rgba,
+        sixteen: depth == ::png::BitDepth::Sixteen,
+        alpha: color == ::png::ColorType::Rgba,
     };
     png.write(output, metadata)?;
     Ok(())
 }
+
+/// The merged image's width and height in pixels.
+type Size = (usize, usize);
 
 fn mismatch(first: &Tile, other: &Tile, key: &str, a: &str, b: String) -> MergeError {
     MergeError::Mismatch {

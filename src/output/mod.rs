@@ -353,6 +353,15 @@ mod tests {
             Self(dir)
         }
 
+        /// Writes `film` as `name` here with the default options; checks it is the only file
+        /// written (no temporary file left behind) and returns its path.
+        fn write_only(&self, name: &str, film: &Film) -> PathBuf {
+            let path = self.0.join(name);
+            write_film(&path, film).unwrap();
+            assert_eq!(self.entries(), vec![name.to_owned()]);
+            path
+        }
+
         fn entries(&self) -> Vec<String> {
             let mut names: Vec<String> = std::fs::read_dir(&self.0)
                 .unwrap()
@@ -392,10 +401,8 @@ mod tests {
     #[test]
     fn png_round_trip() {
         let dir = Scratch::new("png");
-        let path = dir.0.join("film.png");
         let film = test_film();
-        write_film(&path, &film).unwrap();
-        assert_eq!(dir.entries(), vec!["film.png".to_owned()]);
+        let path = dir.write_only("film.png", &film);
 
         let img = image::open(&path).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (4, 3));
@@ -453,10 +460,8 @@ mod tests {
     #[test]
     fn exr_round_trip() {
         let dir = Scratch::new("exr");
-        let path = dir.0.join("film.EXR");
         let film = transparent_film();
-        write_film(&path, &film).unwrap();
-        assert_eq!(dir.entries(), vec!["film.EXR".to_owned()]);
+        let path = dir.write_only("film.EXR", &film);
 
         let channels = read_exr(&path);
         let names: Vec<&str> = channels.iter().map(|(n, _, _)| n.as_str()).collect();
