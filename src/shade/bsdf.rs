@@ -111,6 +111,8 @@ struct Setup {
     cos_o: f32,
     /// [`smith_s`] at `wo`.
     s_o: f32,
+    /// The dielectric Fresnel reflectance at `wo` (what the diffuse layer is dimmed by).
+    fo: f32,
     /// Probability of sampling the microfacet lobes (reflection and transmission) rather than
     /// the diffuse one.
     p_micro: f32,
@@ -163,8 +165,10 @@ impl Setup {
             w_transmit,
             cos_o,
             s_o: smith_s(a2, cos_o),
+            fo: 0.0,
             p_micro: 0.0,
         };
+        setup.fo = setup.dielectric_fresnel(cos_o);
         setup.p_micro = setup.micro_probability();
         Some(setup)
     }
@@ -225,7 +229,12 @@ impl Setup {
             let h = (wo + wi).normalize_or(n);
             let (fd, spec, p_reflect) = self.split(wo.dot(h).clamp(0.0, 1.0));
             let lambert = cos_i * FRAC_1_PI;
-            let mut f = self.base * (self.w_diffuse * (1.0 - fd) * lambert);
+            // The diffuse layer gets what the specular layer does not reflect towards `wo`:
+            // `1 - F(n . wo)` (Cycles' albedo scaling, exact for a smooth interface). glTF's
+            // `1 - F(v . h)` would let a white dielectric reflect up to 1.7 times the light it
+            // receives at grazing angles.
+            let _ = fd;
+            let mut f = self.base * (self.w_diffuse * (1.0 - self.fo) * lambert);
             let mut pdf = (1.0 - self.p_micro) * lambert;
             if !self.delta {
                 let (dv, density) = self.reflection_terms(n, h, cos_i);
@@ -608,14 +617,16 @@ mod tests {
         assert!(checked > 10_000, "{checked}");
     }
 
-    /// The reflection part is reciprocal: `f(wo, wi) = f(wi, wo)`.
+    /// The specular reflection is reciprocal: `f(wo, wi) = f(wi, wo)`. (The diffuse layer's
+    /// albedo scaling by `1 - F(n . wo)` is not, as in Cycles: it is what keeps the layers
+    /// from reflecting more than arrives.)
     #[test]
     fn reflection_is_reciprocal() {
         let n = Vec3::Z;
         for i in 0..2_000u64 {
             let bsdf = Bsdf {
                 base_color: Vec3::new(0.8, 0.4, 0.1),
-                ..material(0.05 + unit(i), unit(i + 7), unit(i + 9), 1.1 + unit(i + 3))
+                ..material(0.05 + unit(i), 1.0, unit(i + 9), 1.1 + unit(i + 3))
             };
             let (a, b) = (u3(i * 5), u3(i * 5 + 1));
             let wo = Vec3::new(a[0] - 0.5, a[1] - 0.5, a[2] + 0.01).normalize();
@@ -673,16 +684,15 @@ mod tests {
     }
 
     /// Directional albedos of white materials never exceed 1; printed as the table the
-    /// documentation quotes (`cargo test albedo_table -- --nocapture`). The opaque dielectric
-    /// is the exception at grazing `wo`: glTF's mix weighs the diffuse part by `1 - F(v . h)`
-    /// while the specular part reflects `F` at `wo`, which is not energy-conserving (a
-    /// smooth white one returns 1.73 at cos 0.05); it conserves near normal incidence.
+    /// documentation quotes (`cargo test albedo_table -- --nocapture`), the opaque white
+    /// dielectric at grazing angles too (its diffuse layer is dimmed by `1 - F(n . wo)`; with
+    /// glTF's `1 - F(v . h)` a smooth one returned 1.73 at cos 0.05).
     #[test]
     fn albedo_table_never_exceeds_one() {
         let cosines = [1.0f32, 0.7, 0.4, 0.2, 0.05];
         for (name, metallic, transmission, eta, conserving) in [
             ("white conductor", 1.0, 0.0, 1.5, 0.0f32),
-            ("white dielectric (ior 1.5)", 0.0, 0.0, 1.5, 0.7),
+            ("white dielectric (ior 1.5)", 0.0, 0.0, 1.5, 0.0),
             ("glass from outside (ior 1.5)", 0.0, 1.0, 1.5, 0.0),
             ("glass from inside (ior 1.5)", 0.0, 1.0, 1.0 / 1.5, 0.0),
         ] {
