@@ -89,7 +89,10 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
             aperture: ApertureShape::default(),
         },
         materials: vec![
-            Material::diffuse(Vec3::ONE),
+            Material {
+                emission: Vec3::splat(100.0),
+                ..Material::diffuse(Vec3::ZERO)
+            },
             Material::diffuse(Vec3::splat(0.004)),
         ],
         objects: vec![
@@ -106,7 +109,7 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
             },
         ],
         lights: vec![],
-        ambient: Vec3::splat(100.0),
+        ambient: Vec3::splat(0.4),
         background: Background::uniform(Vec3::ZERO),
         ..Default::default()
     };

@@ -418,7 +418,7 @@ fn spot_falloff_is_full_inside_zero_outside_and_smooth_between() {
     assert_eq!(lit(31.0), 0.0);
     assert_eq!(lit(60.0), 0.0);
     let mut last = 8.0;
-    for deg in [24.0, 26.0, 28.0, 29.5] {
+    for deg in [25.0, 26.0, 28.0, 29.5] {
         let v = lit(deg);
         assert!(v > 0.0 && v < last, "{deg}: {v} after {last}");
         last = v;

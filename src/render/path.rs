@@ -161,14 +161,14 @@ fn add_world(
         return;
     }
     let dir = packet.dirs();
-    let pdf_light = world.emitters.pdf_world();
     for lane in (0..LANES).filter(|&l| missed & (1 << l) != 0) {
         let s = &lanes[lane];
-        let le = world.background.radiance(lane_vec(dir, lane));
+        let d = lane_vec(dir, lane);
+        let le = world.background.radiance(d);
         let w = if s.delta {
             1.0
         } else {
-            power_heuristic(s.pdf, pdf_light)
+            power_heuristic(s.pdf, world.emitters.pdf_world(world, d))
         };
         radiance[lane] += clamped(s.throughput * le * w, clamp);
     }

@@ -42,6 +42,7 @@ pub fn paper() -> SceneDesc {
             scale,
         },
         roughness: 0.45,
+        ior: 1.5,
         ..Material::diffuse(Vec3::ZERO)
     };
     let materials = vec![
@@ -57,6 +58,7 @@ pub fn paper() -> SceneDesc {
                 b: Vec3::splat(0.12),
                 scale: 1.0,
             },
+            ior: 1.5,
             ..Material::diffuse(Vec3::ZERO)
         },
     ];
@@ -112,6 +114,7 @@ pub fn paper() -> SceneDesc {
         background: Background {
             horizon: Vec3::new(0.375, 0.41, 0.475),
             zenith: Vec3::new(0.15, 0.225, 0.4),
+            map: None,
         },
         ..Default::default()
     }

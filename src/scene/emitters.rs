@@ -125,11 +125,18 @@ impl Emitters {
             }
         }
         let mut world_index = None;
-        let sky = luminance(world.background.horizon.max(world.background.zenith));
-        if sky > 0.0 {
+        let sky = match &world.background.map {
+            Some(map) if map.can_sample() => luminance(map.power(radius)),
+            Some(_) => 0.0,
+            None => {
+                let sky = world.background.horizon.max(world.background.zenith);
+                4.0 * PI * PI * radius * radius * luminance(sky)
+            }
+        };
+        if sky > 0.0 && sky.is_finite() {
             world_index = Some(list.len());
             list.push(Emitter::World);
-            power.push(4.0 * PI * PI * radius * radius * sky);
+            power.push(sky);
         }
         let total: f64 = power.iter().map(|&p| p as f64).sum();
         let prob: Vec<f32> = if total > 0.0 && total.is_finite() {
@@ -194,16 +201,28 @@ impl Emitters {
             }
             Emitter::Triangle { geometry, prim } => sample_triangle(world, geometry, prim, p, u)?,
             Emitter::Sphere { prim } => sample_sphere(world, prim, p, u)?,
-            Emitter::World => {
-                let dir = uniform_sphere(u);
-                EmitterSample {
-                    dir,
-                    distance: f32::INFINITY,
-                    radiance: world.background.radiance(dir),
-                    pdf: 1.0 / (4.0 * PI),
-                    delta: false,
+            Emitter::World => match &world.background.map {
+                Some(map) => {
+                    let s = map.sample(u)?;
+                    EmitterSample {
+                        dir: s.dir,
+                        distance: f32::INFINITY,
+                        radiance: s.radiance,
+                        pdf: s.pdf,
+                        delta: false,
+                    }
                 }
-            }
+                None => {
+                    let dir = uniform_sphere(u);
+                    EmitterSample {
+                        dir,
+                        distance: f32::INFINITY,
+                        radiance: world.background.radiance(dir),
+                        pdf: 1.0 / (4.0 * PI),
+                        delta: false,
+                    }
+                }
+            },
         };
         let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.max_element() > 0.0;
         ok.then_some(EmitterSample {
@@ -239,10 +258,11 @@ impl Emitters {
 
     /// The density [`Emitters::sample`] draws world direction `dir` with (zero when the world
     /// does not emit).
-    pub fn pdf_world(&self) -> f32 {
-        match self.world {
-            Some(i) => self.prob[i] / (4.0 * PI),
-            None => 0.0,
+    pub fn pdf_world(&self, world: &World, dir: Vec3) -> f32 {
+        match (self.world, &world.background.map) {
+            (Some(i), Some(map)) => self.prob[i] * map.pdf(dir),
+            (Some(i), None) => self.prob[i] / (4.0 * PI),
+            (None, _) => 0.0,
         }
     }
 }

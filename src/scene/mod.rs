@@ -56,13 +56,30 @@ pub enum Object {
     },
 }
 
-/// Sky colour by ray direction: `horizon` at the horizon blending to `zenith` straight up.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The world: the radiance arriving from every direction rays leave the scene in. Rays that hit
+/// nothing see it, and the path tracer is lit by it (sampled by importance when it is a map).
+/// A sky colour by direction (`horizon` at the horizon blending to `zenith` straight up), or
+/// an equirectangular map.
+#[derive(Debug, Clone)]
 pub struct Background {
     /// Radiance towards the horizon (and below it), linear RGB.
     pub horizon: Vec3,
     /// Radiance straight up, linear RGB.
     pub zenith: Vec3,
+    /// An environment map (Blender's Environment Texture), which replaces the sky when given.
+    pub map: Option<std::sync::Arc<crate::shade::EnvironmentMap>>,
+}
+
+/// Equal colours, and the same map (by identity: maps are not compared texel by texel).
+impl PartialEq for Background {
+    fn eq(&self, other: &Self) -> bool {
+        let same_map = match (&self.map, &other.map) {
+            (None, None) => true,
+            (Some(a), Some(b)) => std::sync::Arc::ptr_eq(a, b),
+            _ => false,
+        };
+        self.horizon == other.horizon && self.zenith == other.zenith && same_map
+    }
 }
 
 impl Background {
@@ -71,13 +88,27 @@ impl Background {
         Self {
             horizon: c,
             zenith: c,
+            map: None,
         }
     }
 
-    /// Radiance seen along unit direction `dir` (+y up): `horizon` at and below the horizon,
-    /// blending to `zenith` by the square root of `dir.y`.
+    /// Radiance seen along unit direction `dir` (+y up): the map's, else `horizon` at and
+    /// below the horizon, blending to `zenith` by the square root of `dir.y`.
     pub fn radiance(&self, dir: Vec3) -> Vec3 {
-        self.horizon.lerp(self.zenith, dir.y.clamp(0.0, 1.0).sqrt())
+        match &self.map {
+            Some(map) => map.radiance(dir),
+            None => self.horizon.lerp(self.zenith, dir.y.clamp(0.0, 1.0).sqrt()),
+        }
+    }
+
+    /// Mean radiance over the upper hemisphere, cosine-weighted: the unshadowed light the
+    /// world gives an upward surface, as radiance (what the direct integrator's ambient term
+    /// stands in for). For the sky, `E[sqrt(cos)]` under the cosine density is 4/5.
+    pub fn mean_radiance(&self) -> Vec3 {
+        match &self.map {
+            Some(map) => map.average_radiance(),
+            None => self.horizon.lerp(self.zenith, 0.8),
+        }
     }
 }
 

@@ -237,6 +237,7 @@ pub fn default_background() -> Background {
     Background {
         horizon: Vec3::new(0.375, 0.41, 0.475),
         zenith: Vec3::new(0.15, 0.225, 0.4),
+        map: None,
     }
 }
 

@@ -827,6 +827,8 @@ fn convert_material(
         roughness,
         emission,
         emission_texture: None,
+        // A dielectric with glTF's default index (the 4% reflection MTL's `Ks` stands for).
+        ior: 1.5,
         ..Material::diffuse(Vec3::ZERO)
     })
 }

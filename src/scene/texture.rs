@@ -289,6 +289,38 @@ impl TextureCache {
     }
 }
 
+/// An environment map (the world's equirectangular image) from image file `path`: Radiance
+/// `.hdr` and OpenEXR (linear; an EXR's channels must be named R, G and B), or PNG and JPEG
+/// (sRGB). Negative texels (colour-conversion noise in some HDRIs) become 0; `strength`
+/// multiplies the radiance and `rotation` (radians) turns it about the up axis, as Blender's
+/// Mapping node's Z rotation does.
+pub fn load_environment(
+    path: &Path,
+    strength: f32,
+    rotation: f32,
+    options: &LoadOptions,
+) -> Result<crate::shade::EnvironmentMap, LoadError> {
+    let bad = |message: String| LoadError::Image {
+        path: path.to_path_buf(),
+        message,
+    };
+    let bytes = input::read(path, options)?;
+    let linear = matches!(
+        image::guess_format(&bytes),
+        Ok(image::ImageFormat::Hdr | image::ImageFormat::OpenExr)
+    );
+    // The sampling tables take 4 more bytes a texel: leave room for them in the limit.
+    let image =
+        decode(&bytes, !linear, Wrap::Repeat, options.max_texture_bytes / 2).map_err(bad)?;
+    let texels = image
+        .texels
+        .into_iter()
+        .map(|t| t.max(Vec3::ZERO))
+        .collect();
+    crate::shade::EnvironmentMap::new(image.width, image.height, texels, strength, rotation)
+        .map_err(|e| bad(e.to_string()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

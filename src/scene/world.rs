@@ -406,7 +406,7 @@ impl World {
             normal_mapped: desc.materials.iter().any(|m| m.maps.normal.is_some()),
             lights: desc.lights.clone(),
             ambient: desc.ambient,
-            background: desc.background,
+            background: desc.background.clone(),
             emitters: Default::default(),
         };
         world.emitters = super::emitters::Emitters::build(&world);

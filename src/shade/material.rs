@@ -155,15 +155,16 @@ pub fn pbr_params(base: Vec3, metallic: f32, roughness: f32) -> Surface {
 }
 
 impl Material {
-    /// A plain diffuse material of linear RGB albedo `color`: a rough dielectric (metallic 0,
-    /// roughness 1), no emission or maps.
+    /// A Lambertian material of linear RGB albedo `color`: index of refraction 1, so no
+    /// specular reflection at all (set `ior` to 1.5 for a glTF-like dielectric with its 4%
+    /// Fresnel reflection); metallic 0, roughness 1, no emission or maps.
     pub fn diffuse(color: Vec3) -> Self {
         Self {
             base_color: Texture::Constant(color),
             metallic: 0.0,
             roughness: 1.0,
             transmission: 0.0,
-            ior: 1.5,
+            ior: 1.0,
             thin: false,
             emission: Vec3::ZERO,
             emission_texture: None,

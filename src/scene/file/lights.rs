@@ -6,12 +6,14 @@ use glam::{Vec2, Vec3};
 use toml::Spanned;
 
 use super::Ctx;
-use super::raw::{Color, Finite, LightKind, RawBackground, RawLight, RawSize, v3};
+use super::raw::{Color, Finite, LightKind, RawBackground, RawLight, RawSize, RawWorld, v3};
 use crate::camera::CameraSpec;
 use crate::scene::Background;
 use crate::scene::area_light::{AreaLight, AreaShape};
 use crate::scene::error::LoadError;
+use crate::scene::input::LoadOptions;
 use crate::scene::model::{default_background, default_light};
+use crate::scene::texture::load_environment;
 use crate::shade::Light;
 
 /// One `[[lights]]` entry: a punctual light, or an area light (emissive geometry).
@@ -65,12 +67,50 @@ pub(super) fn background(
                     Background {
                         horizon: h.map_or(d.horizon, |c| c.0),
                         zenith: z.map_or(d.zenith, |c| c.0),
+                        map: None,
                     }
                 }
                 _ => return Err(ctx.invalid(span, "background", "give either `color` (a uniform background) or `horizon` and `zenith`, not both")),
             }
         }
     })
+}
+
+/// The `[world]`: a uniform `color`, or an equirectangular `map`, times `strength`, the map
+/// turned by `rotation` degrees about the up axis (Blender's world: Background colour and
+/// strength, or an Environment Texture behind a Mapping node's Z rotation).
+pub(super) fn world(
+    ctx: &Ctx,
+    raw: Spanned<RawWorld>,
+    options: &LoadOptions,
+) -> Result<Background, LoadError> {
+    let span = raw.span();
+    let w = raw.into_inner();
+    let strength = w.strength.map_or(1.0, |s| s.0);
+    match (w.map, w.color) {
+        (Some(_), Some(_)) => Err(ctx.invalid(
+            span,
+            "world",
+            "give either `color` (a uniform world) or `map` (an environment map), not both",
+        )),
+        (Some(map), None) => {
+            let path = ctx.resolve(map.get_ref());
+            let rotation = w.rotation.map_or(0.0, |r| r.0).to_radians();
+            let map = load_environment(&path, strength, rotation, options)?;
+            Ok(Background {
+                map: Some(std::sync::Arc::new(map)),
+                ..Background::uniform(Vec3::ZERO)
+            })
+        }
+        (None, color) => {
+            if w.rotation.is_some() {
+                return Err(ctx.invalid(span, "world.rotation", "`rotation` turns a `map`"));
+            }
+            Ok(Background::uniform(
+                color.map_or(Vec3::splat(0.05), |c| c.0) * strength,
+            ))
+        }
+    }
 }
 
 /// The `ambient` light (linear RGB).

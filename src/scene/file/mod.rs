@@ -168,7 +168,17 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         })?;
         object_list.push(object);
     }
-    let background = lights::background(ctx, raw.background)?;
+    let background = match (raw.world, raw.background) {
+        (Some(w), Some(_)) => {
+            return Err(ctx.invalid(
+                w.span(),
+                "world",
+                "give either `[world]` or the older `[background]`, not both",
+            ));
+        }
+        (Some(w), None) => lights::world(ctx, w, options)?,
+        (None, b) => lights::background(ctx, b)?,
+    };
     let settings = render_settings(ctx, raw.render.unwrap_or_default())?;
     let name = raw.name.unwrap_or_else(|| {
         ctx.path

@@ -316,6 +316,7 @@ pub(super) struct RawScene {
     pub(super) render: Option<RawRender>,
     pub(super) camera: Option<Spanned<RawCamera>>,
     pub(super) background: Option<Spanned<RawBackground>>,
+    pub(super) world: Option<Spanned<RawWorld>>,
     pub(super) lights: Option<Vec<Spanned<RawLight>>>,
     #[serde(default)]
     pub(super) textures: Vec<Spanned<RawTexture>>,
@@ -399,6 +400,15 @@ pub(super) struct RawKey {
     pub(super) aperture_radius: Option<Spanned<NonNeg>>,
     pub(super) focus_distance: Option<Spanned<FocusDistance>>,
     pub(super) focus_point: Option<Spanned<V3>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawWorld {
+    pub(super) color: Option<Color>,
+    pub(super) strength: Option<NonNeg>,
+    pub(super) map: Option<Spanned<String>>,
+    pub(super) rotation: Option<Finite>,
 }
 
 #[derive(Deserialize)]
