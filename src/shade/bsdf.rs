@@ -111,7 +111,8 @@ struct Setup {
     cos_o: f32,
     /// [`smith_s`] at `wo`.
     s_o: f32,
-    /// The dielectric Fresnel reflectance at `wo` (what the diffuse layer is dimmed by).
+    /// What the specular layer reflects of light arriving along `wo` (its directional
+    /// albedo), which the diffuse layer under it is dimmed by.
     fo: f32,
     /// Probability of sampling the microfacet lobes (reflection and transmission) rather than
     /// the diffuse one.
@@ -168,7 +169,11 @@ impl Setup {
             fo: 0.0,
             p_micro: 0.0,
         };
-        setup.fo = setup.dielectric_fresnel(cos_o);
+        setup.fo = if w_diffuse > 0.0 && f0 > 0.0 && eta >= 1.0 {
+            specular_albedo(cos_o, roughness, f0)
+        } else {
+            setup.dielectric_fresnel(cos_o)
+        };
         setup.p_micro = setup.micro_probability();
         Some(setup)
     }
@@ -230,9 +235,10 @@ impl Setup {
             let (fd, spec, p_reflect) = self.split(wo.dot(h).clamp(0.0, 1.0));
             let lambert = cos_i * FRAC_1_PI;
             // The diffuse layer gets what the specular layer does not reflect towards `wo`:
-            // `1 - F(n . wo)` (Cycles' albedo scaling, exact for a smooth interface). glTF's
-            // `1 - F(v . h)` would let a white dielectric reflect up to 1.7 times the light it
-            // receives at grazing angles.
+            // `1 - E(wo)`, its directional albedo (Cycles' albedo scaling; `F(n . wo)` when
+            // smooth). glTF's `1 - F(v . h)` would let a white dielectric reflect up to 1.7
+            // times the light it receives at grazing angles; `1 - F(n . wo)` would lose up to
+            // 70% of a rough one's light there.
             let _ = fd;
             let mut f = self.base * (self.w_diffuse * (1.0 - self.fo) * lambert);
             let mut pdf = (1.0 - self.p_micro) * lambert;
@@ -390,6 +396,69 @@ impl Bsdf {
             delta,
         })
     }
+}
+
+/// Cosines and roughnesses of the specular albedo table.
+const ALBEDO_COS: usize = 32;
+const ALBEDO_ROUGH: usize = 24;
+
+/// The GGX specular layer's directional albedo for Schlick's Fresnel: `f0 E1 + (1 - f0) E5`,
+/// where `E1` is the albedo with `F = 1` and `E5` with `F = (1 - v . h)^5` (both tabulated
+/// once over `sqrt(cos_o)` and `sqrt(roughness)` by sampling the BSDF itself as a white and a black metal,
+/// then read bilinearly).
+fn specular_albedo(cos_o: f32, roughness: f32, f0: f32) -> f32 {
+    static TABLE: std::sync::OnceLock<Vec<[f32; 2]>> = std::sync::OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        let mut t = Vec::with_capacity(ALBEDO_COS * ALBEDO_ROUGH);
+        for j in 0..ALBEDO_ROUGH {
+            let roughness = (j as f32 / (ALBEDO_ROUGH - 1) as f32).powi(2);
+            for i in 0..ALBEDO_COS {
+                // Nodes at squares: dense at grazing angles, where the albedo changes fast.
+                let mu = (i as f32 / (ALBEDO_COS - 1) as f32).powi(2).max(0.002);
+                let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                let albedo = |base: f32| {
+                    let bsdf = Bsdf {
+                        base_color: Vec3::splat(base),
+                        metallic: 1.0,
+                        roughness,
+                        transmission: 0.0,
+                        eta: 1.5,
+                        thin: false,
+                    };
+                    // A stratified 32 x 32 grid of directions.
+                    let mut sum = 0.0f64;
+                    for k in 0..1024u32 {
+                        let u = [
+                            0.5,
+                            ((k % 32) as f32 + 0.5) / 32.0,
+                            ((k / 32) as f32 + 0.5) / 32.0,
+                        ];
+                        if let Some(s) = bsdf.sample(Vec3::Z, wo, u) {
+                            sum += s.weight.x as f64;
+                        }
+                    }
+                    (sum / 1024.0) as f32
+                };
+                let e5 = albedo(0.0);
+                t.push([albedo(1.0) - e5, e5]);
+            }
+        }
+        t
+    });
+    let x = cos_o.clamp(0.0, 1.0).sqrt() * (ALBEDO_COS - 1) as f32;
+    let y = roughness.clamp(0.0, 1.0).sqrt() * (ALBEDO_ROUGH - 1) as f32;
+    let (i, j) = (
+        (x as usize).min(ALBEDO_COS - 2),
+        (y as usize).min(ALBEDO_ROUGH - 2),
+    );
+    let (fx, fy) = (x - i as f32, y - j as f32);
+    let at = |i: usize, j: usize| {
+        let [a, b] = table[j * ALBEDO_COS + i];
+        f0 * a + b
+    };
+    let top = at(i, j) + (at(i + 1, j) - at(i, j)) * fx;
+    let bottom = at(i, j + 1) + (at(i + 1, j + 1) - at(i, j + 1)) * fx;
+    (top + (bottom - top) * fy).clamp(0.0, 1.0)
 }
 
 /// An orthonormal basis around unit `n` (Duff et al. 2017, branchless).

@@ -205,7 +205,13 @@ impl Material {
             metallic,
             roughness,
             transmission: self.transmission,
-            eta: if front { self.ior } else { 1.0 / self.ior },
+            // Only a solid that transmits has an inside: an opaque or thin surface seen from
+            // its back is the same interface as from its front (no total internal reflection).
+            eta: if front || self.thin || self.transmission <= 0.0 {
+                self.ior
+            } else {
+                1.0 / self.ior
+            },
             thin: self.thin,
         }
     }
