@@ -1148,7 +1148,11 @@ impl Loader<'_> {
             .ior()
             .filter(|i| i.is_finite() && (1.0..=10.0).contains(i))
             .unwrap_or(1.5);
-        let volume = m.volume().is_some_and(|v| v.thickness_factor() > 0.0);
+        // Thin-walled only when KHR_materials_volume says so (thickness 0). glTF reads a
+        // transmissive material without the extension as thin-walled, but Blender's exporter
+        // writes its glass that way and Cycles renders it as a refracting solid: dofray
+        // follows the renderer the file came from.
+        let thin = m.volume().is_some_and(|v| v.thickness_factor() <= 0.0);
         // A metallic-roughness texture on the mesh's texture coordinates makes metalness and
         // roughness vary per hit; one on another set is ignored (the factors apply).
         let metal_rough = match pbr.metallic_roughness_texture() {
@@ -1174,9 +1178,7 @@ impl Loader<'_> {
                 roughness,
                 transmission,
                 ior,
-                // glTF transmission without KHR_materials_volume is thin-walled; with it, a
-                // solid.
-                thin: !volume,
+                thin,
                 emission,
                 emission_texture,
                 one_sided: false,
