@@ -235,6 +235,28 @@ impl PixelSampler {
     }
 }
 
+/// The key of sample `sample` of pixel `pixel` under `seed`: what [`path_numbers`] draws a
+/// path's decisions from, so a sample's path is the same whatever packet, thread or tile
+/// traces it.
+pub fn sample_key(seed: u64, pixel: u64, sample: u32) -> u64 {
+    hash64(hash64(seed ^ 0x5bd1_e995) ^ hash64(pixel) ^ (u64::from(sample) << 32))
+}
+
+/// How many numbers [`path_numbers`] gives per bounce.
+pub const PATH_DIMENSIONS: usize = 8;
+
+/// Uniform numbers in [0, 1) for the decisions a path makes at bounce `bounce` (light choice,
+/// light position, BSDF lobe and direction, Russian roulette), hashed from the sample's `key`:
+/// independent across dimensions and bounces.
+pub fn path_numbers(key: u64, bounce: u32) -> [f32; PATH_DIMENSIONS] {
+    let base = hash64(key ^ u64::from(bounce).wrapping_mul(0xd6e8_feb8_6659_fd93));
+    std::array::from_fn(|d| {
+        let h = hash64(base.wrapping_add(d as u64));
+        (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+    })
+}
+
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -349,25 +371,4 @@ mod tests {
             }
         }
     }
-}
-
-/// The key of sample `sample` of pixel `pixel` under `seed`: what [`path_numbers`] draws a
-/// path's decisions from, so a sample's path is the same whatever packet, thread or tile
-/// traces it.
-pub fn sample_key(seed: u64, pixel: u64, sample: u32) -> u64 {
-    hash64(hash64(seed ^ 0x5bd1_e995) ^ hash64(pixel) ^ (u64::from(sample) << 32))
-}
-
-/// How many numbers [`path_numbers`] gives per bounce.
-pub const PATH_DIMENSIONS: usize = 8;
-
-/// Uniform numbers in [0, 1) for the decisions a path makes at bounce `bounce` (light choice,
-/// light position, BSDF lobe and direction, Russian roulette), hashed from the sample's `key`:
-/// independent across dimensions and bounces.
-pub fn path_numbers(key: u64, bounce: u32) -> [f32; PATH_DIMENSIONS] {
-    let base = hash64(key ^ u64::from(bounce).wrapping_mul(0xd6e8_feb8_6659_fd93));
-    std::array::from_fn(|d| {
-        let h = hash64(base.wrapping_add(d as u64));
-        (h >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
-    })
 }

@@ -285,7 +285,7 @@ impl RenderSettings {
                 return Err(SettingError::Bounces { param, value });
             }
         }
-        if !(p.clamp_indirect > 0.0) {
+        if p.clamp_indirect.is_nan() || p.clamp_indirect <= 0.0 {
             return Err(SettingError::ClampIndirect(p.clamp_indirect));
         }
         Ok(())

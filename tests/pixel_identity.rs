@@ -96,6 +96,9 @@ fn cases() -> Vec<(&'static str, Vec<&'static str>)> {
             &["--focus-distance", "inf", "--f-number", "2"],
         ),
         ("paper/region", &["--region", "16,8,80,40"]),
+        ("paper/direct", &["--integrator", "direct"]),
+        ("gallery/direct", &["--integrator", "direct"]),
+        ("bokeh/bounces_clamp", &["--max-bounces", "3", "--clamp-indirect", "4"]),
         ("paper/exposure_seed", &["--exposure", "-1", "--seed", "7"]),
         (
             "paper/lights",

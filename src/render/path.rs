@@ -388,7 +388,7 @@ fn scatter(
     // component (at most 0.95), so paths that carry little stop early and unbiasedly.
     if bounce >= 3 {
         let q = throughput.max_element().min(0.95);
-        if !(u[6] < q) {
+        if u[6] >= q {
             return None;
         }
         throughput /= q;
