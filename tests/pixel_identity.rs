@@ -49,7 +49,7 @@ fn cases() -> Vec<(&'static str, Vec<&'static str>)> {
         }
     }
     // Options that take their own code paths, on the paper scene.
-    let variants: [(&'static str, &[&'static str]); 16] = [
+    let variants: [(&'static str, &[&'static str]); 19] = [
         ("paper/transparent", &["--transparent"]),
         (
             "paper/tolerance_0.5_spp_32",
