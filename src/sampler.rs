@@ -256,7 +256,6 @@ pub fn path_numbers(key: u64, bounce: u32) -> [f32; PATH_DIMENSIONS] {
     })
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -98,7 +98,10 @@ fn cases() -> Vec<(&'static str, Vec<&'static str>)> {
         ("paper/region", &["--region", "16,8,80,40"]),
         ("paper/direct", &["--integrator", "direct"]),
         ("gallery/direct", &["--integrator", "direct"]),
-        ("bokeh/bounces_clamp", &["--max-bounces", "3", "--clamp-indirect", "4"]),
+        (
+            "bokeh/bounces_clamp",
+            &["--max-bounces", "3", "--clamp-indirect", "4"],
+        ),
         ("paper/exposure_seed", &["--exposure", "-1", "--seed", "7"]),
         (
             "paper/lights",
