@@ -127,6 +127,15 @@ pub struct LightSample {
 }
 
 impl Light {
+    /// The light with its intensity (or a sun's irradiance) multiplied by `color`.
+    pub fn tinted(mut self, color: Vec3) -> Self {
+        match &mut self {
+            Self::Point { intensity, .. } | Self::Spot { intensity, .. } => *intensity *= color,
+            Self::Directional { irradiance, .. } => *irradiance *= color,
+        }
+        self
+    }
+
     /// Position, intensity and cone of a point or spot light; None for a directional light.
     pub fn positional(&self) -> Option<Positional> {
         match *self {

@@ -157,40 +157,7 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<FileLight, LoadErr
         LightKind::Point => point(ctx, &key, span, l),
         _ => directional(ctx, &key, span, l),
     }?;
-    Ok(FileLight::Punctual(tinted(light, color)))
-}
-
-/// `light` with its intensity or irradiance multiplied by `color`.
-fn tinted(light: Light, color: Vec3) -> Light {
-    match light {
-        Light::Point {
-            position,
-            intensity,
-        } => Light::Point {
-            position,
-            intensity: intensity * color,
-        },
-        Light::Spot {
-            position,
-            direction,
-            intensity,
-            inner_angle,
-            outer_angle,
-        } => Light::Spot {
-            position,
-            direction,
-            intensity: intensity * color,
-            inner_angle,
-            outer_angle,
-        },
-        Light::Directional {
-            direction,
-            irradiance,
-        } => Light::Directional {
-            direction,
-            irradiance: irradiance * color,
-        },
-    }
+    Ok(FileLight::Punctual(light.tinted(color)))
 }
 
 /// A `rect`, `disk` or `sphere` light: `position`, `power` (watts, as Blender's) times
