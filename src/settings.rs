@@ -46,8 +46,8 @@ pub enum Integrator {
     #[default]
     Path,
     /// The seed's shading, for quick previews and the seed's table: direct light from point,
-    /// spot and sun lights with hard shadows, a normalised Blinn-Phong highlight, the world's
-    /// mean radiance as unshadowed ambient light, and `bounces` mirror reflections.
+    /// spot and sun lights with hard shadows, a normalised Blinn-Phong highlight, the scene's
+    /// `ambient` as unshadowed ambient light, and `bounces` mirror reflections.
     Direct,
 }
 

@@ -127,7 +127,8 @@ pub(crate) struct SceneArgs {
     /// DX,DY,DZ; intensity default 100, cone half-angles in degrees, default 45 and 0).
     #[arg(long = "light", value_name = "KIND:X,Y,Z[:POWER]", value_parser = parse_light)]
     pub(crate) lights: Vec<Light>,
-    /// Ambient light level (replaces the scene's).
+    /// Ambient light level of the direct integrator (replaces the scene's); the path tracer
+    /// is lit by the scene's world instead.
     #[arg(long)]
     pub(crate) ambient: Option<f32>,
     /// Let a model read MTL libraries, textures and buffers outside its folder (absolute

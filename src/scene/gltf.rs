@@ -2,8 +2,8 @@
 //!
 //! The default scene's node tree is walked with each node's transform; every triangle primitive
 //! becomes one mesh with positions, normals (inverse-transpose transformed) and the UV set of
-//! its base-colour texture. Materials: base-colour factor and texture (sRGB) become the diffuse
-//! colour; metallic and roughness map to a Blinn-Phong highlight and a mirror term (see
+//! its base-colour texture. Materials: base-colour factor and texture (sRGB), metallic and
+//! roughness (factors and texture), transmission and IOR become dofray's glTF material (see
 //! `docs/scene-format.md`). The first perspective camera met in the tree is returned too, and
 //! the KHR_lights_punctual lights of the nodes (converted from photometric to radiometric
 //! units). An extension in `extensionsRequired` that is not in [`SUPPORTED_EXTENSIONS`] is an

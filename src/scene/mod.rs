@@ -100,16 +100,6 @@ impl Background {
             None => self.horizon.lerp(self.zenith, dir.y.clamp(0.0, 1.0).sqrt()),
         }
     }
-
-    /// Mean radiance over the upper hemisphere, cosine-weighted: the unshadowed light the
-    /// world gives an upward surface, as radiance (what the direct integrator's ambient term
-    /// stands in for). For the sky, `E[sqrt(cos)]` under the cosine density is 4/5.
-    pub fn mean_radiance(&self) -> Vec3 {
-        match &self.map {
-            Some(map) => map.average_radiance(),
-            None => self.horizon.lerp(self.zenith, 0.8),
-        }
-    }
 }
 
 /// A complete description of what to render, independent of Embree.
