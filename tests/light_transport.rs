@@ -333,3 +333,31 @@ fn a_missing_world_map_is_an_error_naming_it() {
         .to_string();
     assert!(e.contains("nowhere.hdr"), "{e}");
 }
+
+/// A small rect light of power P facing down at height h over a white Lambertian plane: its
+/// radiance is P / (pi A), so the plane's radiance at its foot is about P / (pi^2 h^2) (within
+/// 0.1% for a light a twentieth of h across). Written as a scene file, with Blender's watts.
+#[test]
+fn a_rect_light_in_watts_lights_a_plane_as_cycles_would() {
+    let dir = std::env::temp_dir().join(format!("dofray-rect-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (p, h) = (50.0f32, 2.0f32);
+    let toml = format!(
+        "[image]\nwidth = 16\nheight = 16\n[camera]\neye = [0, 0.5, 0]\nlook_at = [0, 0, 0]\n\
+         up = [0, 0, -1]\nvfov = 0.5\n[world]\ncolor = 0\n[[lights]]\ntype = \"rect\"\n\
+         position = [0, {h}, 0]\ndirection = [0, -1, 0]\nsize = 0.1\npower = {p}\n\
+         [[materials]]\nname = \"white\"\ndiffuse = 1\nior = 1\n[[objects]]\ntype = \"quad\"\n\
+         size = [100, 100]\nmaterial = \"white\"\n"
+    );
+    std::fs::write(dir.join("scene.toml"), toml).unwrap();
+    let desc = dofray::scene::load(dir.join("scene.toml").to_str().unwrap()).unwrap();
+    let m = mean(&render_path(&desc, 256, 1));
+    assert_close(m.x, p / (PI * PI * h * h), 0.01, "rect light on a plane");
+    // Turned to face up, it sends the plane nothing: it emits from its front only.
+    let up = std::fs::read_to_string(dir.join("scene.toml"))
+        .unwrap()
+        .replace("direction = [0, -1, 0]", "direction = [0, 1, 0]");
+    std::fs::write(dir.join("scene.toml"), up).unwrap();
+    let desc = dofray::scene::load(dir.join("scene.toml").to_str().unwrap()).unwrap();
+    assert_eq!(mean(&render_path(&desc, 16, 1)).x, 0.0);
+}

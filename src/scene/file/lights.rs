@@ -135,21 +135,14 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<FileLight, LoadErr
         ("power", l.power.is_some()),
         ("up", l.up.is_some()),
     ];
-    for (k, set) in area_keys {
-        if set {
-            return Err(ctx.invalid(
-                span,
-                format!("{key}.{k}"),
-                format!("`{k}` belongs to area lights (type \"rect\", \"disk\" or \"sphere\")"),
-            ));
-        }
-    }
+    let area_only = "belongs to area lights (type \"rect\", \"disk\" or \"sphere\")";
+    refuse(ctx, &span, &key, &area_keys, area_only)?;
     if l.kind != LightKind::Spot {
         let cone = [
             ("inner_angle", l.inner_angle.is_some()),
             ("outer_angle", l.outer_angle.is_some()),
         ];
-        refuse(ctx, &span, &key, cone, "belongs to spot lights")?;
+        refuse(ctx, &span, &key, &cone, "belongs to spot lights")?;
     }
     let color = l.color.map_or(Vec3::ONE, |c| c.0);
     let light = match l.kind {
@@ -169,15 +162,9 @@ fn area(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<AreaLig
         ("inner_angle", l.inner_angle.is_some()),
         ("outer_angle", l.outer_angle.is_some()),
     ];
-    for (k, set) in punctual {
-        if set {
-            return Err(ctx.invalid(
-                span,
-                format!("{key}.{k}"),
-                format!("`{k}` belongs to point, spot and directional lights; an area light takes `power` (watts)"),
-            ));
-        }
-    }
+    let not_area =
+        "belongs to point, spot and directional lights; an area light takes `power` (watts)";
+    refuse(ctx, &span, key, &punctual, not_area)?;
     let position = l
         .position
         .ok_or_else(|| ctx.invalid(span.clone(), key, "an area light needs `position`"))?;
@@ -294,7 +281,7 @@ fn point(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light,
         ctx,
         &span,
         key,
-        directional,
+        &directional,
         "belongs to directional lights; a point light takes `position` and `intensity`",
     )?;
     let position = l
@@ -315,7 +302,7 @@ fn directional(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<
         ctx,
         &span,
         key,
-        point,
+        &point,
         "belongs to point lights; a directional light takes `direction` and `irradiance`",
     )?;
     let direction = l
@@ -341,10 +328,10 @@ fn refuse(
     ctx: &Ctx,
     span: &Range<usize>,
     key: &str,
-    keys: [(&str, bool); 2],
+    keys: &[(&str, bool)],
     belongs: &str,
 ) -> Result<(), LoadError> {
-    for (k, set) in keys {
+    for &(k, set) in keys {
         if set {
             return Err(ctx.invalid(
                 span.clone(),
