@@ -191,7 +191,7 @@ impl Param {
             Self::Seed => row("seed", Some("--seed"), None, Some("seed"), Some("dofray_scene_set_seed")),
             Self::LensFilter => row("lens_filter", Some("--filter"), None, None, None),
             Self::MaxInterval => row("max_interval", None, None, None, None),
-            Self::Integrator => row("integrator", Some("--integrator"), Some("render.integrator"), None, None),
+            Self::Integrator => row("integrator", Some("--integrator"), Some("render.integrator"), Some("integrator"), None),
             Self::MaxBounces => row("max_bounces", Some("--max-bounces"), Some("render.max_bounces"), None, None),
             Self::DiffuseBounces => row("diffuse_bounces", Some("--diffuse-bounces"), Some("render.diffuse_bounces"), None, None),
             Self::GlossyBounces => row("glossy_bounces", Some("--glossy-bounces"), Some("render.glossy_bounces"), None, None),

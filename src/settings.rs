@@ -59,6 +59,13 @@ impl Integrator {
             Self::Direct => "direct",
         }
     }
+
+    /// The integrator of [`Integrator::name`] `name` (for bindings and configuration).
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Self::Path, Self::Direct]
+            .into_iter()
+            .find(|i| i.name() == name)
+    }
 }
 
 /// How long the path tracer's paths may grow (Cycles' "Light Paths" panel, with its defaults),

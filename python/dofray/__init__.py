@@ -65,6 +65,7 @@ def render(
     seed: Optional[int] = None,
     exposure: Optional[float] = None,
     transparent: bool = False,
+    integrator: Optional[str] = None,
     frame: Optional[int] = None,
     progress: Optional[ProgressCallback] = None,
 ) -> Render:
@@ -86,6 +87,8 @@ def render(
       error tolerance in 8-bit code values; ``seed``; ``exposure`` in stops;
     - ``transparent``: the background contributes nothing (alpha is the coverage and RGB
       is premultiplied);
+    - ``integrator``: ``"path"`` (default: physically based, as Cycles) or ``"direct"``
+      (the seed's quick direct shading);
     - ``frame``: the frame of an animated scene (default: its first);
     - ``progress``: called on the calling thread as ``progress(phase, done, total)`` while
       the render runs (``done`` grows within a phase); if it raises, the render is
@@ -113,6 +116,7 @@ def render(
         seed=seed,
         exposure=exposure,
         transparent=transparent,
+        integrator=integrator,
         frame=frame,
         progress=progress,
     )

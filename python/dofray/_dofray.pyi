@@ -48,6 +48,7 @@ def render(
     seed: Optional[int] = ...,
     exposure: Optional[float] = ...,
     transparent: bool = ...,
+    integrator: Optional[str] = ...,
     frame: Optional[int] = ...,
     progress: Optional[Callable[[str, int, int], object]] = ...,
 ) -> Render: ...

@@ -3,7 +3,7 @@
 
 use dofray::overrides::Overrides;
 use dofray::params::Param;
-use dofray::render::{Mode, RulePatch, SettingsPatch};
+use dofray::render::{Integrator, Mode, RulePatch, SettingsPatch};
 use pyo3::conversion::FromPyObjectOwned;
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
@@ -30,6 +30,7 @@ pub(crate) struct SceneKeywords {
     pub(crate) seed: Option<u64>,
     pub(crate) exposure: Option<f32>,
     pub(crate) transparent: bool,
+    pub(crate) integrator: Option<String>,
 }
 
 /// `value` as keyword `name` takes it, or a `TypeError` naming the keyword.
@@ -67,6 +68,7 @@ impl SceneKeywords {
                 "seed" => k.seed = item(&name, v)?,
                 "exposure" => k.exposure = item(&name, v)?,
                 "transparent" => k.transparent = item(&name, v)?,
+                "integrator" => k.integrator = item(&name, v)?,
                 _ => {
                     return Err(PyTypeError::new_err(format!(
                         "render_jobs() got an unexpected keyword argument '{name}'"
@@ -107,6 +109,7 @@ impl SceneKeywords {
             seed: self.seed,
             exposure: self.exposure,
             transparent: self.transparent,
+            integrator: to_integrator(self.integrator.as_deref())?,
             ..Default::default()
         };
         Ok((overrides, settings))
@@ -128,6 +131,18 @@ pub(crate) fn to_u32(name: &str, value: Option<i64>) -> Result<Option<u32>, Fail
 }
 
 /// A sampling mode's name.
+/// The `integrator` keyword: `"path"` or `"direct"`.
+fn to_integrator(name: Option<&str>) -> Result<Option<Integrator>, Failure> {
+    name.map(|n| {
+        Integrator::from_name(n).ok_or_else(|| {
+            Failure::usage(format!(
+                "integrator must be \"path\" or \"direct\", got {n:?}"
+            ))
+        })
+    })
+    .transpose()
+}
+
 pub(crate) fn to_mode(mode: Option<&str>) -> Result<Option<Mode>, Failure> {
     mode.map(|m| {
         m.parse()

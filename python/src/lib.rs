@@ -411,8 +411,8 @@ impl Render {
 #[pyo3(signature = (
     scene, *, width=None, height=None, f_number=None, focal_length=None, sensor_width=None,
     focus_distance=None, autofocus=None, aperture_radius=None, blades=None, spp=None, aa=None,
-    mode=None, tolerance=None, seed=None, exposure=None, transparent=false, frame=None,
-    progress=None
+    mode=None, tolerance=None, seed=None, exposure=None, transparent=false, integrator=None,
+    frame=None, progress=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn render(
@@ -434,6 +434,7 @@ fn render(
     seed: Option<u64>,
     exposure: Option<f32>,
     transparent: bool,
+    integrator: Option<&str>,
     frame: Option<i64>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Render> {
@@ -461,6 +462,7 @@ fn render(
         seed,
         exposure,
         transparent,
+        integrator: integrator.map(str::to_owned),
     };
     let job = (|| -> Result<Job, Failure> {
         let (overrides, settings) = keywords.parts()?;

@@ -98,6 +98,10 @@ def test_modes_and_overrides():
     assert r.rgba.shape == (24, 32, 4)  # the height follows the scene's aspect
     d = dofray.render("paper", width=32, height=24, mode="dense", spp=4, aperture_radius=0.1)
     assert np.isfinite(d.rgba).all()
+    # The direct integrator renders another image of the same scene.
+    q = dofray.render("paper", width=32, height=24, mode="pinhole", integrator="direct")
+    p = dofray.render("paper", width=32, height=24, mode="pinhole", integrator="path")
+    assert np.isfinite(q.rgba).all() and not np.array_equal(q.rgba, p.rgba)
 
 
 def test_save_png_and_exr(paper, tmp_path):
@@ -148,6 +152,7 @@ def test_unknown_builtin_scene():
         (dict(aperture_radius=-0.5), "aperture_radius"),
         (dict(mode="sharp"), "mode"),
         (dict(exposure=1000.0), "exposure"),
+        (dict(integrator="whitted"), "integrator"),
         (dict(tolerance=0.0), "tolerance"),
     ],
 )
