@@ -64,6 +64,27 @@ fn renders_png_and_exr_with_a_json_summary() {
         + json["secondary_rays"].as_u64().unwrap();
     assert_eq!(rays, parts);
     assert!(json["primary_rays"].as_u64().unwrap() >= 80 * 60);
+    // By bounce: the camera rays at 0, the path tracer's bounces after; they add up to the
+    // kinds.
+    let sum = |key: &str| -> u64 {
+        let list = json[key]
+            .as_array()
+            .unwrap_or_else(|| panic!("{key} in {json}"));
+        list.iter().map(|v| v.as_u64().unwrap()).sum()
+    };
+    assert_eq!(json["rays_by_bounce"][0], json["primary_rays"]);
+    assert_eq!(
+        sum("rays_by_bounce"),
+        json["primary_rays"].as_u64().unwrap() + json["secondary_rays"].as_u64().unwrap()
+    );
+    assert_eq!(
+        sum("shadow_rays_by_bounce"),
+        json["shadow_rays"].as_u64().unwrap()
+    );
+    assert!(
+        json["rays_by_bounce"].as_array().unwrap().len() > 2,
+        "{json}"
+    );
     let img = image::open(&png).unwrap();
     assert_eq!((img.width(), img.height()), (80, 60));
     assert!(dir.join("depth.png").is_file() && dir.join("interval.png").is_file());

@@ -91,6 +91,8 @@ pub struct JobSummary {
     pub primary_rays: u64,
     pub shadow_rays: u64,
     pub secondary_rays: u64,
+    pub rays_by_bounce: Vec<u64>,
+    pub shadow_rays_by_bounce: Vec<u64>,
     pub sample_sites: u64,
     pub defocused_sites: u64,
     pub mrays_per_s: f64,
@@ -175,6 +177,8 @@ impl JobSummary {
             primary_rays: stats.rays.primary,
             shadow_rays: stats.rays.shadow,
             secondary_rays: stats.rays.secondary,
+            rays_by_bounce: trimmed(&stats.rays.by_bounce),
+            shadow_rays_by_bounce: trimmed(&stats.rays.shadow_by_bounce),
             sample_sites: stats.sample_sites,
             defocused_sites: stats.defocused_sites,
             mrays_per_s: stats.mrays_per_s(),
@@ -187,4 +191,10 @@ impl JobSummary {
             stats,
         }
     }
+}
+
+/// `counts` without its trailing zeros (bounces no ray reached).
+fn trimmed(counts: &[u64]) -> Vec<u64> {
+    let len = counts.iter().rposition(|&c| c > 0).map_or(0, |i| i + 1);
+    counts[..len].to_vec()
 }

@@ -92,6 +92,7 @@ pub fn trace_path(
     let mut t = [f32::INFINITY; LANES];
     let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
     for bounce in 0..=limits.total {
+        tally.bounce = bounce;
         let active: u32 = (0..LANES)
             .filter(|&l| packet.is_active(l))
             .fold(0, |m, l| m | 1 << l);
@@ -146,6 +147,7 @@ pub fn trace_path(
         kind = RayKind::Secondary;
         hint = RayHint::Incoherent;
     }
+    tally.bounce = 0;
 }
 
 /// Adds the world's radiance to lanes in `missed` (their rays left the scene).

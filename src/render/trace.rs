@@ -7,15 +7,23 @@ use crate::embree::{Geometry, Hit, LANES, Ray, RayHint, RayPacket16, ShadowPacke
 use crate::scene::World;
 use crate::shade::{self, Light, LightSample, Surface, SurfacePoints16};
 
-/// Rays traced, by kind.
+/// How many bounces [`RayCounts`] tells apart; the last entry counts every bounce from
+/// `BOUNCE_SLOTS - 1` on.
+pub const BOUNCE_SLOTS: usize = 16;
+
+/// Rays traced, by kind and by bounce.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct RayCounts {
     /// Camera rays (pinhole and lens rays).
     pub primary: u64,
     /// Occlusion rays towards lights.
     pub shadow: u64,
-    /// Mirror reflection rays.
+    /// Bounce rays (the path tracer's, the direct integrator's mirror reflections).
     pub secondary: u64,
+    /// Intersected rays by bounce: the camera rays at 0, the `i`-th bounce's at `i`.
+    pub by_bounce: [u64; BOUNCE_SLOTS],
+    /// Shadow rays by the bounce of the vertex they leave (0: where camera rays hit).
+    pub shadow_by_bounce: [u64; BOUNCE_SLOTS],
 }
 
 impl RayCounts {
@@ -29,6 +37,10 @@ impl RayCounts {
         self.primary += other.primary;
         self.shadow += other.shadow;
         self.secondary += other.secondary;
+        for i in 0..BOUNCE_SLOTS {
+            self.by_bounce[i] += other.by_bounce[i];
+            self.shadow_by_bounce[i] += other.shadow_by_bounce[i];
+        }
     }
 }
 
@@ -64,6 +76,8 @@ pub struct Tally {
     pub counts: RayCounts,
     /// Every packet traced, in order; `None` when not recording.
     pub log: Option<Vec<RecordedPacket>>,
+    /// The bounce the rays being counted belong to (0: camera rays and their hits).
+    pub(super) bounce: u32,
 }
 
 impl Tally {
@@ -72,6 +86,7 @@ impl Tally {
         Self {
             counts: RayCounts::default(),
             log: record.then(Vec::new),
+            bounce: 0,
         }
     }
 
@@ -85,6 +100,11 @@ impl Tally {
 
     pub(super) fn count(&mut self, kind: RayKind, active: usize) {
         let n = active as u64;
+        let slot = (self.bounce as usize).min(BOUNCE_SLOTS - 1);
+        match kind {
+            RayKind::Shadow => self.counts.shadow_by_bounce[slot] += n,
+            _ => self.counts.by_bounce[slot] += n,
+        }
         match kind {
             RayKind::Primary => self.counts.primary += n,
             RayKind::Shadow => self.counts.shadow += n,
@@ -337,6 +357,7 @@ pub fn trace_and_shade(
     }
     let mut reflected = [Vec3::ZERO; LANES];
     let mut t_unused = [0.0; LANES];
+    tally.bounce += 1;
     trace_and_shade(
         world,
         mirror,
@@ -348,6 +369,7 @@ pub fn trace_and_shade(
         next,
         tally,
     );
+    tally.bounce -= 1;
     for lane in 0..LANES {
         if mirror.is_active(lane) {
             radiance[lane] += reflected[lane] * hit.surface[lane].mirror;
