@@ -68,6 +68,21 @@ impl Integrator {
     }
 }
 
+/// Which estimator the path tracer weighs light with: both strategies by multiple importance
+/// sampling (the default), or one alone (for tests and for seeing what each contributes; the
+/// image is the same in expectation, only the noise differs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Strategy {
+    /// Light samples and BSDF samples, weighted by the power heuristic.
+    #[default]
+    Mis,
+    /// Light samples only (emitters found by BSDF samples count only when no light sample
+    /// could have found them).
+    LightOnly,
+    /// BSDF samples only (punctual lights, which no BSDF sample can find, are still sampled).
+    BsdfOnly,
+}
+
 /// How long the path tracer's paths may grow (Cycles' "Light Paths" panel, with its defaults),
 /// and the optional clamp on indirect light.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -84,6 +99,8 @@ pub struct PathLimits {
     /// `f32::INFINITY` (the default) clamps nothing, so the image is unbiased. Cycles' default is
     /// 10: clamping trades fireflies for energy lost where light is bright and indirect.
     pub clamp_indirect: f32,
+    /// How light samples and BSDF samples are weighed.
+    pub strategy: Strategy,
 }
 
 impl Default for PathLimits {
@@ -94,6 +111,7 @@ impl Default for PathLimits {
             glossy: 4,
             transmission: 12,
             clamp_indirect: f32::INFINITY,
+            strategy: Strategy::Mis,
         }
     }
 }
@@ -567,6 +585,7 @@ impl SettingsPatch {
                 glossy: self.glossy_bounces.unwrap_or(d.glossy),
                 transmission: self.transmission_bounces.unwrap_or(d.transmission),
                 clamp_indirect: self.clamp_indirect.unwrap_or(d.clamp_indirect),
+                strategy: d.strategy,
             },
             bounces: 1,
             record_rays: false,

@@ -40,7 +40,7 @@ use crate::error_kind::{ErrorKind, HasKind};
 use crate::scene::World;
 pub use crate::settings::{
     Integrator, Mode, PathLimits, RenderSettings, RulePatch, SamplingRule, SettingError,
-    SettingsPatch, SiteRule, UnknownMode,
+    SettingsPatch, SiteRule, Strategy, UnknownMode,
 };
 use estimate::Estimate;
 pub use film::Film;

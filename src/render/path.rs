@@ -11,7 +11,7 @@ use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::sampler::path_numbers;
 use crate::scene::World;
 use crate::scene::emitters::{EmitterSample, emitted_at};
-use crate::settings::PathLimits;
+use crate::settings::{PathLimits, Strategy};
 use crate::shade::{Bsdf, Lobe, SurfacePoints16};
 
 /// Per-thread scratch space for [`trace_path`].
@@ -43,6 +43,29 @@ struct Lane {
 fn power_heuristic(a: f32, b: f32) -> f32 {
     let (a2, b2) = (a * a, b * b);
     if a2 + b2 > 0.0 { a2 / (a2 + b2) } else { 0.0 }
+}
+
+/// The weight of an emitter a BSDF sample of density `bsdf` found, which a light sample finds
+/// with density `light`.
+#[inline]
+fn bsdf_weight(strategy: Strategy, bsdf: f32, light: f32) -> f32 {
+    match strategy {
+        Strategy::Mis => power_heuristic(bsdf, light),
+        Strategy::BsdfOnly => 1.0,
+        Strategy::LightOnly if light > 0.0 => 0.0,
+        Strategy::LightOnly => 1.0,
+    }
+}
+
+/// The weight of a (non-delta) light sample of density `light`, which a BSDF sample finds with
+/// density `bsdf`.
+#[inline]
+fn light_weight(strategy: Strategy, light: f32, bsdf: f32) -> f32 {
+    match strategy {
+        Strategy::Mis => power_heuristic(light, bsdf),
+        Strategy::LightOnly => 1.0,
+        Strategy::BsdfOnly => 0.0,
+    }
 }
 
 /// `c` scaled down so that no component exceeds `clamp`.
@@ -112,11 +135,12 @@ pub fn trace_path(
         } else {
             limits.clamp_indirect
         };
-        add_world(world, packet, active & !hits, &lanes, clamp, radiance);
+        let weigh = (clamp, limits.strategy);
+        add_world(world, packet, active & !hits, &lanes, weigh, radiance);
         if hits == 0 {
             break;
         }
-        let v = vertices(world, packet, hits, &lanes, clamp, scratch, radiance);
+        let v = vertices(world, packet, hits, &lanes, weigh, scratch, radiance);
         if bounce == limits.total {
             break;
         }
@@ -130,6 +154,7 @@ pub fn trace_path(
         let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
         let at = Shading {
             hits,
+            strategy: limits.strategy,
             v: &v,
             wo: &wo,
             numbers: &numbers,
@@ -156,7 +181,7 @@ fn add_world(
     packet: &RayPacket16,
     missed: u32,
     lanes: &[Lane; LANES],
-    clamp: f32,
+    (clamp, strategy): (f32, Strategy),
     radiance: &mut [Vec3; LANES],
 ) {
     if missed == 0 {
@@ -170,7 +195,7 @@ fn add_world(
         let w = if s.delta {
             1.0
         } else {
-            power_heuristic(s.pdf, world.emitters.pdf_world(world, d))
+            bsdf_weight(strategy, s.pdf, world.emitters.pdf_world(world, d))
         };
         radiance[lane] += clamped(s.throughput * le * w, clamp);
     }
@@ -182,7 +207,7 @@ fn vertices(
     packet: &RayPacket16,
     hits: u32,
     lanes: &[Lane; LANES],
-    clamp: f32,
+    (clamp, strategy): (f32, Strategy),
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
 ) -> Vertices {
@@ -205,7 +230,7 @@ fn vertices(
                 1.0
             } else {
                 let pdf_light = world.emitters.pdf_hit(world, &hit, s.from, sp.position, d);
-                power_heuristic(s.pdf, pdf_light)
+                bsdf_weight(strategy, s.pdf, pdf_light)
             };
             radiance[lane] += clamped(s.throughput * le * w, clamp);
         }
@@ -244,6 +269,8 @@ fn vertices(
 struct Shading<'a> {
     /// The lanes that hit (bit per lane).
     hits: u32,
+    /// How light and BSDF samples are weighed.
+    strategy: Strategy,
     v: &'a Vertices,
     /// Unit directions towards the viewer (the reversed rays).
     wo: &'a [Vec3; LANES],
@@ -301,6 +328,7 @@ fn shadow_packet(
     let mut lit = 0u32;
     let Shading {
         hits,
+        strategy,
         v,
         wo,
         numbers,
@@ -321,7 +349,7 @@ fn shadow_packet(
         let w = if es.delta {
             1.0
         } else {
-            power_heuristic(es.pdf, bsdf.pdf(n, wo, es.dir))
+            light_weight(strategy, es.pdf, bsdf.pdf(n, wo, es.dir))
         };
         let c = lanes[lane].throughput * f * es.radiance * (w / es.pdf);
         if !(c.max_element() > 0.0 && c.is_finite()) {
