@@ -65,6 +65,15 @@ pub struct Hit {
     pub ng: Vec3,
 }
 
+impl Hit {
+    /// Whether the hit is on the front of its surface for a ray along `dir`: the side a
+    /// triangle's winding order faces, a sphere's outside (where Embree's geometric normal
+    /// `ng` points, in Embree 3 and 4 alike).
+    pub fn is_front(&self, dir: Vec3) -> bool {
+        self.ng.dot(dir) < 0.0
+    }
+}
+
 /// Whether a packet's rays are coherent (primary rays, lens samples of one pixel) or not.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RayHint {

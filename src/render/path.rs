@@ -10,7 +10,7 @@ use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::sampler::path_numbers;
 use crate::scene::World;
-use crate::scene::emitters::{EmitterSample, emitted_at};
+use crate::scene::emitters::{EmitterSample, punctual_sample};
 use crate::settings::{PathLimits, Strategy};
 use crate::shade::{Bsdf, Lobe, SurfacePoints16};
 
@@ -78,9 +78,7 @@ fn clamped(c: Vec3, clamp: f32) -> Vec3 {
 /// What one bounce found at the lanes that hit, for the next-event and BSDF samples.
 struct Vertices {
     bsdf: [Bsdf; LANES],
-    origin: [[f32; LANES]; 3],
-    below: [[f32; LANES]; 3],
-    reach: [f32; LANES],
+    origins: trace::Origins,
 }
 
 /// Traces the active lanes of `packet` (camera rays) as paths and writes each lane's radiance
@@ -128,14 +126,17 @@ pub fn trace_path(
                 t_hit[lane] = t[lane];
             }
         }
-        // Emitters the camera sees or that the first bounce finds are direct light; later
-        // ones indirect (what the clamp limits, as Cycles' "Indirect Light" clamp).
-        let clamp = if bounce < 2 {
-            f32::INFINITY
-        } else {
-            limits.clamp_indirect
+        // Light that reaches the camera after at most one scattering is direct; the rest is
+        // indirect, what the clamp limits (Cycles' "Indirect Light" clamp). An emitter found
+        // at this bounce has scattered `bounce` times, a light sample taken here once more.
+        let clamp_after = |scatterings: u32| {
+            if scatterings <= 1 {
+                f32::INFINITY
+            } else {
+                limits.clamp_indirect
+            }
         };
-        let weigh = (clamp, limits.strategy);
+        let weigh = (clamp_after(bounce), limits.strategy);
         add_world(world, packet, active & !hits, &lanes, weigh, radiance);
         if hits == 0 {
             break;
@@ -145,11 +146,6 @@ pub fn trace_path(
             break;
         }
         let numbers: [[f32; 8]; LANES] = std::array::from_fn(|l| path_numbers(keys[l], bounce));
-        let indirect = if bounce == 0 {
-            f32::INFINITY
-        } else {
-            limits.clamp_indirect
-        };
         let dir = packet.dirs();
         let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
         let at = Shading {
@@ -160,7 +156,14 @@ pub fn trace_path(
             numbers: &numbers,
             lanes: &lanes,
         };
-        next_event(world, &at, indirect, scratch, radiance, tally);
+        next_event(
+            world,
+            &at,
+            clamp_after(bounce + 1),
+            scratch,
+            radiance,
+            tally,
+        );
         packet.clear();
         for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
             let n = scratch.points.get(lane).normal;
@@ -222,8 +225,8 @@ fn vertices(
         let sp = points.get(lane);
         let d = lane_vec(dir, lane);
         let material = world.material(&hit);
-        let front = world.is_front(&hit, sp.position, d);
-        let le = emitted_at(material, sp.uv, front);
+        let front = hit.is_front(d);
+        let le = material.emitted_towards(sp.uv, front);
         if le != Vec3::ZERO {
             let s = &lanes[lane];
             let w = if s.delta {
@@ -241,7 +244,7 @@ fn vertices(
             lift[k][lane] = up[k];
         }
     }
-    let (origin, reach) = trace::leaving_origins(
+    let origins = trace::leaving_origins(
         &points.position,
         &points.normal,
         dir,
@@ -249,20 +252,7 @@ fn vertices(
         &extent,
         &lift,
     );
-    // Transmitted rays leave from the other side: the hit point moved as far the other way.
-    let mut below = [[0.0f32; LANES]; 3];
-    for lane in 0..LANES {
-        for k in 0..3 {
-            let p = points.position[k][lane];
-            below[k][lane] = p - (origin[k][lane] - p - lift[k][lane]);
-        }
-    }
-    Vertices {
-        bsdf,
-        origin,
-        below,
-        reach,
-    }
+    Vertices { bsdf, origins }
 }
 
 /// One bounce's vertices as next-event estimation reads them.
@@ -291,16 +281,7 @@ fn next_event(
 ) {
     let emitters = &world.emitters;
     for light in &emitters.always {
-        let sample = |p: Vec3, _: &[f32; 8]| {
-            let ls = light.sample(p);
-            Some(EmitterSample {
-                dir: ls.dir,
-                distance: ls.distance,
-                radiance: ls.irradiance,
-                pdf: 1.0,
-                delta: true,
-            })
-        };
+        let sample = |p: Vec3, _: &[f32; 8]| Some(punctual_sample(light, p));
         shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
     }
     if emitters.has_distribution() {
@@ -334,39 +315,35 @@ fn shadow_packet(
         numbers,
         lanes,
     } = *at;
-    for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+    // A vertex whose BSDF is all deltas (a smooth mirror or clear glass) takes no light sample.
+    let sampled = (0..LANES).filter(|&l| hits & (1 << l) != 0 && !v.bsdf[l].is_delta());
+    for lane in sampled {
         let n = points.get(lane).normal;
-        let p = Vec3::new(v.origin[0][lane], v.origin[1][lane], v.origin[2][lane]);
+        let p = v.origins.at(lane, true);
         let Some(es) = sample(p, &numbers[lane]) else {
             continue;
         };
-        let wo = wo[lane];
-        let bsdf = &v.bsdf[lane];
-        let f = bsdf.eval(n, wo, es.dir);
+        let (f, bsdf_pdf) = v.bsdf[lane].eval_pdf(n, wo[lane], es.dir);
         if f == Vec3::ZERO {
             continue;
         }
         let w = if es.delta {
             1.0
         } else {
-            light_weight(strategy, es.pdf, bsdf.pdf(n, wo, es.dir))
+            light_weight(strategy, es.pdf, bsdf_pdf)
         };
         let c = lanes[lane].throughput * f * es.radiance * (w / es.pdf);
         if !(c.max_element() > 0.0 && c.is_finite()) {
             continue;
         }
         contribution[lane] = clamped(c, clamp);
-        let side = if es.dir.dot(n) >= 0.0 {
-            &v.origin
-        } else {
-            &v.below
-        };
+        let o = v.origins.at(lane, es.dir.dot(n) >= 0.0);
         for k in 0..3 {
-            origin[k][lane] = side[k][lane];
+            origin[k][lane] = o[k];
             to_light[k][lane] = es.dir[k];
         }
         seg_end[lane] = if es.distance.is_finite() {
-            es.distance * (1.0 - 1e-4) - v.reach[lane]
+            es.distance * (1.0 - 1e-4) - v.origins.reach[lane]
         } else {
             f32::INFINITY
         };
@@ -426,12 +403,7 @@ fn scatter(
     if !(throughput.max_element() > 0.0 && throughput.is_finite()) {
         return None;
     }
-    let side = if sample.wi.dot(n) >= 0.0 {
-        &v.origin
-    } else {
-        &v.below
-    };
-    let origin = Vec3::new(side[0][lane], side[1][lane], side[2][lane]);
+    let origin = v.origins.at(lane, sample.wi.dot(n) >= 0.0);
     s.throughput = throughput;
     s.pdf = sample.pdf;
     s.delta = sample.delta;

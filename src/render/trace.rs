@@ -228,6 +228,27 @@ pub(super) fn terminator_lift(world: &World, hit: &Hit, p: Vec3, facing: Vec3) -
         .sum()
 }
 
+/// Where rays leave each lane's hit point.
+pub(super) struct Origins {
+    /// The origins of rays leaving on the side the ray came from (shadow, mirror and
+    /// reflected rays).
+    pub(super) above: [[f32; LANES]; 3],
+    /// The origins of rays leaving through the surface (transmitted rays): the hit point moved
+    /// as far the other way, without the terminator lift.
+    pub(super) below: [[f32; LANES]; 3],
+    /// How far an origin may be from the hit point, to shorten segments towards lights.
+    pub(super) reach: [f32; LANES],
+}
+
+impl Origins {
+    /// Where a ray leaving lane `lane` starts: above the surface when it leaves on the side
+    /// the shading normal faces (`above`), else below it.
+    pub(super) fn at(&self, lane: usize, above: bool) -> Vec3 {
+        let side = if above { &self.above } else { &self.below };
+        Vec3::new(side[0][lane], side[1][lane], side[2][lane])
+    }
+}
+
 /// The origins of rays leaving each lane's hit point (shadow and mirror rays alike), and how
 /// far each origin may be from the hit point (`reach`, to shorten segments towards lights).
 /// The origin is the hit point, lifted by `lift` ([`terminator_lift`]), then moved along the
@@ -244,11 +265,14 @@ pub(super) fn leaving_origins(
     t: &[f32; LANES],
     extent: &[f32; LANES],
     lift: &[[f32; LANES]; 3],
-) -> ([[f32; LANES]; 3], [f32; LANES]) {
+) -> Origins {
     // `f32::max` with its NaN handling would not vectorise; no input here is NaN on a hit lane.
     let max = |a: f32, b: f32| if a > b { a } else { b };
-    let mut origin = [[0.0f32; LANES]; 3];
-    let mut reach = [0.0f32; LANES];
+    let mut out = Origins {
+        above: [[0.0f32; LANES]; 3],
+        below: [[0.0f32; LANES]; 3],
+        reach: [0.0f32; LANES],
+    };
     for lane in 0..LANES {
         let p = max(
             position[0][lane].abs(),
@@ -260,12 +284,14 @@ pub(super) fn leaving_origins(
         );
         let offset = OFFSET_SCALE * max(max(p, t[lane] * d), extent[lane]);
         let (lx, ly, lz) = (lift[0][lane], lift[1][lane], lift[2][lane]);
-        reach[lane] = offset + (lx * lx + ly * ly + lz * lz).sqrt();
+        out.reach[lane] = offset + (lx * lx + ly * ly + lz * lz).sqrt();
         for k in 0..3 {
-            origin[k][lane] = position[k][lane] + lift[k][lane] + normal[k][lane] * offset;
+            let (p, n) = (position[k][lane], normal[k][lane]);
+            out.above[k][lane] = p + lift[k][lane] + n * offset;
+            out.below[k][lane] = p - n * offset;
         }
     }
-    (origin, reach)
+    out
 }
 
 /// Per-thread scratch space for [`trace_and_shade`]: the shadow packet and, built on first
@@ -314,7 +340,11 @@ pub fn trace_and_shade(
     let points = &mut scratch.points;
     world.surface_points16(packet, hits, points);
     let hit = surfaces_hit(world, packet, hits, points, radiance);
-    let (origin, reach) = leaving_origins(
+    let Origins {
+        above: origin,
+        reach,
+        ..
+    } = leaving_origins(
         &points.position,
         &points.normal,
         dir,

@@ -12,7 +12,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 use crate::embree::{Geometry, GeometryId, Hit};
-use crate::shade::{Light, Material};
+use crate::shade::Light;
 
 use super::World;
 
@@ -24,7 +24,7 @@ enum Emitter {
     /// A triangle of an emissive mesh.
     Triangle { geometry: u32, prim: u32 },
     /// An emissive sphere.
-    Sphere { prim: u32 },
+    Sphere { geometry: u32, prim: u32 },
     /// The world (light from every direction rays leave the scene in).
     World,
 }
@@ -43,6 +43,19 @@ pub struct EmitterSample {
     pub pdf: f32,
     /// A punctual light: no BSDF sample can find it.
     pub delta: bool,
+}
+
+/// The sample of punctual `light` seen from `p`: its one direction, with the irradiance it
+/// sends there as the radiance and a density of 1 (a delta).
+pub fn punctual_sample(light: &Light, p: Vec3) -> EmitterSample {
+    let ls = light.sample(p);
+    EmitterSample {
+        dir: ls.dir,
+        distance: ls.distance,
+        radiance: ls.irradiance,
+        pdf: 1.0,
+        delta: true,
+    }
 }
 
 /// Luminance of linear Rec.709 RGB.
@@ -112,7 +125,7 @@ impl Emitters {
                     ),
                     Geometry::Spheres(s) => {
                         let r = s.radius(prim);
-                        (Emitter::Sphere { prim }, 4.0 * PI * r * r)
+                        (Emitter::Sphere { geometry: g, prim }, 4.0 * PI * r * r)
                     }
                 };
                 let sides = if material.one_sided { 1.0 } else { 2.0 };
@@ -189,18 +202,9 @@ impl Emitters {
         }
         let u = Vec2::new(u[1], u[2]);
         let s = match self.list[i] {
-            Emitter::Punctual(light) => {
-                let ls = light.sample(p);
-                EmitterSample {
-                    dir: ls.dir,
-                    distance: ls.distance,
-                    radiance: ls.irradiance,
-                    pdf: 1.0,
-                    delta: true,
-                }
-            }
+            Emitter::Punctual(light) => punctual_sample(&light, p),
             Emitter::Triangle { geometry, prim } => sample_triangle(world, geometry, prim, p, u)?,
-            Emitter::Sphere { prim } => sample_sphere(world, prim, p, u)?,
+            Emitter::Sphere { geometry, prim } => sample_sphere(world, geometry, prim, p, u)?,
             Emitter::World => match &world.background.map {
                 Some(map) => {
                     let s = map.sample(u)?;
@@ -348,17 +352,12 @@ fn sphere_pdf(center: Vec3, radius: f32, from: Vec3, at: Vec3, dir: Vec3) -> f32
     }
 }
 
-fn sample_sphere(world: &World, prim: u32, p: Vec3, u: Vec2) -> Option<EmitterSample> {
-    let Some(Geometry::Spheres(s)) = world
-        .scene
-        .geometries()
-        .iter()
-        .find(|g| matches!(g, Geometry::Spheres(_)))
-    else {
+fn sample_sphere(world: &World, g: u32, prim: u32, p: Vec3, u: Vec2) -> Option<EmitterSample> {
+    let Geometry::Spheres(s) = world.scene.geometry(GeometryId(g)) else {
         return None;
     };
     let (center, radius) = (s.center(prim), s.radius(prim));
-    let material = world.sphere_material(prim);
+    let material = world.material_of(GeometryId(g), prim);
     let to_c = center - p;
     let d2 = to_c.length_squared();
     let r2 = radius * radius;
@@ -409,13 +408,4 @@ fn sphere_uv(d: Vec3) -> Vec2 {
         0.5 + d.z.atan2(d.x) / std::f32::consts::TAU,
         0.5 + d.y.clamp(-1.0, 1.0).asin() / PI,
     )
-}
-
-/// The material of an emissive hit's primitive (for one-sided emitters, zero on the back).
-pub fn emitted_at(material: &Material, uv: Vec2, front: bool) -> Vec3 {
-    if material.one_sided && !front {
-        Vec3::ZERO
-    } else {
-        material.emitted(uv)
-    }
 }

@@ -415,35 +415,18 @@ impl World {
 
     /// The material of primitive `prim` of geometry `geometry`.
     pub fn material_of(&self, geometry: GeometryId, prim: u32) -> &Material {
-        let m = self.geometry_materials[geometry.0 as usize].of(prim);
-        &self.materials[m.expect("the primitive exists")]
-    }
-
-    /// The material of sphere `prim` (spheres share one geometry).
-    pub fn sphere_material(&self, prim: u32) -> &Material {
-        let g = self
-            .scene
-            .geometries()
-            .iter()
-            .position(|g| matches!(g, Geometry::Spheres(_)))
-            .expect("a scene with a sphere emitter has spheres");
-        self.material_of(GeometryId(g as u32), prim)
+        &self.materials[self.index_of(geometry, prim)]
     }
 
     /// Index into `materials` of the surface a hit found.
     pub fn material_index(&self, hit: &Hit) -> usize {
-        match &self.geometry_materials[hit.geometry.0 as usize] {
-            GeometryMaterials::One(m) => *m,
-            GeometryMaterials::PerPrimitive(ids) => ids[hit.prim as usize] as usize,
-        }
+        self.index_of(hit.geometry, hit.prim)
     }
 
-    /// Whether `hit` is on the front of its surface for a ray along `dir`: the side a
-    /// triangle's winding order faces, a sphere's outside.
-    pub fn is_front(&self, hit: &Hit, position: Vec3, dir: Vec3) -> bool {
-        match self.scene.geometry(hit.geometry) {
-            Geometry::Mesh(m) => m.face_normal(hit.prim).dot(dir) < 0.0,
-            Geometry::Spheres(s) => (position - s.center(hit.prim)).dot(dir) < 0.0,
+    fn index_of(&self, geometry: GeometryId, prim: u32) -> usize {
+        match &self.geometry_materials[geometry.0 as usize] {
+            GeometryMaterials::One(m) => *m,
+            GeometryMaterials::PerPrimitive(ids) => ids[prim as usize] as usize,
         }
     }
 

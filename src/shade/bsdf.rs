@@ -324,12 +324,18 @@ impl Bsdf {
 
     /// `f(wo, wi) |n . wi|`, without the delta lobes.
     pub fn eval(&self, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
-        Setup::new(self, n, wo).map_or(Vec3::ZERO, |s| s.eval_pdf(n, wo, wi).0)
+        self.eval_pdf(n, wo, wi).0
     }
 
     /// The solid-angle density with which [`Bsdf::sample`] draws `wi` (zero for delta lobes).
     pub fn pdf(&self, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
-        Setup::new(self, n, wo).map_or(0.0, |s| s.eval_pdf(n, wo, wi).1)
+        self.eval_pdf(n, wo, wi).1
+    }
+
+    /// [`Bsdf::eval`] and [`Bsdf::pdf`] at once (a light sample needs both; they share the
+    /// work that depends on `wo`).
+    pub fn eval_pdf(&self, n: Vec3, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
+        Setup::new(self, n, wo).map_or((Vec3::ZERO, 0.0), |s| s.eval_pdf(n, wo, wi))
     }
 
     /// Whether every lobe is a delta, so that [`Bsdf::eval`] is zero everywhere and light

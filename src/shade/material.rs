@@ -216,6 +216,18 @@ impl Material {
         }
     }
 
+    /// The radiance leaving the surface at texture coordinates `uv` towards a ray that met its
+    /// front (`front`, the side its winding faces) or its back: zero behind a one-sided
+    /// emitter.
+    #[inline]
+    pub fn emitted_towards(&self, uv: Vec2, front: bool) -> Vec3 {
+        if self.one_sided && !front {
+            Vec3::ZERO
+        } else {
+            self.emitted(uv)
+        }
+    }
+
     /// The radiance the surface emits at texture coordinates `uv` (zero for most materials).
     #[inline]
     pub fn emitted(&self, uv: Vec2) -> Vec3 {
