@@ -23,10 +23,7 @@ pub struct Estimate {
     peak: f32,
 }
 
-/// Rec. 709 luminance of linear RGB.
-pub fn luminance(c: Vec3) -> f32 {
-    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
-}
+pub use crate::shade::luminance;
 
 /// Linear radiance to 8-bit sRGB code values (0 to 255 for 0 to 1), without clamping above 1:
 /// the same power law continues, so differences in highlights still count, scaled the way a

@@ -12,7 +12,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 use crate::embree::{Geometry, GeometryId, Hit};
-use crate::shade::Light;
+use crate::shade::{Light, luminance};
 
 use super::World;
 
@@ -56,11 +56,6 @@ pub fn punctual_sample(light: &Light, p: Vec3) -> EmitterSample {
         pdf: 1.0,
         delta: true,
     }
-}
-
-/// Luminance of linear Rec.709 RGB.
-pub fn luminance(c: Vec3) -> f32 {
-    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
 /// The emitters of a world and the distribution they are picked from.

@@ -16,6 +16,11 @@ pub use texture::*;
 
 use glam::{Vec2, Vec3};
 
+/// Rec. 709 luminance of linear RGB.
+pub fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
 /// Local shading frame of a hit: everything shading needs, independent of geometry type.
 #[derive(Debug, Clone, Copy)]
 pub struct SurfacePoint {
