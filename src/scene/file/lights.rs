@@ -12,7 +12,7 @@ use crate::scene::Background;
 use crate::scene::area_light::{AreaLight, AreaShape};
 use crate::scene::error::LoadError;
 use crate::scene::input::LoadOptions;
-use crate::scene::model::{default_background, default_light};
+use crate::scene::model::{BLENDER_WORLD, default_background, default_light};
 use crate::scene::texture::load_environment;
 use crate::shade::Light;
 
@@ -29,7 +29,7 @@ pub(super) fn lights(
     raw: Option<Vec<Spanned<RawLight>>>,
     model_lights: Vec<Light>,
     camera: &CameraSpec,
-) -> Result<(Vec<Light>, Vec<AreaLight>), LoadError> {
+) -> Result<(Vec<Light>, Vec<(usize, AreaLight)>), LoadError> {
     let mut lights = Vec::new();
     let mut areas = Vec::new();
     match raw {
@@ -41,7 +41,7 @@ pub(super) fn lights(
             for (i, l) in raw.into_iter().enumerate() {
                 match light(ctx, i, l)? {
                     FileLight::Punctual(l) => lights.push(l),
-                    FileLight::Area(a) => areas.push(a),
+                    FileLight::Area(a) => areas.push((i, a)),
                 }
             }
         }
@@ -107,7 +107,7 @@ pub(super) fn world(
                 return Err(ctx.invalid(span, "world.rotation", "`rotation` turns a `map`"));
             }
             Ok(Background::uniform(
-                color.map_or(Vec3::splat(0.05), |c| c.0) * strength,
+                color.map_or(Vec3::splat(BLENDER_WORLD), |c| c.0) * strength,
             ))
         }
     }

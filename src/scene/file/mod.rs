@@ -157,7 +157,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         .transpose()?;
     let (lights, areas) = lights::lights(ctx, raw.lights, objects.lights, &camera)?;
     let (mut material_list, mut object_list) = (materials.list, objects.list);
-    for (i, area) in areas.iter().enumerate() {
+    for (i, area) in &areas {
         material_list.push(area.material());
         let object = area.object(material_list.len() - 1).map_err(|e| {
             ctx.invalid(
