@@ -22,6 +22,13 @@ pub(super) enum FileLight {
     Area(AreaLight),
 }
 
+/// What a scene file's `[[lights]]` give: punctual lights, and area lights (with their index)
+/// to add as geometry.
+pub(super) struct FileLights {
+    pub(super) lights: Vec<Light>,
+    pub(super) areas: Vec<(usize, AreaLight)>,
+}
+
 /// The file's lights (punctual, and area lights to add as geometry), else the default key
 /// light unless a model brings lights; plus the models' lights.
 pub(super) fn lights(
@@ -29,7 +36,7 @@ pub(super) fn lights(
     raw: Option<Vec<Spanned<RawLight>>>,
     model_lights: Vec<Light>,
     camera: &CameraSpec,
-) -> Result<(Vec<Light>, Vec<(usize, AreaLight)>), LoadError> {
+) -> Result<FileLights, LoadError> {
     let mut lights = Vec::new();
     let mut areas = Vec::new();
     match raw {
@@ -47,7 +54,7 @@ pub(super) fn lights(
         }
     }
     lights.extend(model_lights);
-    Ok((lights, areas))
+    Ok(FileLights { lights, areas })
 }
 
 /// The `[background]`: a uniform `color`, or a sky from `horizon` to `zenith`.

@@ -155,7 +155,8 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         .animation
         .map(|a| animation::animation(ctx, a, &camera, focus_on_look_at))
         .transpose()?;
-    let (lights, areas) = lights::lights(ctx, raw.lights, objects.lights, &camera)?;
+    let lights::FileLights { lights, areas } =
+        lights::lights(ctx, raw.lights, objects.lights, &camera)?;
     let (mut material_list, mut object_list) = (materials.list, objects.list);
     for (i, area) in &areas {
         material_list.push(area.material());
