@@ -9,6 +9,7 @@ For every scene NAME, OUT/NAME/ gets:
     NAME.glb            the export (lights on, Lighting Mode Standard, +Y up)
     NAME.json           the sidecar: world, area lights, camera lens, resolution, render settings
     NAME.cycles.exr     the Cycles render (RGBA float, scene-linear; Standard view transform)
+    NAME.blend          the scene as rendered (with --dof: depth of field on)
     (sky.hdr)           the environment map, for scenes that use one
 
 Everything is built in code from fixed numbers, so a rerun gives the same files (Cycles' seed is
@@ -410,9 +411,11 @@ def build_one(name, args):
     }
     with open(os.path.join(out_dir, name + ".json"), "w") as f:
         json.dump(sidecar, f, indent=2)
+    scene.camera.data.dof.use_dof = args.dof
+    # The scene as Cycles renders it, for equal_error.py.
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(out_dir, name + ".blend"), copy=True)
     if args.no_render:
         return
-    scene.camera.data.dof.use_dof = args.dof
     scene.render.filepath = os.path.join(out_dir, sidecar["exr"])
     t0 = time.time()
     bpy.ops.render.render(write_still=True)
