@@ -243,10 +243,10 @@ pub fn sample_key(seed: u64, pixel: u64, sample: u32) -> u64 {
 }
 
 /// How many numbers [`path_numbers`] gives per bounce.
-pub const PATH_DIMENSIONS: usize = 8;
+pub const PATH_DIMENSIONS: usize = 10;
 
 /// Uniform numbers in [0, 1) for the decisions a path makes at bounce `bounce` (light choice,
-/// light position, BSDF lobe and direction, Russian roulette), hashed from the sample's `key`:
+/// light position, BSDF lobe and direction, Russian roulette, world direction), hashed from the sample's `key`:
 /// independent across dimensions and bounces.
 pub fn path_numbers(key: u64, bounce: u32) -> [f32; PATH_DIMENSIONS] {
     let base = hash64(key ^ u64::from(bounce).wrapping_mul(0xd6e8_feb8_6659_fd93));

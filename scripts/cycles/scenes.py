@@ -330,12 +330,41 @@ def scene_glass(out_dir):
     return {"world": world_color((0.2, 0.2, 0.2), 1.0), "area_lights": [area_light_record(area)]}
 
 
+def scene_defocus(out_dir):
+    """(f) The equal-error shot: a row of spheres and boxes receding from 1.5 m to 12 m, 50 mm
+    f/1.4 focused on the nearest sphere (with --dof: most of the frame is defocused), lit by a
+    sun, a rect area light and a sky-blue world."""
+    floor = principled("Floor", (0.6, 0.6, 0.6), roughness=1.0)
+    plane(40.0, (0, 8, 0), floor)
+    plane(40.0, (0, 16, 4), principled("Wall", (0.7, 0.6, 0.45), roughness=1.0),
+          rotation=(math.pi / 2, 0, 0))
+    mats = [principled("Red", (0.8, 0.2, 0.15), roughness=1.0),
+            principled("Blue", (0.1, 0.3, 0.7), roughness=0.25),
+            principled("Gold", (0.95, 0.75, 0.4), roughness=0.15, metallic=1.0),
+            principled("Green", (0.2, 0.6, 0.25), roughness=0.5)]
+    for i, y in enumerate((1.5, 3.0, 5.0, 7.5, 10.0, 12.0)):
+        x = (-0.5 if i % 2 == 0 else 0.6) * (1.0 + 0.25 * i)
+        if i % 3 == 2:
+            cube(0.7, (x, y, 0.35), mats[i % 4], rotation=(0, 0, math.radians(20 * i)))
+        else:
+            sphere(0.35, (x, y, 0.35), mats[i % 4])
+    add_light("SUN", "Sun", (0, 0, 6), 2.0, rotation=(math.radians(50), 0, math.radians(-35)),
+              angle=0.0)
+    area = add_light("AREA", "Area", (2.0, 0.0, 2.5), 400.0, target=(0, 4, 0.3),
+                     shape="SQUARE", size=1.0)
+    add_camera((0.1, -1.0, 0.6), (0.0, 6.0, 0.4), lens=50.0, focus_target=(-0.5, 1.5, 0.35),
+               f_number=1.4)
+    bpy.context.view_layer.update()
+    return {"world": world_color((0.4, 0.5, 0.7), 1.0), "area_lights": [area_light_record(area)]}
+
+
 SCENES = {
     "box": scene_box,
     "spheres": scene_spheres,
     "hdr": scene_hdr,
     "lights": scene_lights,
     "glass": scene_glass,
+    "defocus": scene_defocus,
 }
 
 

@@ -4,15 +4,19 @@
 //! bounce after it (incoherent after the first); each bounce's light samples go as one
 //! `occluded16` packet. Nothing is allocated per ray.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
-use crate::sampler::path_numbers;
+use crate::sampler::{PATH_DIMENSIONS, path_numbers};
 use crate::scene::World;
 use crate::scene::emitters::{EmitterSample, punctual_sample};
 use crate::settings::{PathLimits, Strategy};
 use crate::shade::{Bsdf, Lobe, SurfacePoints16};
+
+/// One bounce's random numbers of one path: 0-2 pick an emitter and a point on it, 3-5 the
+/// BSDF's lobe and direction, 6 Russian roulette, 8-9 a direction towards the world.
+type Numbers = [f32; PATH_DIMENSIONS];
 
 /// Per-thread scratch space for [`trace_path`].
 #[derive(Default)]
@@ -145,7 +149,7 @@ pub fn trace_path(
         if bounce == limits.total {
             break;
         }
-        let numbers: [[f32; 8]; LANES] = std::array::from_fn(|l| path_numbers(keys[l], bounce));
+        let numbers: [Numbers; LANES] = std::array::from_fn(|l| path_numbers(keys[l], bounce));
         let dir = packet.dirs();
         let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
         let at = Shading {
@@ -264,13 +268,13 @@ struct Shading<'a> {
     v: &'a Vertices,
     /// Unit directions towards the viewer (the reversed rays).
     wo: &'a [Vec3; LANES],
-    numbers: &'a [[f32; 8]; LANES],
+    numbers: &'a [Numbers; LANES],
     lanes: &'a [Lane; LANES],
 }
 
-/// Next-event estimation: a shadow packet for each always-sampled punctual light, and one for
-/// an emitter drawn per lane from the others, weighted against BSDF sampling by the power
-/// heuristic.
+/// Next-event estimation: a shadow packet for each always-sampled punctual light, one for the
+/// world when it emits, and one for an emitter drawn per lane from the others, weighted against
+/// BSDF sampling by the power heuristic.
 fn next_event(
     world: &World,
     at: &Shading,
@@ -281,11 +285,15 @@ fn next_event(
 ) {
     let emitters = &world.emitters;
     for light in &emitters.always {
-        let sample = |p: Vec3, _: &[f32; 8]| Some(punctual_sample(light, p));
+        let sample = |p: Vec3, _: &Numbers| Some(punctual_sample(light, p));
+        shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
+    }
+    if emitters.samples_world() {
+        let sample = |_: Vec3, u: &Numbers| emitters.sample_world(world, Vec2::new(u[8], u[9]));
         shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
     }
     if emitters.has_distribution() {
-        let sample = |p: Vec3, u: &[f32; 8]| emitters.sample(world, p, [u[0], u[1], u[2]]);
+        let sample = |p: Vec3, u: &Numbers| emitters.sample(world, p, [u[0], u[1], u[2]]);
         shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
     }
 }
@@ -296,7 +304,7 @@ fn shadow_packet(
     world: &World,
     at: &Shading,
     clamp: f32,
-    sample: impl Fn(Vec3, &[f32; 8]) -> Option<EmitterSample>,
+    sample: impl Fn(Vec3, &Numbers) -> Option<EmitterSample>,
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
     tally: &mut Tally,
@@ -375,7 +383,7 @@ fn scatter(
     lane: usize,
     n: Vec3,
     wo: Vec3,
-    u: &[f32; 8],
+    u: &Numbers,
     limits: &PathLimits,
     bounce: u32,
     s: &mut Lane,

@@ -1,10 +1,16 @@
 //! Everything that emits light, as the path tracer samples it: punctual lights (point, spot,
 //! sun), emissive triangles and spheres (area lights are emissive geometry), and the world.
 //!
-//! One emitter is picked per next-event estimate, with probability proportional to an estimate
-//! of its power (luminance-weighted), then a direction towards it is drawn. [`Emitters::pdf_hit`]
-//! and [`Emitters::pdf_world`] give the same density for a direction a BSDF sample found, so
-//! multiple importance sampling can weigh the two strategies.
+//! Each next-event estimate takes up to three kinds of sample: one per punctual light when there
+//! are few ([`Emitters::always`]), one of the world ([`Emitters::sample_world`]) when it emits,
+//! and one of an emitter picked from the rest ([`Emitters::sample`]) with probability
+//! proportional to an estimate of its power (luminance-weighted), then a direction towards it.
+//! The world has its own sample because no power estimate weighs it fairly against local
+//! lights: a sky's power grows with the scene's size while what it sends to a point does not,
+//! so picked by power a dim sky over a large floor starves a bright lamp next to the point.
+//! [`Emitters::pdf_hit`] and [`Emitters::pdf_world`] give the density of the sample kind that
+//! can draw a direction a BSDF sample found, so multiple importance sampling can weigh the two
+//! strategies.
 
 use std::collections::HashMap;
 use std::f32::consts::PI;
@@ -25,8 +31,6 @@ enum Emitter {
     Triangle { geometry: u32, prim: u32 },
     /// An emissive sphere.
     Sphere { geometry: u32, prim: u32 },
-    /// The world (light from every direction rays leave the scene in).
-    World,
 }
 
 /// A direction towards an emitter, drawn from a point.
@@ -72,8 +76,8 @@ pub struct Emitters {
     cdf: Vec<f32>,
     /// Emitter index of each emissive triangle or sphere, by (geometry, primitive).
     by_prim: HashMap<(u32, u32), u32>,
-    /// Index of the world in `list`, when it emits.
-    world: Option<usize>,
+    /// Whether the world emits and can be sampled ([`Emitters::sample_world`]).
+    world: bool,
 }
 
 impl Emitters {
@@ -132,20 +136,13 @@ impl Emitters {
                 }
             }
         }
-        let mut world_index = None;
-        let sky = match &world.background.map {
-            Some(map) if map.can_sample() => luminance(map.power(radius)),
-            Some(_) => 0.0,
+        let world_emits = match &world.background.map {
+            Some(map) => map.can_sample(),
             None => {
                 let sky = world.background.horizon.max(world.background.zenith);
-                4.0 * PI * PI * radius * radius * luminance(sky)
+                luminance(sky) > 0.0
             }
         };
-        if sky > 0.0 && sky.is_finite() {
-            world_index = Some(list.len());
-            list.push(Emitter::World);
-            power.push(sky);
-        }
         let total: f64 = power.iter().map(|&p| p as f64).sum();
         let prob: Vec<f32> = if total > 0.0 && total.is_finite() {
             power.iter().map(|&p| (p as f64 / total) as f32).collect()
@@ -166,13 +163,18 @@ impl Emitters {
             prob,
             cdf,
             by_prim,
-            world: world_index,
+            world: world_emits,
         }
     }
 
     /// Whether there is nothing to sample.
     pub fn is_empty(&self) -> bool {
-        self.list.is_empty() && self.always.is_empty()
+        self.list.is_empty() && self.always.is_empty() && !self.world
+    }
+
+    /// Whether the world emits, so [`Emitters::sample_world`] draws directions.
+    pub fn samples_world(&self) -> bool {
+        self.world
     }
 
     /// Whether any emitter is drawn by [`Emitters::sample`] (the others are
@@ -200,34 +202,44 @@ impl Emitters {
             Emitter::Punctual(light) => punctual_sample(&light, p),
             Emitter::Triangle { geometry, prim } => sample_triangle(world, geometry, prim, p, u)?,
             Emitter::Sphere { geometry, prim } => sample_sphere(world, geometry, prim, p, u)?,
-            Emitter::World => match &world.background.map {
-                Some(map) => {
-                    let s = map.sample(u)?;
-                    EmitterSample {
-                        dir: s.dir,
-                        distance: f32::INFINITY,
-                        radiance: s.radiance,
-                        pdf: s.pdf,
-                        delta: false,
-                    }
-                }
-                None => {
-                    let dir = uniform_sphere(u);
-                    EmitterSample {
-                        dir,
-                        distance: f32::INFINITY,
-                        radiance: world.background.radiance(dir),
-                        pdf: 1.0 / (4.0 * PI),
-                        delta: false,
-                    }
-                }
-            },
         };
         let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.max_element() > 0.0;
         ok.then_some(EmitterSample {
             pdf: s.pdf * pick,
             ..s
         })
+    }
+
+    /// Draws a direction towards the world with `u` (by its map's importance, else uniformly
+    /// over the sphere). `None` when the world does not emit or sends nothing along it.
+    pub fn sample_world(&self, world: &World, u: Vec2) -> Option<EmitterSample> {
+        if !self.world {
+            return None;
+        }
+        let s = match &world.background.map {
+            Some(map) => {
+                let s = map.sample(u)?;
+                EmitterSample {
+                    dir: s.dir,
+                    distance: f32::INFINITY,
+                    radiance: s.radiance,
+                    pdf: s.pdf,
+                    delta: false,
+                }
+            }
+            None => {
+                let dir = uniform_sphere(u);
+                EmitterSample {
+                    dir,
+                    distance: f32::INFINITY,
+                    radiance: world.background.radiance(dir),
+                    pdf: 1.0 / (4.0 * PI),
+                    delta: false,
+                }
+            }
+        };
+        let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.max_element() > 0.0;
+        ok.then_some(s)
     }
 
     /// The density [`Emitters::sample`] draws direction `dir` from point `from` with, for a ray
@@ -255,13 +267,13 @@ impl Emitters {
         }
     }
 
-    /// The density [`Emitters::sample`] draws world direction `dir` with (zero when the world
-    /// does not emit).
+    /// The density [`Emitters::sample_world`] draws world direction `dir` with (zero when the
+    /// world does not emit).
     pub fn pdf_world(&self, world: &World, dir: Vec3) -> f32 {
         match (self.world, &world.background.map) {
-            (Some(i), Some(map)) => self.prob[i] * map.pdf(dir),
-            (Some(i), None) => self.prob[i] / (4.0 * PI),
-            (None, _) => 0.0,
+            (true, Some(map)) => map.pdf(dir),
+            (true, None) => 1.0 / (4.0 * PI),
+            (false, _) => 0.0,
         }
     }
 }
