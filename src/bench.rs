@@ -44,9 +44,15 @@ impl Default for BenchConfig {
     }
 }
 
-/// How both studies measure: repeats, the converged reference, the seed.
+/// How both studies measure: what every render starts from, repeats, the converged
+/// reference, the seed.
 #[derive(Debug, Clone)]
 pub struct Measure {
+    /// The settings every render of the study starts from: the integrator and its path
+    /// limits, the pixel and lens filters, exposure, transparency (usually the scene's, with
+    /// the command line's flags). Each render sets its own mode, sample counts, sampling
+    /// rule and seed; the rest is taken from here, for the reference too.
+    pub base: RenderSettings,
     /// Timed repeats of each render; the median is reported.
     pub repeat: usize,
     /// Samples per pixel of the converged reference (dense, in focus or not).
@@ -60,6 +66,7 @@ pub struct Measure {
 impl Default for Measure {
     fn default() -> Self {
         Self {
+            base: RenderSettings::default(),
             repeat: 3,
             reference_spp: 1024,
             seed: 0,
@@ -183,6 +190,8 @@ pub struct BenchRow {
 pub struct BenchReport {
     /// The scene's name.
     pub scene: String,
+    /// How light was carried in every render (and the reference).
+    pub integrator: crate::render::Integrator,
     /// Image width in pixels.
     pub width: usize,
     /// Image height in pixels.
@@ -255,21 +264,17 @@ pub fn median(mut v: Vec<f64>) -> f64 {
 
 /// Bumped whenever the renderer's estimate of a pixel changes (sampling, filters, shading),
 /// so that a cached reference from an older renderer is not reused.
-const RENDERER_REVISION: u32 = 2;
+const RENDERER_REVISION: u32 = 3;
 
 /// The cache key of a reference: everything that changes its pixels.
 pub fn reference_key(desc: &SceneDesc, camera: &Camera, settings: &RenderSettings) -> String {
     let mut h = Fnv1a::default();
+    // Every setting: the integrator, its limits, filters and exposure change the pixels as
+    // much as the sample counts do.
     let _ = write!(
         h,
-        "{}.{RENDERER_REVISION}|{desc:?}|{camera:?}|{}|{}|{}|{:?}|{}|{:?}",
+        "{}.{RENDERER_REVISION}|{desc:?}|{camera:?}|{settings:?}",
         env!("CARGO_PKG_VERSION"),
-        settings.spp,
-        settings.aa,
-        settings.seed,
-        settings.filter,
-        settings.bounces,
-        settings.pixel_filter
     );
     // The name becomes part of a file name: keep it to characters every file system accepts.
     let name: String = desc
@@ -369,8 +374,10 @@ pub(crate) fn reference(
         mode: Mode::Dense,
         spp: reference_spp,
         aa: reference_spp,
+        rule: SamplingRule::ErrorControlled { tolerance: None },
         seed: crate::sampler::hash64(seed ^ 0x5eed_5eed),
-        ..Default::default()
+        record_rays: false,
+        ..measure.base.clone()
     };
     let (w, h) = (camera.width as usize, camera.height as usize);
     let path =
@@ -403,12 +410,8 @@ pub fn run(
 
     // Intersect-only: replay exactly the packets dense traces, without shading or sampling.
     let recording = RenderSettings {
-        mode: Mode::Dense,
-        spp: config.spp,
-        aa: config.aa,
-        seed: config.measure.seed,
         record_rays: true,
-        ..Default::default()
+        ..row_settings(config, Mode::Dense, None, false)
     };
     let (_, recorded) = render::render(world, camera, &recording, progress)?;
     let log = recorded.ray_log.unwrap_or_default();
@@ -459,6 +462,7 @@ pub fn run(
     Ok((
         BenchReport {
             scene: desc.name.clone(),
+            integrator: config.measure.base.integrator,
             width: w,
             height: h,
             spp: config.spp,
@@ -493,7 +497,8 @@ fn row_settings(config: &BenchConfig, mode: Mode, k: Option<f32>, exact: bool) -
             None => SamplingRule::ErrorControlled { tolerance: None },
         },
         seed: config.measure.seed,
-        ..Default::default()
+        record_rays: false,
+        ..config.measure.base.clone()
     }
 }
 

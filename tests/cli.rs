@@ -352,6 +352,25 @@ fn bench_reports_every_mode_and_caches_the_reference() {
         report["reference_cached"], true,
         "second run reuses the reference"
     );
+    assert_eq!(report["integrator"], "path");
+    // The other integrator renders (and caches) its own reference: a reference is never
+    // shared between integrators, whose images differ.
+    let direct_args: Vec<&str> = args
+        .iter()
+        .copied()
+        .chain(["--integrator", "direct"])
+        .collect();
+    let direct = dofray(&direct_args);
+    assert!(direct.status.success(), "{}", stderr(&direct));
+    let direct: serde_json::Value = serde_json::from_slice(&direct.stdout).unwrap();
+    assert_eq!(direct["integrator"], "direct");
+    assert_eq!(direct["reference_cached"], false);
+    // The direct integrator's dense row traces fewer rays than the path tracer's (no bounces
+    // beyond mirrors on the paper scene).
+    let dense_rays = |r: &serde_json::Value| r["rows"][1]["rays"].as_u64().unwrap();
+    assert!(dense_rays(&direct) < dense_rays(&report));
+    let again: serde_json::Value = serde_json::from_slice(&dofray(&direct_args).stdout).unwrap();
+    assert_eq!(again["reference_cached"], true);
     std::fs::remove_dir_all(dir).unwrap();
 }
 

@@ -89,8 +89,9 @@ impl Method {
         }
     }
 
-    /// The render settings of this method at one rung.
-    pub fn settings(self, spp: u32, aa: u32, seed: u64) -> RenderSettings {
+    /// The render settings of this method at one rung: `base` with this method's mode and
+    /// rule and the rung's sample counts and seed.
+    pub fn settings(self, base: &RenderSettings, spp: u32, aa: u32, seed: u64) -> RenderSettings {
         RenderSettings {
             mode: match self {
                 Self::Dense => Mode::Dense,
@@ -100,7 +101,8 @@ impl Method {
             aa,
             rule: SamplingRule::ErrorControlled { tolerance: None },
             seed,
-            ..Default::default()
+            record_rays: false,
+            ..base.clone()
         }
     }
 }
@@ -199,6 +201,8 @@ impl Level {
 pub struct EqualErrorReport {
     /// The scene's name.
     pub scene: String,
+    /// How light was carried in every render (and the reference).
+    pub integrator: crate::render::Integrator,
     /// Image width in pixels.
     pub width: usize,
     /// Image height in pixels.
@@ -361,7 +365,12 @@ pub fn run(
     }
     for spp in &ladder {
         Method::Dense
-            .settings(*spp, config.aa.at(*spp), config.measure.seed)
+            .settings(
+                &config.measure.base,
+                *spp,
+                config.aa.at(*spp),
+                config.measure.seed,
+            )
             .validate()
             .map_err(render::RenderError::from)?;
     }
@@ -378,7 +387,12 @@ pub fn run(
     for repeat in 0..config.measure.repeat {
         for (r, &spp) in ladder.iter().enumerate() {
             for (m, method) in methods.iter().enumerate() {
-                let settings = method.settings(spp, config.aa.at(spp), config.measure.seed);
+                let settings = method.settings(
+                    &config.measure.base,
+                    spp,
+                    config.aa.at(spp),
+                    config.measure.seed,
+                );
                 let (film, stats) = render::render(world, camera, &settings, progress)?;
                 if repeat == 0 {
                     let psnr = metrics::psnr(&film.rgb(), &reference, w, h, Space::Srgb)?;
@@ -416,6 +430,7 @@ pub fn run(
     let (levels, highest_common) = levels(&level_list, &dense, &adaptive);
     Ok(EqualErrorReport {
         scene: desc.name.clone(),
+        integrator: config.measure.base.integrator,
         width: w,
         height: h,
         repeat: config.measure.repeat,
@@ -556,6 +571,7 @@ pub(super) mod tests {
         let (levels, highest_common) = super::levels(levels, &dense, &adaptive);
         EqualErrorReport {
             scene: "hand-made".into(),
+            integrator: crate::render::Integrator::Path,
             width: 64,
             height: 48,
             repeat: 1,

@@ -180,8 +180,12 @@ fn draw(report: &EqualErrorReport, root: &DrawingArea<BitMapBackend, Shift>) -> 
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let ((x0, x1), (y0, y1)) = ranges(report);
     let title = format!(
-        "Equal error: {} ({}x{}, reference dense {} spp)",
-        report.scene, report.width, report.height, report.reference_spp
+        "Equal error: {}, {} ({}x{}, reference dense {} spp)",
+        report.scene,
+        report.integrator.name(),
+        report.width,
+        report.height,
+        report.reference_spp
     );
     let (bold, light) = log_ticks(x0, x1);
     let mut chart = ChartBuilder::on(root)

@@ -334,6 +334,12 @@ pub(crate) struct BenchArgs {
     /// the rung's spp times the scene's aa / spp (4 / 16), rounded, at least 1].
     #[arg(long)]
     pub(crate) aa: Option<u32>,
+    /// How light is carried in every render and the reference: `path` (the physically based
+    /// path tracer) or `direct` (the seed's quick shading, as in its table). Every other
+    /// setting of the scene's [render] table (bounce limits, clamp, filters, exposure) applies
+    /// too [default: the scene's, else path].
+    #[arg(long, value_enum)]
+    pub(crate) integrator: Option<dofray::render::Integrator>,
     /// Timed repeats of each mode (or rung); medians are reported.
     #[arg(long, default_value_t = 3)]
     pub(crate) repeat: usize,

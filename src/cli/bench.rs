@@ -35,13 +35,14 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
     let samples = SettingsPatch {
         spp: a.spp,
         aa: a.aa,
+        integrator: a.integrator,
         ..Default::default()
     };
     let settings = p.renderer.settings(&samples).map_err(cli_error)?;
     let config = BenchConfig {
         spp: settings.spp,
         aa: settings.aa,
-        measure: measure(a),
+        measure: measure(a, settings),
     };
     let max = RenderSettings::MAX_SAMPLES;
     if a.reference_spp == 0 || a.reference_spp > max {
@@ -75,10 +76,11 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
-/// The flags' repeats, reference and seed; the reference cached in the default directory
-/// unless `--cache-dir` names another.
-fn measure(a: &BenchArgs) -> bench::Measure {
+/// The flags' repeats, reference and seed over the scene's settings `base`; the reference
+/// cached in the default directory unless `--cache-dir` names another.
+fn measure(a: &BenchArgs, base: RenderSettings) -> bench::Measure {
     bench::Measure {
+        base,
         repeat: a.repeat,
         reference_spp: a.reference_spp,
         seed: a.scene.seed,
@@ -112,22 +114,23 @@ pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> R
             a.reference_spp
         );
     }
+    let scene = p
+        .renderer
+        .settings(&SettingsPatch {
+            integrator: a.integrator,
+            ..Default::default()
+        })
+        .map_err(cli_error)?;
     // The scene's in-focus to defocused ratio of samples (4 : 16 by default), at every rung.
     let aa = match a.aa {
         Some(n) => equal_error::RungAa::Fixed(n),
-        None => {
-            let scene = p
-                .renderer
-                .settings(&SettingsPatch::default())
-                .map_err(cli_error)?;
-            equal_error::RungAa::Ratio(scene.aa as f64 / scene.spp as f64)
-        }
+        None => equal_error::RungAa::Ratio(scene.aa as f64 / scene.spp as f64),
     };
     let config = equal_error::EqualErrorConfig {
         ladder: a.ladder.clone(),
         levels: a.levels.clone(),
         aa,
-        measure: measure(a),
+        measure: measure(a, scene),
     };
     let bar = Bar::new(a.quiet || a.json);
     let mut report = p.pool.install(|| {

@@ -31,8 +31,9 @@ pub(crate) fn speedup_cell(l: &equal_error::Level) -> String {
 
 pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
     println!(
-        "dofray bench --equal-error: scene {}, {}x{}, median of {} runs, {} threads; reference {} spp{}",
+        "dofray bench --equal-error: scene {}, {} integrator, {}x{}, median of {} runs, {} threads; reference {} spp{}",
         r.scene,
+        r.integrator.name(),
         r.width,
         r.height,
         r.repeat,
@@ -112,8 +113,9 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
 
 pub(crate) fn print_table(r: &bench::BenchReport) {
     println!(
-        "dofray bench: scene {}, {}x{}, {} spp, {} aa, median of {} runs, {} threads; reference {} spp{}",
+        "dofray bench: scene {}, {} integrator, {}x{}, {} spp, {} aa, median of {} runs, {} threads; reference {} spp{}",
         r.scene,
+        r.integrator.name(),
         r.width,
         r.height,
         r.spp,
