@@ -163,7 +163,17 @@ fn every_scene_file_loads_builds_and_renders() {
         }
     }
     names.sort();
-    assert_eq!(names, ["bokeh", "focus_pull", "gallery", "paper", "vase"]);
+    assert_eq!(
+        names,
+        [
+            "bokeh",
+            "focus_pull",
+            "gallery",
+            "interior",
+            "paper",
+            "vase"
+        ]
+    );
 }
 
 /// The packet-wide surface points the renderer shades equal `World::surface_point` of each
