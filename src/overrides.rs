@@ -8,7 +8,10 @@
 
 use glam::Vec3;
 
-use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec, Photographic, check_vfov};
+use crate::camera::lens::focal_length_of_vfov;
+use crate::camera::{
+    ApertureShape, CameraSpec, DEFAULT_SENSOR_WIDTH_MM, Focus, LensSpec, Photographic, check_vfov,
+};
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::params::Param;
 use crate::scene::SceneDesc;
@@ -281,6 +284,13 @@ impl Overrides {
 
     /// The photographic lens's part of [`Overrides::apply_camera`].
     fn apply_photographic(&self, cam: &mut CameraSpec) -> Result<(), OverrideError> {
+        // A lens that is not photographic keeps its field of view under a new f-number: the
+        // focal length that gives it on the sensor (a new aperture must not reframe the shot).
+        let sensor = self
+            .sensor_width_mm
+            .or(cam.lens.photographic().map(|p| p.sensor_width_mm))
+            .unwrap_or(DEFAULT_SENSOR_WIDTH_MM);
+        let keep_fov = focal_length_of_vfov(cam.vfov_deg, sensor, cam.width, cam.height);
         match (self.f_number, &mut cam.lens) {
             (
                 None,
@@ -309,12 +319,16 @@ impl Overrides {
                 }
             }
             (Some(n), lens) => {
-                // The scene's photographic lens, else the default one, with what is given.
+                // The scene's photographic lens, else one that keeps the scene's field of
+                // view, with what is given.
                 let scene = lens.photographic();
+                let kept = (keep_fov.is_finite() && keep_fov > 0.0).then_some(keep_fov);
                 *lens = Photographic::new(
                     n,
-                    self.focal_length_mm.or(scene.map(|p| p.focal_length_mm)),
-                    self.sensor_width_mm.or(scene.map(|p| p.sensor_width_mm)),
+                    self.focal_length_mm
+                        .or(scene.map(|p| p.focal_length_mm))
+                        .or(kept),
+                    Some(sensor),
                 )
                 .spec();
             }
@@ -354,7 +368,14 @@ impl Overrides {
             }
             desc.ambient = Vec3::splat(v);
         }
-        self.apply_camera(&mut desc.camera)
+        self.apply_camera(&mut desc.camera)?;
+        // A lens given here replaces the one dofray guessed: its warning no longer applies.
+        if self.aperture_radius.is_some() || self.f_number.is_some() || self.sharp_range.is_some() {
+            if let Some(guess) = desc.lens_guessed.take() {
+                desc.warnings.retain(|w| *w != guess);
+            }
+        }
+        Ok(())
     }
 
     /// Whether the lens, focus or aperture shape is overridden (a camera that cannot be built

@@ -569,16 +569,24 @@ impl SettingsPatch {
             },
         };
         let d = PathLimits::default();
+        let integrator = self.integrator.unwrap_or_default();
+        let spp = self.spp.unwrap_or(Self::DEFAULT_SPP);
         let settings = RenderSettings {
             mode: self.mode.unwrap_or(Mode::Adaptive),
-            spp: self.spp.unwrap_or(Self::DEFAULT_SPP),
-            aa: self.aa.unwrap_or(Self::DEFAULT_AA),
+            spp,
+            // Paths are as noisy in focus as in the blur: in-focus sites take as many samples
+            // unless asked otherwise. The direct integrator's in-focus pixels only need
+            // anti-aliasing.
+            aa: self.aa.unwrap_or(match integrator {
+                Integrator::Path => spp,
+                Integrator::Direct => Self::DEFAULT_AA,
+            }),
             pixel_filter,
             rule,
             max_interval: 64,
             seed: self.seed.unwrap_or(0),
             filter: self.lens_filter.unwrap_or(LensFilter::Box),
-            integrator: self.integrator.unwrap_or_default(),
+            integrator,
             path: PathLimits {
                 total: self.max_bounces.unwrap_or(d.total),
                 diffuse: self.diffuse_bounces.unwrap_or(d.diffuse),
@@ -679,7 +687,19 @@ mod tests {
     #[test]
     fn the_default_settings_are_the_empty_patch_resolved() {
         let d = RenderSettings::default();
-        assert_eq!((d.mode, d.spp, d.aa), (Mode::Adaptive, 16, 4));
+        // The path tracer's in-focus sites take as many samples as blurred ones.
+        assert_eq!((d.mode, d.spp, d.aa), (Mode::Adaptive, 16, 16));
         assert_eq!(d.tolerance(), Some(1.0));
+        let direct = SettingsPatch {
+            integrator: Some(Integrator::Direct),
+            spp: Some(64),
+            ..Default::default()
+        };
+        assert_eq!(direct.resolve().unwrap().aa, 4);
+        let path = SettingsPatch {
+            spp: Some(64),
+            ..Default::default()
+        };
+        assert_eq!(path.resolve().unwrap().aa, 64);
     }
 }

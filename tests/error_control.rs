@@ -234,7 +234,13 @@ fn the_samples_map_records_what_was_traced() {
     desc.camera.width = 100;
     desc.camera.height = 75;
     let (world, camera) = setup(&desc);
-    let (film, stats) = draw(&world, &camera, RenderSettings::default());
+    // The direct integrator, whose in-focus sites take `aa` (4) and blurred ones up to 16.
+    let settings = RenderSettings {
+        integrator: dofray::render::Integrator::Direct,
+        aa: 4,
+        ..RenderSettings::default()
+    };
+    let (film, stats) = draw(&world, &camera, settings);
     let traced: u64 = film.samples.iter().map(|&n| u64::from(n)).sum();
     // Every sample is one primary ray (the depth pass adds one per pixel). Buckets refine
     // apart, so the sites on the column and row two buckets share may be traced by both: at
@@ -283,4 +289,33 @@ fn the_rule_decides_the_same_for_any_thread_count() {
     assert_eq!(bits(&one), bits(&two));
     assert_eq!((one.samples, one.interval), (two.samples, two.interval));
     assert_eq!((s1.rays, s1.rounds), (s2.rays, s2.rounds));
+}
+
+#[test]
+fn path_traced_in_focus_sites_grow_from_aa_while_noisy() {
+    // With the path tracer an in-focus site carries light noise: from `aa` it grows towards
+    // `spp` where its estimate is noisy (at least 16 before it is trusted), never beyond.
+    let mut desc = builtin::paper();
+    desc.camera.width = 100;
+    desc.camera.height = 75;
+    let (world, camera) = setup(&desc);
+    let settings = RenderSettings {
+        spp: 64,
+        aa: 4,
+        ..RenderSettings::default()
+    };
+    let (film, _) = draw(&world, &camera, settings);
+    let in_focus: Vec<u32> = film
+        .coc
+        .iter()
+        .zip(&film.samples)
+        .filter(|&(&c, &n)| c < 0.5 && n > 0)
+        .map(|(_, &n)| n)
+        .collect();
+    assert!(!in_focus.is_empty());
+    assert!(
+        in_focus.iter().all(|&n| (16..=64).contains(&n)),
+        "{in_focus:?}"
+    );
+    assert!(in_focus.iter().any(|&n| n > 16), "no in-focus site grew");
 }

@@ -180,7 +180,7 @@ fn region_tiles_carry_their_place_and_merge_checks_them() {
     // Refusals, each naming what is wrong, exit 3 (bad input) and write nothing.
     let bad_out = dir.join("bad.exr");
     let overlap = tile("overlap.exr", "90,0,160,120", &[]);
-    let other_spp = tile("spp.exr", "100,0,160,120", &["--spp", "32"]);
+    let other_spp = tile("spp.exr", "100,0,160,120", &["--spp", "32", "--aa", "16"]);
     let cases: Vec<(Vec<&Path>, &str)> = vec![
         (vec![&left, &overlap], "overlap"),
         (vec![&left], "uncovered, the first at (100, 0)"),

@@ -135,7 +135,10 @@ fn blender_glb_lights_camera_and_required_extension_load() {
     // Blender marks KHR_lights_punctual required; it loads.
     let desc = load(&asset("lights.glb")).unwrap();
     check_blender_lights(&desc);
-    assert!(desc.warnings.is_empty(), "{:?}", desc.warnings);
+    // Only the camera's missing depth of field is worth a warning: it renders sharp.
+    assert_eq!(desc.warnings.len(), 1, "{:?}", desc.warnings);
+    assert!(desc.warnings[0].contains("no depth of field"));
+    assert_eq!(desc.camera.lens, LensSpec::Pinhole);
     // Its camera, not a framing one: Blender (0, -8, 4) is glTF (0, 4, 8); aspect 4:3.
     assert!(near(desc.camera.eye, Vec3::new(0.0, 4.0, 8.0), 1e-5));
     assert!((desc.camera.vfov_deg - 0.5274237f32.to_degrees()).abs() < 1e-3);
@@ -241,7 +244,8 @@ fn ignored_features_are_named_in_one_warning_per_file() {
             .push(serde_json::json!(n - 1));
     });
     let desc = load(&path).unwrap();
-    assert_eq!(desc.warnings.len(), 1, "{:?}", desc.warnings);
+    // The ignored features' line, and the camera's missing depth of field.
+    assert_eq!(desc.warnings.len(), 2, "{:?}", desc.warnings);
     let w = &desc.warnings[0];
     for part in [
         "edited.gltf",
@@ -471,4 +475,153 @@ fn a_blender_scene_renders_lit_by_its_lights() {
         all > no_point * 1.02,
         "the point light lights something: {all} vs {no_point}"
     );
+}
+
+/// ortho.gltf with a perspective camera 5 units in front of the model (yfov 0.6 rad), whose
+/// camera and node get `camera_extras` and `node_extras` (null: none).
+fn perspective(
+    test: &str,
+    camera_extras: serde_json::Value,
+    node_extras: serde_json::Value,
+) -> PathBuf {
+    edited_ortho(test, |j| {
+        let mut camera = serde_json::json!({"type": "perspective",
+            "perspective": {"yfov": 0.6, "znear": 0.1}});
+        if !camera_extras.is_null() {
+            camera["extras"] = camera_extras;
+        }
+        j["cameras"] = serde_json::json!([camera]);
+        // The node of the orthographic camera, which it replaces.
+        let mut node = serde_json::json!({"camera": 0, "translation": [0.0, 0.0, 5.0]});
+        if !node_extras.is_null() {
+            node["extras"] = node_extras;
+        }
+        j["nodes"][2] = node;
+    })
+}
+
+#[test]
+fn a_gltf_camera_without_depth_of_field_renders_sharp_and_says_how_to_blur() {
+    use dofray::overrides::Overrides;
+    use dofray::renderer::Renderer;
+    let path = perspective("no-dof", serde_json::Value::Null, serde_json::Value::Null);
+    let desc = load(&path).unwrap();
+    // No invented lens: a pinhole, and one warning naming the file and the flags.
+    assert_eq!(desc.camera.lens, LensSpec::Pinhole);
+    let w = desc.lens_guessed.clone().expect("the lens warning");
+    assert!(desc.warnings.contains(&w), "{:?}", desc.warnings);
+    for part in [
+        "edited.gltf",
+        "no depth of field",
+        "--f-number",
+        "--focus-distance",
+        "add-on",
+    ] {
+        assert!(w.contains(part), "{part:?} not in {w}");
+    }
+    let vfov = desc.camera.effective_vfov_deg();
+    assert!((vfov - 0.6f32.to_degrees()).abs() < 1e-4, "{vfov}");
+    // --f-number gives the blur and keeps the camera's framing; the warning goes.
+    let device = Device::new().unwrap();
+    let overrides = Overrides {
+        f_number: Some(2.0),
+        focus_distance: Some(5.0),
+        ..Default::default()
+    };
+    let r = Renderer::with_overrides(desc, overrides, &device).unwrap();
+    assert!(r.desc().lens_guessed.is_none());
+    assert!(!r.desc().warnings.contains(&w), "{:?}", r.desc().warnings);
+    let kept = r.desc().camera.effective_vfov_deg();
+    assert!(
+        (kept - vfov).abs() < 1e-3,
+        "field of view {vfov} became {kept}"
+    );
+    let camera = r.camera(None).unwrap();
+    use dofray::camera::Lens;
+    // 36 mm sensor, the focal length of that field of view at 640 x 480, f/2.
+    let focal_mm = 18.0 * 480.0 / 640.0 / (0.3f32).tan();
+    let radius = focal_mm / 1000.0 / 4.0;
+    assert!(
+        (camera.lens.aperture_radius() - radius).abs() < 1e-3 * radius,
+        "{} against {radius}",
+        camera.lens.aperture_radius()
+    );
+}
+
+#[test]
+fn depth_of_field_from_a_gltf_cameras_custom_properties() {
+    // Camera data's properties, with the node's (Blender's object) over them.
+    let path = perspective(
+        "dof-extras",
+        serde_json::json!({"dofray_f_number": 2.8, "dofray_focus_distance": 4.0,
+            "dofray_blades": 6, "other": "ignored"}),
+        serde_json::json!({"dofray_f_number": 1.4, "dofray_anamorphic": 1.33}),
+    );
+    let desc = load(&path).unwrap();
+    assert!(desc.lens_guessed.is_none(), "{:?}", desc.warnings);
+    assert!(
+        desc.warnings.iter().all(|w| !w.contains("depth of field")),
+        "{:?}",
+        desc.warnings
+    );
+    match desc.camera.lens {
+        LensSpec::Photographic { f_number, .. } => assert_eq!(f_number, 1.4),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(desc.camera.focus, Focus::Distance(4.0));
+    assert_eq!(desc.camera.aperture.blades, 6);
+    assert_eq!(desc.camera.aperture.anamorphic, 1.33);
+    // The glTF field of view is kept.
+    let vfov = desc.camera.effective_vfov_deg();
+    assert!((vfov - 0.6f32.to_degrees()).abs() < 1e-3, "{vfov}");
+
+    // A property of the wrong type or range: an error naming the file and the property.
+    for (extras, key) in [
+        (
+            serde_json::json!({"dofray_f_number": "two"}),
+            "cameras[0].extras.dofray_f_number",
+        ),
+        (
+            serde_json::json!({"dofray_focus_distance": -1.0}),
+            "cameras[0].extras.dofray_focus_distance",
+        ),
+        (
+            serde_json::json!({"dofray_blades": 2}),
+            "cameras[0].extras.dofray_blades",
+        ),
+    ] {
+        let path = perspective("dof-bad", extras, serde_json::Value::Null);
+        let e = load(&path).unwrap_err().to_string();
+        for part in ["edited.gltf", key] {
+            assert!(e.contains(part), "{part:?} not in {e}");
+        }
+    }
+}
+
+#[test]
+fn a_model_without_a_camera_states_the_lens_it_was_given() {
+    use dofray::overrides::Overrides;
+    use dofray::renderer::Renderer;
+    let path = edited_ortho("no-camera", |j| {
+        j.as_object_mut().unwrap().remove("cameras");
+        for node in j["nodes"].as_array_mut().unwrap() {
+            node.as_object_mut().unwrap().remove("camera");
+        }
+    });
+    let desc = load(&path).unwrap();
+    let w = desc
+        .lens_guessed
+        .clone()
+        .expect("the guessed lens is stated");
+    for part in ["edited.gltf", "no camera", "aperture radius", "--f-number"] {
+        assert!(w.contains(part), "{part:?} not in {w}");
+    }
+    assert!(matches!(desc.camera.lens, LensSpec::Aperture { radius } if radius > 0.0));
+    let device = Device::new().unwrap();
+    let overrides = Overrides {
+        aperture_radius: Some(0.01),
+        ..Default::default()
+    };
+    let r = Renderer::with_overrides(desc, overrides, &device).unwrap();
+    assert!(!r.desc().warnings.contains(&w));
 }

@@ -363,16 +363,10 @@ pub fn run(
             top,
         });
     }
-    for spp in &ladder {
-        Method::Dense
-            .settings(
-                &config.measure.base,
-                *spp,
-                config.aa.at(*spp),
-                config.measure.seed,
-            )
-            .validate()
-            .map_err(render::RenderError::from)?;
+    for &spp in &ladder {
+        let m = &config.measure;
+        let dense = Method::Dense.settings(&m.base, spp, config.aa.at(spp), m.seed);
+        dense.validate().map_err(render::RenderError::from)?;
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
     let (reference, reference_cached, reference_seconds) =

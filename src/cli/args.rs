@@ -82,8 +82,8 @@ pub(crate) struct SceneArgs {
     pub(crate) aperture_radius: Option<f32>,
     /// Photographic lens: f-number (replaces the scene's lens). The focal length and sensor
     /// width come from --focal-length and --sensor-width, else from the scene's photographic
-    /// lens, else 50 mm and 36 mm; the field of view follows from them (replacing the scene's
-    /// vfov when its lens was not photographic).
+    /// lens; else the sensor is 36 mm and the focal length the one that keeps the scene's
+    /// field of view on it (a new aperture does not reframe the shot).
     #[arg(long)]
     pub(crate) f_number: Option<f32>,
     /// Photographic lens: focal length in mm (sets the field of view). Changes the scene's
@@ -164,7 +164,10 @@ pub(crate) struct RenderArgs {
     #[arg(long)]
     pub(crate) spp: Option<u32>,
     /// Anti-aliasing: samples per in-focus sample site, and per pixel in pinhole mode, each a
-    /// point in pixel x lens, 1 to 65536 [default: the scene's, else 4].
+    /// point in pixel x lens, 1 to 65536. With the path tracer, adaptive mode's in-focus sites
+    /// start there and grow to --spp while noisy [default: the scene's, else --spp with the
+    /// path tracer (its light is as noisy in focus as in the blur), 4 with --integrator
+    /// direct].
     #[arg(long)]
     pub(crate) aa: Option<u32>,
     /// The pixel filter that sample positions are drawn from: blackman-harris (smooth and
@@ -330,8 +333,9 @@ pub(crate) struct BenchArgs {
     #[arg(long, conflicts_with = "equal_error")]
     pub(crate) spp: Option<u32>,
     /// Samples per in-focus sample site (and per pixel in pinhole mode), in every mode
-    /// [default: the scene's, else 4]. With --equal-error: the same at every rung [default:
-    /// the rung's spp times the scene's aa / spp (4 / 16), rounded, at least 1].
+    /// [default: the scene's, else spp with the path tracer, 4 with the direct integrator].
+    /// With --equal-error: the same at every rung [default: the rung's spp times the scene's
+    /// aa / spp (1 with the path tracer, 4 / 16 with the direct one), rounded, at least 1].
     #[arg(long)]
     pub(crate) aa: Option<u32>,
     /// How light is carried in every render and the reference: `path` (the physically based

@@ -22,7 +22,9 @@
 //!    converged: a few samples that all land on one side of an edge look noise-free. Nor
 //!    are samples that agree while a much brighter sample was seen within the CoC's reach
 //!    (a small highlight behind the blur that this site's samples happened to miss): the
-//!    site keeps sampling while one such sample more would move it beyond the limit.
+//!    site keeps sampling while one such sample more would move it beyond the limit. With
+//!    the path tracer an in-focus site carries light noise too: it starts with `max(aa, 16)`
+//!    (at most `spp`) and grows the same way up to `spp` (the default `aa` there is `spp`).
 //!
 //! With [`super::RenderSettings::transparent`] the coverage (alpha) takes part in both
 //! checks like a colour channel, 255 code values from empty to opaque, its noise from the
@@ -547,14 +549,9 @@ fn refine_bucket(
     let (width, height) = (b.w, b.h);
     let tolerance = maps.tolerance;
     let blurred = b.slice(maps.blurred, full_width);
-    let target = |p: usize| if blurred[p] { s.spp } else { s.aa };
-    let first = |p: usize| {
-        if blurred[p] {
-            (s.spp / 4).max(s.aa).max(MIN_TRUSTED).min(s.spp)
-        } else {
-            s.aa
-        }
-    };
+    let budget = Budget::new(s);
+    let target = |p: usize| budget.target(blurred[p]);
+    let first = |p: usize| budget.first(blurred[p]);
     let mut interval = b.slice(&maps.start, full_width);
     let reach = b.slice(&maps.reach, full_width);
     let top_reach = reach.iter().copied().max().unwrap_or(1);
@@ -634,6 +631,44 @@ fn refine_bucket(
         samples: traced.est.iter().map(|e| e.n).collect(),
         rounds,
     })
+}
+
+/// How many samples a site starts with and may grow to, blurred or in focus.
+struct Budget {
+    spp: u32,
+    aa: u32,
+    /// The most an in-focus site takes. The direct integrator needs only anti-aliasing there;
+    /// paths carry light noise in focus too, so an in-focus site grows to `spp` while noisy.
+    in_focus: u32,
+}
+
+impl Budget {
+    fn new(s: &super::RenderSettings) -> Self {
+        let in_focus = match s.integrator {
+            super::Integrator::Path => s.spp.max(s.aa),
+            super::Integrator::Direct => s.aa,
+        };
+        Self {
+            spp: s.spp,
+            aa: s.aa,
+            in_focus,
+        }
+    }
+
+    fn target(&self, blurred: bool) -> u32 {
+        if blurred { self.spp } else { self.in_focus }
+    }
+
+    fn first(&self, blurred: bool) -> u32 {
+        if blurred {
+            (self.spp / 4).max(self.aa).max(MIN_TRUSTED).min(self.spp)
+        } else if self.in_focus > self.aa {
+            // Growing by noise: as for blurred sites, too few samples are never trusted.
+            self.aa.max(MIN_TRUSTED).min(self.in_focus)
+        } else {
+            self.aa
+        }
+    }
 }
 
 /// The sites the owned pixels' starting cells need: a mask over the bucket and their list.

@@ -22,7 +22,7 @@ use glam::{Affine3A, Mat4, Vec3};
 use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
 use super::mesh_input::{MeshBuffers, ModelFile, guarded, keep_winding};
-use super::model::{Model, ModelCamera, ModelMesh, Transform, short_number, short_vec};
+use super::model::{CameraDof, Model, ModelCamera, ModelMesh, Transform, short_number, short_vec};
 use super::texture::{TextureCache, decode};
 use super::{MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE};
 use crate::camera::check_vfov;
@@ -613,6 +613,68 @@ fn plural(n: usize, one: &str, many: &str) -> String {
 }
 
 /// A named glTF object for messages: `light 1 "Spot"`.
+/// Reads the `dofray_*` depth-of-field properties of one `extras` value (JSON text) into
+/// `dof`; other properties, and extras that are not an object, are left alone. `Err` names the
+/// property and what it must be.
+fn camera_dof(json: &str, dof: &mut CameraDof) -> Result<(), (&'static str, String)> {
+    let Ok(serde_json::Value::Object(map)) = serde_json::from_str::<serde_json::Value>(json) else {
+        return Ok(());
+    };
+    let number = |key: &'static str, positive: bool| -> Result<Option<f32>, _> {
+        let Some(v) = map.get(key) else {
+            return Ok(None);
+        };
+        let x = v.as_f64().map(|x| x as f32);
+        match x {
+            Some(x) if x.is_finite() && (!positive || x > 0.0) => Ok(Some(x)),
+            _ => Err((
+                key,
+                format!(
+                    "expected a finite number{}, got {v}",
+                    if positive { " > 0" } else { "" }
+                ),
+            )),
+        }
+    };
+    let set = |slot: &mut Option<f32>, v: Option<f32>| {
+        if v.is_some() {
+            *slot = v;
+        }
+    };
+    set(&mut dof.f_number, number("dofray_f_number", true)?);
+    set(
+        &mut dof.focus_distance,
+        number("dofray_focus_distance", true)?,
+    );
+    set(
+        &mut dof.focal_length_mm,
+        number("dofray_focal_length_mm", true)?,
+    );
+    set(
+        &mut dof.sensor_width_mm,
+        number("dofray_sensor_width_mm", true)?,
+    );
+    set(
+        &mut dof.blade_rotation_deg,
+        number("dofray_blade_rotation", false)?,
+    );
+    set(&mut dof.anamorphic, number("dofray_anamorphic", true)?);
+    if let Some(v) = map.get("dofray_blades") {
+        match v.as_u64() {
+            Some(b) if b == 0 || (3..=1024).contains(&b) => dof.blades = Some(b as u32),
+            _ => {
+                return Err((
+                    "dofray_blades",
+                    format!(
+                        "expected 0 (round) or a whole number of blades from 3 to 1024, got {v}"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 fn named(kind: &str, index: usize, name: Option<&str>) -> String {
     match name {
         Some(n) => format!("{kind} {index} {n:?}"),
@@ -795,7 +857,7 @@ impl Loader<'_> {
                 )
             })?;
         if let Some(camera) = node.camera() {
-            self.camera(node, &camera, &world);
+            self.camera(node, &camera, &world)?;
         }
         if let Some(light) = node.light() {
             self.light(node, &light, &world)?;
@@ -813,7 +875,12 @@ impl Loader<'_> {
 
     /// A camera at `node` (world transform `world`): the first usable perspective one is the
     /// model's; the others are counted, and orthographic ones named, for the warning.
-    fn camera(&mut self, node: &::gltf::Node, camera: &::gltf::Camera, world: &Transform) {
+    fn camera(
+        &mut self,
+        node: &::gltf::Node,
+        camera: &::gltf::Camera,
+        world: &Transform,
+    ) -> Result<(), LoadError> {
         match camera.projection() {
             ::gltf::camera::Projection::Perspective(_) if self.camera.is_some() => {
                 self.extra_cameras += 1;
@@ -827,12 +894,33 @@ impl Loader<'_> {
                 let up = world.affine.transform_vector3(Vec3::Y).normalize_or_zero();
                 let vfov_deg = p.yfov().to_degrees();
                 if eye.is_finite() && forward != Vec3::ZERO && check_vfov(vfov_deg).is_ok() {
+                    // The camera data's properties, then its node's (the object's) over them.
+                    let mut dof = CameraDof::default();
+                    let sources = [
+                        (
+                            camera.extras(),
+                            format!("cameras[{}].extras", camera.index()),
+                        ),
+                        (node.extras(), format!("nodes[{}].extras", node.index())),
+                    ];
+                    for (extras, key) in sources {
+                        if let Some(raw) = extras {
+                            camera_dof(raw.get(), &mut dof).map_err(|(k, message)| {
+                                LoadError::Gltf {
+                                    at: Location::file(self.file.path)
+                                        .with_key(format!("{key}.{k}")),
+                                    message,
+                                }
+                            })?;
+                        }
+                    }
                     self.camera = Some(ModelCamera {
                         eye,
                         forward,
                         up,
                         vfov_deg,
                         aspect: p.aspect_ratio(),
+                        dof,
                     });
                 } else {
                     self.extra_cameras += 1;
@@ -844,6 +932,7 @@ impl Loader<'_> {
                     .push(format!("{name} (node {})", node.index()));
             }
         }
+        Ok(())
     }
 
     /// A KHR_lights_punctual light at `node` (world transform `world`): glTF lights shine

@@ -153,6 +153,10 @@ pub struct SceneDesc {
     /// does not implement, light ranges, animations, ...): at most one line per file, naming
     /// the file. Empty for built-in scenes.
     pub warnings: Vec<String>,
+    /// When the input gave no lens and dofray chose one (a bare model's): the warning that
+    /// says so, also in `warnings`. Overrides that give a lens remove both
+    /// ([`crate::overrides::Overrides::apply_scene`]).
+    pub lens_guessed: Option<String>,
     /// The camera animation of a scene file's `[animation]` table (None for built-in scenes,
     /// bare models and files without one). `camera` is the `[camera]` table as written; apply
     /// the animation to a copy of it for each frame.
@@ -176,6 +180,7 @@ impl Default for SceneDesc {
             background: model::default_background(),
             settings: Default::default(),
             warnings: Vec::new(),
+            lens_guessed: None,
             animation: None,
         }
     }

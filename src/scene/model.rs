@@ -7,8 +7,10 @@ use glam::{Affine3A, Mat3, Vec3};
 
 use super::error::{LoadError, Location};
 use super::{Background, MeshMaterials, Object, SceneDesc};
+use crate::camera::lens::focal_length_of_vfov;
 use crate::camera::{
-    ApertureShape, CameraSpec, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, Focus, LensSpec,
+    ApertureShape, CameraSpec, DEFAULT_HEIGHT, DEFAULT_SENSOR_WIDTH_MM, DEFAULT_VFOV,
+    DEFAULT_WIDTH, Focus, LensSpec, Photographic,
 };
 use crate::embree::TriangleMesh;
 use crate::shade::{Light, Material};
@@ -102,6 +104,32 @@ pub struct ModelCamera {
     pub vfov_deg: f32,
     /// Width over height, if the file gives one.
     pub aspect: Option<f32>,
+    /// The depth of field the file's custom properties give the camera (glTF has none).
+    pub dof: CameraDof,
+}
+
+/// Depth of field given to a glTF camera as custom properties (glTF `extras` of the camera or
+/// its node; Blender exports a camera's custom properties there with "Include > Custom
+/// Properties"): glTF cameras have no aperture or focus of their own. Names and units are the
+/// scene file's `[camera]` keys with a `dofray_` prefix: `dofray_f_number`,
+/// `dofray_focus_distance` (scene units), `dofray_focal_length_mm`, `dofray_sensor_width_mm`,
+/// `dofray_blades`, `dofray_blade_rotation` (degrees), `dofray_anamorphic`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct CameraDof {
+    /// The f-number (Blender's F-Stop); without it the camera is a pinhole.
+    pub f_number: Option<f32>,
+    /// Distance in focus along the view axis.
+    pub focus_distance: Option<f32>,
+    /// Focal length, mm (default: the one that keeps the glTF field of view on the sensor).
+    pub focal_length_mm: Option<f32>,
+    /// Sensor width, mm (default 36, Blender's).
+    pub sensor_width_mm: Option<f32>,
+    /// Diaphragm blades (0: round).
+    pub blades: Option<u32>,
+    /// Rotation of the blades, degrees.
+    pub blade_rotation_deg: Option<f32>,
+    /// Anamorphic ratio, aperture height over width.
+    pub anamorphic: Option<f32>,
 }
 
 /// One mesh of a model with the model material it uses (`None`: the default material).
@@ -272,6 +300,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
     )?;
     let center = (lo + hi) * 0.5;
     let diagonal = (hi - lo).length().max(1e-3);
+    let dof = model.camera.map(|c| c.dof);
     let View {
         eye,
         look_at,
@@ -288,6 +317,28 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
     let name = path
         .file_stem()
         .map_or_else(|| "model".into(), |s| s.to_string_lossy().into_owned());
+    let (lens, focus, aperture, lens_guessed) = match dof {
+        Some(dof) => model_lens(path, &dof, vfov_deg, (width, height), focus),
+        None => {
+            let radius = MODEL_APERTURE_FRACTION * diagonal;
+            let warning = format!(
+                "{}: no camera; dofray frames the model and guesses a lens: aperture radius \
+                 {radius:.3} (2% of the model's size), focused on its centre {:.3} away. Give \
+                 --f-number (or --aperture-radius) and --focus-distance (or --autofocus) to \
+                 choose the depth of field",
+                path.display(),
+                (focus - eye).dot((look_at - eye).normalize_or_zero()),
+            );
+            (
+                LensSpec::Aperture { radius },
+                Focus::Point(focus),
+                ApertureShape::default(),
+                Some(warning),
+            )
+        }
+    };
+    let mut warnings = model.warnings;
+    warnings.extend(lens_guessed.clone());
     Ok(SceneDesc {
         name,
         camera: CameraSpec {
@@ -297,11 +348,9 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
             vfov_deg,
             width,
             height,
-            lens: LensSpec::Aperture {
-                radius: MODEL_APERTURE_FRACTION * diagonal,
-            },
-            focus: Focus::Point(focus),
-            aperture: ApertureShape::default(),
+            lens,
+            focus,
+            aperture,
         },
         materials,
         objects,
@@ -323,9 +372,46 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
         } else {
             model.lights
         },
-        warnings: model.warnings,
+        warnings,
+        lens_guessed,
         ..Default::default()
     })
+}
+
+/// The lens of a model's own camera: its `dof` properties, else a pinhole (glTF cameras carry
+/// no depth of field, and blur nobody asked for is worse than none), with the warning that
+/// says so. Focus: `dof`'s distance, else `focus` (the bounds' centre).
+fn model_lens(
+    path: &Path,
+    dof: &CameraDof,
+    vfov_deg: f32,
+    (width, height): (u32, u32),
+    focus: Vec3,
+) -> (LensSpec, Focus, ApertureShape, Option<String>) {
+    let focus = dof
+        .focus_distance
+        .map_or(Focus::Point(focus), Focus::Distance);
+    let aperture = ApertureShape {
+        blades: dof.blades.unwrap_or(0),
+        rotation_deg: dof.blade_rotation_deg.unwrap_or(0.0),
+        anamorphic: dof.anamorphic.unwrap_or(1.0),
+    };
+    let Some(n) = dof.f_number else {
+        let warning = format!(
+            "{}: its camera has no depth of field (glTF cameras carry none): rendering it \
+             sharp, as a pinhole. For blur give --f-number and --focus-distance (or \
+             --autofocus), set the camera's dofray_f_number and dofray_focus_distance custom \
+             properties, or export with dofray's Blender add-on",
+            path.display()
+        );
+        return (LensSpec::Pinhole, focus, aperture, Some(warning));
+    };
+    let sensor = dof.sensor_width_mm.unwrap_or(DEFAULT_SENSOR_WIDTH_MM);
+    let focal = dof
+        .focal_length_mm
+        .unwrap_or_else(|| focal_length_of_vfov(vfov_deg, sensor, width, height));
+    let lens = Photographic::new(n, Some(focal), Some(sensor)).spec();
+    (lens, focus, aperture, None)
 }
 
 /// The model's meshes as scene objects, and its materials with the default material last

@@ -196,6 +196,7 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         background,
         settings,
         warnings: objects.warnings,
+        lens_guessed: None,
         animation,
     })
 }
