@@ -48,9 +48,10 @@ def common_tables(side, dof):
     w, h = side["resolution"]
     lines = ["[image]", f"width = {w}", f"height = {h}", "",
              "[render]",
-             # Cycles' default pixel filter: Blackman-Harris, 1.5 pixels wide.
+             # Cycles' Blackman-Harris of filter_width w spans +-w (its filter_table doubles
+             # the width), so its default 1.5 is dofray's full width 3.
              f"pixel_filter = {fmt('blackman-harris')}",
-             f"pixel_filter_width = {fmt(side['cycles']['pixel_filter_width'])}", ""]
+             f"pixel_filter_width = {fmt(2.0 * side['cycles']['pixel_filter_width'])}", ""]
     if dof:
         d = side["camera"]["dof"]
         lines += ["[camera]", f"f_number = {fmt(d['f_number'])}",

@@ -128,6 +128,26 @@ def fmt_t(t, first):
     return ("<= " if first else "") + f"{t:.2f} s"
 
 
+def run_cycles(args, blend, work):
+    """Cycles' overhead, reference time and series (fixed, adaptive, OIDN)."""
+    print(f"[{args.scene}] Cycles", file=sys.stderr)
+    cy = Cycles(blend, work, args.threads)
+    _, overhead = cy.render("overhead", 1)
+    _, overhead = cy.render("overhead", 1)  # the second call: caches warm, as for every rung
+    reference, ref_seconds = cy.render("reference", args.cycles_reference_spp)
+    ints = lambda s: [int(v) for v in s.split(",")]  # noqa: E731
+    series = {
+        "cycles": cycles_series(cy, "fixed", ints(args.cycles_ladder), reference, overhead,
+                                args.repeat),
+        "cycles_adaptive": cycles_series(
+            cy, "adaptive", [float(v) for v in args.cycles_adaptive.split(",")], reference,
+            overhead, args.repeat, adaptive=True, max_spp=args.cycles_adaptive_max),
+        "cycles_oidn": cycles_series(cy, "oidn", ints(args.cycles_denoised), reference,
+                                     overhead, args.repeat, denoise=True),
+    }
+    return overhead, ref_seconds, series
+
+
 def main(argv):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="the folder scenes.py and compare.py wrote")
@@ -146,6 +166,9 @@ def main(argv):
     p.add_argument("--cycles-reference-spp", type=int, default=4096)
     p.add_argument("--repeat", type=int, default=1, help="timed repeats per rung (median)")
     p.add_argument("--threads", type=int, default=0, help="Cycles threads (0: all)")
+    p.add_argument("--reuse-cycles", action="store_true",
+                   help="take Cycles' series from the last run's equal-error.json (same scene, "
+                        "same machine) and run only dofray")
     args = p.parse_args(argv)
     levels = [float(v) for v in args.levels.split(",")]
     d = os.path.join(args.out, args.scene)
@@ -165,21 +188,14 @@ def main(argv):
     print(f"[{args.scene}] dofray", file=sys.stderr)
     dof = run_dofray(args, toml)
 
-    print(f"[{args.scene}] Cycles", file=sys.stderr)
-    cy = Cycles(blend, work, args.threads)
-    _, overhead = cy.render("overhead", 1)
-    _, overhead = cy.render("overhead", 1)  # the second call: caches warm, as for every rung
-    reference, ref_seconds = cy.render("reference", args.cycles_reference_spp)
-    ints = lambda s: [int(v) for v in s.split(",")]  # noqa: E731
-    series = {
-        "cycles": cycles_series(cy, "fixed", ints(args.cycles_ladder), reference, overhead,
-                                args.repeat),
-        "cycles_adaptive": cycles_series(
-            cy, "adaptive", [float(v) for v in args.cycles_adaptive.split(",")], reference,
-            overhead, args.repeat, adaptive=True, max_spp=args.cycles_adaptive_max),
-        "cycles_oidn": cycles_series(cy, "oidn", ints(args.cycles_denoised), reference,
-                                     overhead, args.repeat, denoise=True),
-    }
+    if args.reuse_cycles:
+        with open(os.path.join(d, "equal-error.json")) as f:
+            last = json.load(f)
+        overhead = last["cycles_overhead_seconds"]
+        ref_seconds = last["cycles_reference_seconds"]
+        series = {k: v for k, v in last["series"].items() if k.startswith("cycles")}
+    else:
+        overhead, ref_seconds, series = run_cycles(args, blend, work)
     for m in ("dense", "adaptive"):
         series["dofray_" + m] = [
             {"rung": r["spp"], "seconds": r["seconds"], "psnr": r["psnr_vs_reference"]
