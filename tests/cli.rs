@@ -1347,3 +1347,28 @@ fn exposure_is_a_flag_in_stops_and_checked() {
         assert!(stderr(&run).contains("--exposure"), "{}", stderr(&run));
     }
 }
+
+#[test]
+fn progress_is_plain_lines_when_stderr_is_not_a_terminal() {
+    let dir = scratch("progress");
+    let png = dir.join("p.png");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["render", "-o", png.to_str().unwrap(), "--width", "48"];
+        args.extend(["--spp", "4"]);
+        args.extend(extra);
+        let out = dofray(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        out
+    };
+    // Here stderr is a pipe, as in a farm's log: lines, not a bar's escape codes.
+    let auto = stderr(&run(&[]));
+    assert!(auto.contains("progress: "), "{auto}");
+    assert!(!auto.contains('\r') && !auto.contains('\u{1b}'), "{auto:?}");
+    assert!(!stderr(&run(&["--progress", "none"])).contains("progress: "));
+    // --json keeps stderr quiet unless progress is asked for; stdout stays one JSON object.
+    assert!(!stderr(&run(&["--json"])).contains("progress: "));
+    let asked = run(&["--json", "--progress", "plain"]);
+    assert!(stderr(&asked).contains("progress: "));
+    serde_json::from_slice::<serde_json::Value>(&asked.stdout).unwrap();
+    std::fs::remove_dir_all(dir).unwrap();
+}

@@ -306,6 +306,10 @@ pub(crate) struct RenderArgs {
     /// No progress bar and no summary line.
     #[arg(long, short)]
     pub(crate) quiet: bool,
+    /// Progress on stderr: auto (a bar on a terminal, else a line every 5 seconds and at each
+    /// phase, as farm logs need; nothing with --json or --quiet), bar, plain, or none.
+    #[arg(long, value_enum, default_value_t = super::ProgressMode::Auto)]
+    pub(crate) progress: super::ProgressMode,
 }
 
 #[derive(Args)]
@@ -388,6 +392,10 @@ pub(crate) struct BenchArgs {
     /// No progress bar.
     #[arg(long, short)]
     pub(crate) quiet: bool,
+    /// Progress on stderr: auto (a bar on a terminal, else a line every 5 seconds and at each
+    /// phase; nothing with --json or --quiet), bar, plain, or none.
+    #[arg(long, value_enum, default_value_t = super::ProgressMode::Auto)]
+    pub(crate) progress: super::ProgressMode,
 }
 
 pub(crate) fn parse_pixel(s: &str) -> Result<(u32, u32), String> {

@@ -54,7 +54,7 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
     if a.repeat == 0 {
         usage!("--repeat must be at least 1");
     }
-    let bar = Bar::new(a.quiet || a.json);
+    let bar = Bar::new(a.progress.resolve(a.quiet, a.json));
     let (report, images) = p.pool.install(|| {
         bench::run(
             p.renderer.desc(),
@@ -132,7 +132,7 @@ pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> R
         aa,
         measure: measure(a, scene),
     };
-    let bar = Bar::new(a.quiet || a.json);
+    let bar = Bar::new(a.progress.resolve(a.quiet, a.json));
     let mut report = p.pool.install(|| {
         equal_error::run(p.renderer.desc(), p.renderer.world(), camera, &config, &bar)
     })?;

@@ -4,11 +4,10 @@ use anyhow::{Context, Result};
 use dofray::embree::Device;
 use dofray::overrides::Overrides;
 use dofray::params::Param;
-use dofray::render::Progress;
 use dofray::renderer::{Renderer, RendererError};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use args::SceneArgs;
+pub(crate) use progress::{Bar, ProgressMode};
 
 /// Returns a usage error (exit status 2): a flag's value or a combination of flags is wrong.
 macro_rules! usage {
@@ -19,45 +18,10 @@ macro_rules! usage {
 
 pub(crate) mod args;
 pub(crate) mod bench;
+pub(crate) mod progress;
 pub(crate) mod render;
 pub(crate) mod report;
 pub(crate) mod signals;
-
-/// An indicatif bar on stderr; it draws nothing when stderr is not a terminal.
-pub(crate) struct Bar(ProgressBar);
-
-impl Bar {
-    pub(crate) fn new(quiet: bool) -> Self {
-        let target = if quiet {
-            ProgressDrawTarget::hidden()
-        } else {
-            ProgressDrawTarget::stderr()
-        };
-        let bar = ProgressBar::with_draw_target(None, target);
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{msg:>9} [{bar:40}] {percent:>3}% {elapsed_precise} eta {eta}",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        );
-        Bar(bar)
-    }
-}
-
-impl Progress for Bar {
-    fn start(&self, phase: &str, total: u64) {
-        self.0.reset();
-        self.0.set_length(total);
-        self.0.set_message(phase.to_string());
-    }
-    fn advance(&self, units: u64) {
-        self.0.inc(units);
-    }
-    fn finish(&self) {
-        self.0.finish_and_clear();
-    }
-}
 
 /// The scene overrides the flags ask for.
 pub(crate) fn overrides(a: &SceneArgs) -> Overrides {

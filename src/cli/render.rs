@@ -195,7 +195,11 @@ pub(crate) fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         let targets = batch.targets(job)?;
         dofray::batch::run::refuse_existing(job, a.no_overwrite).map_err(job_error)?;
         let summary = batch
-            .render_job_to(job, &targets, &Bar::new(a.quiet || a.json))
+            .render_job_to(
+                job,
+                &targets,
+                &Bar::new(a.progress.resolve(a.quiet, a.json)),
+            )
             .map_err(job_error)?;
         if !a.quiet && !a.json {
             print_rendered(job, &summary);
@@ -222,7 +226,8 @@ pub(crate) fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         merge_tiles: tiles.is_some() && shard.is_none(),
     };
     let quiet = a.quiet || a.json;
-    let report = batch.run(&mine, options, &CliProgress { quiet })?;
+    let progress = a.progress.resolve(a.quiet, a.json);
+    let report = batch.run(&mine, options, &CliProgress { quiet, progress })?;
     if a.json {
         let shard = shard.as_ref().map(|(s, source)| (s, source.as_str()));
         let summary = report.summary(&p.renderer, &a.output, shard, all.len());
@@ -262,6 +267,8 @@ fn print_rendered(job: &Job, s: &JobSummary) {
 /// always.
 struct CliProgress {
     quiet: bool,
+    /// How each job's progress is shown.
+    progress: super::ProgressMode,
 }
 
 impl RunProgress for CliProgress {
@@ -277,7 +284,7 @@ impl RunProgress for CliProgress {
         eprintln!("[{}/{count}] {}{left}", index + 1, job.label());
     }
     fn job_progress(&self, _job: &Job) -> Box<dyn Progress + '_> {
-        Box::new(Bar::new(self.quiet))
+        Box::new(Bar::new(self.progress))
     }
     fn rendered(&self, job: &Job, summary: &JobSummary) {
         if !self.quiet {
