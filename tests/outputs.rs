@@ -583,3 +583,41 @@ fn exr_half_round_trips_the_beauty_within_half_precision() {
     assert!(depth.iter().all(|d| d.is_finite() && *d > 0.0));
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// The EXR says which colour space its linear values are in (Rec.709 primaries, D65 white), as
+/// Blender, Nuke and OpenImageIO read it; merged tiles keep it.
+#[test]
+fn exr_carries_rec709_d65_chromaticities() {
+    let dir = scratch("chroma");
+    let (full, left, right, merged) = (
+        dir.join("full.exr"),
+        dir.join("left.exr"),
+        dir.join("right.exr"),
+        dir.join("merged.exr"),
+    );
+    for (out, region) in [
+        (&full, None),
+        (&left, Some("0,0,24,36")),
+        (&right, Some("24,0,48,36")),
+    ] {
+        let mut args = vec!["render", "-o", s(out), "--width", "48", "--spp", "1", "-q"];
+        args.extend(region.map(|r| ["--region", r]).into_iter().flatten());
+        let run = dofray(&args);
+        assert!(run.status.success(), "{}", stderr(&run));
+    }
+    let run = dofray(&["merge", s(&left), s(&right), "-o", s(&merged), "-q"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    for path in [&full, &left, &merged] {
+        let meta = exr::meta::MetaData::read_from_file(path, false).unwrap();
+        let c = meta.headers[0]
+            .shared_attributes
+            .chromaticities
+            .unwrap_or_else(|| panic!("{}: no chromaticities", path.display()));
+        let xy = |v: exr::math::Vec2<f32>| (v.0, v.1);
+        assert_eq!(xy(c.red), (0.64, 0.33));
+        assert_eq!(xy(c.green), (0.30, 0.60));
+        assert_eq!(xy(c.blue), (0.15, 0.06));
+        assert_eq!(xy(c.white), (0.3127, 0.3290));
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}

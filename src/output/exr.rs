@@ -330,16 +330,27 @@ pub(super) fn layer_image(
         // EXR requires channels sorted by name; `sort` does that (bytewise, see CHANNELS).
         AnyChannels::sort(channels),
     );
-    match region {
-        Some((_, (w, h))) => Image {
-            attributes: ImageAttributes::new(IntegerBounds::from_dimensions((
-                w as usize, h as usize,
-            ))),
-            layer_data: layer,
-        },
-        None => Image::from_layer(layer),
+    let (w, h) = match region {
+        Some((_, (w, h))) => (w as usize, h as usize),
+        None => size,
+    };
+    let mut attributes = ImageAttributes::new(IntegerBounds::from_dimensions((w, h)));
+    // The colour is linear Rec.709 / sRGB primaries with a D65 white: say so, as Blender and
+    // Nuke read it.
+    attributes.chromaticities = Some(REC709_D65);
+    Image {
+        attributes,
+        layer_data: layer,
     }
 }
+
+/// Rec.709 (sRGB) primaries and the D65 white point, CIE xy.
+const REC709_D65: exr::meta::attribute::Chromaticities = exr::meta::attribute::Chromaticities {
+    red: Vec2(0.64, 0.33),
+    green: Vec2(0.30, 0.60),
+    blue: Vec2(0.15, 0.06),
+    white: Vec2(0.3127, 0.3290),
+};
 
 /// Writes an EXR image to `target` atomically.
 pub(super) fn write_image(
