@@ -67,6 +67,7 @@ def render(
     transparent: bool = False,
     integrator: Optional[str] = None,
     frame: Optional[int] = None,
+    threads: Optional[int] = None,
     progress: Optional[ProgressCallback] = None,
 ) -> Render:
     """Render ``scene`` and return a :class:`Render` (``rgba``, ``depth``, ``coc``,
@@ -90,6 +91,8 @@ def render(
     - ``integrator``: ``"path"`` (default: physically based, as Cycles) or ``"direct"``
       (the seed's quick direct shading);
     - ``frame``: the frame of an animated scene (default: its first);
+    - ``threads``: worker threads, 1 to 1024 (default: all cores); the image is the same
+      for any number;
     - ``progress``: called on the calling thread as ``progress(phase, done, total)`` while
       the render runs (``done`` grows within a phase); if it raises, the render is
       cancelled and the exception propagates.
@@ -118,6 +121,7 @@ def render(
         transparent=transparent,
         integrator=integrator,
         frame=frame,
+        threads=threads,
         progress=progress,
     )
 

@@ -50,6 +50,7 @@ def render(
     transparent: bool = ...,
     integrator: Optional[str] = ...,
     frame: Optional[int] = ...,
+    threads: Optional[int] = ...,
     progress: Optional[Callable[[str, int, int], object]] = ...,
 ) -> Render: ...
 

@@ -92,6 +92,21 @@ struct Job {
     frame: Option<i64>,
     overrides: Overrides,
     settings: SettingsPatch,
+    /// Worker threads of the render (None: all cores).
+    threads: Option<usize>,
+}
+
+/// `threads` checked: 1 to [`dofray::limits::MAX_THREADS`], or None for all cores.
+fn checked_threads(threads: Option<i64>) -> Result<Option<usize>, Failure> {
+    let max = dofray::limits::MAX_THREADS;
+    match threads {
+        None => Ok(None),
+        Some(n) if n >= 1 && n as u64 <= max as u64 => Ok(Some(n as usize)),
+        Some(n) => Err(Failure {
+            kind: ErrorKind::Usage,
+            message: format!("threads must be 1 to {max} (or None: all cores), got {n}"),
+        }),
+    }
 }
 
 /// The Embree device, made once per process (making one starts Embree's thread pool).
@@ -132,9 +147,23 @@ impl Job {
     /// Loads, builds and renders (on the calling thread), reporting to `progress`.
     fn run(self, progress: &Shared) -> Result<(Film, RenderStats), Failure> {
         let (renderer, settings) = prepare(&self.scene, self.overrides, &self.settings)?;
-        renderer
-            .render_frame(self.frame, None, &settings, progress)
-            .map_err(|e| Failure::from_error(&e))
+        let render = || {
+            renderer
+                .render_frame(self.frame, None, &settings, progress)
+                .map_err(|e| Failure::from_error(&e))
+        };
+        match self.threads {
+            None => render(),
+            // A pool of the caller's size for this render; the image is the same for any.
+            Some(n) => rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .map_err(|e| Failure {
+                    kind: ErrorKind::ResourceLimit,
+                    message: format!("cannot start {n} worker threads: {e}"),
+                })?
+                .install(render),
+        }
     }
 }
 
@@ -412,7 +441,7 @@ impl Render {
     scene, *, width=None, height=None, f_number=None, focal_length=None, sensor_width=None,
     focus_distance=None, autofocus=None, aperture_radius=None, blades=None, spp=None, aa=None,
     mode=None, tolerance=None, seed=None, exposure=None, transparent=false, integrator=None,
-    frame=None, progress=None
+    frame=None, threads=None, progress=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn render(
@@ -436,6 +465,7 @@ fn render(
     transparent: bool,
     integrator: Option<&str>,
     frame: Option<i64>,
+    threads: Option<i64>,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Render> {
     if let Some(callback) = &progress
@@ -471,6 +501,7 @@ fn render(
             frame,
             overrides,
             settings,
+            threads: checked_threads(threads)?,
         })
     })()
     .map_err(|f| f.into_pyerr(py))?;

@@ -84,6 +84,15 @@ def test_same_seed_same_image():
     np.testing.assert_array_equal(a.rgba, b.rgba)
 
 
+def test_threads_do_not_change_the_image():
+    one = dofray.render("paper", width=32, height=24, spp=4, threads=1)
+    two = dofray.render("paper", width=32, height=24, spp=4, threads=2)
+    np.testing.assert_array_equal(one.rgba, two.rgba)
+    for bad in (0, -1, 5000):
+        with pytest.raises(dofray.UsageError, match="threads"):
+            dofray.render("paper", width=16, height=12, threads=bad)
+
+
 def test_modes_and_overrides():
     r = dofray.render(
         "paper",
