@@ -625,3 +625,40 @@ fn a_model_without_a_camera_states_the_lens_it_was_given() {
     let r = Renderer::with_overrides(desc, overrides, &device).unwrap();
     assert!(!r.desc().warnings.contains(&w));
 }
+
+#[test]
+fn the_command_line_warns_about_a_sharp_gltf_camera_until_a_lens_is_given() {
+    let dir = scratch("cli-warning");
+    let png = dir.join("x.png");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "render".to_owned(),
+            asset("lights.glb").to_str().unwrap().to_owned(),
+        ];
+        args.extend(
+            [
+                "-o",
+                png.to_str().unwrap(),
+                "--width",
+                "32",
+                "--spp",
+                "1",
+                "-q",
+            ]
+            .map(String::from),
+        );
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_dofray"))
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    assert!(run(&[]).contains("no depth of field"));
+    assert!(!run(&["--f-number", "2"]).contains("no depth of field"));
+}

@@ -73,9 +73,6 @@ pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
         ..defaults
     };
     let desc = dofray::scene::load_with(&a.scene, &options)?;
-    for warning in &desc.warnings {
-        eprintln!("warning: {warning}");
-    }
     let threads = a.threads.map(usize::from);
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.unwrap_or(0))
@@ -88,5 +85,9 @@ pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
     }
     .context("cannot create the Embree device")?;
     let renderer = Renderer::with_overrides(desc, overrides(a), &device).map_err(cli_error)?;
+    // After the overrides: a lens flag answers the warning about a guessed lens.
+    for warning in &renderer.desc().warnings {
+        eprintln!("warning: {warning}");
+    }
     Ok(Prepared { renderer, pool })
 }
