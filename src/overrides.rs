@@ -8,10 +8,7 @@
 
 use glam::Vec3;
 
-use crate::camera::lens::focal_length_of_vfov;
-use crate::camera::{
-    ApertureShape, CameraSpec, DEFAULT_SENSOR_WIDTH_MM, Focus, LensSpec, Photographic, check_vfov,
-};
+use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec, Photographic, check_vfov};
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::params::Param;
 use crate::scene::SceneDesc;
@@ -284,13 +281,7 @@ impl Overrides {
 
     /// The photographic lens's part of [`Overrides::apply_camera`].
     fn apply_photographic(&self, cam: &mut CameraSpec) -> Result<(), OverrideError> {
-        // A lens that is not photographic keeps its field of view under a new f-number: the
-        // focal length that gives it on the sensor (a new aperture must not reframe the shot).
-        let sensor = self
-            .sensor_width_mm
-            .or(cam.lens.photographic().map(|p| p.sensor_width_mm))
-            .unwrap_or(DEFAULT_SENSOR_WIDTH_MM);
-        let keep_fov = focal_length_of_vfov(cam.vfov_deg, sensor, cam.width, cam.height);
+        let (vfov_deg, size) = (cam.vfov_deg, (cam.width, cam.height));
         match (self.f_number, &mut cam.lens) {
             (
                 None,
@@ -322,13 +313,12 @@ impl Overrides {
                 // The scene's photographic lens, else one that keeps the scene's field of
                 // view, with what is given.
                 let scene = lens.photographic();
-                let kept = (keep_fov.is_finite() && keep_fov > 0.0).then_some(keep_fov);
-                *lens = Photographic::new(
+                *lens = Photographic::keeping_vfov(
                     n,
-                    self.focal_length_mm
-                        .or(scene.map(|p| p.focal_length_mm))
-                        .or(kept),
-                    Some(sensor),
+                    self.focal_length_mm.or(scene.map(|p| p.focal_length_mm)),
+                    self.sensor_width_mm.or(scene.map(|p| p.sensor_width_mm)),
+                    vfov_deg,
+                    size,
                 )
                 .spec();
             }

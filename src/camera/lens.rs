@@ -351,6 +351,23 @@ impl Photographic {
         }
     }
 
+    /// A lens of f-number `f_number` on a sensor `sensor_width_mm` wide (36 mm if not given)
+    /// whose focal length is `focal_length_mm`, else the one that keeps vertical field of view
+    /// `vfov_deg` on a `width` x `height` image (50 mm if that has none): a new aperture on a
+    /// view that was framed without one must not reframe it.
+    pub fn keeping_vfov(
+        f_number: f32,
+        focal_length_mm: Option<f32>,
+        sensor_width_mm: Option<f32>,
+        vfov_deg: f32,
+        (width, height): (u32, u32),
+    ) -> Self {
+        let sensor = sensor_width_mm.unwrap_or(DEFAULT_SENSOR_WIDTH_MM);
+        let kept = focal_length_of_vfov(vfov_deg, sensor, width, height);
+        let focal = focal_length_mm.or((kept.is_finite() && kept > 0.0).then_some(kept));
+        Self::new(f_number, focal, Some(sensor))
+    }
+
     /// Checks the f-number, focal length or sensor width `value` named `name`: each must be a
     /// finite number > 0.
     pub fn check_number(name: &'static str, value: f32) -> Result<(), CameraError> {

@@ -7,10 +7,9 @@ use glam::{Affine3A, Mat3, Vec3};
 
 use super::error::{LoadError, Location};
 use super::{Background, MeshMaterials, Object, SceneDesc};
-use crate::camera::lens::focal_length_of_vfov;
 use crate::camera::{
-    ApertureShape, CameraSpec, DEFAULT_HEIGHT, DEFAULT_SENSOR_WIDTH_MM, DEFAULT_VFOV,
-    DEFAULT_WIDTH, Focus, LensSpec, Photographic,
+    ApertureShape, CameraSpec, DEFAULT_HEIGHT, DEFAULT_VFOV, DEFAULT_WIDTH, Focus, LensSpec,
+    Photographic,
 };
 use crate::embree::TriangleMesh;
 use crate::shade::{Light, Material};
@@ -406,12 +405,14 @@ fn model_lens(
         );
         return (LensSpec::Pinhole, focus, aperture, Some(warning));
     };
-    let sensor = dof.sensor_width_mm.unwrap_or(DEFAULT_SENSOR_WIDTH_MM);
-    let focal = dof
-        .focal_length_mm
-        .unwrap_or_else(|| focal_length_of_vfov(vfov_deg, sensor, width, height));
-    let lens = Photographic::new(n, Some(focal), Some(sensor)).spec();
-    (lens, focus, aperture, None)
+    let lens = Photographic::keeping_vfov(
+        n,
+        dof.focal_length_mm,
+        dof.sensor_width_mm,
+        vfov_deg,
+        (width, height),
+    );
+    (lens.spec(), focus, aperture, None)
 }
 
 /// The model's meshes as scene objects, and its materials with the default material last

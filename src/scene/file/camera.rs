@@ -8,10 +8,7 @@ use toml::Spanned;
 use super::Ctx;
 use super::objects::{FromModel, Objects};
 use super::raw::{RawCamera, V3, v3};
-use crate::camera::lens::focal_length_of_vfov;
-use crate::camera::{
-    ApertureShape, CameraSpec, DEFAULT_SENSOR_WIDTH_MM, DEFAULT_VFOV, Focus, LensSpec, Photographic,
-};
+use crate::camera::{ApertureShape, CameraSpec, DEFAULT_VFOV, Focus, LensSpec, Photographic};
 use crate::scene::Object;
 use crate::scene::error::LoadError;
 use crate::scene::model;
@@ -288,19 +285,21 @@ fn lens(raw: &RawCamera, model_view: bool, vfov_deg: f32, width: u32, height: u3
             }
         }
     } else if let Some(n) = &raw.f_number {
-        let sensor_width_mm = raw
-            .sensor_width_mm
-            .as_ref()
-            .map_or(DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0);
-        // With a model's camera, the focal length that keeps its field of view on this sensor.
-        let keep_fov =
-            model_view.then(|| focal_length_of_vfov(vfov_deg, sensor_width_mm, width, height));
+        let n = n.get_ref().0;
+        let sensor_width_mm = raw.sensor_width_mm.as_ref().map(|s| s.get_ref().0);
         let focal_length_mm = raw.focal_length_mm.as_ref().map(|f| f.get_ref().0);
-        Photographic::new(
-            n.get_ref().0,
-            focal_length_mm.or(keep_fov),
-            Some(sensor_width_mm),
-        )
+        // With a model's camera, the focal length that keeps its field of view on this sensor.
+        if model_view {
+            Photographic::keeping_vfov(
+                n,
+                focal_length_mm,
+                sensor_width_mm,
+                vfov_deg,
+                (width, height),
+            )
+        } else {
+            Photographic::new(n, focal_length_mm, sensor_width_mm)
+        }
         .spec()
     } else if let (Some(r), Some(s)) = (&raw.sharp_range, &raw.spread) {
         LensSpec::Seed {
