@@ -6,6 +6,8 @@
 #[path = "../examples/make_hard_scene.rs"]
 mod make_hard_scene;
 
+mod scene_assets;
+
 use std::path::PathBuf;
 
 use dofray::camera::Camera;
@@ -28,23 +30,11 @@ fn camera(desc: &SceneDesc) -> Camera {
 
 #[test]
 fn the_committed_scene_is_what_the_generator_writes() {
-    let committed = std::fs::read_to_string(path()).unwrap();
-    let generated = make_hard_scene::generate();
-    if committed != generated {
-        let line = committed
-            .lines()
-            .zip(generated.lines())
-            .position(|(a, b)| a != b)
-            .unwrap_or_else(|| committed.lines().count().min(generated.lines().count()));
-        panic!(
-            "scenes/bokeh.toml differs from its generator from line {} on ({} vs {} bytes); \
-             regenerate it with `cargo run --release --example make_hard_scene -- \
-             scenes/bokeh.toml`",
-            line + 1,
-            committed.len(),
-            generated.len()
-        );
-    }
+    scene_assets::assert_generated(
+        "bokeh.toml",
+        "make_hard_scene",
+        &make_hard_scene::generate(),
+    );
 }
 
 /// The lamps (emissive spheres) in view: (pinhole diameter, CoC diameter, depth), in pixels

@@ -6,6 +6,8 @@
 #[path = "../examples/make_interior.rs"]
 mod make_interior;
 
+mod scene_assets;
+
 use std::path::PathBuf;
 
 use dofray::camera::Camera;
@@ -29,23 +31,7 @@ fn camera(desc: &SceneDesc) -> Camera {
 
 #[test]
 fn the_committed_scene_is_what_the_generator_writes() {
-    let committed = std::fs::read_to_string(path()).unwrap();
-    let generated = make_interior::generate();
-    if committed != generated {
-        let line = committed
-            .lines()
-            .zip(generated.lines())
-            .position(|(a, b)| a != b)
-            .unwrap_or_else(|| committed.lines().count().min(generated.lines().count()));
-        panic!(
-            "scenes/interior.toml differs from its generator from line {} on ({} vs {} bytes); \
-             regenerate it with `cargo run --release --example make_interior -- \
-             scenes/interior.toml`",
-            line + 1,
-            committed.len(),
-            generated.len()
-        );
-    }
+    scene_assets::assert_generated("interior.toml", "make_interior", &make_interior::generate());
 }
 
 /// The emissive spheres: (centre, radius).

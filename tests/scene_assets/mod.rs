@@ -388,3 +388,27 @@ pub fn vase_glb() -> Vec<u8> {
     let (doc, buf) = vase_document(true);
     glb(&doc, &buf)
 }
+
+/// Panics unless `scenes/{scene}` (relative to the repository) is `generated` byte for byte,
+/// naming the first line that differs and the command that rewrites it (the generator
+/// `examples/{example}.rs`).
+pub fn assert_generated(scene: &str, example: &str, generated: &str) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(scene);
+    let committed = std::fs::read_to_string(&path).unwrap();
+    if committed != generated {
+        let line = committed
+            .lines()
+            .zip(generated.lines())
+            .position(|(a, b)| a != b)
+            .unwrap_or_else(|| committed.lines().count().min(generated.lines().count()));
+        panic!(
+            "scenes/{scene} differs from its generator from line {} on ({} vs {} bytes); \
+             regenerate it with `cargo run --release --example {example} -- scenes/{scene}`",
+            line + 1,
+            committed.len(),
+            generated.len()
+        );
+    }
+}
