@@ -130,6 +130,7 @@ classified! {
     crate::settings::SettingError,
     crate::output::OutputError,
     crate::output::CompressionError,
+    crate::view::ViewError,
     crate::output::merge::MergeError,
     crate::batch::FrameSpecError,
     crate::batch::FrameSelectError,
@@ -162,6 +163,7 @@ mod tests {
     use crate::renderer::RendererError;
     use crate::scene::{LoadError, Location, SceneError};
     use crate::settings::{SettingError, UnknownMode};
+    use crate::view::ViewError;
     use std::any::TypeId;
     use std::path::PathBuf;
 
@@ -184,6 +186,7 @@ mod tests {
         has_kind::<SettingError>();
         has_kind::<OutputError>();
         has_kind::<CompressionError>();
+        has_kind::<ViewError>();
         has_kind::<MergeError>();
         has_kind::<FrameSpecError>();
         has_kind::<FrameSelectError>();
@@ -372,6 +375,7 @@ mod tests {
                 },
                 Usage,
             ),
+            case(ViewError::Filmic, Usage),
             case(MergeError::NoTiles, Usage),
             case(
                 MergeError::Read {

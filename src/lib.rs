@@ -43,7 +43,7 @@
 //! | layer | modules | what they hold |
 //! |---|---|---|
 //! | 0 | [`error_kind`], [`params`] | the kinds of failure (exit codes, JSON kinds); the parameter table (flag, scene key, Python keyword, C setter) |
-//! | 1 | [`embree`], [`limits`], [`filter`], [`sampler`], [`metrics`] | Embree (the only `unsafe`), resource limits, the pixel filter, sample numbers, image metrics |
+//! | 1 | [`embree`], [`limits`], [`filter`], [`sampler`], [`metrics`], [`view`] | Embree (the only `unsafe`), resource limits, the pixel filter, sample numbers, image metrics, display views (AgX, ...) |
 //! | 2 | [`camera`] | the camera makes rays: spec, focus, the lens seam ([`camera::lens`]), apertures |
 //! | 3 | [`shade`], [`settings`] | materials, textures, lights; render settings resolved once from patches |
 //! | 4 | [`scene`] | descriptions and loaders (TOML by concept, OBJ, glTF) and the Embree world |
@@ -115,6 +115,7 @@ pub mod sampler;
 pub mod scene;
 pub mod settings;
 pub mod shade;
+pub mod view;
 
 /// The vector maths crate of dofray's public types (`Vec3` in scenes, cameras and lights),
 /// re-exported so callers use the same version.

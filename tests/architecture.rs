@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 /// classifies any error chain by trying every error type, is at the top.
 const LAYERS: &[&[&str]] = &[
     &["error_kind", "params"],
-    &["embree", "limits", "filter", "sampler", "metrics"],
+    &["embree", "limits", "filter", "sampler", "metrics", "view"],
     &["camera"],
     &["shade", "settings"],
     &["scene"],

@@ -1372,3 +1372,121 @@ fn progress_is_plain_lines_when_stderr_is_not_a_terminal() {
     serde_json::from_slice::<serde_json::Value>(&asked.stdout).unwrap();
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn png_views_apply_record_and_reject_what_they_cannot_do() {
+    let dir = scratch("views");
+    let scene = repo("scenes/interior.toml");
+    let render = |name: &str, extra: &[&str]| {
+        let out = dir.join(name);
+        let mut args = vec!["render", &scene, "-o", out.to_str().unwrap()];
+        args.extend_from_slice(&["--width", "40", "--spp", "2", "--seed", "3", "-q"]);
+        args.extend_from_slice(extra);
+        (dofray(&args), out)
+    };
+    let (run, standard) = render("standard.png", &[]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let (run, agx) = render(
+        "agx.png",
+        &["--view", "agx", "--look", "AgX - High Contrast"],
+    );
+    assert!(run.status.success(), "{}", stderr(&run));
+    let get = |path: &std::path::Path, key: &str| {
+        png_info(path)
+            .0
+            .into_iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v)
+            .unwrap_or_else(|| panic!("{key} missing"))
+    };
+    assert_eq!(get(&standard, "dofray:view"), "Standard");
+    assert_eq!(get(&agx, "dofray:view"), "AgX");
+    assert_eq!(get(&agx, "dofray:look"), "AgX - High Contrast");
+    // The interior's window and lamps are far above 1: Standard clips them to white, AgX
+    // rolls them off below it.
+    let (s, a) = (
+        image::open(&standard).unwrap().to_rgb8(),
+        image::open(&agx).unwrap().to_rgb8(),
+    );
+    let white = |img: &image::RgbImage| img.pixels().filter(|p| p.0 == [255; 3]).count();
+    assert!(white(&s) > 0, "standard has clipped highlights");
+    assert!(
+        white(&a) < white(&s),
+        "AgX keeps fewer pixels at pure white"
+    );
+
+    for (flags, expect) in [
+        (
+            &["--look", "high-contrast"][..],
+            "--look: the look \"AgX - High Contrast\" needs the AgX view",
+        ),
+        (&["--view", "filmic"][..], "Filmic view is not available"),
+        (&["--view", "agx", "--look", "punchy"][..], "Punchy"),
+        (&["--view-gamma", "0"][..], "--view-gamma"),
+        (&["--view-exposure", "99"][..], "--view-exposure"),
+    ] {
+        let (run, out) = render("bad.png", flags);
+        assert_eq!(run.status.code(), Some(2), "{flags:?}: {}", stderr(&run));
+        assert!(stderr(&run).contains(expect), "{flags:?}: {}", stderr(&run));
+        assert!(!out.exists());
+    }
+    let (run, _) = render("x.exr", &["--view", "agx"]);
+    assert_eq!(run.status.code(), Some(2));
+    assert!(
+        stderr(&run).contains("apply to .png output only"),
+        "{}",
+        stderr(&run)
+    );
+
+    // A scene file's [view] is the default, checked where it is written.
+    let file = dir.join("viewed.toml");
+    let text = std::fs::read_to_string(&scene).unwrap();
+    std::fs::write(
+        &file,
+        format!("{text}\n[view]\ntransform = \"AgX\"\nlook = \"AgX - High Contrast\"\n"),
+    )
+    .unwrap();
+    let out = dir.join("from-scene.png");
+    let run = dofray(&[
+        "render",
+        file.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--width",
+        "40",
+        "--spp",
+        "2",
+        "--seed",
+        "3",
+        "-q",
+    ]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    assert_eq!(
+        image::open(&out).unwrap().to_rgb8(),
+        a,
+        "the scene's [view] = the flags"
+    );
+    std::fs::write(
+        &file,
+        format!("{text}\n[view]\ntransform = \"Standard\"\nlook = \"AgX - Greyscale\"\n"),
+    )
+    .unwrap();
+    let run = dofray(&[
+        "render",
+        file.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--width",
+        "40",
+        "-q",
+    ]);
+    assert_eq!(run.status.code(), Some(3), "{}", stderr(&run));
+    let err = stderr(&run);
+    assert!(
+        err.contains("viewed.toml")
+            && err.contains("view.look")
+            && err.contains("needs the AgX view"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}

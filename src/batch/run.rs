@@ -64,6 +64,8 @@ impl JobError {
 pub struct ImageOptions {
     /// PNG: 16 bits per channel.
     pub png_16bit: bool,
+    /// PNG: the display view (view transform, look, exposure, gamma).
+    pub view: crate::view::DisplayView,
     /// EXR: the beauty as half floats.
     pub exr_half: bool,
     /// EXR: the compression.
@@ -345,6 +347,7 @@ impl Batch<'_> {
             metadata,
             png_16bit: self.image.png_16bit,
             png_alpha: self.settings.transparent,
+            view: self.image.view,
             exr_half: self.image.exr_half,
             exr_compression: self.image.exr_compression,
             region: (region != full).then_some((region, (camera.width, camera.height))),

@@ -9,6 +9,7 @@ use dofray::filter::PixelFilterKind;
 use dofray::output;
 use dofray::render::{Mode, Region};
 use dofray::shade::Light;
+use dofray::view::{Look, View, ViewError};
 use glam::Vec3;
 
 /// Depth-of-field ray tracer on Intel Embree.
@@ -239,9 +240,29 @@ pub(crate) struct RenderArgs {
     /// black = interpolated) as PNG pictures into this directory (created if missing).
     #[arg(long)]
     pub(crate) aov_dir: Option<PathBuf>,
-    /// PNG output: 16 bits per channel instead of 8 (still sRGB; EXR is always float).
+    /// PNG output: 16 bits per channel instead of 8 (EXR is always float).
     #[arg(long)]
     pub(crate) png_16: bool,
+    /// PNG output: the view transform, as Blender's colour management names it: standard
+    /// (the sRGB curve, clipped), agx (Blender 4's default: highlights roll off instead of
+    /// clipping), khronos-pbr-neutral, or raw (linear, for data). Matches a Blender PNG of
+    /// the same image to the code value. EXR stays scene-linear. [default: the scene's
+    /// [view], else standard]
+    #[arg(long, value_name = "NAME", value_parser = parse_view)]
+    pub(crate) view: Option<View>,
+    /// PNG output: an AgX look (needs --view agx): very-high-contrast, high-contrast,
+    /// medium-high-contrast, base-contrast, medium-low-contrast, low-contrast,
+    /// very-low-contrast, greyscale, or none; Blender's names ("AgX - High Contrast") work too.
+    #[arg(long, value_name = "NAME", value_parser = parse_look)]
+    pub(crate) look: Option<Look>,
+    /// PNG output: stops applied before the view, as Blender's view exposure (unlike
+    /// --exposure, the EXR is not changed) [default: the scene's [view], else 0].
+    #[arg(long, value_name = "STOPS", allow_negative_numbers = true)]
+    pub(crate) view_exposure: Option<f32>,
+    /// PNG output: display gamma applied after the view, as Blender's view gamma, in (0, 5]
+    /// [default: the scene's [view], else 1].
+    #[arg(long, value_name = "GAMMA")]
+    pub(crate) view_gamma: Option<f32>,
     /// EXR output: the beauty (ViewLayer.Combined.R/G/B/A) as 16-bit half float, clamped to
     /// +-65504; depth (ViewLayer.Depth.Z) and dofray's passes (ViewLayer.CoC.X,
     /// ViewLayer.Interval.X, ViewLayer.Samples.X) stay 32-bit float. See docs/outputs.md.
@@ -420,6 +441,14 @@ pub(crate) fn parse_shard(s: &str) -> Result<Shard, String> {
 pub(crate) fn parse_exr_compression(s: &str) -> Result<output::ExrCompression, String> {
     s.parse()
         .map_err(|e: output::CompressionError| e.to_string())
+}
+
+pub(crate) fn parse_view(s: &str) -> Result<View, String> {
+    s.parse().map_err(|e: ViewError| e.to_string())
+}
+
+pub(crate) fn parse_look(s: &str) -> Result<Look, String> {
+    s.parse().map_err(|e: ViewError| e.to_string())
 }
 
 /// `spot:X,Y,Z:DX,DY,DZ[:INTENSITY[:OUTER[:INNER]]]`.

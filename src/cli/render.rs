@@ -14,6 +14,7 @@ use dofray::params::Param;
 use dofray::render::{Progress, Region, RenderSettings};
 use dofray::render::{RulePatch, SettingsPatch};
 use dofray::scene::SceneDesc;
+use dofray::view::{DisplayView, ViewError};
 
 use super::args::{MergeArgs, RenderArgs};
 use super::{Bar, cli_error, prepare};
@@ -118,6 +119,15 @@ fn check_format_flags(a: &RenderArgs) -> Result<()> {
             a.output.display()
         );
     }
+    let view_flags =
+        a.view.is_some() || a.look.is_some() || a.view_exposure.is_some() || a.view_gamma.is_some();
+    if view_flags && format == Some(output::ImageFormat::Exr) {
+        usage!(
+            "--view, --look, --view-exposure and --view-gamma apply to .png output only, and \
+             -o {} is an EXR (scene-linear; Blender applies its view when it shows it)",
+            a.output.display()
+        );
+    }
     if a.png_16 && format == Some(output::ImageFormat::Exr) {
         usage!(
             "--png-16 applies to .png output only, and -o {} is an EXR (always float; \
@@ -126,6 +136,27 @@ fn check_format_flags(a: &RenderArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The scene's `[view]` with the view flags over it.
+fn display_view(a: &RenderArgs, scene: DisplayView) -> Result<DisplayView> {
+    let view = DisplayView {
+        view: a.view.unwrap_or(scene.view),
+        look: a.look.unwrap_or(scene.look),
+        exposure: a.view_exposure.unwrap_or(scene.exposure),
+        gamma: a.view_gamma.unwrap_or(scene.gamma),
+    };
+    // The scene's own [view] was checked when it loaded: what fails here is a flag's.
+    view.validate().map_err(|e| {
+        let flag = match e {
+            ViewError::Exposure(_) => "--view-exposure",
+            ViewError::Gamma(_) => "--view-gamma",
+            _ if a.look.is_some() => "--look",
+            _ => "--view",
+        };
+        dofray::exit::UsageError(format!("{flag}: {e}"))
+    })?;
+    Ok(view)
 }
 
 /// The tiles of `--tiles` (checking `--region` instead when it is given).
@@ -180,6 +211,7 @@ pub(crate) fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         pool: Some(&p.pool),
         image: ImageOptions {
             png_16bit: a.png_16,
+            view: display_view(a, p.renderer.desc().view)?,
             exr_half: a.exr_half,
             exr_compression: a.exr_compression.unwrap_or_default(),
             scene_file: Some(a.scene.scene.clone().into()),

@@ -2,8 +2,9 @@
 //!
 //! Two formats, chosen by the file extension (case-insensitive):
 //!
-//! - `.png` ([`png`]): 8-bit (or, with [`WriteOptions::png_16bit`], 16-bit) sRGB of the linear
-//!   colour, clamped to `[0, 1]`, with an `sRGB` chunk and the [`Metadata`] as text chunks;
+//! - `.png` ([`png`]): 8-bit (or, with [`WriteOptions::png_16bit`], 16-bit) code values of the
+//!   linear colour through a display view ([`view`]: sRGB by default, or AgX, Khronos PBR
+//!   Neutral, with Blender's looks, exposure and gamma; [`WriteOptions::view`]), with an `sRGB` chunk and the [`Metadata`] as text chunks;
 //!   with [`WriteOptions::png_alpha`], RGBA with straight (unassociated) alpha.
 //! - `.exr` ([`exr`]): Blender-style multilayer channels in one part: the beauty
 //!   `ViewLayer.Combined.R/G/B/A` (linear, premultiplied by the coverage alpha; 32-bit float,
@@ -50,6 +51,7 @@ use glam::Vec3;
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::render::Region;
 use crate::render::film::Film;
+pub use crate::view::DisplayView;
 pub use atomic::{TempFile, remove_all_for_exit};
 pub use exr::{CompressionError, ExrCompression};
 pub use metadata::Metadata;
@@ -142,6 +144,9 @@ pub struct WriteOptions {
     /// linear. Meant for renders whose background is transparent (the film's colour then is
     /// premultiplied by its coverage); otherwise alpha is 1 everywhere. EXR always has alpha.
     pub png_alpha: bool,
+    /// PNG: the display view (view transform, look, exposure, gamma) the colour is shown
+    /// through, recorded in the PNG's text chunks; plain sRGB by default. EXR stays linear.
+    pub view: DisplayView,
     /// EXR: the beauty (`ViewLayer.Combined.R/G/B/A`) as 16-bit half floats, clamped to
     /// +-65504; depth and dofray's passes stay 32-bit.
     pub exr_half: bool,
@@ -208,7 +213,11 @@ pub fn write_film_to(
     match target.format() {
         ImageFormat::Png => {
             let (sixteen, alpha) = (options.png_16bit, options.png_alpha);
-            let data = png::film_samples(film, sixteen, alpha);
+            let data = png::film_samples(film, sixteen, alpha, &options.view);
+            let mut metadata = options.metadata.clone();
+            for (key, value) in options.view.metadata() {
+                metadata.push(key, value);
+            }
             let png = png::Png {
                 width: film.width,
                 height: film.height,
@@ -216,7 +225,7 @@ pub fn write_film_to(
                 sixteen,
                 alpha,
             };
-            png.write(target, &options.metadata)
+            png.write(target, &metadata)
         }
         ImageFormat::Exr => {
             let exr_options = exr::ExrOptions {

@@ -1,5 +1,5 @@
-//! The PNG writer: sRGB-encoded RGB or RGBA, 8 or 16 bits per channel, with an `sRGB` chunk
-//! and the metadata as text chunks.
+//! The PNG writer: RGB or RGBA through a display view (sRGB-encoded; plain sRGB by default),
+//! 8 or 16 bits per channel, with an `sRGB` chunk and the metadata as text chunks.
 //!
 //! PNG alpha is straight (unassociated) and linear, while the film's colour is premultiplied
 //! by its alpha: an RGBA PNG stores `colour / alpha` (where alpha > 0) sRGB-encoded, and alpha
@@ -7,45 +7,40 @@
 
 use std::io::{BufWriter, Write};
 
-use super::pictures::{srgb8, srgb16};
-use super::{Metadata, OutputError, Target, check_len};
+use super::{DisplayView, Metadata, OutputError, Target, check_len};
 use crate::render::film::Film;
 
-/// The film as PNG samples: sRGB colour (straight, when `alpha`) and, when `alpha`, the
-/// linear alpha; 8-bit bytes or 16-bit big-endian pairs.
-pub(super) fn film_samples(film: &Film, sixteen: bool, alpha: bool) -> Vec<u8> {
+/// The film as PNG samples: colour through `view` (straight, when `alpha`: divided by alpha
+/// first, as the view applies to the colour a surface has, not to its coverage) and, when
+/// `alpha`, the linear alpha; 8-bit bytes or 16-bit big-endian pairs.
+pub(super) fn film_samples(film: &Film, sixteen: bool, alpha: bool, view: &DisplayView) -> Vec<u8> {
     let channels = if alpha { 4 } else { 3 };
     let mut out = Vec::with_capacity(film.color.len() * channels * if sixteen { 2 } else { 1 });
-    let mut push = |v: f32, srgb: bool| {
+    let mut push = |v: f32| {
         if sixteen {
-            let code = if srgb { srgb16(v) } else { linear16(v) };
-            out.extend_from_slice(&code.to_be_bytes());
+            out.extend_from_slice(&linear16(v).to_be_bytes());
         } else {
-            out.push(if srgb { srgb8(v) } else { linear8(v) });
+            out.push(linear8(v));
         }
     };
     for (c, &a) in film.color.iter().zip(&film.alpha) {
+        let straight = if alpha && a > 0.0 { *c / a } else { *c };
+        for v in view.encode(straight.to_array()) {
+            push(v);
+        }
         if alpha {
-            let straight = if a > 0.0 { *c / a } else { *c };
-            push(straight.x, true);
-            push(straight.y, true);
-            push(straight.z, true);
-            push(a, false);
-        } else {
-            push(c.x, true);
-            push(c.y, true);
-            push(c.z, true);
+            push(a);
         }
     }
     out
 }
 
-/// A linear value in `[0, 1]` (clamped; NaN counts as 0) to 8 bits.
+/// A value in `[0, 1]` (clamped; NaN counts as 0) to 8 bits.
 fn linear8(v: f32) -> u8 {
     (unit(v) * 255.0).round() as u8
 }
 
-/// A linear value in `[0, 1]` (clamped; NaN counts as 0) to 16 bits.
+/// A value in `[0, 1]` (clamped; NaN counts as 0) to 16 bits.
 fn linear16(v: f32) -> u16 {
     (unit(v) * 65535.0).round() as u16
 }
@@ -138,6 +133,7 @@ impl Png<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::output::{srgb8, srgb16};
     use glam::Vec3;
 
     #[test]
@@ -146,7 +142,7 @@ mod tests {
         // Premultiplied: half-covered mid grey, fully covered white, empty.
         film.color = vec![Vec3::splat(0.25), Vec3::ONE, Vec3::ZERO];
         film.alpha = vec![0.5, 1.0, 0.0];
-        let rgba = film_samples(&film, false, true);
+        let rgba = film_samples(&film, false, true, &DisplayView::default());
         assert_eq!(
             rgba,
             [
@@ -165,10 +161,10 @@ mod tests {
             ]
         );
         // Without alpha the premultiplied colour is written as it is.
-        let rgb = film_samples(&film, false, false);
+        let rgb = film_samples(&film, false, false, &DisplayView::default());
         assert_eq!(&rgb[..3], &[srgb8(0.25); 3]);
         assert_eq!(rgb.len(), 9);
-        let rgba16 = film_samples(&film, true, true);
+        let rgba16 = film_samples(&film, true, true, &DisplayView::default());
         assert_eq!(rgba16.len(), 24);
         assert_eq!(&rgba16[0..2], &srgb16(0.5).to_be_bytes());
         assert_eq!(&rgba16[6..8], &32768u16.to_be_bytes());

@@ -161,6 +161,9 @@ pub struct SceneDesc {
     /// bare models and files without one). `camera` is the `[camera]` table as written; apply
     /// the animation to a copy of it for each frame.
     pub animation: Option<Animation>,
+    /// How PNG outputs show the colour (a scene file's `[view]`; plain sRGB by default): the
+    /// view transform, look, exposure and gamma of Blender's colour management.
+    pub view: crate::view::DisplayView,
 }
 
 /// An empty scene named "scene": the default [`CameraSpec`] (a pinhole at (0, 0, 5) looking
@@ -182,6 +185,7 @@ impl Default for SceneDesc {
             warnings: Vec::new(),
             lens_guessed: None,
             animation: None,
+            view: Default::default(),
         }
     }
 }

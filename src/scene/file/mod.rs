@@ -18,7 +18,7 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use self::objects::FromModel;
-use self::raw::{RawImage, RawRender, RawScene};
+use self::raw::{RawImage, RawRender, RawScene, RawView};
 use super::SceneDesc;
 use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
@@ -27,6 +27,7 @@ use super::texture::TextureCache;
 use crate::camera::{DEFAULT_HEIGHT, DEFAULT_WIDTH};
 use crate::params::Param;
 use crate::settings::{RulePatch, SettingsPatch};
+use crate::view::{DisplayView, ViewError};
 
 /// The scene file being built: its path and text, for error locations and relative paths.
 struct Ctx<'a> {
@@ -181,6 +182,11 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         (None, b) => lights::background(ctx, b)?,
     };
     let settings = render_settings(ctx, raw.render.unwrap_or_default())?;
+    let view = raw
+        .view
+        .map(|v| display_view(ctx, v))
+        .transpose()?
+        .unwrap_or_default();
     let name = raw.name.unwrap_or_else(|| {
         ctx.path
             .file_stem()
@@ -198,7 +204,41 @@ fn build(ctx: &Ctx, raw: RawScene, options: &LoadOptions) -> Result<SceneDesc, L
         warnings: objects.warnings,
         lens_guessed: None,
         animation,
+        view,
     })
+}
+
+/// `[view]`: the view transform and look by Blender's names, exposure and gamma, each
+/// checked where it is written.
+fn display_view(ctx: &Ctx, raw: RawView) -> Result<DisplayView, LoadError> {
+    let mut view = DisplayView::default();
+    if let Some(t) = &raw.transform {
+        view.view = t
+            .get_ref()
+            .parse()
+            .map_err(|e: ViewError| ctx.invalid(t.span(), "view.transform", e.to_string()))?;
+    }
+    if let Some(l) = &raw.look {
+        view.look = l
+            .get_ref()
+            .parse()
+            .map_err(|e: ViewError| ctx.invalid(l.span(), "view.look", e.to_string()))?;
+    }
+    if let Some(e) = &raw.exposure {
+        view.exposure = *e.get_ref();
+    }
+    if let Some(g) = &raw.gamma {
+        view.gamma = *g.get_ref();
+    }
+    view.validate().map_err(|e| {
+        let (span, key) = match e {
+            ViewError::Exposure(_) => (raw.exposure.as_ref().map(|s| s.span()), "view.exposure"),
+            ViewError::Gamma(_) => (raw.gamma.as_ref().map(|s| s.span()), "view.gamma"),
+            _ => (raw.look.as_ref().map(|s| s.span()), "view.look"),
+        };
+        ctx.invalid(span.unwrap_or(0..0), key, e.to_string())
+    })?;
+    Ok(view)
 }
 
 /// The image size: `[image]`'s, the height else from a model camera's aspect ratio, else the

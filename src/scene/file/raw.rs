@@ -325,6 +325,17 @@ pub(super) struct RawScene {
     #[serde(default)]
     pub(super) objects: Vec<Spanned<RawObject>>,
     pub(super) animation: Option<Spanned<RawAnimation>>,
+    pub(super) view: Option<RawView>,
+}
+
+/// `[view]`: Blender's colour management for PNG outputs.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawView {
+    pub(super) transform: Option<Spanned<String>>,
+    pub(super) look: Option<Spanned<String>>,
+    pub(super) exposure: Option<Spanned<f32>>,
+    pub(super) gamma: Option<Spanned<f32>>,
 }
 
 #[derive(Deserialize)]
