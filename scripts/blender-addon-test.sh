@@ -2,7 +2,8 @@
 # Headless test of the dofray Blender add-on (blender/dofray_blender) under Blender 4.2 as a
 # Python module: builds the extension zip, then runs blender/tests/test_addon.py, which exports
 # a scene built in code, checks the scene file against Blender's values, renders it with dofray,
-# renders through the DOFRAY render engine, and installs the zip as an extension.
+# renders through the DOFRAY render engine, and installs the zip as an extension; then
+# scripts/view-transform-check.py compares dofray's PNG views with Blender's.
 #
 #   scripts/blender-addon-test.sh [DOFRAY_BIN]     # default: target/release/dofray
 #
@@ -48,5 +49,14 @@ start=$(date +%s)
 status=0
 PYTHONDONTWRITEBYTECODE=1 DOFRAY_ADDON_ZIP="$zip" "$py" "$repo/blender/tests/test_addon.py" "$dofray" \
     || status=$?
+# dofray's PNG views (AgX, looks, PBR Neutral, exposure, gamma) against Blender's own PNGs of
+# the same linear image: at most 1 code value apart on average (a few seconds).
+view_out=$(mktemp -d /tmp/dofray-view-check.XXXXXX)
+if PYTHONDONTWRITEBYTECODE=1 "$py" "$repo/scripts/view-transform-check.py" "$dofray" --out "$view_out"; then
+    rm -rf "$view_out"
+else
+    echo "blender-addon-test: view transforms differ from Blender's; images in $view_out"
+    status=1
+fi
 echo "blender-addon-test: exit $status in $(( $(date +%s) - start )) s"
 exit $status
