@@ -594,3 +594,23 @@ fn focus_pull_renders_the_near_ball_sharp_first_and_the_far_ball_last() {
     assert!(near_first > 2.0 * near_last, "{near_first} {near_last}");
     assert!(far_last > 2.0 * far_first, "{far_first} {far_last}");
 }
+
+#[test]
+fn frame_numbers_beyond_the_range_are_refused_even_at_the_integer_limits() {
+    for frame in [
+        i64::MIN,
+        i64::MIN + 1,
+        -1_000_000_001,
+        1_000_000_001,
+        i64::MAX,
+    ] {
+        let text = format!(
+            "[animation]\n[[animation.key]]\nframe = 1\nvfov = 30\n[[animation.key]]\nframe = {frame}\nvfov = 50\n"
+        );
+        let err = parse(&scene(CAMERA, &text)).unwrap_err().to_string();
+        assert!(
+            err.contains("anim.toml") && err.contains("frame number from -1000000000"),
+            "{frame}: {err}"
+        );
+    }
+}

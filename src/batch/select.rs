@@ -5,7 +5,7 @@ use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 
 use super::frames::{FrameSpecError, frame_range, parse_frames};
-use super::pattern::has_frame_pattern;
+use super::pattern::{PatternError, check_frame_pattern, has_frame_pattern};
 use crate::error_kind::{ErrorKind, HasKind};
 
 /// The frames asked for. `list` and the range fields exclude each other.
@@ -47,6 +47,9 @@ pub enum FrameSelectError {
         /// The output path.
         output: PathBuf,
     },
+    /// The output's name mixes `#` runs with printf conversions (`shot_%04d_##.exr`).
+    #[error(transparent)]
+    Pattern(#[from] PatternError),
 }
 
 /// The frames `request` asks for (`None`: one image, not a frame of several), given the
@@ -56,6 +59,8 @@ pub fn select_frames(
     output: &Path,
     animation: Option<RangeInclusive<i64>>,
 ) -> Result<Option<Vec<i64>>, FrameSelectError> {
+    // Whatever the frames: a name that mixes the two pattern styles is ambiguous.
+    check_frame_pattern(output, 1)?;
     let frames = if let Some(spec) = &request.list {
         Some(parse_frames(spec).map_err(FrameSelectError::List)?)
     } else if request.start.is_some() || request.end.is_some() || request.step.is_some() {
@@ -101,6 +106,23 @@ impl HasKind for FrameSelectError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_name_mixing_pattern_styles_is_refused_for_any_frames() {
+        let mixed = Path::new("shot_%04d_##.exr");
+        for request in [
+            FrameRequest::default(),
+            FrameRequest {
+                list: Some("1-2".into()),
+                ..Default::default()
+            },
+        ] {
+            assert!(matches!(
+                select_frames(&request, mixed, Some(1..=2)),
+                Err(FrameSelectError::Pattern(PatternError::Mixed { .. }))
+            ));
+        }
+    }
 
     #[test]
     fn frames_come_from_the_request_else_the_animation_for_a_pattern() {

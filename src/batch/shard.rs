@@ -96,6 +96,18 @@ pub enum ShardError {
         /// The missing variable.
         variable: &'static str,
     },
+    /// A Slurm job array's variables without the task's own index (unset or empty): every
+    /// task would render everything.
+    #[error(
+        "{variable} is set (a Slurm job array) but {SLURM_ARRAY_TASK_ID} is {state}, so this \
+         task's share of the work is unknown; pass --shard I/N"
+    )]
+    SlurmIdMissing {
+        /// The array variable that was seen.
+        variable: &'static str,
+        /// `"empty"` or `"not set"`.
+        state: &'static str,
+    },
     /// A Slurm array that is not one evenly stepped range.
     #[error(
         "this Slurm job array is not one contiguous range ({SLURM_ARRAY_TASK_MIN}={min}, \
@@ -270,9 +282,24 @@ impl Shard {
     pub fn from_env(
         get: impl Fn(&str) -> Option<String>,
     ) -> Result<Option<(Shard, ShardSource)>, ShardError> {
+        let raw_id = get(SLURM_ARRAY_TASK_ID);
         let get = |name: &str| get(name).filter(|v| !v.trim().is_empty());
         if let Some(id) = get(SLURM_ARRAY_TASK_ID) {
             return slurm(&get, &id).map(Some);
+        }
+        // The array's other variables without the task's index: refused, not read as "no
+        // array" (every task would then render every frame).
+        let array_variable = [
+            SLURM_ARRAY_TASK_MIN,
+            SLURM_ARRAY_TASK_MAX,
+            SLURM_ARRAY_TASK_COUNT,
+            SLURM_ARRAY_TASK_STEP,
+        ]
+        .into_iter()
+        .find(|v| get(v).is_some());
+        if let Some(variable) = array_variable {
+            let state = if raw_id.is_some() { "empty" } else { "not set" };
+            return Err(ShardError::SlurmIdMissing { variable, state });
         }
         match (get(JOB_COMPLETION_INDEX), get(DOFRAY_SHARD_COUNT)) {
             (None, None) => Ok(None),
@@ -424,6 +451,34 @@ mod tests {
 
     fn shard(index: u32, count: u32) -> Shard {
         Shard { index, count }
+    }
+
+    #[test]
+    fn an_array_without_its_task_id_is_refused() {
+        // Empty, blank or missing SLURM_ARRAY_TASK_ID while the array's other variables are
+        // set: every task would otherwise render every frame.
+        for id in ["", "  "] {
+            assert_eq!(
+                slurm_env(id, "0", "9", "1", "10"),
+                Err(ShardError::SlurmIdMissing {
+                    variable: SLURM_ARRAY_TASK_MIN,
+                    state: "empty"
+                })
+            );
+        }
+        assert_eq!(
+            env(&[(SLURM_ARRAY_TASK_COUNT, "4")]),
+            Err(ShardError::SlurmIdMissing {
+                variable: SLURM_ARRAY_TASK_COUNT,
+                state: "not set"
+            })
+        );
+        // No Slurm array variables at all (or only empty ones): no shard.
+        assert_eq!(env(&[]), Ok(None));
+        assert_eq!(
+            env(&[(SLURM_ARRAY_TASK_ID, ""), (SLURM_ARRAY_TASK_MIN, "")]),
+            Ok(None)
+        );
     }
 
     #[test]

@@ -97,6 +97,7 @@ fn frames_message(e: &FrameSelectError) -> String {
              with #### (e.g. -o out/shot_####.exr)",
             output.display()
         ),
+        FrameSelectError::Pattern(e) => format!("-o: {e}"),
     }
 }
 

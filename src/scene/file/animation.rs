@@ -199,7 +199,8 @@ pub(super) fn animation(
 
 /// A key's frame number (`v`, at `key`), if in range.
 fn frame(ctx: &Ctx, v: &Spanned<i64>, key: String) -> Result<i64, LoadError> {
-    if v.get_ref().abs() <= MAX_FRAME {
+    // A range test, not abs(): abs(i64::MIN) overflows.
+    if (-MAX_FRAME..=MAX_FRAME).contains(v.get_ref()) {
         Ok(*v.get_ref())
     } else {
         Err(ctx.invalid(
