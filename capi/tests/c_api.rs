@@ -1,7 +1,8 @@
 //! Compiles the C programs (`capi/tests/c/smoke.c` and `jobs.c`, the README's
 //! `capi/examples/render.c`)
 //! with the system's C compiler against `include/dofray.h`, links them with `libdofray.so`
-//! and with `libdofray.a`, and runs them.
+//! and with `libdofray.a`, and runs them; installs the library with
+//! `scripts/install-capi.sh` and links the example through the installed `dofray.pc`.
 //!
 //! `cargo test` does not build the cdylib and staticlib for integration tests: the test
 //! runs `cargo build -p dofray-capi --lib` first (see [`lib_dir`]).
@@ -33,15 +34,16 @@ fn build_lib() -> PathBuf {
         .expect("target/<profile>")
         .to_path_buf();
     let target_dir = dir.parent().expect("the target directory");
-    // `cargo test` builds with the test profile into target/debug, `cargo test --release`
-    // with the bench profile into target/release.
-    let profile = match dir.file_name().and_then(|n| n.to_str()) {
-        Some("release") => "bench",
-        _ => "test",
-    };
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
-        .args(["build", "-p", "dofray-capi", "--lib", "--profile", profile])
+        .args([
+            "build",
+            "-p",
+            "dofray-capi",
+            "--lib",
+            "--profile",
+            profile(&dir),
+        ])
         .arg("--target-dir")
         .arg(target_dir)
         .current_dir(root())
@@ -51,8 +53,28 @@ fn build_lib() -> PathBuf {
     for lib in ["libdofray.so", "libdofray.a"] {
         assert!(dir.join(lib).is_file(), "no {lib} in {}", dir.display());
     }
+    // Programs linked with -ldofray ask for the SONAME (libdofray.so.0) at run time, which
+    // cargo does not create: link it beside libdofray.so (replaced atomically, as another
+    // test process may be using it).
+    let temporary = dir.join(format!("{SONAME}.{}.tmp", std::process::id()));
+    let _ = std::fs::remove_file(&temporary);
+    std::os::unix::fs::symlink("libdofray.so", &temporary).expect("a symlink in target/<profile>");
+    std::fs::rename(&temporary, dir.join(SONAME)).expect("the libdofray.so.0 symlink");
     dir
 }
+
+/// The cargo profile of this test's build directory: `cargo test` builds with the test
+/// profile into target/debug, `cargo test --release` with the bench profile into
+/// target/release.
+fn profile(dir: &Path) -> &'static str {
+    match dir.file_name().and_then(|n| n.to_str()) {
+        Some("release") => "bench",
+        _ => "test",
+    }
+}
+
+/// libdofray.so's SONAME (capi/build.rs).
+const SONAME: &str = env!("DOFRAY_CAPI_SONAME");
 
 /// The Embree library dofray links (`embree3` or `embree4`), from the build script of the
 /// `dofray` crate (through capi/build.rs).
@@ -232,4 +254,176 @@ fn readme_example() {
     let text = run(&exe, &[], &dir);
     assert!(text.contains("64x48"), "{text}");
     assert!(dir.join("paper.png").is_file());
+}
+
+/// scripts/install-capi.sh into a staging directory (DESTDIR, so no ldconfig): the library
+/// as libdofray.so.<version> with its SONAME and the libdofray.so.0 and libdofray.so links,
+/// libdofray.a, dofray.h and dofray.pc (with the prefix given); then capi/examples/render.c
+/// compiled with `pkg-config --cflags --libs dofray` against the installed copy and run from
+/// it (LD_LIBRARY_PATH), and linked with libdofray.a and `pkg-config --static`'s
+/// Libs.private. The script installs this test's own build (DOFRAY_PROFILE=test), not a
+/// release build, so it only copies files.
+#[test]
+fn install_script_and_pkg_config() {
+    if under_foreign_loader() {
+        return;
+    }
+    if Command::new("pkg-config")
+        .arg("--version")
+        .output()
+        .is_err()
+    {
+        println!("SKIPPED: pkg-config is not installed (Debian: apt-get install pkgconf)");
+        return;
+    }
+    let lib_dir = lib_dir();
+    let dir = out_dir("install");
+    let destdir = dir.join("stage");
+    let prefix = "/opt/dofray-install-test";
+    let installed = destdir.join(prefix.trim_start_matches('/'));
+    let lib = installed.join("lib");
+
+    // A fake ldconfig first on PATH tells whether the script ran it: not with DESTDIR.
+    let bin = dir.join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let ldconfig = bin.join("ldconfig");
+    std::fs::write(&ldconfig, "#!/bin/sh\ntouch \"$0-ran\"\n").unwrap();
+    let executable = std::os::unix::fs::PermissionsExt::from_mode(0o755);
+    std::fs::set_permissions(&ldconfig, executable).unwrap();
+    let path = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let started = std::time::Instant::now();
+    let mut script = Command::new("bash");
+    script
+        .arg(root().join("scripts/install-capi.sh"))
+        .arg(prefix)
+        .arg("--target-dir")
+        .arg(lib_dir.parent().expect("the target directory"))
+        .env("DESTDIR", &destdir)
+        .env("DOFRAY_PROFILE", profile(&lib_dir))
+        .env("PATH", &path)
+        .current_dir(&dir);
+    let text = output_of(&mut script);
+    println!(
+        "install-capi.sh: {:.1} s\n{text}",
+        started.elapsed().as_secs_f64()
+    );
+    assert!(
+        !bin.join("ldconfig-ran").exists(),
+        "install-capi.sh ran ldconfig with DESTDIR set"
+    );
+
+    let version = env!("CARGO_PKG_VERSION");
+    let real = format!("libdofray.so.{version}");
+    let link = |name: &str| std::fs::read_link(lib.join(name)).unwrap_or_default();
+    assert!(lib.join(&real).symlink_metadata().unwrap().is_file());
+    assert_eq!(link(SONAME), Path::new(&real), "{SONAME}");
+    assert_eq!(link("libdofray.so"), Path::new(SONAME), "libdofray.so");
+    assert!(lib.join("libdofray.a").is_file());
+    assert_eq!(
+        std::fs::read(installed.join("include/dofray.h")).unwrap(),
+        std::fs::read(root().join("include/dofray.h")).unwrap()
+    );
+    let pc = std::fs::read_to_string(lib.join("pkgconfig/dofray.pc")).unwrap();
+    assert!(pc.contains(&format!("\nprefix={prefix}\n")), "{pc}");
+    let dynamic = output_of(Command::new("readelf").arg("-d").arg(lib.join(&real)));
+    assert!(
+        dynamic.contains(&format!("Library soname: [{SONAME}]")),
+        "{dynamic}"
+    );
+
+    // pkg-config finds the staged dofray.pc; PKG_CONFIG_SYSROOT_DIR puts DESTDIR before the
+    // paths it gives, as for any staged installation.
+    let pkg_config = |args: &[&str]| -> Vec<String> {
+        let mut cmd = Command::new("pkg-config");
+        cmd.args(args)
+            .arg("dofray")
+            .env("PKG_CONFIG_PATH", lib.join("pkgconfig"))
+            .env("PKG_CONFIG_SYSROOT_DIR", &destdir);
+        output_of(&mut cmd)
+            .split_whitespace()
+            .map(String::from)
+            .collect()
+    };
+    assert_eq!(pkg_config(&["--modversion"]), [version]);
+    let shared_flags = pkg_config(&["--cflags", "--libs"]);
+    for flag in [
+        format!("-I{}", installed.join("include").display()),
+        format!("-L{}", lib.display()),
+        "-ldofray".into(),
+    ] {
+        assert!(
+            shared_flags.contains(&flag),
+            "{flag} not in {shared_flags:?}"
+        );
+    }
+    // Static: the archive itself (-ldofray would pick the shared library), and what it needs.
+    let mut static_flags = pkg_config(&["--cflags", "--static", "--libs"]);
+    static_flags.retain(|f| f != "-ldofray");
+    static_flags.insert(0, lib.join("libdofray.a").display().to_string());
+    assert!(
+        static_flags.contains(&format!("-l{EMBREE_LIB}")),
+        "{static_flags:?}"
+    );
+
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    for (name, flags) in [("shared", shared_flags), ("static", static_flags)] {
+        let work = dir.join(name);
+        std::fs::create_dir_all(&work).unwrap();
+        let exe = work.join("render");
+        output_of(
+            Command::new(&cc)
+                .args([
+                    "-std=c99",
+                    "-Wall",
+                    "-Wextra",
+                    "-Werror",
+                    "-pedantic",
+                    "-O1",
+                ])
+                .arg(root().join("capi/examples/render.c"))
+                .args(&flags)
+                .arg("-o")
+                .arg(&exe),
+        );
+        let libraries = output_of(Command::new("ldd").arg(&exe).env("LD_LIBRARY_PATH", &lib));
+        let from_installed = format!("{SONAME} => {}", lib.join(SONAME).display());
+        if name == "shared" {
+            assert!(libraries.contains(&from_installed), "{libraries}");
+        } else {
+            assert!(!libraries.contains("libdofray"), "{libraries}");
+        }
+        let text = output_of(
+            Command::new(&exe)
+                .current_dir(&work)
+                .env("LD_LIBRARY_PATH", &lib),
+        );
+        assert!(text.contains("64x48"), "{name}: {text}");
+        assert!(work.join("paper.png").is_file(), "{name}: no paper.png");
+    }
+    println!(
+        "install, two compiles and two renders: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+}
+
+/// Runs `cmd`, which must succeed; its stdout and stderr.
+fn output_of(cmd: &mut Command) -> String {
+    let output = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("{cmd:?} cannot run: {e}"));
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        output.status.success(),
+        "{cmd:?} failed ({}):\n{text}",
+        output.status
+    );
+    text
 }
