@@ -495,3 +495,38 @@ fn frames_of_an_unanimated_scene_warn_that_they_are_identical() {
     );
     assert!(dir.join("still_01.png").exists() && dir.join("still_02.png").exists());
 }
+
+#[test]
+fn a_whole_image_tile_merges_and_merge_refuses_what_is_not_a_file() {
+    let dir = scratch("one-tile");
+    let full = dir.join("full.exr");
+    let tiled = dir.join("tiled.exr");
+    let o = dofray(&[&["render", "-o", s(&full), "-q"][..], &SIZE].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    // --tiles 1x1: one tile covering the image still records its place and merges.
+    let o = dofray(
+        &[
+            &["render", "-o", s(&tiled), "--tiles", "1x1", "--json"][..],
+            &SIZE,
+        ]
+        .concat(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(json(&o)["merged"][0], s(&tiled));
+    assert!(
+        exr_pixels(&full) == exr_pixels(&tiled),
+        "the one-tile merge differs"
+    );
+    // A FIFO (or a directory) given as a tile is refused at once instead of blocking.
+    let fifo = dir.join("t.tile-000.exr");
+    let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
+    assert!(made.success());
+    for tile in [fifo.clone(), dir.clone()] {
+        let start = std::time::Instant::now();
+        let o = dofray(&["merge", s(&tile), "-o", s(&dir.join("m.exr"))]);
+        assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+        assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+        assert!(start.elapsed().as_secs() < 30);
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}

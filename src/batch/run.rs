@@ -325,6 +325,9 @@ impl Batch<'_> {
         let camera = renderer.camera(job.frame)?;
         let full = Region::full(camera.width, camera.height);
         let region = job.tile.map(|t| t.region).or(self.region).unwrap_or(full);
+        // A tile (or a --region) records its place even when it covers the whole image
+        // (--tiles 1x1), so the merge can take it like any other tile.
+        let placed = (job.tile.is_some() || self.region.is_some()).then_some(region);
         let render =
             || render::render_region(renderer.world(), &camera, self.settings, &region, progress);
         let (film, stats) = match self.pool {
@@ -350,7 +353,7 @@ impl Batch<'_> {
             view: self.image.view,
             exr_half: self.image.exr_half,
             exr_compression: self.image.exr_compression,
-            region: (region != full).then_some((region, (camera.width, camera.height))),
+            region: placed.map(|r| (r, (camera.width, camera.height))),
         };
         output::write_film_to(&targets.image, &film, &options)?;
         if let Some(aovs) = &targets.aovs {
@@ -360,7 +363,7 @@ impl Batch<'_> {
             scene: renderer.desc().name.clone(),
             output: job.output.clone(),
             frame: job.frame,
-            region: (region != full).then(|| region.to_string()),
+            region: placed.map(|r| r.to_string()),
             size: (film.width, film.height),
             threads: self
                 .pool

@@ -489,6 +489,18 @@ fn bad_size() -> (String, String) {
 }
 
 fn read_tile(path: &Path) -> Result<Tile, MergeError> {
+    // Opening a FIFO blocks until a writer comes, and a device may never end: only regular
+    // files (symbolic links followed) are read, as for every other input.
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => {}
+        Ok(_) => {
+            return Err(read_error(
+                path,
+                "not a regular file (a directory, FIFO or device); a tile is an image file".into(),
+            ));
+        }
+        Err(e) => return Err(read_error(path, e.to_string())),
+    }
     let (metadata, pixels, stored) = match ImageFormat::from_path(path)? {
         ImageFormat::Exr => read_exr_tile(path)?,
         ImageFormat::Png => read_png_tile(path)?,
