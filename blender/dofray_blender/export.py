@@ -1,6 +1,8 @@
 """Blender scene -> dofray scene file (NAME.toml) + Blender's own glTF export (NAME.glb).
 
-The glTF carries the meshes, materials, the camera's view and the point, spot and sun lights.
+The glTF carries the meshes, materials, the camera's view and the point, spot and sun lights
+(the add-on then keeps only the active camera in it and adds the IOR Blender's exporter drops
+for opaque materials: `patch_glb`).
 NAME.toml carries what glTF cannot (docs/scene-format.md in the dofray repository): the image
 size, the render settings (samples, filter, bounces, clamp, transparency), the camera's depth of
 field, the world (colour or equirectangular map, strength, rotation), area lights, and an
@@ -195,7 +197,12 @@ def render_table(scene, settings, warnings):
         spp = settings.spp if settings is not None else DEFAULT_SPP
     out["spp"] = clamp_int(spp, SPP_RANGE)
     if settings is not None:
-        out["aa"] = clamp_int(settings.aa, SPP_RANGE)
+        if settings.aa > 0:
+            # 0 (the default) leaves dofray's own: aa = spp with the path tracer, 4 with the
+            # direct integrator. A fixed 4 would leave every in-focus pixel of a path-traced
+            # render at 4 samples (dense and pinhole modes take aa there; adaptive sites start
+            # from it).
+            out["aa"] = clamp_int(settings.aa, SPP_RANGE)
         if settings.tolerance > 0.0:
             out["tolerance"] = float(settings.tolerance)
     if cycles is not None:
@@ -522,6 +529,13 @@ def material_warnings(mat, warnings):
                 warnings.add(f"material '{mat.name}': {what} is not carried (glTF / dofray "
                              "material: base colour, metallic, roughness, transmission, IOR, "
                              "emission, alpha, normal map)")
+        level, tint = surf.inputs.get("Specular IOR Level"), surf.inputs.get("Specular Tint")
+        if (level is not None and (level.is_linked or abs(level.default_value - 0.5) > 1e-6)) \
+                or (tint is not None and (tint.is_linked or any(
+                    abs(c - 1.0) > 1e-6 for c in tint.default_value[:3]))):
+            # Blender's exporter writes them as KHR_materials_specular, which dofray ignores.
+            warnings.add(f"material '{mat.name}': Specular IOR Level and Specular Tint are not "
+                         "carried (dofray's specular follows the IOR alone)")
         for name in ("Base Color", "Roughness", "Metallic", "Emission Color", "Alpha"):
             src = _linked_node(surf.inputs[name]) if name in surf.inputs else None
             if src is not None and src.type not in ("TEX_IMAGE", "SEPARATE_COLOR",
@@ -759,20 +773,75 @@ def write_glb(path, doc, rest):
         f.write(rest)
 
 
-def keep_only_camera(glb_path, cam_obj):
+def keep_only_camera(doc, cam_obj):
     """dofray takes the glTF's first perspective camera; Blender's exporter writes every
-    camera. Keep the active one only (other camera nodes stay, as empty nodes)."""
-    doc, rest = read_glb(glb_path)
+    camera. Keep the active one only (other camera nodes stay, as empty nodes). Returns
+    whether `doc` changed."""
     nodes = doc.get("nodes", [])
     cams = [n for n in nodes if "camera" in n]
     mine = [n for n in cams if n.get("name") == cam_obj.name]
     if not mine:
         raise ExportError(f"the active camera '{cam_obj.name}' is not in the glTF export (is "
                           "it hidden? the export takes visible objects only)")
-    if len(cams) > 1:
-        for n in cams:
-            if n is not mine[0]:
-                del n["camera"]
+    if len(cams) <= 1:
+        return False
+    for n in cams:
+        if n is not mine[0]:
+            del n["camera"]
+    return True
+
+
+GLTF_IOR = 1.5  # glTF's IOR without KHR_materials_ior (and Blender 4's default)
+
+
+def principled_ior(mat):
+    """The IOR of a material's Principled BSDF (the one its active output's Surface shows),
+    or None: no such BSDF, a linked IOR, or a full metal (whose IOR glTF does not use)."""
+    if mat is None or not mat.use_nodes or mat.node_tree is None:
+        return None
+    out = _active_output(mat.node_tree, "OUTPUT_MATERIAL")
+    surf = _linked_node(out.inputs["Surface"]) if out is not None else None
+    if surf is None or surf.type != "BSDF_PRINCIPLED":
+        return None
+    ior, metallic = surf.inputs.get("IOR"), surf.inputs.get("Metallic")
+    if ior is None or ior.is_linked:
+        return None
+    if metallic is not None and not metallic.is_linked and metallic.default_value >= 1.0:
+        return None
+    return float(ior.default_value)
+
+
+def carry_ior(doc):
+    """Blender's glTF exporter writes KHR_materials_ior only with transmission, volume or
+    specular (`export_ior` in io_scene_gltf2), so an opaque dielectric's IOR is lost and
+    dofray (as glTF) takes 1.5: a glossy plastic of IOR 1.45 reflects 19% more at normal
+    incidence than in Cycles (F0 0.040 against 0.034). Adds the extension to every material
+    whose Blender Principled BSDF has another IOR. Returns whether `doc` changed."""
+    changed = False
+    for m in doc.get("materials", []):
+        ext = m.get("extensions", {})
+        if "KHR_materials_ior" in ext:
+            continue
+        ior = principled_ior(bpy.data.materials.get(m.get("name", "")))
+        if ior is None or abs(ior - GLTF_IOR) < 1e-6:
+            continue
+        m.setdefault("extensions", {})["KHR_materials_ior"] = {"ior": ior}
+        changed = True
+    if changed:
+        used = doc.setdefault("extensionsUsed", [])
+        if "KHR_materials_ior" not in used:
+            used.append("KHR_materials_ior")
+    return changed
+
+
+def patch_glb(glb_path, cam_obj):
+    """What the add-on changes in the exporter's .glb: the active camera only
+    (keep_only_camera) and the IOR of opaque dielectrics (carry_ior). Rewritten only when
+    something changed. Returns the glTF document."""
+    doc, rest = read_glb(glb_path)
+    changed = keep_only_camera(doc, cam_obj)
+    changed = carry_ior(doc) or changed
+    if changed:
         write_glb(glb_path, doc, rest)
     return doc
 
@@ -859,7 +928,7 @@ def export_scene(context, toml_path, visible_only=True, renderable_only=False, a
                              copy_images, settings, camera_override)
     cam_obj = camera_override or context.scene.camera
     export_glb(context, glb_path, visible_only, renderable_only)
-    keep_only_camera(glb_path, cam_obj)
+    patch_glb(glb_path, cam_obj)
     comment = (f"dofray scene exported from Blender {bpy.app.version_string} by the dofray "
                f"add-on.\nMeshes, materials, the camera's view and point/spot/sun lights: "
                f"{os.path.basename(glb_path)}.")

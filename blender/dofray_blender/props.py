@@ -15,8 +15,10 @@ class DofraySceneSettings(bpy.types.PropertyGroup):
     aa: IntProperty(
         name="In-Focus Samples",
         description="Samples per in-focus sample site, and per pixel in pinhole mode "
-                    "(dofray's --aa, anti-aliasing)",
-        default=4, min=1, max=65536, soft_max=256,
+                    "(dofray's --aa, anti-aliasing). 0: dofray's default, the Samples above "
+                    "with the path tracer (its light is as noisy in focus as in the blur), 4 "
+                    "with the direct integrator",
+        default=0, min=0, max=65536, soft_max=256,
     )
     use_cycles_samples: BoolProperty(
         name="Samples from Cycles",
