@@ -530,3 +530,76 @@ fn a_whole_image_tile_merges_and_merge_refuses_what_is_not_a_file() {
     }
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn skip_existing_renders_again_frames_that_are_not_finished() {
+    let dir = scratch("broken-frames");
+    let scene = format!("{}/scenes/focus_pull.toml", env!("CARGO_MANIFEST_DIR"));
+    let pattern = dir.join("f_##.png");
+    let args = |extra: &[&'static str]| {
+        let mut a = vec![
+            "render",
+            scene.as_str(),
+            "-o",
+            s(&pattern),
+            "--frames",
+            "1-4",
+        ];
+        a.extend_from_slice(&["--width", "40", "--spp", "2", "--json"]);
+        a.extend_from_slice(extra);
+        a.iter().map(|x| x.to_string()).collect::<Vec<_>>()
+    };
+    let run = |extra: &[&'static str]| {
+        let a = args(extra);
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        dofray(&a)
+    };
+    let o = run(&[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let frame = |n: u32| dir.join(format!("f_{n:02}.png"));
+    let good: Vec<Vec<u8>> = (1..=4).map(|n| std::fs::read(frame(n)).unwrap()).collect();
+    // Frame 2 truncated (a broken copy), 3 empty (a full disk), 4 of another size.
+    std::fs::write(frame(2), &good[1][..good[1].len() / 2]).unwrap();
+    std::fs::write(frame(3), b"").unwrap();
+    let small = dir.join("small.png");
+    let o = dofray(&[
+        "render",
+        "-o",
+        s(&small),
+        "--width",
+        "8",
+        "--height",
+        "6",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::rename(&small, frame(4)).unwrap();
+    let o = run(&["--skip-existing"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j = json(&o);
+    let status: Vec<&str> = j["frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["status"].as_str().unwrap())
+        .collect();
+    assert_eq!(status, ["skipped", "rendered", "rendered", "rendered"]);
+    let err = stderr(&o);
+    for (n, why) in [(2, "incomplete PNG"), (3, "empty"), (4, "8x6 pixels")] {
+        let name = format!("f_{n:02}.png");
+        assert!(
+            err.lines()
+                .any(|l| l.contains(&name) && l.contains(why) && l.starts_with("warning:")),
+            "frame {n}: {err}"
+        );
+    }
+    // The frames rendered again are the frames a clean run writes.
+    for n in 2..=4 {
+        assert_eq!(png_pixels(&frame(n)), {
+            let p = dir.join("ref.png");
+            std::fs::write(&p, &good[n as usize - 1]).unwrap();
+            png_pixels(&p)
+        });
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}

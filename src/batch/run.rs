@@ -102,6 +102,9 @@ pub trait RunProgress {
     fn rendered(&self, _job: &Job, _summary: &JobSummary) {}
     /// A job was skipped: its output exists.
     fn skipped(&self, _job: &Job) {}
+    /// `--skip-existing` found `path` for `job` but it is not a finished image (`reason`):
+    /// the job renders again.
+    fn incomplete(&self, _job: &Job, _path: &Path, _reason: &str) {}
     /// A job failed.
     fn failed(&self, _job: &Job, _failure: &JobFailure) {}
     /// `fail_fast` stops the run after a failure, with `not_run` of `count` jobs left.
@@ -405,8 +408,7 @@ impl Batch<'_> {
         // Jobs rendered so far and their time, for the estimate of what is left.
         let (mut done, mut busy) = (0u32, 0.0f64);
         for (i, job) in jobs.iter().enumerate() {
-            let outcome = if options.skip_existing && (job.output.is_file() || job.image.is_file())
-            {
+            let outcome = if options.skip_existing && self.finished(job, progress) {
                 progress.skipped(job);
                 JobOutcome::Skipped
             } else {
@@ -438,6 +440,33 @@ impl Batch<'_> {
         }
         report.seconds = start.elapsed().as_secs_f64();
         Ok(report)
+    }
+
+    /// Whether `job`'s output (or, for a tile, its whole image) exists and is complete: a
+    /// readable image of the size the job would write ([`output::verify`]). A file that is
+    /// not is reported ([`RunProgress::incomplete`]) and rendered again.
+    fn finished(&self, job: &Job, progress: &dyn RunProgress) -> bool {
+        let Ok(camera) = self.renderer.camera(job.frame) else {
+            return false; // the render will report why
+        };
+        let full = (camera.width, camera.height);
+        let own = job
+            .tile
+            .map_or(full, |t| (t.region.width(), t.region.height()));
+        let mut candidates = vec![(&job.output, own)];
+        if job.image != job.output {
+            candidates.push((&job.image, full));
+        }
+        for (path, (w, h)) in candidates {
+            if !path.exists() {
+                continue;
+            }
+            match output::verify::check_complete(path, w, h) {
+                Ok(()) => return true,
+                Err(reason) => progress.incomplete(job, path, &reason),
+            }
+        }
+        false
     }
 
     /// Refuses, checks, renders and writes one job of a run.

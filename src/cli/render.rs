@@ -329,6 +329,14 @@ impl RunProgress for CliProgress {
             eprintln!("{}: {} exists, skipped", job.label(), job.output.display());
         }
     }
+    fn incomplete(&self, job: &Job, path: &Path, reason: &str) {
+        // Always said, even with -q: a broken frame on a farm is worth a line in the log.
+        eprintln!(
+            "warning: {}: {} exists but is not a finished image ({reason}); rendering it again",
+            job.label(),
+            path.display()
+        );
+    }
     fn failed(&self, job: &Job, failure: &JobFailure) {
         eprintln!("error: {}: {}", job.label(), failure.message);
     }

@@ -43,6 +43,7 @@ pub mod metadata;
 pub mod pictures;
 pub mod png;
 pub mod target;
+pub mod verify;
 
 use std::path::{Path, PathBuf};
 
