@@ -234,6 +234,47 @@ def render_table(scene, settings, warnings):
     return out
 
 
+# Blender's view transforms and looks that dofray reproduces (docs/outputs.md, "Views").
+VIEWS = ("Standard", "AgX", "Khronos PBR Neutral", "Raw")
+AGX_LOOKS = ("None", "AgX - Very High Contrast", "AgX - High Contrast",
+             "AgX - Medium High Contrast", "AgX - Base Contrast", "AgX - Medium Low Contrast",
+             "AgX - Low Contrast", "AgX - Very Low Contrast", "AgX - Greyscale")
+
+
+def view_table(scene, warnings):
+    """[view]: Color Management's view transform, look, exposure and gamma, for PNG outputs
+    (EXR stays linear). What dofray cannot reproduce falls back to Standard / no look, with a
+    warning."""
+    vs, ds = scene.view_settings, scene.display_settings
+    out = {}
+    view = vs.view_transform
+    if view in VIEWS:
+        out["transform"] = view
+    else:
+        warnings.add(f"view transform '{view}' is not available in dofray: its PNGs use "
+                     "Standard (AgX, Blender's default, is)")
+        view = "Standard"
+    look = vs.look
+    if look not in ("", "None"):
+        if view == "AgX" and look in AGX_LOOKS:
+            out["look"] = look
+        else:
+            warnings.add(f"look '{look}' is not available in dofray: its PNGs have no look")
+    if vs.exposure != 0.0:
+        out["exposure"] = float(vs.exposure)
+    if vs.gamma != 1.0:
+        out["gamma"] = float(vs.gamma)
+    if vs.use_curve_mapping:
+        warnings.add("Color Management's curves are not carried")
+    if ds.display_device != "sRGB":
+        warnings.add(f"display '{ds.display_device}' is not carried: dofray's PNGs are sRGB")
+    cycles = getattr(scene, "cycles", None)
+    if cycles is not None and abs(getattr(cycles, "film_exposure", 1.0) - 1.0) > 1e-6:
+        warnings.add("Film > Exposure is not carried (use dofray's --exposure, in stops: "
+                     f"{math.log2(max(cycles.film_exposure, 1e-9)):.3g})")
+    return out
+
+
 def _scene_has_volumes(scene):
     return any(o.type == "VOLUME" for o in scene.objects)
 
@@ -705,6 +746,8 @@ def to_toml(data, comment=""):
     lines.append("")
     lines += _table_lines("[image]", data["image"])
     lines += _table_lines("[render]", data["render"])
+    if data.get("view"):
+        lines += _table_lines("[view]", data["view"])
     if data["camera"]:
         lines += _table_lines("[camera]", data["camera"])
     lines += _table_lines("[world]", data["world"])
@@ -875,6 +918,7 @@ def collect(context, toml_path, visible_only=True, renderable_only=False, animat
     width, height = render_size(scene.render)
     data = {"name": scene.name, "image": {"width": width, "height": height}}
     data["render"] = render_table(scene, settings, warnings)
+    data["view"] = view_table(scene, warnings)
     data["camera"] = camera_table(scene, cam_obj, width, height, warnings)
     data["world"] = world_table(scene, folder, copy_images, warnings)
     lights = []

@@ -491,6 +491,41 @@ class AddonTest(unittest.TestCase):
         bpy.data.materials.remove(plain)
         bpy.data.materials.remove(metal)
 
+    def test_08c_view(self):
+        # Color Management -> [view]: what dofray reproduces is carried, the rest is named.
+        vs = self.scene.view_settings
+        saved = (vs.view_transform, vs.look, vs.exposure, vs.gamma)
+        try:
+            vs.view_transform, vs.look, vs.exposure, vs.gamma = "AgX", "AgX - High Contrast", 0.5, 1.2
+            w = dexport.Warnings()
+            self.assertEqual(dexport.view_table(self.scene, w),
+                             {"transform": "AgX", "look": "AgX - High Contrast",
+                              "exposure": 0.5, "gamma": self.scene.view_settings.gamma})
+            vs.look = "AgX - Punchy"
+            w = dexport.Warnings()
+            self.assertEqual(dexport.view_table(self.scene, w)["transform"], "AgX")
+            self.assertTrue(any("Punchy" in m for m in w), w)
+            vs.view_transform = "Filmic"
+            w = dexport.Warnings()
+            self.assertNotIn("transform", dexport.view_table(self.scene, w))
+            self.assertTrue(any("Filmic" in m for m in w), w)
+            # dofray reads what the add-on writes: a PNG through AgX differs from Standard.
+            vs.view_transform, vs.look, vs.exposure, vs.gamma = "AgX", "AgX - Greyscale", 0, 1
+            path = os.path.join(OUT, "viewed.toml")
+            dofray_blender.export_scene(bpy.context, path)
+            with open(path, "rb") as f:
+                self.assertEqual(tomllib.load(f)["view"],
+                                 {"transform": "AgX", "look": "AgX - Greyscale"})
+            png = os.path.join(OUT, "viewed.png")
+            subprocess.run([DOFRAY, "render", path, "-o", png, "--width", "32", "--spp", "1",
+                            "-q"], check=True)
+            img = bpy.data.images.load(png)
+            px = np.array(img.pixels[:]).reshape(-1, img.channels)[:, :3]
+            bpy.data.images.remove(img)
+            self.assertLess(np.abs(px[:, 0] - px[:, 1]).max(), 2 / 255, "greyscale look")
+        finally:
+            vs.view_transform, vs.look, vs.exposure, vs.gamma = saved
+
     def test_09_warnings(self):
         text = " ".join(self.info["warnings"])
         self.assertIn("'Fog': its volume is not carried", text)
