@@ -41,7 +41,7 @@ denoiser: common.configure_cycles), casts Blender's own pinhole ray through ever
                in-focus subject, a defocused object in front and one behind) dofray / Cycles
                within --tolerance (3%), with each ratio's 1-sigma noise (dofray's two seeds);
                printed, not judged: adaptive mode's ratios, and the sun's highlight on the
-               glossy ball (Schlick against exact Fresnel, README.md here)
+               glossy ball (a check of the dielectric Fresnel, README.md here)
 
 It prints a table, writes OUT/roundtrip.json and the previews OUT/roundtrip.compare.png
 (Cycles | dofray | log2 ratio, the rectangles drawn, one stop darker) and
@@ -762,8 +762,8 @@ def region_table(rects, cyc, dof, dof2):
 
 def sun_highlight(scene, ids, names, cycl, dof, dof2, half=4):
     """Not judged: the sun's highlight on the glossy ball (a dielectric of roughness 0.2,
-    IOR 1.45), where Cycles' exact dielectric Fresnel and dofray's Schlick approximation
-    differ (README.md here): a (2 half + 1)^2 window on Cycles' brightest pixel of the ball,
+    IOR 1.45), where a Schlick approximation of the dielectric Fresnel would be 10% low
+    (README.md here): a (2 half + 1)^2 window on Cycles' brightest pixel of the ball,
     and the angle of incidence there (between the view ray and the ball's normal: the
     mirror direction's, so the half-vector's, angle at the highlight's peak)."""
     m = ids == names.index("Glossy")
@@ -1082,7 +1082,7 @@ def report(r):
         inc = f", incidence {v['incidence_deg']:.0f} deg" if v.get("incidence_deg") else ""
         print(f"    not judged: {name} (9x9 px at {tuple(v['pixel'])}{inc}): Cycles "
               f"{sum(v['cycles_rgb']) / 3:.3f}, dofray {sum(v['dofray_rgb']) / 3:.3f}, ratio "
-              f"{v['ratio']:.3f} +- {v['noise']:.3f} (Schlick against exact Fresnel)")
+              f"{v['ratio']:.3f} +- {v['noise']:.3f} (dielectric Fresnel)")
     print(f"all: {yes(r['pass'])} ({r['seconds']:.0f} s)")
 
 

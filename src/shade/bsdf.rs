@@ -98,8 +98,6 @@ struct Setup {
     delta: bool,
     eta: f32,
     f0: f32,
-    /// 0 when there is no interface (eta = 1): no Fresnel reflection at all.
-    grazing: f32,
     through: Through,
     metallic: f32,
     base: Vec3,
@@ -144,7 +142,6 @@ impl Setup {
             Through::Refract
         };
         let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
-        let grazing = if f0 > 0.0 { 1.0 } else { 0.0 };
         let metallic = clamp(bsdf.metallic, 0.0, 1.0);
         let transmission = clamp(bsdf.transmission, 0.0, 1.0);
         let base = bsdf.base_color.clamp(Vec3::ZERO, Vec3::ONE);
@@ -157,7 +154,6 @@ impl Setup {
             delta,
             eta,
             f0,
-            grazing,
             through,
             metallic,
             base,
@@ -170,7 +166,7 @@ impl Setup {
             p_micro: 0.0,
         };
         setup.fo = if w_diffuse > 0.0 && f0 > 0.0 && eta >= 1.0 {
-            specular_albedo(cos_o, roughness, f0)
+            specular_albedo(cos_o, roughness, eta)
         } else {
             setup.dielectric_fresnel(cos_o)
         };
@@ -201,7 +197,7 @@ impl Setup {
     }
 
     fn dielectric_fresnel(&self, cos: f32) -> f32 {
-        dielectric_fresnel(self.eta, self.f0, self.grazing, cos)
+        dielectric_fresnel(self.eta, cos)
     }
 
     /// At a microfacet seen at `cos` from `wo`: the dielectric Fresnel, the reflection colour
@@ -404,67 +400,82 @@ impl Bsdf {
     }
 }
 
-/// Cosines and roughnesses of the specular albedo table.
+/// Cosines, roughnesses and indices of the specular albedo table.
 const ALBEDO_COS: usize = 32;
 const ALBEDO_ROUGH: usize = 24;
+const ALBEDO_ETA: usize = 12;
 
-/// The GGX specular layer's directional albedo for Schlick's Fresnel: `f0 E1 + (1 - f0) E5`,
-/// where `E1` is the albedo with `F = 1` and `E5` with `F = (1 - v . h)^5` (both tabulated
-/// once over `sqrt(cos_o)` and `sqrt(roughness)` by sampling the BSDF itself as a white and a black metal,
-/// then read bilinearly).
-fn specular_albedo(cos_o: f32, roughness: f32, f0: f32) -> f32 {
-    static TABLE: std::sync::OnceLock<Vec<[f32; 2]>> = std::sync::OnceLock::new();
+/// The GGX dielectric specular layer's directional albedo (exact Fresnel) at `cos_o`,
+/// `roughness` and relative index `eta >= 1`, as its ratio to the Fresnel reflectance at
+/// `cos_o`: tabulated once over `sqrt(cos_o)`, `sqrt(roughness)` and `s = (eta - 1) / (eta +
+/// 1)` (the square root of the reflectance at normal incidence) by sampling the layer itself
+/// on a stratified 16 x 16 grid, read trilinearly, then multiplied by the exact
+/// `F(cos_o)`. The ratio is 1 for a smooth surface and varies slowly elsewhere, so the
+/// interpolation keeps the albedo of any index within the table's sampling error (the
+/// albedo itself is convex in the index, and interpolating it would always come out low,
+/// handing the diffuse layer light the specular layer also reflects).
+fn specular_albedo(cos_o: f32, roughness: f32, eta: f32) -> f32 {
+    let node_s = |k: usize| (k as f32 / (ALBEDO_ETA - 1) as f32).clamp(0.01, 0.998);
+    static TABLE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
     let table = TABLE.get_or_init(|| {
-        let mut t = Vec::with_capacity(ALBEDO_COS * ALBEDO_ROUGH);
-        for j in 0..ALBEDO_ROUGH {
-            let roughness = (j as f32 / (ALBEDO_ROUGH - 1) as f32).powi(2);
-            for i in 0..ALBEDO_COS {
-                // Nodes at squares: dense at grazing angles, where the albedo changes fast.
-                let mu = (i as f32 / (ALBEDO_COS - 1) as f32).powi(2).max(0.002);
-                let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
-                let albedo = |base: f32| {
-                    let bsdf = Bsdf {
-                        base_color: Vec3::splat(base),
-                        metallic: 1.0,
-                        roughness,
-                        transmission: 0.0,
-                        eta: 1.5,
-                        thin: false,
-                    };
-                    // A stratified 32 x 32 grid of directions.
+        let mut t = Vec::with_capacity(ALBEDO_ETA * ALBEDO_COS * ALBEDO_ROUGH);
+        for k in 0..ALBEDO_ETA {
+            let s = node_s(k);
+            let eta = (1.0 + s) / (1.0 - s);
+            for j in 0..ALBEDO_ROUGH {
+                let roughness = (j as f32 / (ALBEDO_ROUGH - 1) as f32).powi(2);
+                // A black, fully transmissive dielectric: only its reflection returns light,
+                // and no diffuse layer asks for this table while it is being made.
+                let layer = Bsdf {
+                    base_color: Vec3::ZERO,
+                    metallic: 0.0,
+                    roughness,
+                    transmission: 1.0,
+                    eta,
+                    thin: false,
+                };
+                for i in 0..ALBEDO_COS {
+                    // Nodes at squares: dense at grazing angles, where the albedo changes fast.
+                    let mu = (i as f32 / (ALBEDO_COS - 1) as f32).powi(2).max(0.002);
+                    let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
                     let mut sum = 0.0f64;
-                    for k in 0..1024u32 {
+                    for n in 0..256u32 {
                         let u = [
                             0.5,
-                            ((k % 32) as f32 + 0.5) / 32.0,
-                            ((k / 32) as f32 + 0.5) / 32.0,
+                            ((n % 16) as f32 + 0.5) / 16.0,
+                            ((n / 16) as f32 + 0.5) / 16.0,
                         ];
-                        if let Some(s) = bsdf.sample(Vec3::Z, wo, u) {
-                            sum += s.weight.x as f64;
+                        if let Some(s) = layer.sample(Vec3::Z, wo, u)
+                            && s.lobe == Lobe::Glossy
+                        {
+                            sum += f64::from(s.weight.x);
                         }
                     }
-                    (sum / 1024.0) as f32
-                };
-                let e5 = albedo(0.0);
-                t.push([albedo(1.0) - e5, e5]);
+                    t.push((sum / 256.0) as f32 / dielectric_fresnel(eta, mu));
+                }
             }
         }
         t
     });
     let x = cos_o.clamp(0.0, 1.0).sqrt() * (ALBEDO_COS - 1) as f32;
     let y = roughness.clamp(0.0, 1.0).sqrt() * (ALBEDO_ROUGH - 1) as f32;
-    let (i, j) = (
+    let s = (eta - 1.0) / (eta + 1.0);
+    let z = s.clamp(0.0, 1.0) * (ALBEDO_ETA - 1) as f32;
+    let (i, j, k) = (
         (x as usize).min(ALBEDO_COS - 2),
         (y as usize).min(ALBEDO_ROUGH - 2),
+        (z as usize).min(ALBEDO_ETA - 2),
     );
     let (fx, fy) = (x - i as f32, y - j as f32);
-    let at = |i: usize, j: usize| {
-        let [a, b] = table[j * ALBEDO_COS + i];
-        f0 * a + b
+    let at = |i: usize, j: usize, k: usize| table[(k * ALBEDO_ROUGH + j) * ALBEDO_COS + i];
+    let plane = |k: usize| {
+        let top = at(i, j, k) + (at(i + 1, j, k) - at(i, j, k)) * fx;
+        let bottom = at(i, j + 1, k) + (at(i + 1, j + 1, k) - at(i, j + 1, k)) * fx;
+        top + (bottom - top) * fy
     };
-    let top = at(i, j) + (at(i + 1, j) - at(i, j)) * fx;
-    let bottom = at(i, j + 1) + (at(i + 1, j + 1) - at(i, j + 1)) * fx;
-    (top + (bottom - top) * fy).clamp(0.0, 1.0)
+    let t = ((s - node_s(k)) / (node_s(k + 1) - node_s(k))).clamp(0.0, 1.0);
+    let ratio = plane(k) + (plane(k + 1) - plane(k)) * t;
+    (ratio * dielectric_fresnel(eta, cos_o)).clamp(0.0, 1.0)
 }
 
 /// An orthonormal basis around unit `n` (Duff et al. 2017, branchless).
@@ -810,8 +821,7 @@ mod tests {
                     }
                 }
                 let critical = eta < 1.0 && (1.0 - mu * mu).sqrt() > eta;
-                let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
-                let fresnel = dielectric_fresnel(eta, f0, 1.0, mu) as f64;
+                let fresnel = dielectric_fresnel(eta, mu) as f64;
                 let share = reflected as f64 / count as f64;
                 let noise = 4.0 * (fresnel * (1.0 - fresnel) / count as f64).sqrt() + 1e-3;
                 assert!(
