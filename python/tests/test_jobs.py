@@ -121,3 +121,24 @@ def test_keyboard_interrupt_cancels_the_run(tmp_path):
     finally:
         timer.cancel()
     assert not (tmp_path / "big.png").exists()
+
+
+def test_a_scene_view_reaches_the_png(tmp_path):
+    # A scene file's [view] (what the Blender add-on writes) is how every front end's PNGs
+    # look, not only the command line's.
+    scene = tmp_path / "viewed.toml"
+    scene.write_text(FOCUS_PULL.read_text() + '\n[view]\ntransform = "AgX"\n')
+    out = tmp_path / "still.png"
+    run = dofray.render_jobs(scene, out, **TINY)
+    assert run["rendered"] == 1
+    # The PNG's tEXt chunks, read by hand (no imaging library needed).
+    data = out.read_bytes()
+    texts, pos = {}, 8
+    while pos < len(data):
+        n = int.from_bytes(data[pos:pos + 4], "big")
+        kind, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + n]
+        if kind == b"tEXt":
+            k, _, v = body.partition(b"\0")
+            texts[k.decode()] = v.decode("latin-1")
+        pos += 12 + n
+    assert texts["dofray:view"] == "AgX"

@@ -64,8 +64,9 @@ impl JobError {
 pub struct ImageOptions {
     /// PNG: 16 bits per channel.
     pub png_16bit: bool,
-    /// PNG: the display view (view transform, look, exposure, gamma).
-    pub view: crate::view::DisplayView,
+    /// PNG: the display view (view transform, look, exposure, gamma); `None`: the scene's
+    /// own (`[view]`; plain sRGB without one).
+    pub view: Option<crate::view::DisplayView>,
     /// EXR: the beauty as half floats.
     pub exr_half: bool,
     /// EXR: the compression.
@@ -353,7 +354,7 @@ impl Batch<'_> {
             metadata,
             png_16bit: self.image.png_16bit,
             png_alpha: self.settings.transparent,
-            view: self.image.view,
+            view: self.image.view.unwrap_or(renderer.desc().view),
             exr_half: self.image.exr_half,
             exr_compression: self.image.exr_compression,
             region: placed.map(|r| (r, (camera.width, camera.height))),

@@ -212,7 +212,7 @@ pub(crate) fn run_render(a: &RenderArgs) -> Result<ExitCode> {
         pool: Some(&p.pool),
         image: ImageOptions {
             png_16bit: a.png_16,
-            view: display_view(a, p.renderer.desc().view)?,
+            view: Some(display_view(a, p.renderer.desc().view)?),
             exr_half: a.exr_half,
             exr_compression: a.exr_compression.unwrap_or_default(),
             scene_file: Some(a.scene.scene.clone().into()),
