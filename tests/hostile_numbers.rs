@@ -271,3 +271,55 @@ fn a_missed_autofocus_pixel_is_named_as_the_file_gives_it() {
         "{err}"
     );
 }
+
+/// Values every key accepts alone but the renderer cannot use are refused where they were
+/// written: the file, the line and the key (or the table), as a bad input (exit 3).
+#[test]
+fn values_refused_after_parsing_point_at_the_file_line_and_key() {
+    let dir = scratch("located");
+    let sphere = "[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\n";
+    for (table, expect) in [
+        (
+            "[camera]\neye = [0, 0, 5]\nfocal_length_mm = 3e38\nf_number = 2\n",
+            "scene.toml:3:19: `camera.focal_length_mm`: focal_length_mm must be",
+        ),
+        (
+            "[camera]\neye = [0, 0, 5]\naperture_radius = 3e38\n",
+            "scene.toml:3:19: `camera.aperture_radius`",
+        ),
+        (
+            "[camera]\neye = [0, 0, 5]\nf_number = 1e-30\n",
+            "scene.toml:3:12: `camera.f_number`",
+        ),
+        (
+            "[camera]\neye = [0, 0, 5]\naperture_radius = 0.1\nanamorphic = 1e30\n",
+            "scene.toml:4:14: `camera.anamorphic`",
+        ),
+        (
+            "[[lights]]\ntype = \"point\"\nposition = [3e38, 0, 0]\n",
+            "scene.toml:1:1: `lights[0]`: light 0's position",
+        ),
+        (
+            "[[materials]]\nname = \"m\"\ndiffuse = [1e38, 0.5, 0.5]\n",
+            "scene.toml:2:8: `materials[0]`: material 0's colour",
+        ),
+        (
+            "[[textures]]\nname = \"t\"\npattern = \"checker\"\nscale = 1e38\n\
+             [[materials]]\nname = \"m\"\ntexture = \"t\"\n",
+            "scene.toml:6:8: `materials[0]`: material 0's pattern scale",
+        ),
+    ] {
+        let scene = dir.join("scene.toml");
+        std::fs::write(&scene, format!("{table}\n{sphere}")).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_dofray"))
+            .args(["render", "--width", "16", "-o"])
+            .arg(dir.join("out.png"))
+            .arg(&scene)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(3), "{table}: {err}");
+        assert!(err.contains(expect), "{table}: {err}");
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}

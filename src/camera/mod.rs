@@ -261,7 +261,19 @@ impl CameraSpec {
             p.check_film()?;
         }
         let vfov_deg = self.effective_vfov_deg();
-        check_vfov(vfov_deg)?;
+        match self.lens.photographic() {
+            // Named after what the user gave: the focal length, not a derived angle.
+            Some(p) if check_vfov(vfov_deg).is_err() => check(
+                false,
+                "focal_length_mm",
+                "a focal length whose field of view on the sensor is between 0 and 180 degrees",
+                format!(
+                    "{} mm on a {} mm sensor ({vfov_deg} degrees)",
+                    p.focal_length_mm, p.sensor_width_mm
+                ),
+            )?,
+            _ => check_vfov(vfov_deg)?,
+        }
         let mut camera = Camera {
             eye: self.eye,
             forward,

@@ -203,8 +203,9 @@ fn check_ranges(desc: &SceneDesc) -> Result<(), SceneError> {
 /// The largest index of refraction a material may have (diamond is 2.4).
 const MAX_IOR: f32 = 10.0;
 
-/// [`check_ranges`] of material `i`.
-fn check_material(i: usize, m: &Material) -> Result<(), SceneError> {
+/// [`check_ranges`] of material `i` (also run by the scene file's loader on each
+/// `[[materials]]` table, to place the error).
+pub(crate) fn check_material(i: usize, m: &Material) -> Result<(), SceneError> {
     match &m.base_color {
         Texture::Constant(c) => check_value(
             || format!("material {i}'s colour"),
@@ -270,8 +271,9 @@ fn check_material(i: usize, m: &Material) -> Result<(), SceneError> {
     Ok(())
 }
 
-/// [`check_ranges`] of light `i`.
-fn check_light(i: usize, light: &Light) -> Result<(), SceneError> {
+/// [`check_ranges`] of light `i` (also run by the scene file's loader on each `[[lights]]`
+/// table, to place the error).
+pub(crate) fn check_light(i: usize, light: &Light) -> Result<(), SceneError> {
     let direction_ok = |d: Vec3| d.is_finite() && d.length_squared() > 0.0;
     let (place, power, place_ok) = match *light {
         Light::Point {

@@ -8,7 +8,9 @@ use toml::Spanned;
 use super::Ctx;
 use super::objects::{FromModel, Objects};
 use super::raw::{RawCamera, V3, v3};
-use crate::camera::{ApertureShape, CameraSpec, DEFAULT_VFOV, Focus, LensSpec, Photographic};
+use crate::camera::{
+    ApertureShape, CameraError, CameraSpec, DEFAULT_VFOV, Focus, LensSpec, Photographic,
+};
 use crate::scene::Object;
 use crate::scene::error::LoadError;
 use crate::scene::model;
@@ -52,7 +54,7 @@ pub(super) fn camera(
             "`blades` must be 0 (a circular aperture) or at least 3",
         ));
     }
-    Ok(CameraSpec {
+    let spec = CameraSpec {
         eye: view.eye,
         look_at: view.look_at,
         up: view.up,
@@ -63,9 +65,102 @@ pub(super) fn camera(
         focus,
         aperture: ApertureShape {
             blades,
-            rotation_deg: raw.blade_rotation.map_or(0.0, |r| r.0),
-            anamorphic: raw.anamorphic.map_or(1.0, |a| a.0),
+            rotation_deg: raw.blade_rotation.as_ref().map_or(0.0, |r| r.get_ref().0),
+            anamorphic: raw.anamorphic.as_ref().map_or(1.0, |a| a.get_ref().0),
         },
+    };
+    check_built(ctx, &raw, &table, &spec)?;
+    Ok(spec)
+}
+
+/// Builds the camera as a render would (autofocus answered with any depth: the scene is not
+/// built yet) so that a value every key accepts alone but the lens cannot use together (a
+/// focal length too long for any field of view, an aperture too large for the lens to stay
+/// in range) is refused here, at the key that gave it, instead of later without a place.
+fn check_built(
+    ctx: &Ctx,
+    raw: &RawCamera,
+    table: &Range<usize>,
+    spec: &CameraSpec,
+) -> Result<(), LoadError> {
+    let error = match spec.build(|_| Some(1.0)) {
+        Ok(_) => return Ok(()),
+        // Where the autofocus pixel lands depends on the final image size and the scene.
+        Err(CameraError::FocusPixelOutside { .. } | CameraError::FocusPixelMisses { .. }) => {
+            return Ok(());
+        }
+        Err(e) => e,
+    };
+    let name = match &error {
+        CameraError::Invalid { name, .. } => *name,
+        _ => "",
+    };
+    let span = |s: Option<Range<usize>>| s;
+    // The key that gave the value, by the name the check uses; for a derived aperture, the
+    // first of the keys it is derived from.
+    let keys: &[(&str, Option<Range<usize>>)] = &[
+        ("eye", span(raw.eye.as_ref().map(|s| s.span()))),
+        ("look_at", span(raw.look_at.as_ref().map(|s| s.span()))),
+        ("up", span(raw.up.as_ref().map(|s| s.span()))),
+        ("vfov", span(raw.vfov.as_ref().map(|s| s.span()))),
+        (
+            "focal_length_mm",
+            span(raw.focal_length_mm.as_ref().map(|s| s.span())),
+        ),
+        (
+            "sensor_width_mm",
+            span(raw.sensor_width_mm.as_ref().map(|s| s.span())),
+        ),
+        (
+            "aperture_radius",
+            span(raw.aperture_radius.as_ref().map(|s| s.span())),
+        ),
+        ("f_number", span(raw.f_number.as_ref().map(|s| s.span()))),
+        (
+            "sharp_range",
+            span(raw.sharp_range.as_ref().map(|s| s.span())),
+        ),
+        ("spread", span(raw.spread.as_ref().map(|s| s.span()))),
+        (
+            "anamorphic",
+            span(raw.anamorphic.as_ref().map(|s| s.span())),
+        ),
+        (
+            "blade_rotation",
+            span(raw.blade_rotation.as_ref().map(|s| s.span())),
+        ),
+        ("blades", span(raw.blades.as_ref().map(|s| s.span()))),
+    ];
+    let candidates: &[&str] = match name {
+        "eye" => &["eye"],
+        "look_at" => &["look_at"],
+        "up" => &["up"],
+        "vfov_deg" => &["vfov", "focal_length_mm", "sensor_width_mm"],
+        "focal_length_mm" => &["focal_length_mm", "vfov"],
+        "sensor_width_mm" => &["sensor_width_mm"],
+        "f_number" => &["f_number"],
+        "sharp_range" => &["sharp_range"],
+        "spread" => &["spread"],
+        "anamorphic ratio" => &["anamorphic"],
+        "aperture rotation" => &["blade_rotation"],
+        "aperture blades" => &["blades"],
+        _ => &[
+            "aperture_radius",
+            "f_number",
+            "sharp_range",
+            "spread",
+            "anamorphic",
+            "eye",
+        ],
+    };
+    let found = candidates
+        .iter()
+        .find_map(|c| keys.iter().find(|(k, s)| k == c && s.is_some()));
+    Err(match found {
+        Some((key, Some(span))) => {
+            ctx.invalid(span.clone(), format!("camera.{key}"), error.to_string())
+        }
+        _ => ctx.invalid(table.clone(), "camera", error.to_string()),
     })
 }
 

@@ -46,8 +46,15 @@ pub(super) fn lights(
         None => {}
         Some(raw) => {
             for (i, l) in raw.into_iter().enumerate() {
+                let span = l.span();
                 match light(ctx, i, l)? {
-                    FileLight::Punctual(l) => lights.push(l),
+                    FileLight::Punctual(l) => {
+                        // The ranges the renderer checks, refused at the table that gave them.
+                        crate::scene::world::check_light(i, &l).map_err(|e| {
+                            ctx.invalid(span.clone(), format!("lights[{i}]"), e.to_string())
+                        })?;
+                        lights.push(l)
+                    }
                     FileLight::Area(a) => areas.push((i, a)),
                 }
             }

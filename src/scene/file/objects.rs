@@ -151,7 +151,12 @@ impl Materials {
                     format!("material {name:?} is defined twice"),
                 ));
             }
-            list.push(material(ctx, &key, &m, textures)?);
+            let built = material(ctx, &key, &m, textures)?;
+            // The ranges the renderer checks (a colour of 1e38, a pattern scale from a texture
+            // of 1e38), refused here at the table that gave them.
+            crate::scene::world::check_material(i, &built)
+                .map_err(|e| ctx.invalid(m.name.span(), key.clone(), e.to_string()))?;
+            list.push(built);
             named.insert(name, list.len() - 1);
         }
         let default = named.get("default").copied();

@@ -380,8 +380,8 @@ pub(super) struct RawCamera {
     pub(super) focus_point: Option<Spanned<V3>>,
     pub(super) focus_pixel: Option<Spanned<[Whole; 2]>>,
     pub(super) blades: Option<Spanned<Whole>>,
-    pub(super) blade_rotation: Option<Finite>,
-    pub(super) anamorphic: Option<Positive>,
+    pub(super) blade_rotation: Option<Spanned<Finite>>,
+    pub(super) anamorphic: Option<Spanned<Positive>>,
 }
 
 /// The `[animation]` table: the shot's range and rate, and its keys.
