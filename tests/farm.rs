@@ -603,3 +603,44 @@ fn skip_existing_renders_again_frames_that_are_not_finished() {
     }
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+#[test]
+fn concurrent_runs_of_the_same_tiles_all_succeed() {
+    // A requeued task overlapping its original: one run merges and removes the tiles while
+    // another is about to read them. Before, the second failed (and with afterok cancelled
+    // the work downstream); four at once, three times, hit that race nearly every time.
+    let dir = scratch("twins");
+    let reference = dir.join("ref.exr");
+    let size = ["--width", "64", "--height", "48", "--spp", "4"];
+    let o = dofray(&[&["render", "-o", s(&reference), "-q"][..], &size].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let image = dir.join("img.exr");
+    for round in 0..3 {
+        let children: Vec<_> = (0..4)
+            .map(|_| {
+                cmd()
+                    .args(["render", "-o", s(&image), "--tiles", "4x2", "-q"])
+                    .args(size)
+                    .stderr(std::process::Stdio::piped())
+                    .spawn()
+                    .unwrap()
+            })
+            .collect();
+        for child in children {
+            let o = child.wait_with_output().unwrap();
+            assert!(o.status.success(), "round {round}: {}", stderr(&o));
+        }
+        assert!(
+            exr_pixels(&image) == exr_pixels(&reference),
+            "round {round}"
+        );
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().contains(".tile-"))
+            .map(|e| e.file_name())
+            .collect();
+        assert!(left.is_empty(), "round {round}: tiles left {left:?}");
+    }
+    std::fs::remove_dir_all(dir).unwrap();
+}

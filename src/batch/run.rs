@@ -114,6 +114,9 @@ pub trait RunProgress {
     fn merged(&self, _image: &Path, _tiles: usize) {}
     /// An image could not be assembled from its tiles.
     fn merge_failed(&self, _image: &Path, _failure: &JobFailure) {}
+    /// Another run of the same tiles assembled `image` (and removed the tiles) while this run
+    /// was merging them: the image is finished, nothing failed.
+    fn merged_elsewhere(&self, _image: &Path) {}
 }
 
 /// A run that reports nothing as it goes.
@@ -506,6 +509,14 @@ impl Batch<'_> {
                     progress.merged(&image, m.tiles);
                     report.merged.push(image.clone());
                 }
+                Err(_) if self.twin_merged(&image, &parts) => {
+                    // This run's tiles are the twin's (the same render): not left behind.
+                    for path in &paths {
+                        let _ = std::fs::remove_file(path);
+                    }
+                    progress.merged_elsewhere(&image);
+                    report.merged.push(image.clone());
+                }
                 Err(e) => {
                     let failure = JobFailure {
                         error: None,
@@ -517,6 +528,21 @@ impl Batch<'_> {
                 }
             }
         }
+    }
+
+    /// Whether another run of the same tiles (a requeued task overlapping its original)
+    /// assembled `image` while this one was merging: some of the tiles are gone and the
+    /// image is there, complete and of the frame's size. A run removes its tiles only after
+    /// its image is in place, so a missing tile with a finished image is that, not a loss.
+    fn twin_merged(&self, image: &Path, parts: &[&Job]) -> bool {
+        let Some(first) = parts.first() else {
+            return false;
+        };
+        let Ok(camera) = self.renderer.camera(first.frame) else {
+            return false;
+        };
+        parts.iter().any(|t| !t.output.exists())
+            && output::verify::check_complete(image, camera.width, camera.height).is_ok()
     }
 }
 

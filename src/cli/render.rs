@@ -351,6 +351,14 @@ impl RunProgress for CliProgress {
     fn merge_failed(&self, image: &Path, failure: &JobFailure) {
         eprintln!("error: {}: {}", image.display(), failure.message);
     }
+    fn merged_elsewhere(&self, image: &Path) {
+        if !self.quiet {
+            eprintln!(
+                "{}: assembled by another run of the same tiles while this one merged",
+                image.display()
+            );
+        }
+    }
 }
 
 pub(crate) fn run_merge(a: &MergeArgs) -> Result<()> {
