@@ -499,3 +499,74 @@ fn limit_flags_set_the_loader_limits() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Found by fuzzing (fuzz/, scripts/fuzz.sh): the tile reader of `dofray merge`.
+
+/// A one-channel EXR tile of a 1x1 image whose header then claims a `side` x `side` data
+/// window, with nothing after its header (as the fuzzer's input had).
+fn exr_tile_claiming(side: i32) -> Vec<u8> {
+    use exr::prelude::*;
+    let channel = AnyChannel::new("R", FlatSamples::F32(vec![0.5]));
+    let layer = Layer::new(
+        (1, 1),
+        LayerAttributes::default(),
+        Encoding::UNCOMPRESSED,
+        AnyChannels::sort(vec![channel].into()),
+    );
+    let mut image = Image::from_layer(layer);
+    for (key, value) in [
+        ("dofray:region", "0,0,1,1"),
+        ("dofray:width", "1"),
+        ("dofray:height", "1"),
+    ] {
+        image
+            .attributes
+            .other
+            .insert(Text::from(key), AttributeValue::Text(Text::from(value)));
+    }
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    image.write().to_buffered(&mut bytes).unwrap();
+    let mut bytes = bytes.into_inner();
+    // dataWindow: box2i, 16 bytes: x min, y min, x max, y max.
+    let key = b"dataWindow\0box2i\0\x10\0\0\0";
+    let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len();
+    bytes[at + 8..at + 12].copy_from_slice(&(side - 1).to_le_bytes());
+    bytes[at + 12..at + 16].copy_from_slice(&(side - 1).to_le_bytes());
+    // chunkCount: int, one chunk a scan line without compression.
+    let key = b"chunkCount\0int\0\x04\0\0\0";
+    let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len();
+    bytes[at..at + 4].copy_from_slice(&side.to_le_bytes());
+    // The header: magic and version, then attributes (name, type, size, value) up to a 0.
+    let mut end = 8;
+    while bytes[end] != 0 {
+        let name = end + bytes[end..].iter().position(|&b| b == 0).unwrap();
+        let kind = name + 1 + bytes[name + 1..].iter().position(|&b| b == 0).unwrap();
+        let size = i32::from_le_bytes(bytes[kind + 1..kind + 5].try_into().unwrap());
+        end = kind + 5 + size as usize;
+    }
+    bytes.truncate(end + 1);
+    bytes
+}
+
+#[test]
+fn merge_tiles_whose_headers_claim_terabytes_are_refused_before_allocating() {
+    let dir = scratch("merge-claims");
+    let merge = |name: &str, bytes: Vec<u8>| {
+        let tile = dir.join(name);
+        std::fs::write(&tile, bytes).unwrap();
+        let out = dir.join(format!("out.{}", name.rsplit('.').next().unwrap()));
+        quick(Duration::from_secs(2), || {
+            dofray::output::merge::merge(&[tile], &out)
+                .unwrap_err()
+                .to_string()
+        })
+    };
+    // The reader used to allocate what the header claims (2^58 floats here), and the process
+    // aborted: "memory allocation of ... bytes failed".
+    let e = merge("tile.exr", exr_tile_claiming(1 << 29));
+    assert_contains(&e, &["tile.exr", "536870912x536870912", "EiB", "available"]);
+    // A PNG whose header claims 2^20 x 2^20 RGB pixels (3 TiB).
+    let e = merge("tile.png", png_header(1 << 20, 1 << 20));
+    assert_contains(&e, &["tile.png", "1048576x1048576", "3.0 TiB", "available"]);
+}

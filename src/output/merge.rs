@@ -541,8 +541,35 @@ fn read_error(path: &Path, message: String) -> MergeError {
     }
 }
 
+/// Refuses a tile whose header asks for more pixel memory than there is, before its reader
+/// allocates it: a few bytes of header can claim a data window of terabytes.
+fn check_pixel_memory(path: &Path, (w, h): (u64, u64), needed: u128) -> Result<(), MergeError> {
+    use crate::limits::{Bytes, FALLBACK_LIMIT_BYTES, available_memory};
+    let available = available_memory().unwrap_or(FALLBACK_LIMIT_BYTES);
+    if needed > u128::from(available) {
+        return Err(read_error(
+            path,
+            format!(
+                "its header claims {w}x{h} pixels, which need {} of memory, but only {} is \
+                 available: not a tile of an image that could have been rendered here",
+                Bytes(needed),
+                Bytes(available)
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// An EXR tile's text attributes (sorted), channels and data window.
 fn read_exr_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> {
+    let headers = ::exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| read_error(path, e.to_string()))?
+        .headers;
+    for header in &headers {
+        let (w, h) = (header.layer_size.0 as u64, header.layer_size.1 as u64);
+        let pixel = header.channels.bytes_per_pixel as u128;
+        check_pixel_memory(path, (w, h), u128::from(w) * u128::from(h) * pixel)?;
+    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -593,12 +620,12 @@ fn read_png_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> 
     let mut decoder = ::png::Decoder::new(BufReader::new(file));
     decoder.set_transformations(::png::Transformations::IDENTITY);
     let mut reader = decoder.read_info().map_err(|e| read_error(e.to_string()))?;
-    let mut data = vec![
-        0;
-        reader
-            .output_buffer_size()
-            .ok_or_else(|| read_error("too large".into()))?
-    ];
+    let size = reader.info().size();
+    let bytes = reader
+        .output_buffer_size()
+        .ok_or_else(|| read_error("too large".into()))?;
+    check_pixel_memory(path, (size.0.into(), size.1.into()), bytes as u128)?;
+    let mut data = vec![0; bytes];
     let frame = reader
         .next_frame(&mut data)
         .map_err(|e| read_error(e.to_string()))?;
