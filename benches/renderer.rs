@@ -53,8 +53,8 @@ fn benches(c: &mut Criterion) {
     g.bench_function("interval map (conservative)", |b| {
         b.iter(|| black_box(maps::interval_map(&film.coc, w, h, 0.4, false, 64)))
     });
-    let interval = maps::interval_map(&film.coc, w, h, 0.4, false, 64);
-    let sites = maps::site_mask(&interval, w, h);
+    let interval = maps::interval_map(&film.coc, w, h, 0.4, false, 64).unwrap();
+    let sites = maps::site_mask(&interval, w, h).unwrap();
     g.bench_function("site mask", |b| {
         b.iter(|| black_box(maps::site_mask(&interval, w, h)))
     });

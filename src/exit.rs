@@ -290,7 +290,12 @@ mod tests {
     /// command line's exit codes and tests/cli.rs expect it.
     fn cases() -> Vec<Case> {
         use ErrorKind::*;
-        let memory = crate::limits::check_image_memory_against(100, 100, 1, true).unwrap_err();
+        let memory = crate::limits::check_image_memory_against(
+            100,
+            100,
+            &crate::limits::MemoryLimit::Available { available: 1 },
+        )
+        .unwrap_err();
         let override_error = || OverrideError::ZeroSize(Param::Width);
         let renderer_camera = |overridden| RendererError::Camera {
             source: camera_error(),

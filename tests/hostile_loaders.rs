@@ -339,7 +339,7 @@ fn scene_image_sizes_beyond_memory_name_the_file_and_key() {
             "scene.toml:2:",
             "image.width",
             "4294967295x4294967295",
-            "1.2 ZiB",
+            "2.0 ZiB",
         ],
     );
     std::fs::write(

@@ -7,7 +7,9 @@ use std::path::{Path, PathBuf};
 
 use dofray::camera::{CameraLens, Focus, LensSpec};
 use dofray::embree::Device;
-use dofray::limits::{BYTES_PER_PIXEL, check_image_memory, check_image_memory_against};
+use dofray::limits::{
+    BYTES_PER_PIXEL, MemoryLimit, check_image_memory, check_image_memory_against,
+};
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, RulePatch, render};
 use dofray::scene::{self, LoadError, MeshMaterials, Object, SceneDesc, World, builtin};
 use dofray::shade::{Light, Texture};
@@ -1414,11 +1416,14 @@ fn invalid_utf8_in_a_scene_names_the_line() {
 fn image_sizes_beyond_memory_are_refused_with_the_need() {
     assert!(check_image_memory(640, 480).is_ok());
     let e = check_image_memory(200_000, 200_000).unwrap_err();
-    assert_eq!(e.needed, 200_000u128 * 200_000 * BYTES_PER_PIXEL as u128);
+    assert_eq!(e.needed(), 200_000u128 * 200_000 * BYTES_PER_PIXEL as u128);
     let m = e.to_string();
     assert!(m.contains("200000x200000") && m.contains("TiB"), "{m}");
-    let e = check_image_memory_against(4000, 3000, 100 << 20, true).unwrap_err();
-    assert!(e.to_string().contains("915.5 MiB"), "{e}");
+    let limit = MemoryLimit::Available {
+        available: 100 << 20,
+    };
+    let e = check_image_memory_against(4000, 3000, &limit).unwrap_err();
+    assert!(e.to_string().contains("1.4 GiB"), "{e}");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -205,7 +205,7 @@ fn render(
         return Err(cancelled());
     }
     Ok(DofrayImage {
-        rgba: film.rgba_interleaved(),
+        rgba: film.try_rgba_interleaved()?,
         film,
         stats,
         transparent: settings.transparent,

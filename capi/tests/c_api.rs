@@ -235,6 +235,39 @@ fn render_jobs() {
     );
 }
 
+/// capi/tests/c/memory.c under an address-space limit (`ulimit -v`, about 3 GB; a small
+/// render needs about 0.4 GB of address space, Embree's and the threads' included): an image
+/// whose buffers cannot fit is `DOFRAY_RESOURCE_LIMIT` naming the limit, not an abort of the
+/// host process, which then renders a small image.
+#[test]
+fn an_image_beyond_the_address_space_limit_is_a_resource_limit() {
+    if under_foreign_loader() {
+        return;
+    }
+    let lib_dir = lib_dir();
+    let dir = out_dir("memory");
+    let exe = dir.join("memory");
+    compile(&root().join("capi/tests/c/memory.c"), &exe, &lib_dir, true);
+    let output = Command::new("sh")
+        .args([
+            "-c",
+            "ulimit -v 3000000 && exec \"$0\"",
+            exe.to_str().unwrap(),
+        ])
+        .current_dir(&dir)
+        .output()
+        .expect("sh runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    println!("{text}");
+    assert!(output.status.success(), "{}:\n{text}", output.status);
+    assert!(text.contains("memory checks passed"), "{text}");
+    assert!(text.contains("huge render -> resource_limit"), "{text}");
+}
+
 /// The README's example is capi/examples/render.c, which compiles and renders paper.png.
 #[test]
 fn readme_example() {

@@ -19,6 +19,7 @@ use std::time::Duration;
 
 use dofray::embree::Device;
 use dofray::exit::{ErrorKind, HasKind};
+use dofray::limits::{MemoryError, try_copy};
 use dofray::overrides::Overrides;
 use dofray::params::Param;
 use dofray::render::{CancelFlag, Film, Progress, RenderSettings, RenderStats, SettingsPatch};
@@ -413,7 +414,8 @@ impl Render {
         // An ImportError if numpy is missing (the numpy crate would panic).
         py.import("numpy")?;
         let (w, h) = (film.width, film.height);
-        let rgba = film.rgba_interleaved();
+        let memory = |e: MemoryError| Failure::from_error(&e).into_pyerr(py);
+        let rgba = film.try_rgba_interleaved().map_err(memory)?;
         let shape = |e: numpy::ndarray::ShapeError| {
             Failure {
                 kind: ErrorKind::Internal,
@@ -422,8 +424,10 @@ impl Render {
             .into_pyerr(py)
         };
         let rgba = Array3::from_shape_vec((h, w, 4), rgba).map_err(shape)?;
-        let depth = Array2::from_shape_vec((h, w), film.depth.clone()).map_err(shape)?;
-        let coc = Array2::from_shape_vec((h, w), film.coc.clone()).map_err(shape)?;
+        let depth = try_copy(&film.depth, "the depth array").map_err(memory)?;
+        let depth = Array2::from_shape_vec((h, w), depth).map_err(shape)?;
+        let coc = try_copy(&film.coc, "the CoC array").map_err(memory)?;
+        let coc = Array2::from_shape_vec((h, w), coc).map_err(shape)?;
         Ok(Self {
             rgba: rgba.into_pyarray(py).unbind(),
             depth: depth.into_pyarray(py).unbind(),

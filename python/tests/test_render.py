@@ -146,6 +146,34 @@ def test_unknown_builtin_scene():
     assert "no-such-builtin" in str(info.value)
 
 
+def test_an_image_beyond_the_address_space_limit_is_an_error_not_an_abort():
+    """Under an address-space limit (`ulimit -v`, set in a child interpreter), an image whose
+    buffers cannot fit raises dofray.Error (kind resource_limit) naming the limit, and the
+    interpreter lives on to render a small image."""
+    import subprocess
+    import sys
+
+    child = """
+import resource
+import dofray
+resource.setrlimit(resource.RLIMIT_AS, (3_000_000_000, resource.RLIM_INFINITY))
+try:
+    dofray.render("paper", width=1, height=200_000_000)
+    print("no error")
+except dofray.Error as e:
+    print("error:", e.kind, e)
+r = dofray.render("paper", width=32, height=24, spp=4)
+print("survived", r.width, r.height)
+"""
+    out = subprocess.run(
+        [sys.executable, "-c", child], capture_output=True, text=True, timeout=120
+    )
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "error: resource_limit a 1x200000000 image" in out.stdout, out.stdout
+    assert "address-space limit" in out.stdout, out.stdout
+    assert "survived 32 24" in out.stdout, out.stdout
+
+
 @pytest.mark.parametrize(
     ("kwargs", "name"),
     [

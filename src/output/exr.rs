@@ -21,6 +21,7 @@ use ::exr::prelude::*;
 
 use super::{Metadata, OutputError, Target};
 use crate::error_kind::{ErrorKind, HasKind};
+use crate::limits::{MemoryError, try_collect};
 use crate::render::Region;
 use crate::render::film::Film;
 
@@ -242,38 +243,36 @@ pub(super) fn write_exr(
     metadata: &Metadata,
     options: ExrOptions,
 ) -> Result<(), OutputError> {
+    // Every channel's buffer is allocated fallibly: a MemoryError, not an abort.
     let f32s = |name: &str, data: Vec<f32>| AnyChannel::new(name, FlatSamples::F32(data));
-    let beauty = |name: &str, data: Vec<f32>| {
-        if options.half {
-            let halves = data
-                .into_iter()
-                .map(|v| f16::from_f32(v.clamp(-HALF_MAX, HALF_MAX)))
-                .collect();
-            AnyChannel::new(name, FlatSamples::F16(halves))
+    let floats =
+        |values: &mut dyn ExactSizeIterator<Item = f32>| try_collect(values, "an EXR channel");
+    let beauty = |name: &str, values: &mut dyn ExactSizeIterator<Item = f32>| {
+        Ok::<_, MemoryError>(if options.half {
+            let halves = values.map(|v| f16::from_f32(v.clamp(-HALF_MAX, HALF_MAX)));
+            AnyChannel::new(
+                name,
+                FlatSamples::F16(try_collect(halves, "an EXR channel")?),
+            )
         } else {
-            f32s(name, data)
-        }
+            f32s(name, floats(values)?)
+        })
     };
+    let depth = |&d: &f32| if d.is_finite() { d } else { DEPTH_MISS };
     let channels = SmallVec::from_vec(vec![
-        beauty(CHANNEL_R, film.color.iter().map(|c| c.x).collect()),
-        beauty(CHANNEL_G, film.color.iter().map(|c| c.y).collect()),
-        beauty(CHANNEL_B, film.color.iter().map(|c| c.z).collect()),
-        beauty(CHANNEL_A, film.alpha.clone()),
-        f32s(
-            CHANNEL_DEPTH,
-            film.depth
-                .iter()
-                .map(|&d| if d.is_finite() { d } else { DEPTH_MISS })
-                .collect(),
-        ),
-        f32s(CHANNEL_COC, film.coc.clone()),
+        beauty(CHANNEL_R, &mut film.color.iter().map(|c| c.x))?,
+        beauty(CHANNEL_G, &mut film.color.iter().map(|c| c.y))?,
+        beauty(CHANNEL_B, &mut film.color.iter().map(|c| c.z))?,
+        beauty(CHANNEL_A, &mut film.alpha.iter().copied())?,
+        f32s(CHANNEL_DEPTH, floats(&mut film.depth.iter().map(depth))?),
+        f32s(CHANNEL_COC, floats(&mut film.coc.iter().copied())?),
         f32s(
             CHANNEL_INTERVAL,
-            film.interval.iter().map(|&i| i as f32).collect(),
+            floats(&mut film.interval.iter().map(|&i| i as f32))?,
         ),
         f32s(
             CHANNEL_SAMPLES,
-            film.samples.iter().map(|&s| s as f32).collect(),
+            floats(&mut film.samples.iter().map(|&s| s as f32))?,
         ),
     ]);
     let size = (film.width, film.height);

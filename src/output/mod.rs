@@ -91,6 +91,9 @@ pub enum OutputError {
     /// The image has no pixels (zero width or height).
     #[error("cannot write an image with no pixels")]
     EmptyImage,
+    /// A buffer of the encoded image could not be allocated.
+    #[error(transparent)]
+    Memory(#[from] crate::limits::MemoryError),
     /// The target exists and has no write permission bit: it is never replaced.
     #[error(
         "{} is read-only (no write permission bit{}): refusing to replace it; make it \
@@ -214,7 +217,7 @@ pub fn write_film_to(
     match target.format() {
         ImageFormat::Png => {
             let (sixteen, alpha) = (options.png_16bit, options.png_alpha);
-            let data = png::film_samples(film, sixteen, alpha, &options.view);
+            let data = png::film_samples(film, sixteen, alpha, &options.view)?;
             let mut metadata = options.metadata.clone();
             for (key, value) in options.view.metadata() {
                 metadata.push(key, value);
@@ -337,6 +340,7 @@ impl HasKind for OutputError {
         match self {
             // The value of -o or --aov-dir is wrong, not the file system.
             Self::UnknownExtension { .. } | Self::Collision { .. } => ErrorKind::Usage,
+            Self::Memory(e) => e.kind(),
             _ => ErrorKind::Io,
         }
     }

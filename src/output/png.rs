@@ -8,14 +8,22 @@
 use std::io::{BufWriter, Write};
 
 use super::{DisplayView, Metadata, OutputError, Target, check_len};
+use crate::limits::{MemoryError, try_with_capacity};
 use crate::render::film::Film;
 
 /// The film as PNG samples: colour through `view` (straight, when `alpha`: divided by alpha
 /// first, as the view applies to the colour a surface has, not to its coverage) and, when
-/// `alpha`, the linear alpha; 8-bit bytes or 16-bit big-endian pairs.
-pub(super) fn film_samples(film: &Film, sixteen: bool, alpha: bool, view: &DisplayView) -> Vec<u8> {
+/// `alpha`, the linear alpha; 8-bit bytes or 16-bit big-endian pairs. A [`MemoryError`] when
+/// the samples' buffer cannot be allocated.
+pub(super) fn film_samples(
+    film: &Film,
+    sixteen: bool,
+    alpha: bool,
+    view: &DisplayView,
+) -> Result<Vec<u8>, MemoryError> {
     let channels = if alpha { 4 } else { 3 };
-    let mut out = Vec::with_capacity(film.color.len() * channels * if sixteen { 2 } else { 1 });
+    let bytes = film.color.len() * channels * if sixteen { 2 } else { 1 };
+    let mut out = try_with_capacity(bytes, "the PNG's samples")?;
     let mut push = |v: f32| {
         if sixteen {
             out.extend_from_slice(&linear16(v).to_be_bytes());
@@ -32,7 +40,7 @@ pub(super) fn film_samples(film: &Film, sixteen: bool, alpha: bool, view: &Displ
             push(a);
         }
     }
-    out
+    Ok(out)
 }
 
 /// A value in `[0, 1]` (clamped; NaN counts as 0) to 8 bits.
@@ -142,7 +150,7 @@ mod tests {
         // Premultiplied: half-covered mid grey, fully covered white, empty.
         film.color = vec![Vec3::splat(0.25), Vec3::ONE, Vec3::ZERO];
         film.alpha = vec![0.5, 1.0, 0.0];
-        let rgba = film_samples(&film, false, true, &DisplayView::default());
+        let rgba = film_samples(&film, false, true, &DisplayView::default()).unwrap();
         assert_eq!(
             rgba,
             [
@@ -161,10 +169,10 @@ mod tests {
             ]
         );
         // Without alpha the premultiplied colour is written as it is.
-        let rgb = film_samples(&film, false, false, &DisplayView::default());
+        let rgb = film_samples(&film, false, false, &DisplayView::default()).unwrap();
         assert_eq!(&rgb[..3], &[srgb8(0.25); 3]);
         assert_eq!(rgb.len(), 9);
-        let rgba16 = film_samples(&film, true, true, &DisplayView::default());
+        let rgba16 = film_samples(&film, true, true, &DisplayView::default()).unwrap();
         assert_eq!(rgba16.len(), 24);
         assert_eq!(&rgba16[0..2], &srgb16(0.5).to_be_bytes());
         assert_eq!(&rgba16[6..8], &32768u16.to_be_bytes());

@@ -2,6 +2,8 @@
 
 use glam::{Vec3, Vec4};
 
+use crate::limits::{MemoryError, try_collect, try_vec, try_with_capacity};
+
 /// A rendered frame: linear RGB radiance plus the maps the seed's method works from.
 #[derive(Debug, Clone)]
 pub struct Film {
@@ -29,19 +31,26 @@ pub struct Film {
 
 impl Film {
     /// A `width` x `height` film with black colour, alpha 1, infinite depth, CoC 0, interval 1 and
-    /// no samples.
+    /// no samples. Aborts if the memory cannot be had: renders use [`Film::try_new`].
     pub fn new(width: usize, height: usize) -> Self {
-        let n = width * height;
-        Self {
+        Self::try_new(width, height).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`Film::new`], or a [`MemoryError`] when a buffer cannot be allocated.
+    pub fn try_new(width: usize, height: usize) -> Result<Self, MemoryError> {
+        let n = width
+            .checked_mul(height)
+            .ok_or_else(|| MemoryError::allocation("the film", width as u128 * height as u128))?;
+        Ok(Self {
             width,
             height,
-            color: vec![Vec3::ZERO; n],
-            alpha: vec![1.0; n],
-            depth: vec![f32::INFINITY; n],
-            coc: vec![0.0; n],
-            interval: vec![1; n],
-            samples: vec![0; n],
-        }
+            color: try_vec(n, Vec3::ZERO, "the film's colour")?,
+            alpha: try_vec(n, 1.0, "the film's alpha")?,
+            depth: try_vec(n, f32::INFINITY, "the film's depth")?,
+            coc: try_vec(n, 0.0, "the film's CoC")?,
+            interval: try_vec(n, 1, "the film's intervals")?,
+            samples: try_vec(n, 0, "the film's sample counts")?,
+        })
     }
 
     /// Index of pixel (`x`, `y`) in the row-major per-pixel vectors: `y * width + x`.
@@ -49,25 +58,38 @@ impl Film {
         y * self.width + x
     }
 
-    /// Sets colour and alpha from RGBA pixels.
+    /// Sets colour and alpha from RGBA pixels (one per film pixel), in place.
     pub fn set_rgba(&mut self, rgba: &[Vec4]) {
-        self.color = rgba.iter().map(|c| c.truncate()).collect();
-        self.alpha = rgba.iter().map(|c| c.w).collect();
+        debug_assert_eq!(
+            rgba.len(),
+            self.color.len(),
+            "one RGBA pixel per film pixel"
+        );
+        for ((c, a), p) in self.color.iter_mut().zip(&mut self.alpha).zip(rgba) {
+            *c = p.truncate();
+            *a = p.w;
+        }
     }
 
-    /// The pixels of `region` (which must lie inside the film) as a film of its own.
+    /// The pixels of `region` (which must lie inside the film) as a film of its own. Aborts if
+    /// the memory cannot be had: renders use [`Film::try_crop`].
     pub fn crop(&self, region: &super::Region) -> Film {
+        self.try_crop(region).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`Film::crop`], or a [`MemoryError`] when a buffer cannot be allocated.
+    pub fn try_crop(&self, region: &super::Region) -> Result<Film, MemoryError> {
         let w = self.width;
-        Film {
+        Ok(Film {
             width: region.width() as usize,
             height: region.height() as usize,
-            color: region.crop(&self.color, w),
-            alpha: region.crop(&self.alpha, w),
-            depth: region.crop(&self.depth, w),
-            coc: region.crop(&self.coc, w),
-            interval: region.crop(&self.interval, w),
-            samples: region.crop(&self.samples, w),
-        }
+            color: region.try_crop(&self.color, w, "the region's colour")?,
+            alpha: region.try_crop(&self.alpha, w, "the region's alpha")?,
+            depth: region.try_crop(&self.depth, w, "the region's depth")?,
+            coc: region.try_crop(&self.coc, w, "the region's CoC")?,
+            interval: region.try_crop(&self.interval, w, "the region's intervals")?,
+            samples: region.try_crop(&self.samples, w, "the region's sample counts")?,
+        })
     }
 
     /// The colour as `[f32; 3]` pixels (for metrics and writers).
@@ -76,11 +98,24 @@ impl Film {
     }
 
     /// Colour and alpha interleaved, 4 floats per pixel, row-major (for C and numpy buffers).
+    /// Aborts if the memory cannot be had: see [`Film::try_rgba_interleaved`].
     pub fn rgba_interleaved(&self) -> Vec<f32> {
-        self.color
-            .iter()
-            .zip(&self.alpha)
-            .flat_map(|(c, &a)| [c.x, c.y, c.z, a])
-            .collect()
+        self.try_rgba_interleaved()
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`Film::rgba_interleaved`], or a [`MemoryError`] when it cannot be allocated.
+    pub fn try_rgba_interleaved(&self) -> Result<Vec<f32>, MemoryError> {
+        let n = self.color.len().min(self.alpha.len());
+        let mut out = try_with_capacity(n.saturating_mul(4), "the interleaved RGBA image")?;
+        for (c, &a) in self.color.iter().zip(&self.alpha) {
+            out.extend_from_slice(&[c.x, c.y, c.z, a]);
+        }
+        Ok(out)
+    }
+
+    /// The colour as `[f32; 3]` pixels, or a [`MemoryError`] when they cannot be allocated.
+    pub fn try_rgb(&self) -> Result<Vec<[f32; 3]>, MemoryError> {
+        try_collect(self.color.iter().map(|c| c.to_array()), "the RGB image")
     }
 }

@@ -4,21 +4,23 @@ use glam::Vec4;
 use rayon::prelude::*;
 
 use super::maps::cell;
+use crate::limits::{MemoryError, try_copy};
 
 /// Replaces every non-site pixel's colour and coverage (RGBA) by the bilinear blend of the
 /// sites at the corners of its lattice cell (see [`super::maps::site_mask`], which guarantees
-/// they are sites).
+/// they are sites). A [`MemoryError`] (nothing changed) when its copy of the sites' colours
+/// cannot be allocated.
 pub fn interpolate(
     color: &mut [Vec4],
     interval: &[u32],
     sites: &[bool],
     width: usize,
     height: usize,
-) {
+) -> Result<(), MemoryError> {
     if sites.iter().all(|&s| s) {
-        return; // nothing to fill (dense)
+        return Ok(()); // nothing to fill (dense)
     }
-    let snapshot: Vec<Vec4> = color.to_vec();
+    let snapshot = try_copy(color, "the colours to interpolate from")?;
     color
         .par_chunks_mut(width)
         .enumerate()
@@ -46,6 +48,7 @@ pub fn interpolate(
                 *out = top.lerp(bottom, ty);
             }
         });
+    Ok(())
 }
 
 #[cfg(test)]
@@ -57,7 +60,7 @@ mod tests {
     fn linear_gradients_are_reproduced_exactly() {
         let (w, h) = (17, 9);
         let interval = vec![4u32; w * h];
-        let sites = site_mask(&interval, w, h);
+        let sites = site_mask(&interval, w, h).unwrap();
         let truth: Vec<Vec4> = (0..w * h)
             .map(|p| Vec4::new((p % w) as f32 * 0.1, (p / w) as f32 * 0.2, 1.0, 0.5))
             .collect();
@@ -66,7 +69,7 @@ mod tests {
             .zip(&sites)
             .map(|(c, &s)| if s { *c } else { Vec4::splat(-1.0) })
             .collect();
-        interpolate(&mut color, &interval, &sites, w, h);
+        interpolate(&mut color, &interval, &sites, w, h).unwrap();
         for (got, want) in color.iter().zip(&truth) {
             assert!((*got - *want).length() < 1e-5, "{got} vs {want}");
         }

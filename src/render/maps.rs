@@ -3,6 +3,8 @@
 
 use rayon::prelude::*;
 
+use crate::limits::{MemoryError, try_collect, try_vec};
+
 /// Minima over growing squares by doubling (the sparse-table idea), for every level
 /// `l` in `1..=top`: `out[l - 1][p]` is the minimum of `src` over the (2r + 1)^2 square around
 /// pixel p with r = 2^l, clipped at the borders (missing pixels count as `u8::MAX`).
@@ -12,14 +14,19 @@ use rayon::prelude::*;
 /// (2r + 1)^2 square around p is covered by the four 2r x 2r squares whose corners are at
 /// p - r and p - (r - 1) on each axis. Every step is a min of whole shifted slices, which
 /// vectorises: a few passes over the bytes instead of a filter per pixel.
-fn square_minima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u8>> {
+fn square_minima(
+    src: &[u8],
+    width: usize,
+    height: usize,
+    top: u32,
+) -> Result<Vec<Vec<u8>>, MemoryError> {
     if top == 0 {
-        return Vec::new();
+        return Ok(Vec::new());
     }
     // Pad every side by the largest radius so shifted reads stay inside the buffer.
     let pad = 1usize << top;
     let (pw, ph) = (width + 2 * pad, height + 2 * pad);
-    let mut m = vec![u8::MAX; pw * ph];
+    let mut m = try_vec(pw * ph, u8::MAX, "the padded blur map")?;
     m.par_chunks_mut(pw)
         .skip(pad)
         .zip(src.par_chunks(width))
@@ -36,14 +43,14 @@ fn square_minima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u
     for level in 1..=top {
         let r = 1usize << level;
         while side < 2 * r {
-            let mut next = vec![u8::MAX; m.len()];
+            let mut next = try_vec(m.len(), u8::MAX, "the padded blur map")?;
             let n = m.len() - side * pw - side;
             shifted_min(&m, [0, side, side * pw, side * pw + side], &mut next[..n]);
             m = next;
             side *= 2;
         }
         // m is now M_2r: the four covering squares around each pixel.
-        let mut level_min = vec![0u8; width * height];
+        let mut level_min = try_vec(width * height, 0u8, "a minimum map")?;
         level_min
             .par_chunks_mut(width)
             .enumerate()
@@ -58,21 +65,26 @@ fn square_minima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u
             });
         out.push(level_min);
     }
-    out
+    Ok(out)
 }
 
 /// Maxima over growing squares, for every level `l` in `1..=top`: `out[l - 1][p]` is the
 /// maximum of `src` over the (2r + 1)^2 square around pixel p with r = 2^l, clipped at the
 /// borders (missing pixels count as 0).
-pub fn square_maxima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<Vec<u8>> {
-    let inverted: Vec<u8> = src.iter().map(|&v| u8::MAX - v).collect();
-    let mut levels = square_minima(&inverted, width, height, top);
+pub fn square_maxima(
+    src: &[u8],
+    width: usize,
+    height: usize,
+    top: u32,
+) -> Result<Vec<Vec<u8>>, MemoryError> {
+    let inverted = try_collect(src.iter().map(|&v| u8::MAX - v), "the peak map")?;
+    let mut levels = square_minima(&inverted, width, height, top)?;
     for level in &mut levels {
         for v in level.iter_mut() {
             *v = u8::MAX - *v;
         }
     }
-    levels
+    Ok(levels)
 }
 
 /// Which pixels the blur of a defocused surface reaches. A surface seen at pixel q with
@@ -81,18 +93,16 @@ pub fn square_maxima(src: &[u8], width: usize, height: usize, top: u32) -> Vec<V
 /// pixels need lens samples too. The disc of radius r is covered by the diamond
 /// |dx| + |dy| <= r sqrt(2), whose reach is a separable max-minus-distance propagation
 /// (two linear scans per axis), so this never underestimates and costs O(pixels).
-pub fn blurred(coc: &[f32], width: usize, height: usize) -> Vec<bool> {
+pub fn blurred(coc: &[f32], width: usize, height: usize) -> Result<Vec<bool>, MemoryError> {
     let none = f32::NEG_INFINITY;
-    let mut reach: Vec<f32> = coc
-        .iter()
-        .map(|&c| {
-            if c > 1.0 {
-                c * 0.5 * std::f32::consts::SQRT_2
-            } else {
-                none
-            }
-        })
-        .collect();
+    let reach = coc.iter().map(|&c| {
+        if c > 1.0 {
+            c * 0.5 * std::f32::consts::SQRT_2
+        } else {
+            none
+        }
+    });
+    let mut reach = try_collect(reach, "the blur reach map")?;
     reach.par_chunks_mut(width).for_each(|row| {
         for x in 1..row.len() {
             row[x] = row[x].max(row[x - 1] - 1.0);
@@ -114,7 +124,7 @@ pub fn blurred(coc: &[f32], width: usize, height: usize) -> Vec<bool> {
             *r = r.max(b - 1.0);
         }
     }
-    reach.into_iter().map(|r| r >= 0.0).collect()
+    try_collect(reach.iter().map(|&r| r >= 0.0), "the blur map")
 }
 
 /// Largest power of two <= v, for v >= 1 (an integer's highest bit: no log2 per pixel).
@@ -150,13 +160,11 @@ pub fn interval_map(
     k: f32,
     paper_exact: bool,
     max_interval: u32,
-) -> Vec<u32> {
-    let raw: Vec<u32> = coc
-        .iter()
-        .map(|&c| paper_interval(c, k, max_interval))
-        .collect();
+) -> Result<Vec<u32>, MemoryError> {
+    let raw = coc.iter().map(|&c| paper_interval(c, k, max_interval));
+    let raw = try_collect(raw, "the interval map")?;
     if paper_exact {
-        return raw;
+        return Ok(raw);
     }
     conservative(raw, width, height)
 }
@@ -164,29 +172,37 @@ pub fn interval_map(
 /// The error-controlled rule's starting intervals: `k * CoC` in power-of-two layers with no
 /// every-other-pixel floor (a CoC below 2 / k starts at 1), made conservative like
 /// [`interval_map`]'s. These are upper bounds; [`super::refine`] only ever halves them.
-pub fn start_intervals(coc: &[f32], width: usize, height: usize, k: f32, max: u32) -> Vec<u32> {
-    let raw = coc
-        .iter()
-        .map(|&c| layer_interval(c, k, 1.0, max))
-        .collect();
-    conservative(raw, width, height)
+pub fn start_intervals(
+    coc: &[f32],
+    width: usize,
+    height: usize,
+    k: f32,
+    max: u32,
+) -> Result<Vec<u32>, MemoryError> {
+    let raw = coc.iter().map(|&c| layer_interval(c, k, 1.0, max));
+    conservative(try_collect(raw, "the interval map")?, width, height)
 }
 
 /// Lowers each interval until no pixel within its reach has a smaller one.
-fn conservative(raw: Vec<u32>, width: usize, height: usize) -> Vec<u32> {
+fn conservative(raw: Vec<u32>, width: usize, height: usize) -> Result<Vec<u32>, MemoryError> {
     // Work on log2 of the layers as bytes: a quarter of the memory traffic of u32.
-    let layer: Vec<u8> = raw.iter().map(|&i| i.trailing_zeros() as u8).collect();
+    let layer = try_collect(
+        raw.iter().map(|&i| i.trailing_zeros() as u8),
+        "the interval layers",
+    )?;
     let top = u32::from(layer.iter().copied().max().unwrap_or(0));
-    let mut out = vec![1u32; raw.len()];
+    // The raw map is the result's buffer.
+    let mut out = raw;
+    out.fill(1);
     // Level l is allowed where every pixel within 2^l (the pixel itself included) allows it.
-    for (level, min_in_reach) in (1..=top).zip(square_minima(&layer, width, height, top)) {
+    for (level, min_in_reach) in (1..=top).zip(square_minima(&layer, width, height, top)?) {
         for (o, &m) in out.iter_mut().zip(&min_in_reach) {
             if u32::from(m) >= level {
                 *o = 1 << level;
             }
         }
     }
-    out
+    Ok(out)
 }
 
 /// The lattice cell of pixel coordinate `x` at interval `i` in an axis of length `n`:
@@ -205,12 +221,12 @@ pub fn cell(x: usize, interval: u32, n: usize) -> (usize, usize) {
 /// Marks the sample sites: every lattice corner that some pixel interpolates from (a pixel
 /// with interval 1 is its own site). Interpolated pixels therefore only read traced sites, at
 /// every boundary between layers.
-pub fn site_mask(interval: &[u32], width: usize, height: usize) -> Vec<bool> {
+pub fn site_mask(interval: &[u32], width: usize, height: usize) -> Result<Vec<bool>, MemoryError> {
     if interval.iter().all(|&i| i == 1) {
         // Dense, or nothing defocused: every pixel is its own site.
-        return vec![true; interval.len()];
+        return try_vec(interval.len(), true, "the site mask");
     }
-    let mut sites = vec![false; interval.len()];
+    let mut sites = try_vec(interval.len(), false, "the site mask")?;
     for y in 0..height {
         for x in 0..width {
             let i = interval[y * width + x];
@@ -222,7 +238,7 @@ pub fn site_mask(interval: &[u32], width: usize, height: usize) -> Vec<bool> {
             }
         }
     }
-    sites
+    Ok(sites)
 }
 
 #[cfg(test)]
@@ -252,7 +268,7 @@ mod tests {
                 .map(|i| (crate::sampler::hash64(i as u64) % 200) as u8)
                 .collect();
             let wide: Vec<u32> = src.iter().map(|&v| u32::from(v)).collect();
-            let got = square_minima(&src, w, h, 5);
+            let got = square_minima(&src, w, h, 5).unwrap();
             assert_eq!(got.len(), 5);
             for (level, mins) in (1..=5).zip(&got) {
                 let want = brute(&wide, w, h, 1 << level);
@@ -260,7 +276,7 @@ mod tests {
                 assert_eq!(mins, want, "{w}x{h} level {level}");
             }
         }
-        assert!(square_minima(&[3], 1, 1, 0).is_empty());
+        assert!(square_minima(&[3], 1, 1, 0).unwrap().is_empty());
     }
 
     #[test]
@@ -287,8 +303,8 @@ mod tests {
         let coc: Vec<f32> = (0..w * h)
             .map(|i| if i % w < 40 { 0.0 } else { 40.0 })
             .collect();
-        let exact = interval_map(&coc, w, h, 0.4, true, 64);
-        let safe = interval_map(&coc, w, h, 0.4, false, 64);
+        let exact = interval_map(&coc, w, h, 0.4, true, 64).unwrap();
+        let safe = interval_map(&coc, w, h, 0.4, false, 64).unwrap();
         assert_eq!(exact[h / 2 * w + 40], 16);
         for y in 0..h {
             for x in 0..w {
@@ -312,7 +328,7 @@ mod tests {
         let mut coc = vec![0.0f32; w * h];
         coc[32 * w + 32] = 20.0; // reaches 10 px around
         coc[5 * w + 5] = 0.8; // in focus: reaches nothing
-        let blurred = blurred(&coc, w, h);
+        let blurred = blurred(&coc, w, h).unwrap();
         for y in 0..h {
             for x in 0..w {
                 let (dx, dy) = (x as f32 - 32.0, y as f32 - 32.0);
@@ -334,8 +350,8 @@ mod tests {
             .map(|i| ((i % w) as f32 - 20.0).abs() * 1.5)
             .collect();
         for exact in [true, false] {
-            let interval = interval_map(&coc, w, h, 0.4, exact, 64);
-            let sites = site_mask(&interval, w, h);
+            let interval = interval_map(&coc, w, h, 0.4, exact, 64).unwrap();
+            let sites = site_mask(&interval, w, h).unwrap();
             for y in 0..h {
                 for x in 0..w {
                     let i = interval[y * w + x];

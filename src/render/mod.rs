@@ -37,6 +37,7 @@ use rayon::prelude::*;
 use crate::camera::Camera;
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::error_kind::{ErrorKind, HasKind};
+use crate::limits::{MemoryError, try_collect, try_vec};
 use crate::scene::World;
 pub use crate::settings::{
     Integrator, Mode, PathLimits, RenderSettings, RulePatch, SamplingRule, SettingError,
@@ -61,6 +62,9 @@ pub enum RenderError {
     /// The region to render is empty or reaches beyond the image.
     #[error(transparent)]
     BadRegion(#[from] RegionError),
+    /// A buffer of the render (the film, a map) could not be allocated.
+    #[error(transparent)]
+    Memory(#[from] MemoryError),
     /// The last line of defence: input checks should make this impossible.
     #[error(
         "the render produced {count} pixels that are not finite numbers (the first at x = {x}, \
@@ -335,7 +339,7 @@ fn fixed_sites(
     film: &mut Film,
     blurred: &[bool],
     region: &Region,
-) -> Option<Vec<bool>> {
+) -> Result<Option<Vec<bool>>, MemoryError> {
     let (w, h) = (film.width, film.height);
     let per_site = |p: usize| {
         if settings.mode == Mode::Pinhole || !blurred[p] {
@@ -345,7 +349,7 @@ fn fixed_sites(
         }
     };
     // The pixels the region needs traced: its own, and the sites its pixels interpolate from.
-    let mut need = vec![false; w * h];
+    let mut need = try_vec(w * h, false, "the map of pixels to trace")?;
     let mut sites = None;
     if let (
         Mode::Adaptive,
@@ -362,8 +366,8 @@ fn fixed_sites(
             interval_factor,
             paper_exact,
             settings.max_interval,
-        );
-        let mask = maps::site_mask(&film.interval, w, h);
+        )?;
+        let mask = maps::site_mask(&film.interval, w, h)?;
         for y in region.y0 as usize..region.y1 as usize {
             for x in region.x0 as usize..region.x1 as usize {
                 let (x0, x1) = maps::cell(x, film.interval[y * w + x], w);
@@ -380,10 +384,10 @@ fn fixed_sites(
             need[y * w + region.x0 as usize..y * w + region.x1 as usize].fill(true);
         }
     }
-    film.samples = (0..w * h)
-        .map(|p| if need[p] { per_site(p) } else { 0 })
-        .collect();
-    sites
+    for (p, samples) in film.samples.iter_mut().enumerate() {
+        *samples = if need[p] { per_site(p) } else { 0 };
+    }
+    Ok(sites)
 }
 
 /// Renders `world` through `camera`. The result is bit-identical for any thread count.
@@ -435,7 +439,7 @@ pub fn render_region(
     region.check(camera.width, camera.height)?;
     let start = Instant::now();
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let mut film = Film::new(w, h);
+    let mut film = Film::try_new(w, h)?;
     let mut tally = Tally::new(settings.record_rays);
     depth_pass(world, camera, settings, &mut film, &mut tally, progress)?;
     let mut stats = RenderStats {
@@ -451,7 +455,7 @@ pub fn render_region(
         settings,
         pixel_filter: &pixel_filter,
     };
-    let blurred = maps::blurred(&film.coc, w, h);
+    let blurred = maps::blurred(&film.coc, w, h)?;
     if let (Mode::Adaptive, Some(tolerance)) = (settings.mode, settings.tolerance()) {
         // Maps, sites and interpolation interleave in rounds: timed as shading.
         let refined = refine::refine(
@@ -463,18 +467,21 @@ pub fn render_region(
         film.samples = refined.samples;
         stats.sites_seconds = phase.elapsed().as_secs_f64();
     } else {
-        let sites = fixed_sites(settings, &mut film, &blurred, region);
+        let sites = fixed_sites(settings, &mut film, &blurred, region)?;
         stats.maps_seconds = phase.elapsed().as_secs_f64();
         let phase = Instant::now();
         progress.start(settings.mode.name(), h as u64);
-        let mut estimates = vec![Estimate::default(); w * h];
-        let none = vec![0; w * h];
+        let mut estimates = try_vec(w * h, Estimate::default(), "the pixels' estimates")?;
+        let none = try_vec(w * h, 0, "the pixels' sample counts")?;
         shader.shade_rows(&none, &film.samples, &mut estimates, progress, &mut tally)?;
-        let mut rgba: Vec<glam::Vec4> = estimates.iter().map(|e| e.mean_rgba()).collect();
+        drop(none);
+        let rgba = estimates.iter().map(|e| e.mean_rgba());
+        let mut rgba = try_collect(rgba, "the pixels' colours")?;
+        drop(estimates);
         stats.sites_seconds = phase.elapsed().as_secs_f64();
         let phase = Instant::now();
         if let Some(sites) = &sites {
-            interpolate::interpolate(&mut rgba, &film.interval, sites, w, h);
+            interpolate::interpolate(&mut rgba, &film.interval, sites, w, h)?;
         }
         film.set_rgba(&rgba);
         stats.interpolate_seconds = phase.elapsed().as_secs_f64();
@@ -482,7 +489,8 @@ pub fn render_region(
     let (mut film, blurred) = if *region == Region::full(camera.width, camera.height) {
         (film, blurred)
     } else {
-        (film.crop(region), region.crop(&blurred, w))
+        let blurred = region.try_crop(&blurred, w, "the region's blur map")?;
+        (film.try_crop(region)?, blurred)
     };
     let bad = |c: &glam::Vec3| !c.is_finite();
     if let Some(first) = film.color.iter().position(bad) {
@@ -517,6 +525,7 @@ impl HasKind for RenderError {
             Self::Cancelled => ErrorKind::Interrupted(2),
             Self::Setting(e) => e.kind(),
             Self::BadRegion(e) => e.kind(),
+            Self::Memory(e) => e.kind(),
         }
     }
 }

@@ -42,6 +42,7 @@ use super::estimate::{Estimate, code3};
 use super::maps;
 use super::site::SiteShader;
 use super::{Progress, Tally};
+use crate::limits::{MemoryError, try_collect, try_copy, try_vec};
 
 /// Start interval as a fraction of the CoC at a tolerance of 1 code value (see the module
 /// documentation).
@@ -366,13 +367,12 @@ struct Peaks {
 
 /// Per pixel, the [`Peaks`] level whose square covers its reach, CoC / 2 (2 to `max`): a
 /// property of the CoC map, so made once per render.
-fn reach_levels(coc: &[f32], max: u32) -> Vec<u8> {
-    coc.iter()
-        .map(|&c| {
-            let r = (0.5 * c).clamp(2.0, max as f32);
-            r.log2().ceil().max(1.0) as u8
-        })
-        .collect()
+fn reach_levels(coc: &[f32], max: u32) -> Result<Vec<u8>, MemoryError> {
+    let levels = coc.iter().map(|&c| {
+        let r = (0.5 * c).clamp(2.0, max as f32);
+        r.log2().ceil().max(1.0) as u8
+    });
+    try_collect(levels, "the highlight reach map")
 }
 
 impl Peaks {
@@ -394,11 +394,11 @@ impl Peaks {
     }
 
     /// `top`: the largest of the [`reach_levels`].
-    fn new(est: &[Estimate], width: usize, height: usize, top: u8) -> Self {
+    fn new(est: &[Estimate], width: usize, height: usize, top: u8) -> Result<Self, MemoryError> {
         let peak: Vec<u8> = est.iter().map(|e| Self::quantise(e.peak())).collect();
-        Self {
-            levels: maps::square_maxima(&peak, width, height, u32::from(top)),
-        }
+        Ok(Self {
+            levels: maps::square_maxima(&peak, width, height, u32::from(top))?,
+        })
     }
 
     /// The brightest sample within `level`'s square around pixel p.
@@ -490,8 +490,8 @@ pub fn refine(
     let maps = Maps {
         tolerance,
         blurred,
-        start: maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval),
-        reach: reach_levels(coc, s.max_interval),
+        start: maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval)?,
+        reach: reach_levels(coc, s.max_interval)?,
     };
     let size = s.max_interval as usize;
     let buckets: Vec<Bucket> = (0..height)
@@ -501,7 +501,7 @@ pub fn refine(
         .filter(|b| region.overlaps(&b.region(false)))
         .collect();
     progress.start("adaptive", buckets.len() as u64);
-    let done: Vec<(Bucket, Option<Refined>, Tally)> = buckets
+    let done: Vec<(Bucket, Result<Option<Refined>, MemoryError>, Tally)> = buckets
         .par_iter()
         .map(|b| {
             let mut local = Tally::new(s.record_rays);
@@ -512,13 +512,13 @@ pub fn refine(
         .collect();
     super::check_cancelled(progress)?;
     let mut out = Refined {
-        color: vec![Vec4::ZERO; width * height],
-        interval: maps.start.clone(),
-        samples: vec![0; width * height],
+        color: try_vec(width * height, Vec4::ZERO, "the pixels' colours")?,
+        interval: try_copy(&maps.start, "the interval map")?,
+        samples: try_vec(width * height, 0, "the pixels' sample counts")?,
         rounds: 0,
     };
     for (b, refined, local) in done {
-        let Some(refined) = refined else {
+        let Some(refined) = refined? else {
             return Err(super::RenderError::Cancelled);
         };
         for y in 0..b.owned_h {
@@ -543,7 +543,7 @@ fn refine_bucket(
     b: &Bucket,
     progress: &dyn Progress,
     tally: &mut Tally,
-) -> Option<Refined> {
+) -> Result<Option<Refined>, MemoryError> {
     let s = shader.settings;
     let full_width = shader.camera.width as usize;
     let (width, height) = (b.w, b.h);
@@ -566,7 +566,7 @@ fn refine_bucket(
     let mut rounds = 0;
     loop {
         if progress.cancelled() {
-            return None;
+            return Ok(None);
         }
         pending.sort_unstable();
         pending.dedup();
@@ -583,7 +583,8 @@ fn refine_bucket(
         let peaks = pending
             .iter()
             .any(|&p| calm(p))
-            .then(|| Peaks::new(&traced.est, width, height, top_reach));
+            .then(|| Peaks::new(&traced.est, width, height, top_reach))
+            .transpose()?;
         let mut work = Vec::new();
         for p in pending.drain(..) {
             let e = &traced.est[p];
@@ -625,12 +626,12 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
-    Some(Refined {
+    Ok(Some(Refined {
         color: final_colour(&traced, &interval, b),
         interval,
         samples: traced.est.iter().map(|e| e.n).collect(),
         rounds,
-    })
+    }))
 }
 
 /// How many samples a site starts with and may grow to, blurred or in focus.

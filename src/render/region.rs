@@ -114,14 +114,25 @@ impl Region {
 
     /// Copies the region's pixels out of a full-frame, row-major buffer of width `width`.
     pub fn crop<T: Copy>(&self, full: &[T], width: usize) -> Vec<T> {
-        (self.y0 as usize..self.y1 as usize)
-            .flat_map(|y| {
-                let row = y * width;
-                full[row + self.x0 as usize..row + self.x1 as usize]
-                    .iter()
-                    .copied()
-            })
-            .collect()
+        self.try_crop(full, width, "a region's pixels")
+            .unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// [`Region::crop`], or a [`MemoryError`](crate::limits::MemoryError) naming `what` when
+    /// the copy cannot be allocated.
+    pub fn try_crop<T: Copy>(
+        &self,
+        full: &[T],
+        width: usize,
+        what: &'static str,
+    ) -> Result<Vec<T>, crate::limits::MemoryError> {
+        let (w, h) = (self.width() as usize, self.height() as usize);
+        let mut out = crate::limits::try_with_capacity(w * h, what)?;
+        for y in self.y0 as usize..self.y1 as usize {
+            let row = y * width;
+            out.extend_from_slice(&full[row + self.x0 as usize..row + self.x1 as usize]);
+        }
+        Ok(out)
     }
 
     /// Copies a region-sized, row-major buffer (`per_pixel` elements to a pixel) into the

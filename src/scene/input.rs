@@ -92,6 +92,8 @@ pub struct Input {
     reader: Take<BufReader<File>>,
     path: PathBuf,
     limit: u64,
+    /// The file's size when it was opened.
+    size: u64,
 }
 
 impl Input {
@@ -134,13 +136,26 @@ pub fn open(path: &Path, options: &LoadOptions) -> Result<Input, LoadError> {
         reader: BufReader::with_capacity(1 << 16, file).take(limit.saturating_add(1)),
         path: path.to_path_buf(),
         limit,
+        size: meta.len(),
     })
 }
 
-/// Reads a whole regular file, refusing more than `options.max_input_bytes`.
+/// Reads a whole regular file, refusing more than `options.max_input_bytes`. Its buffer is
+/// allocated at once for the file's size, so memory that cannot be had is a resource-limit
+/// error naming the file, not an abort halfway through.
 pub fn read(path: &Path, options: &LoadOptions) -> Result<Vec<u8>, LoadError> {
     let mut input = open(path, options)?;
-    let mut bytes = Vec::new();
+    if input.size > input.limit {
+        return Err(too_large(path, input.limit));
+    }
+    let size = input.size;
+    let mut bytes =
+        crate::limits::try_with_capacity(size as usize, "the file's bytes").map_err(|e| {
+            LoadError::Limit {
+                at: Location::file(path),
+                message: e.to_string(),
+            }
+        })?;
     input
         .reader()
         .read_to_end(&mut bytes)

@@ -11,6 +11,7 @@ use super::input::{self, Input, LoadOptions};
 use super::model::Transform;
 use super::texture::TextureCache;
 use crate::embree::{EmbreeError, TriangleMesh};
+use crate::limits::{MemoryError, try_with_capacity};
 use crate::shade::{ImageTexture, Wrap};
 
 /// A model file being loaded: its path, its folder (which the files it refers to resolve
@@ -100,6 +101,20 @@ pub(super) struct MeshBuffers {
     pub normals: Option<Vec<[f32; 3]>>,
     pub uvs: Option<Vec<[f32; 2]>>,
     pub tangents: Option<Vec<[f32; 4]>>,
+}
+
+/// An allocation of a load that failed, as the resource-limit error of the file `path`.
+pub(super) fn memory_error(path: &Path, e: MemoryError) -> LoadError {
+    LoadError::Limit {
+        at: Location::file(path),
+        message: e.to_string(),
+    }
+}
+
+/// An empty buffer with room for exactly `n` elements (mesh data of the file `path`, sized by
+/// the file), or the file's resource-limit error when the memory cannot be had.
+pub(super) fn buffer<T>(path: &Path, n: usize, what: &'static str) -> Result<Vec<T>, LoadError> {
+    try_with_capacity(n, what).map_err(|e| memory_error(path, e))
 }
 
 /// Reverses the winding of `triangles` when `transform` mirrors: a mirror turns every triangle

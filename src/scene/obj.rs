@@ -14,7 +14,7 @@ use glam::Vec3;
 use super::MAX_MATERIAL_VALUE;
 use super::error::{LoadError, Location};
 use super::input::{self, LoadOptions};
-use super::mesh_input::{MeshBuffers, ModelFile, guarded, keep_winding};
+use super::mesh_input::{MeshBuffers, ModelFile, buffer, guarded, keep_winding};
 use super::model::{Model, ModelMesh, Transform, short_vec};
 use super::texture::TextureCache;
 use crate::shade::{Material, Texture, Wrap};
@@ -571,24 +571,28 @@ fn model_mesh(
             c.copy_from_slice(&transform.point([c[0], c[1], c[2]]));
         }
     }
-    let positions = into_arrays::<f32, 3>(positions, 1);
-    let mut triangles = into_arrays::<u32, 3>(indices, 1);
+    let positions = into_arrays::<f32, 3>(file.path, positions, 1)?;
+    let mut triangles = into_arrays::<u32, 3>(file.path, indices, 1)?;
     drop_degenerate_and_repeated(&mut triangles);
     if triangles.is_empty() {
         return Ok(None);
     }
     keep_winding(&mut triangles, transform);
     // Only complete per-vertex attributes are kept (some faces may lack them).
-    let normals = (normals.len() == vertices * 3).then(|| {
-        let mut normals = normals;
-        if !transform.is_identity() {
-            for c in normals.chunks_exact_mut(3) {
-                c.copy_from_slice(&transform.normal([c[0], c[1], c[2]]));
+    let normals = (normals.len() == vertices * 3)
+        .then(|| {
+            let mut normals = normals;
+            if !transform.is_identity() {
+                for c in normals.chunks_exact_mut(3) {
+                    c.copy_from_slice(&transform.normal([c[0], c[1], c[2]]));
+                }
             }
-        }
-        into_arrays::<f32, 3>(normals, 0)
-    });
-    let uvs = (texcoords.len() == vertices * 2).then(|| into_arrays::<f32, 2>(texcoords, 0));
+            into_arrays::<f32, 3>(file.path, normals, 0)
+        })
+        .transpose()?;
+    let uvs = (texcoords.len() == vertices * 2)
+        .then(|| into_arrays::<f32, 2>(file.path, texcoords, 0))
+        .transpose()?;
     let what = if name.is_empty() {
         "mesh".to_string()
     } else {
@@ -614,10 +618,15 @@ fn model_mesh(
 /// Reusing tobj's allocation instead of copying would need `unsafe` (std has no safe
 /// `Vec<T>` to `Vec<[T; N]>` conversion), which the crate denies outside `embree`; measured
 /// on a 1M-triangle OBJ it would not lower the peak either, which comes from tobj's parse.
-fn into_arrays<T: Copy, const N: usize>(v: Vec<T>, spare: usize) -> Vec<[T; N]> {
-    let mut out = Vec::with_capacity(v.len() / N + spare);
+/// Allocated fallibly: memory that cannot be had is the file's resource-limit error.
+fn into_arrays<T: Copy, const N: usize>(
+    path: &Path,
+    v: Vec<T>,
+    spare: usize,
+) -> Result<Vec<[T; N]>, LoadError> {
+    let mut out = buffer(path, v.len() / N + spare, "a mesh's vertex data")?;
     out.extend(v.chunks_exact(N).map(|c| std::array::from_fn(|i| c[i])));
-    out
+    Ok(out)
 }
 
 /// Removes triangles with a repeated corner (no area) and repeats of a triangle (the same
@@ -895,7 +904,7 @@ mod tests {
     fn flat_buffers_become_arrays_with_spare_room() {
         let mut v: Vec<f32> = Vec::with_capacity(1000);
         v.extend((0..300).map(|i| i as f32));
-        let a: Vec<[f32; 3]> = into_arrays(v, 1);
+        let a: Vec<[f32; 3]> = into_arrays(Path::new("t.obj"), v, 1).unwrap();
         assert_eq!(a.len(), 100);
         assert_eq!(
             a.capacity(),
@@ -903,7 +912,7 @@ mod tests {
             "one spare element for TriangleMesh's padding"
         );
         assert_eq!(a[99], [297.0, 298.0, 299.0]);
-        let b: Vec<[u32; 2]> = into_arrays(vec![1, 2, 3, 4], 0);
+        let b: Vec<[u32; 2]> = into_arrays(Path::new("t.obj"), vec![1, 2, 3, 4], 0).unwrap();
         assert_eq!((b.as_slice(), b.capacity()), (&[[1, 2], [3, 4]][..], 2));
     }
 

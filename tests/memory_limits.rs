@@ -1,0 +1,164 @@
+//! Issue 28: memory that respects the limits the process really has. Under an address-space
+//! limit (`ulimit -v`, set by `sh -c`), an image whose buffers cannot fit is refused with exit
+//! 5 and a message naming the limit (it used to pass the `MemAvailable` check and abort:
+//! "memory allocation of 800000000 bytes failed", SIGABRT), and a render whose film cannot be
+//! allocated returns a memory error instead of aborting the process.
+//!
+//! The limits were measured: a small render needs about 0.3 to 0.5 GB of address space
+//! (Embree's device, the worker threads' stacks, the allocator's per-thread arenas; below
+//! about 0.3 GB Embree's device cannot be made), so 3 GB leaves a normal render plenty, and
+//! 1 x 200,000,000 pixels (about 24 GiB of buffers) cannot fit.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// Address-space limit of the command line runs, in KiB (`ulimit -v`): 2.9 GiB.
+const LIMIT_KIB: u64 = 3_000_000;
+
+/// `dofray args...` under `ulimit -v kib`.
+fn dofray_limited(kib: u64, args: &[&str]) -> Output {
+    Command::new("sh")
+        .arg("-c")
+        .arg(format!("ulimit -v {kib} && exec \"$0\" \"$@\""))
+        .arg(env!("CARGO_BIN_EXE_dofray"))
+        .args(args)
+        .output()
+        .expect("sh runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("dofray-memory-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn the_cli_refuses_an_image_beyond_the_address_space_limit_with_exit_5() {
+    let dir = scratch("cli");
+    let small = dir.join("small.png");
+    let out = dofray_limited(
+        LIMIT_KIB,
+        &[
+            "render", "--width", "64", "--height", "48", "--spp", "4", "--quiet", "-o",
+        ]
+        .iter()
+        .copied()
+        .chain([small.to_str().unwrap()])
+        .collect::<Vec<_>>(),
+    );
+    assert!(
+        out.status.success(),
+        "a small render fails: {}",
+        text(&out.stderr)
+    );
+    assert!(small.is_file());
+
+    let huge = dir.join("huge.png");
+    let args = [
+        "render",
+        "--width",
+        "1",
+        "--height",
+        "200000000",
+        "--quiet",
+        "-o",
+    ];
+    let mut args: Vec<&str> = args.to_vec();
+    args.push(huge.to_str().unwrap());
+    let out = dofray_limited(LIMIT_KIB, &args);
+    let err = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(5), "{err}");
+    for part in [
+        "error: a 1x200000000 image needs about 23.8 GiB for its render buffers",
+        "is left under the process's address-space limit (RLIMIT_AS, ulimit -v) of 2.9 GiB",
+        "of which is mapped already",
+        "choose a smaller --width/--height",
+    ] {
+        assert!(err.contains(part), "no {part:?} in: {err}");
+    }
+    assert!(!huge.exists());
+
+    // --json: the same status, and the JSON error object on stdout.
+    args.push("--json");
+    let out = dofray_limited(LIMIT_KIB, &args);
+    assert_eq!(out.status.code(), Some(5), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(json["error"]["kind"], "resource_limit", "{json}");
+    assert_eq!(json["error"]["exit_code"], 5, "{json}");
+    let message = json["error"]["message"].as_str().unwrap();
+    assert!(
+        message.contains("1x200000000") && message.contains("address-space limit"),
+        "{message}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Environment variable that tells the child test it runs under the limit.
+const CHILD: &str = "DOFRAY_MEMORY_LIMITS_CHILD";
+
+/// A render called directly (no budget check before it, as a library user may) whose film
+/// cannot be allocated under the address-space limit: [`child_render_beyond_the_address_space`]
+/// run in a child process of this test binary under `ulimit -v`.
+#[test]
+fn a_render_whose_film_cannot_be_allocated_returns_a_memory_error() {
+    let exe = std::env::current_exe().unwrap();
+    let out = Command::new("sh")
+        .arg("-c")
+        // 1.4 GiB: room for Embree and the scene, not for the 2.2 GiB colour buffer.
+        .arg("ulimit -v 1500000 && exec \"$0\" --exact child_render_beyond_the_address_space --ignored --nocapture")
+        .arg(exe)
+        .env(CHILD, "1")
+        .output()
+        .expect("sh runs");
+    let stdout = text(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}{stdout}{}",
+        out.status,
+        text(&out.stderr)
+    );
+    assert!(stdout.contains("1 passed"), "{stdout}");
+    assert!(
+        stdout
+            .contains("child: out of memory: 2.2 GiB for the film's colour could not be allocated")
+            && stdout.contains("address-space limit"),
+        "{stdout}"
+    );
+}
+
+#[test]
+#[ignore = "run under `ulimit -v` by a_render_whose_film_cannot_be_allocated_returns_a_memory_error"]
+fn child_render_beyond_the_address_space() {
+    use dofray::limits::MemoryError;
+    use dofray::render::{self, NoProgress, RenderError, RenderSettings};
+
+    if std::env::var_os(CHILD).is_none() {
+        return;
+    }
+    let mut desc = dofray::scene::load("paper").unwrap();
+    (desc.camera.width, desc.camera.height) = (1, 200_000_000);
+    let world =
+        dofray::scene::World::build(&desc, &dofray::embree::Device::new().unwrap()).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    let settings = RenderSettings::default();
+    let e = render::render(&world, &camera, &settings, &NoProgress).unwrap_err();
+    assert!(
+        matches!(&e, RenderError::Memory(MemoryError::Allocation { .. })),
+        "{e:?}"
+    );
+    assert_eq!(
+        dofray::exit::classify(&e),
+        dofray::exit::ErrorKind::ResourceLimit
+    );
+    println!("child: {e}");
+    // The process lives on, and renders what fits.
+    (desc.camera.width, desc.camera.height) = (16, 12);
+    let camera = desc.camera.build(|_| None).unwrap();
+    let (film, _) = render::render(&world, &camera, &settings, &NoProgress).unwrap();
+    assert_eq!(film.color.len(), 16 * 12);
+}
