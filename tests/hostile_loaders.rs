@@ -134,16 +134,76 @@ fn a_gltf_dag_that_instances_exponentially_is_refused_before_expanding() {
     std::fs::write(&path, gltf_with_nodes(&dag_nodes(100), "[0]")).unwrap();
     let e = quick(Duration::from_millis(500), || error(&path));
     assert_contains(&e, &["dag.gltf", "18446744073709551615 or more"]);
-    // Within the limits the same shape loads: 2^4 instances.
+    // Within the limits the same shape loads: 2^4 instances, all in one place, so one mesh is
+    // built (see the next test).
     std::fs::write(&path, gltf_with_nodes(&dag_nodes(5), "[0]")).unwrap();
-    assert_eq!(load(&path).unwrap().objects.len(), 16);
-    // And the limit can be raised or lowered.
+    assert_eq!(load(&path).unwrap().objects.len(), 1);
+    // And the limit (counted before the walk, repeats included) can be raised or lowered.
     let tight = LoadOptions {
         max_instanced_triangles: 15,
         ..LoadOptions::default()
     };
     let e = load_with(&path, &tight).unwrap_err().to_string();
     assert_contains(&e, &["16 triangles", "limit of 15"]);
+}
+
+/// A 32 x 24 render of `desc` (4 samples per pixel).
+fn render_small(desc: SceneDesc) -> dofray::render::Film {
+    use dofray::{overrides::Overrides, render::SettingsPatch, renderer::Renderer};
+    let overrides = Overrides {
+        width: Some(32),
+        height: Some(24),
+        ..Default::default()
+    };
+    let device = dofray::embree::Device::new().unwrap();
+    let renderer = Renderer::with_overrides(desc, overrides, &device).unwrap();
+    let patch = SettingsPatch {
+        spp: Some(4),
+        ..Default::default()
+    };
+    let settings = renderer.settings(&patch).unwrap();
+    renderer
+        .render(&settings, &dofray::render::NoProgress)
+        .unwrap()
+        .0
+}
+
+#[test]
+fn a_mesh_placed_half_a_million_times_in_one_place_is_built_once() {
+    let dir = scratch("coincident");
+    // 2^19 = 524288 placements of one triangle by the identity: within the instancing limits,
+    // and every ray through the triangle used to test all 524288 coincident copies (27 s for
+    // 32 x 32 pixels, minutes at 640 x 480). A repeat (same mesh, same world transform) is
+    // skipped and said in a warning.
+    let many = dir.join("many.gltf");
+    std::fs::write(&many, gltf_with_nodes(&dag_nodes(20), "[0]")).unwrap();
+    let desc = quick(Duration::from_secs(3), || load(&many).unwrap());
+    assert_eq!(desc.objects.len(), 1);
+    assert!(
+        desc.warnings
+            .iter()
+            .any(|w| w.contains("many.gltf") && w.contains("skipped 524287 placements")),
+        "{:?}",
+        desc.warnings
+    );
+    let film = quick(Duration::from_secs(3), || render_small(desc));
+    // The image is the one placement's, bit for bit.
+    let one = dir.join("one.gltf");
+    std::fs::write(&one, gltf_with_nodes(r#"[{"mesh":0}]"#, "[0]")).unwrap();
+    let single = render_small(load(&one).unwrap());
+    assert_eq!(film.color, single.color);
+    assert!(film.color.iter().any(|c| c.max_element() > 0.0));
+    // Placements that differ are all built: two at the origin (one kept), one moved, one
+    // mirrored.
+    let nodes = r#"[{"children":[1,2,3,4]},{"mesh":0},{"mesh":0},{"mesh":0,"translation":[2,0,0]},{"mesh":0,"scale":[-1,1,1]}]"#;
+    std::fs::write(&many, gltf_with_nodes(nodes, "[0]")).unwrap();
+    let desc = load(&many).unwrap();
+    assert_eq!(desc.objects.len(), 3);
+    assert!(
+        desc.warnings
+            .iter()
+            .any(|w| w.contains("skipped 1 placement "))
+    );
 }
 
 #[test]

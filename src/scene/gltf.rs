@@ -10,7 +10,7 @@
 //! error; everything else the file uses and dofray ignores is named in one warning.
 //! Accessors are checked before they are read, and a panic inside the parser becomes an error.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -21,7 +21,7 @@ use glam::{Affine3A, Mat4, Vec3};
 
 use super::error::{LoadError, Location, shown};
 use super::input::{self, LoadOptions};
-use super::mesh_input::{MeshBuffers, ModelFile, guarded, keep_winding};
+use super::mesh_input::{MeshBuffers, ModelFile, buffer, guarded, keep_winding};
 use super::model::{CameraDof, Model, ModelCamera, ModelMesh, Transform, short_number, short_vec};
 use super::texture::{TextureCache, decode};
 use super::{MAX_LIGHT_VALUE, MAX_MATERIAL_VALUE};
@@ -268,6 +268,11 @@ struct Loader<'a> {
     /// What the file uses that dofray ignores, for the file's one warning.
     ignored: Vec<String>,
     visits: u64,
+    /// Every (glTF mesh, world transform bits) built so far: a mesh placed again where it
+    /// already is is skipped ([`Loader::node`]).
+    placed: HashSet<(usize, [u32; 12])>,
+    /// Placements skipped so, for the warning.
+    repeats: u64,
 }
 
 /// Deepest node nesting followed.
@@ -439,6 +444,8 @@ fn open(file: ModelFile) -> Result<(::gltf::Document, Loader), LoadError> {
         lights: Vec::new(),
         ignored,
         visits: 0,
+        placed: HashSet::new(),
+        repeats: 0,
     };
     Ok((document, loader))
 }
@@ -592,13 +599,22 @@ impl Loader<'_> {
             None => self.orthographic.first().cloned(),
             Some(_) => None,
         };
+        let mut warnings: Vec<String> = warning(self.file.path, &ignored).into_iter().collect();
+        if self.repeats > 0 {
+            warnings.push(format!(
+                "{}: skipped {} of a mesh where the same mesh already is (the same \
+                 world transform): coincident copies add nothing to the image",
+                shown(self.file.path),
+                plural(self.repeats as usize, "placement", "placements"),
+            ));
+        }
         Model {
             meshes: self.meshes,
             materials: self.materials,
             camera: self.camera,
             orthographic_camera,
             lights: self.lights,
-            warnings: warning(self.file.path, &ignored).into_iter().collect(),
+            warnings,
         }
     }
 }
@@ -863,8 +879,18 @@ impl Loader<'_> {
             self.light(node, &light, &world)?;
         }
         if let Some(m) = node.mesh() {
-            for prim in m.primitives() {
-                self.primitive(&m, &prim, &world)?;
+            // The same mesh placed again by the same world transform (bit for bit) adds only
+            // coincident triangles: nothing to the image, but a BVH cannot separate them, so
+            // every ray there would test every copy (a node tree that instances one triangle
+            // half a million times in one place took minutes a frame). Repeats are skipped,
+            // as the OBJ loader drops repeated triangles.
+            let key = world.affine.to_cols_array().map(f32::to_bits);
+            if self.placed.insert((m.index(), key)) {
+                for prim in m.primitives() {
+                    self.primitive(&m, &prim, &world)?;
+                }
+            } else {
+                self.repeats += 1;
             }
         }
         for child in node.children() {
@@ -1026,8 +1052,8 @@ impl Loader<'_> {
         }
         let what = format!("mesh {} primitive {}", m.index(), prim.index());
         let attributes = self.check_attributes(prim, &what)?;
-        let mut buffers = self.read_vertices(prim, &attributes, world);
-        buffers.triangles = self.read_triangles(prim, mode, buffers.positions.len());
+        let mut buffers = self.read_vertices(prim, &attributes, world)?;
+        buffers.triangles = self.read_triangles(prim, mode, buffers.positions.len())?;
         keep_winding(&mut buffers.triangles, world);
         if buffers.triangles.is_empty() || buffers.positions.is_empty() {
             return Ok(());
@@ -1099,47 +1125,55 @@ impl Loader<'_> {
     }
 
     /// Positions, normals and texture coordinates in world space (no triangles yet); normals
-    /// and texture coordinates only when there is one for every position.
+    /// and texture coordinates only when there is one for every position. Buffers sized by
+    /// the accessors are allocated fallibly (a resource-limit error naming the file).
     fn read_vertices(
         &self,
         prim: &::gltf::Primitive,
         attributes: &Attributes,
         world: &Transform,
-    ) -> MeshBuffers {
+    ) -> Result<MeshBuffers, LoadError> {
+        let path = self.file.path;
+        let count = attributes.count;
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(Vec::as_slice));
-        let mut p = Vec::with_capacity(attributes.count + 1);
+        let mut p = buffer(path, count + 1, "a mesh's positions")?;
         if let Some(it) = reader.read_positions() {
             p.extend(it.map(|v| world.point(v)));
         }
-        let n: Option<Vec<[f32; 3]>> = attributes
-            .normals
-            .then(|| reader.read_normals())
-            .flatten()
-            .map(|it| it.map(|v| world.normal(v)).collect())
-            .filter(|n: &Vec<[f32; 3]>| n.len() == p.len());
-        // glTF's v runs down the image; ours runs up.
-        let uv: Option<Vec<[f32; 2]>> = attributes
+        let mut n = None;
+        if let Some(it) = attributes.normals.then(|| reader.read_normals()).flatten() {
+            let mut normals = buffer(path, count, "a mesh's normals")?;
+            normals.extend(it.map(|v| world.normal(v)));
+            n = (normals.len() == p.len()).then_some(normals);
+        }
+        let mut uv = None;
+        if let Some(it) = attributes
             .uv_set
             .and_then(|set| reader.read_tex_coords(set))
-            .map(|it| it.into_f32().map(|[u, v]| [u, 1.0 - v]).collect())
-            .filter(|t: &Vec<[f32; 2]>| t.len() == p.len());
-        MeshBuffers {
+        {
+            let mut uvs = buffer(path, count, "a mesh's texture coordinates")?;
+            // glTF's v runs down the image; ours runs up.
+            uvs.extend(it.into_f32().map(|[u, v]| [u, 1.0 - v]));
+            uv = (uvs.len() == p.len()).then_some(uvs);
+        }
+        Ok(MeshBuffers {
             positions: p,
             triangles: Vec::new(),
             normals: n,
             uvs: uv,
             tangents: None,
-        }
+        })
     }
 
     /// The primitive's triangles, from its indices or else its vertex order; strips and fans
-    /// unrolled (every other strip triangle flipped to keep the winding).
+    /// unrolled (every other strip triangle flipped to keep the winding). Allocated fallibly.
     fn read_triangles(
         &self,
         prim: &::gltf::Primitive,
         mode: Mode,
         vertices: usize,
-    ) -> Vec<[u32; 3]> {
+    ) -> Result<Vec<[u32; 3]>, LoadError> {
+        let path = self.file.path;
         let reader = prim.reader(|b| self.buffers.get(b.index()).map(Vec::as_slice));
         let indices = prim
             .indices()
@@ -1148,7 +1182,7 @@ impl Loader<'_> {
         if mode == Mode::Triangles {
             // Straight into triangles (one spare slot for TriangleMesh's padding).
             let count = prim.indices().map_or(vertices, |a| a.count()) / 3;
-            let mut t = Vec::with_capacity(count + 1);
+            let mut t = buffer(path, count + 1, "a mesh's triangles")?;
             match indices {
                 Some(mut it) => {
                     while let (Some(a), Some(b), Some(c)) = (it.next(), it.next(), it.next()) {
@@ -1157,28 +1191,27 @@ impl Loader<'_> {
                 }
                 None => t.extend((0..count as u32).map(|i| [3 * i, 3 * i + 1, 3 * i + 2])),
             }
-            return t;
+            return Ok(t);
         }
-        let idx: Vec<u32> = match indices {
-            Some(it) => it.collect(),
-            None => (0..vertices as u32).collect(),
-        };
+        let count = prim.indices().map_or(vertices, |a| a.count());
+        let mut idx = buffer(path, count, "a mesh's indices")?;
+        match indices {
+            Some(it) => idx.extend(it),
+            None => idx.extend(0..vertices as u32),
+        }
+        let mut t = buffer(path, idx.len().saturating_sub(2) + 1, "a mesh's triangles")?;
         if mode == Mode::TriangleStrip {
-            idx.windows(3)
-                .enumerate()
-                .map(|(i, w)| {
-                    if i % 2 == 0 {
-                        [w[0], w[1], w[2]]
-                    } else {
-                        [w[1], w[0], w[2]]
-                    }
-                })
-                .collect()
+            t.extend(idx.windows(3).enumerate().map(|(i, w)| {
+                if i % 2 == 0 {
+                    [w[0], w[1], w[2]]
+                } else {
+                    [w[1], w[0], w[2]]
+                }
+            }));
         } else {
-            (2..idx.len())
-                .map(|i| [idx[0], idx[i - 1], idx[i]])
-                .collect()
+            t.extend((2..idx.len()).map(|i| [idx[0], idx[i - 1], idx[i]]));
         }
+        Ok(t)
     }
 
     /// The primitive's TANGENT attribute in world space, when it has one for every vertex: w
