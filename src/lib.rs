@@ -43,8 +43,8 @@
 //! | layer | modules | what they hold |
 //! |---|---|---|
 //! | 0 | [`error_kind`], [`params`] | the kinds of failure (exit codes, JSON kinds); the parameter table (flag, scene key, Python keyword, C setter) |
-//! | 1 | [`embree`], [`limits`], [`filter`], [`sampler`], [`metrics`], [`view`] | Embree (the only `unsafe`), resource limits, the pixel filter, sample numbers, image metrics, display views (AgX, ...) |
-//! | 2 | [`camera`] | the camera makes rays: spec, focus, the lens seam ([`camera::lens`]), apertures |
+//! | 1 | [`embree`], [`limits`], [`filter`], [`sampler`], [`metrics`] | Embree (the only `unsafe`), resource limits, the pixel filter, sample numbers, image metrics |
+//! | 2 | [`camera`], [`view`] | the camera makes rays: spec, focus, the lens seam ([`camera::lens`]), apertures; display views for PNGs (AgX, ...) |
 //! | 3 | [`shade`], [`settings`] | materials, textures, lights; render settings resolved once from patches |
 //! | 4 | [`scene`] | descriptions and loaders (TOML by concept, OBJ, glTF) and the Embree world |
 //! | 5 | [`render`] | depth pass and maps, sites, error estimate and refinement, packets, film |

@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 /// classifies any error chain by trying every error type, is at the top.
 const LAYERS: &[&[&str]] = &[
     &["error_kind", "params"],
-    &["embree", "limits", "filter", "sampler", "metrics", "view"],
-    &["camera"],
+    &["embree", "limits", "filter", "sampler", "metrics"],
+    &["camera", "view"],
     &["shade", "settings"],
     &["scene"],
     &["render"],
