@@ -563,9 +563,9 @@ fn limit_flags_set_the_loader_limits() {
 // ---------------------------------------------------------------------------------------------
 // Found by fuzzing (fuzz/, scripts/fuzz.sh): the tile reader of `dofray merge`.
 
-/// A one-channel EXR tile of a 1x1 image whose header then claims a `side` x `side` data
-/// window, with nothing after its header (as the fuzzer's input had).
-fn exr_tile_claiming(side: i32) -> Vec<u8> {
+/// A one-channel EXR tile of a 1x1 image whose header then claims a `width` x `height` data
+/// window, with nothing after its header (as the fuzzer's inputs had).
+fn exr_tile_claiming(width: i32, height: i32) -> Vec<u8> {
     use exr::prelude::*;
     let channel = AnyChannel::new("R", FlatSamples::F32(vec![0.5]));
     let layer = Layer::new(
@@ -591,12 +591,12 @@ fn exr_tile_claiming(side: i32) -> Vec<u8> {
     // dataWindow: box2i, 16 bytes: x min, y min, x max, y max.
     let key = b"dataWindow\0box2i\0\x10\0\0\0";
     let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len();
-    bytes[at + 8..at + 12].copy_from_slice(&(side - 1).to_le_bytes());
-    bytes[at + 12..at + 16].copy_from_slice(&(side - 1).to_le_bytes());
+    bytes[at + 8..at + 12].copy_from_slice(&(width - 1).to_le_bytes());
+    bytes[at + 12..at + 16].copy_from_slice(&(height - 1).to_le_bytes());
     // chunkCount: int, one chunk a scan line without compression.
     let key = b"chunkCount\0int\0\x04\0\0\0";
     let at = bytes.windows(key.len()).position(|w| w == key).unwrap() + key.len();
-    bytes[at..at + 4].copy_from_slice(&side.to_le_bytes());
+    bytes[at..at + 4].copy_from_slice(&height.to_le_bytes());
     // The header: magic and version, then attributes (name, type, size, value) up to a 0.
     let mut end = 8;
     while bytes[end] != 0 {
@@ -624,9 +624,28 @@ fn merge_tiles_whose_headers_claim_terabytes_are_refused_before_allocating() {
     };
     // The reader used to allocate what the header claims (2^58 floats here), and the process
     // aborted: "memory allocation of ... bytes failed".
-    let e = merge("tile.exr", exr_tile_claiming(1 << 29));
+    let e = merge("tile.exr", exr_tile_claiming(1 << 29, 1 << 29));
     assert_contains(&e, &["tile.exr", "536870912x536870912", "EiB", "available"]);
     // A PNG whose header claims 2^20 x 2^20 RGB pixels (3 TiB).
     let e = merge("tile.png", png_header(1 << 20, 1 << 20));
     assert_contains(&e, &["tile.png", "1048576x1048576", "3.0 TiB", "available"]);
+}
+
+#[test]
+fn an_exr_tile_is_placed_by_its_header_before_its_pixels_are_read() {
+    let dir = scratch("merge-window");
+    // A data window of 2^26 x 1 pixels for a 1x1 region: within memory, but the reader used to
+    // allocate (and, compressed, fill) it before the mismatch was noticed: a 2 KB tile took
+    // 2.6 GB and 1.6 s. Now the header's data window is held against the region first.
+    let tile = dir.join("wide.exr");
+    std::fs::write(&tile, exr_tile_claiming(1 << 26, 1)).unwrap();
+    let e = quick(Duration::from_millis(500), || {
+        dofray::output::merge::merge(&[tile], &dir.join("out.exr"))
+            .unwrap_err()
+            .to_string()
+    });
+    assert_contains(
+        &e,
+        &["wide.exr", "holds 67108864x1 pixels", "needs 1x1 at (0, 0)"],
+    );
 }

@@ -505,8 +505,24 @@ fn read_tile(path: &Path) -> Result<Tile, MergeError> {
         ImageFormat::Exr => read_exr_tile(path)?,
         ImageFormat::Png => read_png_tile(path)?,
     };
-    let (region, size) = tile_place(path, &metadata)?;
-    let (position, w, h) = stored;
+    let (region, size) = placed(path, &metadata, stored)?;
+    Ok(Tile {
+        path: path.to_path_buf(),
+        region,
+        size,
+        metadata,
+        pixels,
+    })
+}
+
+/// The tile's region and the whole image's size from its metadata, once its pixels are
+/// stored where the region says.
+fn placed(
+    path: &Path,
+    metadata: &Metadata,
+    (position, w, h): Stored,
+) -> Result<(Region, (u32, u32)), MergeError> {
+    let (region, size) = tile_place(path, metadata)?;
     let placed = position.is_none_or(|(x, y)| (x, y) == (region.x0 as i32, region.y0 as i32));
     if !placed || (w, h) != (u64::from(region.width()), u64::from(region.height())) {
         return Err(MergeError::Size {
@@ -522,13 +538,7 @@ fn read_tile(path: &Path) -> Result<Tile, MergeError> {
             ),
         });
     }
-    Ok(Tile {
-        path: path.to_path_buf(),
-        region,
-        size,
-        metadata,
-        pixels,
-    })
+    Ok((region, size))
 }
 
 /// Where a tile's pixels are stored: the data window's position (EXR only) and its size.
@@ -570,6 +580,14 @@ fn read_exr_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> 
         let pixel = header.channels.bytes_per_pixel as u128;
         check_pixel_memory(path, (w, h), u128::from(w) * u128::from(h) * pixel)?;
     }
+    // The layer read is the first that is not deep: its data window must be the region its
+    // attributes name before its pixels are allocated (a mangled data window can ask for
+    // gigabytes the region never needed).
+    if let Some(header) = headers.iter().find(|h| !h.deep) {
+        let metadata = text_attributes(&header.shared_attributes, &header.own_attributes);
+        let stored = exr_stored(&header.own_attributes, header.layer_size);
+        placed(path, &metadata, stored)?;
+    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
@@ -578,28 +596,9 @@ fn read_exr_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> 
         .all_attributes()
         .from_file(path)
         .map_err(|e| read_error(path, e.to_string()))?;
-    let mut metadata = Metadata::new();
     let layer = &image.layer_data;
-    let mut attributes: Vec<(String, String)> = image
-        .attributes
-        .other
-        .iter()
-        .chain(&layer.attributes.other)
-        .filter_map(|(k, v)| match v {
-            AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
-            _ => None,
-        })
-        .collect();
-    attributes.sort();
-    for (k, v) in attributes {
-        metadata.push(k, v);
-    }
-    let position = layer.attributes.layer_position;
-    let stored = (
-        Some((position.0, position.1)),
-        layer.size.0 as u64,
-        layer.size.1 as u64,
-    );
+    let metadata = text_attributes(&image.attributes, &layer.attributes);
+    let stored = exr_stored(&layer.attributes, layer.size);
     let channels = layer
         .channel_data
         .list
@@ -611,6 +610,31 @@ fn read_exr_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> 
         compression: layer.encoding.compression,
     };
     Ok((metadata, pixels, stored))
+}
+
+/// An EXR file's and layer's text attributes, sorted.
+fn text_attributes(image: &ImageAttributes, layer: &LayerAttributes) -> Metadata {
+    let mut attributes: Vec<(String, String)> = image
+        .other
+        .iter()
+        .chain(&layer.other)
+        .filter_map(|(k, v)| match v {
+            AttributeValue::Text(t) => Some((k.to_string(), t.to_string())),
+            _ => None,
+        })
+        .collect();
+    attributes.sort();
+    let mut metadata = Metadata::new();
+    for (k, v) in attributes {
+        metadata.push(k, v);
+    }
+    metadata
+}
+
+/// Where an EXR layer's pixels are: its data window.
+fn exr_stored(layer: &LayerAttributes, size: Vec2<usize>) -> Stored {
+    let position = layer.layer_position;
+    (Some((position.0, position.1)), size.0 as u64, size.1 as u64)
 }
 
 /// A PNG tile's text chunks, bytes (as stored: 8 or 16 bits, RGB or RGBA) and size.
