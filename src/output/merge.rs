@@ -554,16 +554,16 @@ fn read_error(path: &Path, message: String) -> MergeError {
 /// Refuses a tile whose header asks for more pixel memory than there is, before its reader
 /// allocates it: a few bytes of header can claim a data window of terabytes.
 fn check_pixel_memory(path: &Path, (w, h): (u64, u64), needed: u128) -> Result<(), MergeError> {
-    use crate::limits::{Bytes, FALLBACK_LIMIT_BYTES, available_memory};
-    let available = available_memory().unwrap_or(FALLBACK_LIMIT_BYTES);
-    if needed > u128::from(available) {
+    use crate::limits::{Bytes, MemoryBudget};
+    let limit = MemoryBudget::read().binding();
+    if needed > u128::from(limit.remaining()) {
         return Err(read_error(
             path,
             format!(
-                "its header claims {w}x{h} pixels, which need {} of memory, but only {} is \
-                 available: not a tile of an image that could have been rendered here",
+                "its header claims {w}x{h} pixels, which need {} of memory, but only {} \
+                 {limit}: not a tile of an image that could have been rendered here",
                 Bytes(needed),
-                Bytes(available)
+                Bytes(limit.remaining())
             ),
         ));
     }
