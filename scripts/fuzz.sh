@@ -10,6 +10,8 @@
 #   FUZZ_TARGETS    the targets to run, space-separated (default: all of them)
 #   FUZZ_SANITIZER  cargo fuzz's -s: none (default: safe Rust needs no ASan, and it builds in
 #                   half the time) or address (also reports any single allocation over 2 GiB)
+#   FUZZ_SEED=N     libFuzzer's random seed (CI fixes it, so its run is repeatable; default
+#                   a new one each run)
 #   FUZZ_KEEP=DIR   keep the corpora the runs grew in DIR/TARGET (to merge into the seeds)
 #   FUZZ_TARGET_DIR build there instead of fuzz/target (CI: a cache outside the checkout, so
 #                   the dependencies are built once per machine; dofray and the fuzz crate
@@ -63,7 +65,7 @@ for t in "${targets[@]}"; do
   log="$work/$t.log"
   rc=0
   TMPDIR="$work/tmp" "${fuzz[@]}" run "${build_flags[@]}" "$t" "$grown" "fuzz/corpus/$t" -- \
-    -max_total_time="$secs" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 \
+    -max_total_time="$secs" -rss_limit_mb=2048 -timeout=10 -print_final_stats=1 ${FUZZ_SEED:+-seed="$FUZZ_SEED"} \
     >"$log" 2>&1 || rc=$?
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -n 1)
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -n 1 || true)
