@@ -649,3 +649,24 @@ fn an_exr_tile_is_placed_by_its_header_before_its_pixels_are_read() {
         &["wide.exr", "holds 67108864x1 pixels", "needs 1x1 at (0, 0)"],
     );
 }
+
+#[test]
+fn a_glb_declaring_less_than_its_own_header_is_refused_as_corrupt() {
+    let dir = scratch("glb-length");
+    // The GLB header's length word is 0: the glTF parser's `length - 12` underflowed (a panic
+    // in checked builds, caught only as "the glTF parser failed on it").
+    let mut glb = b"glTF".to_vec();
+    glb.extend(2u32.to_le_bytes());
+    glb.extend(0u32.to_le_bytes());
+    glb.extend(b"....JSON{}");
+    let path = dir.join("short.glb");
+    std::fs::write(&path, glb).unwrap();
+    assert_contains(
+        &error(&path),
+        &[
+            "short.glb",
+            "declares a length of 0 bytes",
+            "12-byte header",
+        ],
+    );
+}

@@ -210,6 +210,16 @@ fn check_glb_length(path: &Path, bytes: &[u8]) -> Result<(), LoadError> {
             ),
         ));
     };
+    // (The glTF parser subtracts the header from this length: below 12 it underflows.)
+    if declared < 12 {
+        return Err(gltf_error(
+            path,
+            format!(
+                "corrupt GLB file: its header declares a length of {declared} bytes, less than \
+                 the 12-byte header itself"
+            ),
+        ));
+    }
     let size = bytes.len() as u64;
     if size < declared {
         return Err(gltf_error(
