@@ -3,7 +3,7 @@
 //! Two formats, chosen by the file extension (case-insensitive):
 //!
 //! - `.png` ([`png`]): 8-bit (or, with [`WriteOptions::png_16bit`], 16-bit) code values of the
-//!   linear colour through a display view ([`view`]: sRGB by default, or AgX, Khronos PBR
+//!   linear colour through a display view ([`crate::view`]: sRGB by default, or AgX, Khronos PBR
 //!   Neutral, with Blender's looks, exposure and gamma; [`WriteOptions::view`]), with an `sRGB` chunk and the [`Metadata`] as text chunks;
 //!   with [`WriteOptions::png_alpha`], RGBA with straight (unassociated) alpha.
 //! - `.exr` ([`exr`]): Blender-style multilayer channels in one part: the beauty
