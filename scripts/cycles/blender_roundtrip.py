@@ -53,11 +53,9 @@ import argparse
 import json
 import math
 import os
-import struct
 import subprocess
 import sys
 import time
-import zlib
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
@@ -101,7 +99,8 @@ import numpy as np  # noqa: E402
 from mathutils import Vector  # noqa: E402
 
 sys.path.insert(0, HERE)
-from common import configure_cycles, read_rgb  # noqa: E402
+from common import configure_cycles, read_rgb, write_png  # noqa: E402
+import scenes  # noqa: E402
 
 sys.path.insert(0, BLENDER_DIR)
 import dofray_blender  # noqa: E402
@@ -144,20 +143,10 @@ def log(msg):
     print(f"[roundtrip] {msg}", flush=True)
 
 
-def principled(name, color, roughness=0.5, metallic=0.0, transmission=0.0, ior=1.45,
-               emission=None, strength=0.0):
-    m = bpy.data.materials.new(name)
-    m.use_nodes = True
-    b = m.node_tree.nodes["Principled BSDF"]
-    b.inputs["Base Color"].default_value = (*color, 1.0)
-    b.inputs["Roughness"].default_value = roughness
-    b.inputs["Metallic"].default_value = metallic
-    b.inputs["Transmission Weight"].default_value = transmission
-    b.inputs["IOR"].default_value = ior
-    if emission is not None:
-        b.inputs["Emission Color"].default_value = (*emission, 1.0)
-        b.inputs["Emission Strength"].default_value = strength
-    return m
+def principled(name, color, roughness=0.5, ior=1.45, strength=0.0, **kw):
+    """scenes.py's Principled material; every material here has IOR 1.45 (not Blender's 1.5),
+    so the export must carry the index of opaque materials too."""
+    return scenes.principled(name, color, roughness, ior=ior, emission_strength=strength, **kw)
 
 
 def link(name, mesh_data, mats):
@@ -484,23 +473,6 @@ def draw_rects(img8, rects, colour=(255, 0, 255)):
         out[y0:y1, x0] = colour
         out[y0:y1, x1 - 1] = colour
     return out
-
-
-def write_png(path, rgb8, scale=1):
-    if scale > 1:
-        rgb8 = np.repeat(np.repeat(rgb8, scale, 0), scale, 1)
-    h, w, _ = rgb8.shape
-    raw = b"".join(b"\x00" + rgb8[y].tobytes() for y in range(h))
-
-    def chunk(tag, data):
-        return (struct.pack(">I", len(data)) + tag + data
-                + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
-
-    with open(path, "wb") as f:
-        f.write(b"\x89PNG\r\n\x1a\n")
-        f.write(chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)))
-        f.write(chunk(b"IDAT", zlib.compress(raw, 6)))
-        f.write(chunk(b"IEND", b""))
 
 
 def side_by_side(path, panels, scale=1):

@@ -1,10 +1,13 @@
-"""What the comparison scripts share: Cycles' settings, reading an EXR's colour, and writing a
-Radiance .hdr (RGBE) in numpy.
+"""What the comparison scripts share: Cycles' settings, reading an EXR's colour, writing a
+Radiance .hdr (RGBE) in numpy, and writing an 8-bit PNG without an imaging library.
 
 Blender 4.2's `Image.save()` of a float image to .hdr writes the values through the display
 transform (sRGB-encoded: 2.0 is stored as 1.35, 400 as 12.75), so environment maps are written
 here instead, as flat (uncompressed) scanlines, which every reader accepts.
 """
+
+import struct
+import zlib
 
 import numpy as np
 
@@ -80,3 +83,21 @@ def write_hdr(path, rgb):
     e = out[..., 3].astype(np.float64)
     factor = np.where(out[..., 3] > 0, np.ldexp(1.0, (e - 136).astype(int)), 0.0)
     return out[..., :3].astype(np.float64) * factor[..., None] * (out[..., 3:] > 0)
+
+
+def write_png(path, rgb8, scale=1):
+    """An 8-bit RGB PNG of `rgb8` (H x W x 3 uint8), each pixel repeated `scale` times."""
+    if scale > 1:
+        rgb8 = np.repeat(np.repeat(rgb8, scale, 0), scale, 1)
+    h, w, _ = rgb8.shape
+    raw = b"".join(b"\x00" + rgb8[y].tobytes() for y in range(h))
+
+    def chunk(tag, data):
+        return (struct.pack(">I", len(data)) + tag + data
+                + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
+
+    with open(path, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n")
+        f.write(chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)))
+        f.write(chunk(b"IDAT", zlib.compress(raw, 6)))
+        f.write(chunk(b"IEND", b""))

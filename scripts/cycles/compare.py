@@ -16,15 +16,13 @@ import argparse
 import json
 import math
 import os
-import struct
 import subprocess
 import sys
-import zlib
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from common import read_rgb  # noqa: E402
+from common import read_rgb, write_png  # noqa: E402
 
 GRID = 4
 
@@ -159,21 +157,6 @@ def ratio_colour(cyc, dof):
     rgb[..., 0] -= neg
     rgb[(a < eps) & (b < eps)] = 0.0
     return (np.clip(rgb, 0, 1) * 255 + 0.5).astype(np.uint8)
-
-
-def write_png(path, rgb8):
-    h, w, _ = rgb8.shape
-    raw = b"".join(b"\x00" + rgb8[y].tobytes() for y in range(h))
-
-    def chunk(tag, data):
-        return (struct.pack(">I", len(data)) + tag + data
-                + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
-
-    with open(path, "wb") as f:
-        f.write(b"\x89PNG\r\n\x1a\n")
-        f.write(chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)))
-        f.write(chunk(b"IDAT", zlib.compress(raw, 6)))
-        f.write(chunk(b"IEND", b""))
 
 
 def side_by_side(path, cyc, dof):

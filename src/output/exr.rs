@@ -237,6 +237,20 @@ pub struct ExrOptions {
 
 /// Writes `film` as an EXR (see the module documentation) to `target`, atomically. The film's
 /// buffers must already have been checked against its size.
+/// The first flat layer of an EXR with all its channels and attributes, every chunk read and
+/// decompressed: what the tile merge and `--skip-existing`'s check read.
+pub(super) fn read_first_layer(
+    path: &std::path::Path,
+) -> ::exr::error::Result<Image<Layer<AnyChannels<FlatSamples>>>> {
+    read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+}
+
 pub(super) fn write_exr(
     target: &Target,
     film: &Film,

@@ -588,14 +588,7 @@ fn read_exr_tile(path: &Path) -> Result<(Metadata, Pixels, Stored), MergeError> 
         let stored = exr_stored(&header.own_attributes, header.layer_size);
         placed(path, &metadata, stored)?;
     }
-    let image = read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .map_err(|e| read_error(path, e.to_string()))?;
+    let image = dofray_exr::read_first_layer(path).map_err(|e| read_error(path, e.to_string()))?;
     let layer = &image.layer_data;
     let metadata = text_attributes(&image.attributes, &layer.attributes);
     let stored = exr_stored(&layer.attributes, layer.size);

@@ -9,8 +9,6 @@
 use std::io::BufReader;
 use std::path::Path;
 
-use exr::prelude::{ReadChannels, ReadLayers};
-
 use super::ImageFormat;
 
 /// Checks that `path` is a complete, readable PNG or EXR of `width` x `height` pixels; the
@@ -73,14 +71,7 @@ fn exr_size(path: &Path, expected: (u32, u32)) -> Result<(u32, u32), String> {
     if size != expected {
         return Ok(size);
     }
-    exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_file(path)
-        .map_err(|e| format!("incomplete EXR: {e}"))?;
+    super::exr::read_first_layer(path).map_err(|e| format!("incomplete EXR: {e}"))?;
     Ok(size)
 }
 

@@ -172,37 +172,36 @@ fn sigmoid(x: f64) -> f64 {
 /// The lower guard rail in Rec.2020: lifts negative components while keeping luminance
 /// (identity for colours without negatives).
 fn lower_guard_rail_2020(rgb: [f64; 3]) -> [f64; 3] {
-    let luma = |c: [f64; 3]| dot(c, LUMA_2020);
-    let opponent = |c: [f64; 3]| {
-        let m = max3(c);
-        let inv = c.map(|v| m - v);
-        max3(inv) - luma(inv) + luma(c)
-    };
-    let target = opponent(rgb);
-    let offset = (-min3(rgb)).max(0.0);
-    let lifted = rgb.map(|v| v + offset);
-    let now = opponent(lifted);
-    let ratio = if now > target { target / now } else { 1.0 };
-    lifted.map(|v| v * ratio)
+    lower_guard_rail(rgb, |c| opponent_luma(c, |c| dot(c, LUMA_2020)))
 }
 
 /// The lower guard rail of the Rec.709 display, luminance measured in Rec.2020 and the
 /// opponent compensation faded out (`Y^0.08`) as luminance grows.
 fn lower_guard_rail_709(to_2020: &Mat3, rgb: [f64; 3]) -> [f64; 3] {
     let luma = |c: [f64; 3]| dot(matrix::apply(to_2020, c), LUMA_2020);
-    let compensated = |c: [f64; 3]| {
-        let m = max3(c);
-        let inv = c.map(|v| m - v);
+    lower_guard_rail(rgb, |c| {
         let y = luma(c);
-        let opponent = max3(inv) - luma(inv) + y;
         // A negative luminance has no power 0.08: the generator's NaN leaves it as is below.
         let t = y.powf(0.08).clamp(0.0, 1.0);
-        (1.0 - t) * opponent + t * y
-    };
-    let target = compensated(rgb);
+        (1.0 - t) * opponent_luma(c, luma) + t * y
+    })
+}
+
+/// The luminance of `c` compensated by its opponent colour's (`max - c`), so a colour with
+/// negative components is measured as the light it stands for.
+fn opponent_luma(c: [f64; 3], luma: impl Fn([f64; 3]) -> f64) -> f64 {
+    let m = max3(c);
+    let inv = c.map(|v| m - v);
+    max3(inv) - luma(inv) + luma(c)
+}
+
+/// Offsets `rgb` so no component is negative, then scales it back down to the `measure` the
+/// original had when the offset raised it (Eary Chow's guard rail, after Sakari Kapanen).
+fn lower_guard_rail(rgb: [f64; 3], measure: impl Fn([f64; 3]) -> f64) -> [f64; 3] {
+    let target = measure(rgb);
     let offset = (-min3(rgb)).max(0.0);
     let lifted = rgb.map(|v| v + offset);
-    let now = compensated(lifted);
+    let now = measure(lifted);
     let ratio = if now > target {
         target / now.max(1e-100)
     } else {

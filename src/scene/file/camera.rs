@@ -95,41 +95,25 @@ fn check_built(
         CameraError::Invalid { name, .. } => *name,
         _ => "",
     };
-    let span = |s: Option<Range<usize>>| s;
+    fn at<T>(key: &Option<Spanned<T>>) -> Option<Range<usize>> {
+        key.as_ref().map(Spanned::span)
+    }
     // The key that gave the value, by the name the check uses; for a derived aperture, the
     // first of the keys it is derived from.
-    let keys: &[(&str, Option<Range<usize>>)] = &[
-        ("eye", span(raw.eye.as_ref().map(|s| s.span()))),
-        ("look_at", span(raw.look_at.as_ref().map(|s| s.span()))),
-        ("up", span(raw.up.as_ref().map(|s| s.span()))),
-        ("vfov", span(raw.vfov.as_ref().map(|s| s.span()))),
-        (
-            "focal_length_mm",
-            span(raw.focal_length_mm.as_ref().map(|s| s.span())),
-        ),
-        (
-            "sensor_width_mm",
-            span(raw.sensor_width_mm.as_ref().map(|s| s.span())),
-        ),
-        (
-            "aperture_radius",
-            span(raw.aperture_radius.as_ref().map(|s| s.span())),
-        ),
-        ("f_number", span(raw.f_number.as_ref().map(|s| s.span()))),
-        (
-            "sharp_range",
-            span(raw.sharp_range.as_ref().map(|s| s.span())),
-        ),
-        ("spread", span(raw.spread.as_ref().map(|s| s.span()))),
-        (
-            "anamorphic",
-            span(raw.anamorphic.as_ref().map(|s| s.span())),
-        ),
-        (
-            "blade_rotation",
-            span(raw.blade_rotation.as_ref().map(|s| s.span())),
-        ),
-        ("blades", span(raw.blades.as_ref().map(|s| s.span()))),
+    let keys = [
+        ("eye", at(&raw.eye)),
+        ("look_at", at(&raw.look_at)),
+        ("up", at(&raw.up)),
+        ("vfov", at(&raw.vfov)),
+        ("focal_length_mm", at(&raw.focal_length_mm)),
+        ("sensor_width_mm", at(&raw.sensor_width_mm)),
+        ("aperture_radius", at(&raw.aperture_radius)),
+        ("f_number", at(&raw.f_number)),
+        ("sharp_range", at(&raw.sharp_range)),
+        ("spread", at(&raw.spread)),
+        ("anamorphic", at(&raw.anamorphic)),
+        ("blade_rotation", at(&raw.blade_rotation)),
+        ("blades", at(&raw.blades)),
     ];
     let candidates: &[&str] = match name {
         "eye" => &["eye"],
@@ -153,14 +137,13 @@ fn check_built(
             "eye",
         ],
     };
-    let found = candidates
-        .iter()
-        .find_map(|c| keys.iter().find(|(k, s)| k == c && s.is_some()));
+    let found = candidates.iter().find_map(|c| {
+        keys.iter()
+            .find_map(|(k, span)| (k == c).then(|| span.clone()).flatten().map(|s| (k, s)))
+    });
     Err(match found {
-        Some((key, Some(span))) => {
-            ctx.invalid(span.clone(), format!("camera.{key}"), error.to_string())
-        }
-        _ => ctx.invalid(table.clone(), "camera", error.to_string()),
+        Some((key, span)) => ctx.invalid(span, format!("camera.{key}"), error.to_string()),
+        None => ctx.invalid(table.clone(), "camera", error.to_string()),
     })
 }
 
