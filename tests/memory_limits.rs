@@ -98,6 +98,27 @@ fn the_cli_refuses_an_image_beyond_the_address_space_limit_with_exit_5() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The command that started this test binary: its path, or, when it was started through the
+/// dynamic loader (`ld-linux.so --library-path DIR BINARY`, as the Embree 4 check runs it, where
+/// `current_exe` is the loader), the loader with its options and the binary.
+fn this_test_binary() -> Vec<std::ffi::OsString> {
+    let cmdline = std::fs::read("/proc/self/cmdline").unwrap_or_default();
+    let all: Vec<std::ffi::OsString> = cmdline
+        .split(|&b| b == 0)
+        .filter(|a| !a.is_empty())
+        .map(|a| <std::ffi::OsStr as std::os::unix::ffi::OsStrExt>::from_bytes(a).to_owned())
+        .collect();
+    let own = std::env::args_os().count();
+    if all.len() > own {
+        // The loader's words, then the binary (this process's own first argument).
+        let mut prefix = all[..all.len() - own].to_vec();
+        prefix.extend(std::env::args_os().next());
+        prefix
+    } else {
+        vec![std::env::current_exe().unwrap().into_os_string()]
+    }
+}
+
 /// Environment variable that tells the child test it runs under the limit.
 const CHILD: &str = "DOFRAY_MEMORY_LIMITS_CHILD";
 
@@ -106,12 +127,12 @@ const CHILD: &str = "DOFRAY_MEMORY_LIMITS_CHILD";
 /// run in a child process of this test binary under `ulimit -v`.
 #[test]
 fn a_render_whose_film_cannot_be_allocated_returns_a_memory_error() {
-    let exe = std::env::current_exe().unwrap();
     let out = Command::new("sh")
         .arg("-c")
         // 1.4 GiB: room for Embree and the scene, not for the 2.2 GiB colour buffer.
-        .arg("ulimit -v 1500000 && exec \"$0\" --exact child_render_beyond_the_address_space --ignored --nocapture")
-        .arg(exe)
+        .arg("ulimit -v 1500000 && exec \"$@\" --exact child_render_beyond_the_address_space --ignored --nocapture")
+        .arg("sh")
+        .args(this_test_binary())
         .env(CHILD, "1")
         .output()
         .expect("sh runs");
