@@ -86,6 +86,8 @@ pub enum Param {
     TransmissionBounces,
     /// Clamp on indirect samples.
     ClampIndirect,
+    /// Light tracing of small emitters seen through the lens.
+    LightTracing,
 }
 
 /// What each front end calls a [`Param`].
@@ -122,7 +124,7 @@ const fn row(
 
 impl Param {
     /// Every parameter.
-    pub const ALL: [Param; 34] = [
+    pub const ALL: [Param; 35] = [
         Self::Width,
         Self::Height,
         Self::ApertureRadius,
@@ -157,6 +159,7 @@ impl Param {
         Self::GlossyBounces,
         Self::TransmissionBounces,
         Self::ClampIndirect,
+        Self::LightTracing,
     ];
 
     /// The table: the parameter's name in each front end.
@@ -197,6 +200,7 @@ impl Param {
             Self::GlossyBounces => row("glossy_bounces", Some("--glossy-bounces"), Some("render.glossy_bounces"), None, None),
             Self::TransmissionBounces => row("transmission_bounces", Some("--transmission-bounces"), Some("render.transmission_bounces"), None, None),
             Self::ClampIndirect => row("clamp_indirect", Some("--clamp-indirect"), Some("render.clamp_indirect"), None, None),
+            Self::LightTracing => row("light_tracing", Some("--light-tracing"), Some("render.light_tracing"), None, None),
         }
     }
 

@@ -101,6 +101,12 @@ pub struct PathLimits {
     pub clamp_indirect: f32,
     /// How light samples and BSDF samples are weighed.
     pub strategy: Strategy,
+    /// Whether emitters much smaller on screen than their blur (and sub-pixel ones) are seen
+    /// through the lens by light tracing, from the light's side (default), instead of by the
+    /// camera's rays alone: a clean bokeh disc where camera samples find the lamp by luck
+    /// ([`crate::render::light_trace`]). Either way the image is unbiased; only the noise
+    /// differs.
+    pub light_tracing: bool,
 }
 
 impl Default for PathLimits {
@@ -112,6 +118,7 @@ impl Default for PathLimits {
             transmission: 12,
             clamp_indirect: f32::INFINITY,
             strategy: Strategy::Mis,
+            light_tracing: true,
         }
     }
 }
@@ -487,6 +494,8 @@ pub struct SettingsPatch {
     pub transmission_bounces: Option<u32>,
     /// Clamp on indirect samples. Default: none.
     pub clamp_indirect: Option<f32>,
+    /// Light tracing of small emitters ([`PathLimits::light_tracing`]). Default: on.
+    pub light_tracing: Option<bool>,
 }
 
 impl SettingsPatch {
@@ -545,6 +554,7 @@ impl SettingsPatch {
             glossy_bounces: self.glossy_bounces.or(lower.glossy_bounces),
             transmission_bounces: self.transmission_bounces.or(lower.transmission_bounces),
             clamp_indirect: self.clamp_indirect.or(lower.clamp_indirect),
+            light_tracing: self.light_tracing.or(lower.light_tracing),
         }
     }
 
@@ -594,6 +604,7 @@ impl SettingsPatch {
                 transmission: self.transmission_bounces.unwrap_or(d.transmission),
                 clamp_indirect: self.clamp_indirect.unwrap_or(d.clamp_indirect),
                 strategy: d.strategy,
+                light_tracing: self.light_tracing.unwrap_or(d.light_tracing),
             },
             bounces: 1,
             record_rays: false,

@@ -94,6 +94,7 @@ fn renders_png_and_exr_with_a_json_summary() {
         "maps_seconds",
         "sites_seconds",
         "interpolate_seconds",
+        "light_seconds",
     ]
     .iter()
     .map(|k| {

@@ -197,43 +197,45 @@ fn a_lambertian_plane_under_a_point_light_has_the_closed_form_radiance() {
 /// A sphere light (an emissive sphere of radius r and radiance Le, centre at height h) gives
 /// the plane below it irradiance pi Le (r / h)^2 at its foot, so L = rho Le (r / h)^2. Both
 /// the light sample (a cone towards the sphere) and the BSDF sample (which can hit it) carry
-/// it, weighted by MIS.
+/// it, weighted by MIS. The second sphere is a 4 mm lamp 4 m up: its cone's 1 - cos (5e-7) is
+/// within a few ulps of 1 in f32, which the light sample must not round (it was 6% off).
 #[test]
 fn a_sphere_light_lights_a_plane_as_the_closed_form_says() {
-    let (rho, le, r, h) = (0.7, 5.0, 0.5, 2.0);
-    let desc = SceneDesc {
-        // Looking down past the sphere's side at the foot point, from below the sphere.
-        camera: camera(Vec3::new(0.0, 0.6, 0.0), Vec3::ZERO, 0.3),
-        materials: vec![
-            Material::diffuse(Vec3::splat(rho)),
-            Material {
-                emission: Vec3::splat(le),
-                ..Material::diffuse(Vec3::ZERO)
-            },
-        ],
-        objects: vec![
-            Object::Mesh {
-                mesh: ground(50.0),
-                materials: MeshMaterials::One(0),
-            },
-            Object::Sphere {
-                center: Vec3::new(0.0, h, 0.0),
-                radius: r,
-                material: 1,
-            },
-        ],
-        lights: vec![],
-        ambient: Vec3::ZERO,
-        background: Background::uniform(Vec3::ZERO),
-        ..Default::default()
-    };
-    let m = mean(&render_path(&desc, 1024, 1));
-    assert_close(
-        m.x,
-        rho * le * (r / h) * (r / h),
-        0.01,
-        "sphere light on a plane",
-    );
+    for (rho, le, r, h) in [(0.7, 5.0, 0.5, 2.0), (0.7, 1e6, 0.004, 4.0)] {
+        let desc = SceneDesc {
+            // Looking down past the sphere's side at the foot point, from below the sphere.
+            camera: camera(Vec3::new(0.0, 0.6, 0.0), Vec3::ZERO, 0.3),
+            materials: vec![
+                Material::diffuse(Vec3::splat(rho)),
+                Material {
+                    emission: Vec3::splat(le),
+                    ..Material::diffuse(Vec3::ZERO)
+                },
+            ],
+            objects: vec![
+                Object::Mesh {
+                    mesh: ground(50.0),
+                    materials: MeshMaterials::One(0),
+                },
+                Object::Sphere {
+                    center: Vec3::new(0.0, h, 0.0),
+                    radius: r,
+                    material: 1,
+                },
+            ],
+            lights: vec![],
+            ambient: Vec3::ZERO,
+            background: Background::uniform(Vec3::ZERO),
+            ..Default::default()
+        };
+        let m = mean(&render_path(&desc, 1024, 1));
+        assert_close(
+            m.x,
+            rho * le * (r / h) * (r / h),
+            0.01,
+            "sphere light on a plane",
+        );
+    }
 }
 
 /// Writes a `w` x `h` Radiance .hdr file of radiance `texel(x, y)` (row 0 at the top) into a

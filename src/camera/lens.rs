@@ -50,6 +50,15 @@ pub trait Lens {
     /// passes through it (infinitely far when focused at infinity).
     fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3;
 
+    /// Where the rays of lens position `lens` leave the lens (their common origin).
+    fn lens_origin(&self, camera: &Camera, lens: Vec2) -> Vec3;
+
+    /// The inverse of [`Lens::ray`] for light arriving at the lens: the film position whose
+    /// ray from lens position `lens` leaves along unit `dir`, and the film area (square pixels)
+    /// per unit solid angle of `dir` there. `None` when no film position looks that way.
+    /// Light tracing ([`crate::render::light_trace`]) lands its paths with it.
+    fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)>;
+
     /// The weight under `filter` of a sample that crossed the lens at `lens`.
     fn weight(&self, filter: LensFilter, lens: Vec2) -> f32;
 
@@ -122,6 +131,14 @@ impl Lens for CameraLens {
     #[inline]
     fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3 {
         dispatch!(self, l => l.focus_point(camera, px, py))
+    }
+
+    fn lens_origin(&self, camera: &Camera, lens: Vec2) -> Vec3 {
+        dispatch!(self, l => l.lens_origin(camera, lens))
+    }
+
+    fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)> {
+        dispatch!(self, l => l.film_point(camera, lens, dir))
     }
 
     #[inline]
@@ -299,6 +316,33 @@ impl Lens for ThinLens {
         camera.eye + camera.film_dir(px, py) * self.focus_distance
     }
 
+    fn lens_origin(&self, camera: &Camera, lens: Vec2) -> Vec3 {
+        camera.eye + (camera.right * lens.x + camera.up * lens.y) * self.aperture_radius
+    }
+
+    /// [`Lens::ray`]'s direction is `film_dir - offset / focus_distance` normalised, with the
+    /// offset across the view axis and `film_dir`'s component along it 1: so `dir` divided by
+    /// its axial component `c`, plus the offset term, is `film_dir`, which gives the film
+    /// position. Film positions map to the plane at unit distance with pixels of side
+    /// `s = 2 tan(vfov / 2) / height`, which a ray at angle theta to the axis sees as
+    /// `s^2 cos^3 theta` steradians: `c^3 s^2`.
+    fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)> {
+        let c = dir.dot(camera.forward);
+        if c.is_nan() || c <= 0.0 {
+            return None;
+        }
+        let offset = (camera.right * lens.x + camera.up * lens.y) * self.aperture_radius;
+        let film_dir = dir / c + offset * self.inv_focus_distance;
+        let (w, h) = (camera.width as f32, camera.height as f32);
+        let tan = camera.tan_half_vfov;
+        let sx = film_dir.dot(camera.right) / (tan * (w / h));
+        let sy = film_dir.dot(camera.up) / tan;
+        let film = Vec2::new((sx + 1.0) * 0.5 * w, (1.0 - sy) * 0.5 * h);
+        let s = 2.0 * tan / h;
+        let per_sr = 1.0 / (c * c * c * s * s);
+        (film.is_finite() && per_sr.is_finite()).then_some((film, per_sr))
+    }
+
     /// The filter's weight at the sample's radius on the unstretched aperture.
     #[inline]
     fn weight(&self, filter: LensFilter, lens: Vec2) -> f32 {
@@ -432,6 +476,53 @@ pub fn focal_length_of_vfov(vfov_deg: f32, sensor_width_mm: f32, width: u32, hei
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::camera::{CameraSpec, Focus};
+
+    /// `film_point` inverts `ray` for any lens position, and its film area per steradian is
+    /// what a small square of film around that position subtends.
+    #[test]
+    fn film_point_inverts_the_lens_rays_and_measures_their_solid_angle() {
+        for focus in [Focus::Distance(3.0), Focus::Distance(f32::INFINITY)] {
+            let camera = CameraSpec {
+                eye: Vec3::new(0.5, 1.0, -2.0),
+                look_at: Vec3::new(-1.0, 0.2, 4.0),
+                width: 320,
+                height: 200,
+                lens: LensSpec::Aperture { radius: 0.2 },
+                focus,
+                aperture: ApertureShape {
+                    anamorphic: 1.5,
+                    ..ApertureShape::default()
+                },
+                ..CameraSpec::default()
+            }
+            .build(|_| None)
+            .unwrap();
+            for (px, py, lx, ly) in [
+                (160.0, 100.0, 0.0, 0.0),
+                (3.5, 7.25, 0.9, -0.3),
+                (310.0, 190.0, -0.5, 1.4),
+            ] {
+                let lens = Vec2::new(lx, ly);
+                let ray = camera.lens_ray(px, py, lens);
+                assert!((ray.origin - camera.lens_origin(lens)).length() < 1e-6);
+                let (film, per_sr) = camera.film_point(lens, ray.dir).unwrap();
+                assert!(
+                    (film - Vec2::new(px, py)).length() < 2e-3,
+                    "{focus:?}: {film} for ({px}, {py})"
+                );
+                // The solid angle of a 0.5 px square by the cross product of its edges' rays.
+                let h = 0.25;
+                let d = |x: f32, y: f32| camera.lens_ray(x, y, lens).dir;
+                let (a, b) = (d(px + h, py) - d(px - h, py), d(px, py + h) - d(px, py - h));
+                let solid = a.cross(b).length();
+                let want = (2.0 * h) * (2.0 * h) / solid;
+                assert!((per_sr / want - 1.0).abs() < 1e-2, "{per_sr} vs {want}");
+            }
+            // Nothing on the film looks backwards.
+            assert!(camera.film_point(Vec2::ZERO, -camera.forward).is_none());
+        }
+    }
 
     #[test]
     fn focal_length_and_field_of_view_are_inverse() {

@@ -446,6 +446,17 @@ impl Camera {
         self.lens.rays16(self, film, lens, origin, dir);
     }
 
+    /// Where the rays of lens position `lens` ([`Lens::lens_point`]) leave the lens.
+    pub fn lens_origin(&self, lens: Vec2) -> Vec3 {
+        self.lens.lens_origin(self, lens)
+    }
+
+    /// The film position (pixels) whose ray from lens position `lens` leaves along unit `dir`,
+    /// with the film area in square pixels per steradian of `dir` there ([`Lens::film_point`]).
+    pub fn film_point(&self, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)> {
+        self.lens.film_point(self, lens, dir)
+    }
+
     /// Depth along the view axis of the point at parameter `t` of `ray` (unit direction).
     pub fn depth_along_axis(&self, ray: &Ray, t: f32) -> f32 {
         (ray.at(t) - self.eye).dot(self.forward)

@@ -222,6 +222,12 @@ pub(crate) struct RenderArgs {
     /// of bias (bright indirect light gets darker) [default: the scene's, else no clamp].
     #[arg(long, value_name = "RADIANCE")]
     pub(crate) clamp_indirect: Option<f32>,
+    /// Path tracer: lamps much smaller on screen than their blur (and sub-pixel ones) are seen
+    /// through the lens by tracing light from them to the lens, so their bokeh discs come out
+    /// clean instead of speckled, and adaptive sites cannot miss them. Unbiased either way;
+    /// `off` leaves them to camera rays alone (for comparisons) [default: the scene's, else on].
+    #[arg(long, value_name = "on|off")]
+    pub(crate) light_tracing: Option<Switch>,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
     /// interval = max(2, k x CoC) in defocused regions, spp samples per defocused site (0.4 is
     /// the paper's; reproduces its table) [default: the scene's].
@@ -542,4 +548,13 @@ pub(crate) fn parse_light(s: &str) -> Result<Light, String> {
             "unknown light kind {other:?}: expected point, sun or spot"
         )),
     }
+}
+
+/// An on/off flag value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum Switch {
+    /// Enabled.
+    On,
+    /// Disabled.
+    Off,
 }

@@ -16,7 +16,7 @@ use dofray::render::{RulePatch, SettingsPatch};
 use dofray::scene::SceneDesc;
 use dofray::view::{DisplayView, ViewError};
 
-use super::args::{MergeArgs, RenderArgs};
+use super::args::{MergeArgs, RenderArgs, Switch};
 use super::{Bar, cli_error, prepare};
 
 /// The render settings the flags and the scene ask for.
@@ -47,6 +47,7 @@ pub(crate) fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<Render
         glossy_bounces: a.glossy_bounces,
         transmission_bounces: a.transmission_bounces,
         clamp_indirect: a.clamp_indirect,
+        light_tracing: a.light_tracing.map(|s| s == Switch::On),
     };
     Ok(flags
         .over(&desc.settings)

@@ -23,6 +23,7 @@
 pub mod estimate;
 pub mod film;
 pub mod interpolate;
+pub mod light_trace;
 pub mod maps;
 pub mod path;
 pub mod refine;
@@ -45,6 +46,7 @@ pub use crate::settings::{
 };
 use estimate::Estimate;
 pub use film::Film;
+pub use light_trace::LightTraced;
 pub use region::{Region, RegionError};
 pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};
@@ -94,6 +96,11 @@ pub struct RenderStats {
     pub sites_seconds: f64,
     /// Time spent interpolating between sites (included in `seconds`).
     pub interpolate_seconds: f64,
+    /// Time spent tracing light from small emitters to the lens (included in `seconds`).
+    pub light_seconds: f64,
+    /// Light paths traced from small emitters to the lens ([`light_trace`]): each one shadow
+    /// ray, counted in `rays`.
+    pub light_paths: u64,
     /// Rays traced, by kind (for a region render, the rays traced for it, the full-frame depth pass
     /// included).
     pub rays: RayCounts,
@@ -449,11 +456,13 @@ pub fn render_region(
 
     let phase = Instant::now();
     let pixel_filter = settings.pixel_filter.sampler();
+    let light_traced = LightTraced::choose(world, camera, settings);
     let shader = SiteShader {
         world,
         camera,
         settings,
         pixel_filter: &pixel_filter,
+        light_traced: &light_traced,
     };
     let blurred = maps::blurred(&film.coc, w, h)?;
     if let (Mode::Adaptive, Some(tolerance)) = (settings.mode, settings.tolerance()) {
@@ -486,20 +495,24 @@ pub fn render_region(
         film.set_rgba(&rgba);
         stats.interpolate_seconds = phase.elapsed().as_secs_f64();
     }
+    let phase = Instant::now();
+    light_trace::trace(
+        &shader,
+        &light_traced,
+        region,
+        progress,
+        &mut tally,
+        &mut film.color,
+    )?;
+    stats.light_paths = light_traced.paths();
+    stats.light_seconds = phase.elapsed().as_secs_f64();
     let (mut film, blurred) = if *region == Region::full(camera.width, camera.height) {
         (film, blurred)
     } else {
         let blurred = region.try_crop(&blurred, w, "the region's blur map")?;
         (film.try_crop(region)?, blurred)
     };
-    let bad = |c: &glam::Vec3| !c.is_finite();
-    if let Some(first) = film.color.iter().position(bad) {
-        return Err(RenderError::NonFinite {
-            count: film.color.iter().filter(|c| bad(c)).count(),
-            x: first % film.width + region.x0 as usize,
-            y: first / film.width + region.y0 as usize,
-        });
-    }
+    check_finite(&film, region)?;
     if !settings.transparent {
         // The background is part of the picture: every pixel is opaque.
         film.alpha.fill(1.0);
@@ -515,6 +528,19 @@ pub fn render_region(
     stats.ray_log = tally.log;
     stats.seconds = start.elapsed().as_secs_f64();
     Ok((film, stats))
+}
+
+/// [`RenderError::NonFinite`] when a pixel of `film` (the pixels of `region`) is not finite.
+fn check_finite(film: &Film, region: &Region) -> Result<(), RenderError> {
+    let bad = |c: &glam::Vec3| !c.is_finite();
+    match film.color.iter().position(bad) {
+        Some(first) => Err(RenderError::NonFinite {
+            count: film.color.iter().filter(|c| bad(c)).count(),
+            x: first % film.width + region.x0 as usize,
+            y: first / film.width + region.y0 as usize,
+        }),
+        None => Ok(()),
+    }
 }
 
 impl HasKind for RenderError {

@@ -6,6 +6,7 @@
 
 use glam::{Vec2, Vec3};
 
+use super::light_trace::LightTraced;
 use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::sampler::{PATH_DIMENSIONS, path_numbers};
@@ -94,6 +95,7 @@ pub fn trace_path(
     packet: &mut RayPacket16,
     keys: &[u64; LANES],
     limits: &PathLimits,
+    light_traced: &LightTraced,
     radiance: &mut [Vec3; LANES],
     t_hit: &mut [f32; LANES],
     scratch: &mut PathScratch,
@@ -145,7 +147,11 @@ pub fn trace_path(
         if hits == 0 {
             break;
         }
-        let v = vertices(world, packet, hits, &lanes, weigh, scratch, radiance);
+        // The emitters light tracing sees through the lens send nothing to camera rays.
+        let unseen = (bounce == 0).then_some(light_traced);
+        let v = vertices(
+            world, packet, hits, &lanes, weigh, unseen, scratch, radiance,
+        );
         if bounce == limits.total {
             break;
         }
@@ -208,13 +214,16 @@ fn add_world(
     }
 }
 
-/// The BSDFs and leaving origins of the lanes in `hits`; adds the emission they see.
+/// The BSDFs and leaving origins of the lanes in `hits`; adds the emission they see (but not
+/// that of primitives in `unseen`).
+#[allow(clippy::too_many_arguments)]
 fn vertices(
     world: &World,
     packet: &RayPacket16,
     hits: u32,
     lanes: &[Lane; LANES],
     (clamp, strategy): (f32, Strategy),
+    unseen: Option<&LightTraced>,
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
 ) -> Vertices {
@@ -231,7 +240,8 @@ fn vertices(
         let material = world.material(&hit);
         let front = hit.is_front(d);
         let le = material.emitted_towards(sp.uv, front);
-        if le != Vec3::ZERO {
+        let seen = unseen.is_none_or(|u| !u.contains(hit.geometry.0, hit.prim));
+        if le != Vec3::ZERO && seen {
             let s = &lanes[lane];
             let w = if s.delta {
                 1.0

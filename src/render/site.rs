@@ -17,6 +17,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::estimate::Estimate;
+use super::light_trace::LightTraced;
 use super::trace::{self, RayKind, Tally};
 use super::{Integrator, path};
 use super::{Mode, Progress, RenderSettings};
@@ -36,6 +37,9 @@ pub struct SiteShader<'a> {
     pub settings: &'a RenderSettings,
     /// Draws each sample's film offset from the pixel filter ([`RenderSettings::pixel_filter`]).
     pub pixel_filter: &'a FilterSampler,
+    /// Emitters whose direct view is light-traced ([`super::light_trace`]): the camera's paths
+    /// leave their emission out where they hit them first.
+    pub light_traced: &'a LightTraced,
 }
 
 /// Per-thread scratch space for [`SiteShader::shade_row`]; its contents on entry do not
@@ -227,6 +231,7 @@ impl SiteShader<'_> {
                 packet,
                 &b.key,
                 &self.settings.path,
+                self.light_traced,
                 &mut radiance,
                 &mut t_hit,
                 path,

@@ -313,6 +313,7 @@ fn render_settings(ctx: &Ctx, render: RawRender) -> Result<SettingsPatch, LoadEr
         glossy_bounces: render.glossy_bounces.as_ref().map(|s| *s.get_ref()),
         transmission_bounces: render.transmission_bounces.as_ref().map(|s| *s.get_ref()),
         clamp_indirect: render.clamp_indirect.as_ref().map(|s| s.get_ref().0),
+        light_tracing: render.light_tracing,
         ..Default::default()
     };
     if let Err(e) = patch.resolve() {

@@ -1,0 +1,444 @@
+//! Emitters the camera would find only by luck, traced from the light instead (light tracing:
+//! the t = 1 strategy of bidirectional path tracing).
+//!
+//! A lamp much smaller on screen than its blur is the hardest case for a camera-side sampler:
+//! a pixel inside its bokeh disc sees it through a fraction (sharp area / disc area) of the
+//! aperture, so at 16 samples a 24 px disc of a sub-pixel lamp is a few speckles, and adaptive
+//! sites that all miss it lose the disc. From the light's side every path lands in the disc:
+//! pick a point on the aperture, a direction from it towards the lamp, test that nothing is in
+//! between, and the lens says where on the film that ray belongs
+//! ([`crate::camera::Lens::film_point`]).
+//!
+//! **The split is exact.** For each primitive chosen here, the light it sends straight into the
+//! lens comes from here alone: camera paths add none of its emission at their first hit
+//! ([`LightTraced::contains`]). What reaches the camera after a bounce (its reflection in a
+//! window, its light on a wall) stays with the path tracer. Both estimators are unbiased, so is
+//! their sum; only the noise moves.
+//!
+//! **Estimator.** A pixel is `I_p = E_u[ ∫ f(x - c_p) L(x, u) dx ]` over the camera's lens
+//! positions `u` and film positions `x` (pixels), `f` the pixel filter's normalised density
+//! ([`crate::filter::FilterDensity`]). For one lens position the film area per steradian of
+//! ray direction is the lens's `per_sr`, so a direction `w` drawn towards the lamp with
+//! density `p(w)` contributes `f(x - c_p) L_e V per_sr / p(w)` to every pixel `p` whose filter
+//! reaches `x`; `N` paths each add a `1 / N` share. A non-box lens filter weighs each path by
+//! its lens weight over the weights' mean, as the camera's weighted mean does.
+//!
+//! **Which primitives.** An emissive triangle or sphere whose sharp image (the bounding box of
+//! its projected bounds) covers at most a quarter of its blurred footprint (that box grown by
+//! half the largest CoC over its depths and the pixel filter's reach): defocused lamps and
+//! sub-pixel ones. Each takes `spp` paths per pixel of its footprint in the frame, so its disc
+//! converges as a dense render's pixels do; smallest footprints first, within a budget of half
+//! the samples of a dense render (what is left over stays with the camera). Emitters the camera
+//! sees large and sharp are better found by its own rays.
+//!
+//! **Deterministic.** Paths are numbered per primitive (Owen-scrambled Sobol points keyed by
+//! it), traced in parallel in fixed blocks and splatted in block order: the image is the same
+//! for any thread count, and a region gets exactly the splats the full frame gives it.
+
+use std::collections::HashSet;
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use super::region::Region;
+use super::site::SiteShader;
+use super::trace::{RayKind, Tally};
+use super::{Progress, RenderError, check_cancelled};
+use crate::camera::{Camera, Lens, LensFilter};
+use crate::embree::{LANES, RayHint, ShadowPacket16};
+use crate::filter::FilterDensity;
+use crate::limits::{MemoryError, try_with_capacity};
+use crate::sampler::{PixelSampler, hash64};
+use crate::scene::World;
+use crate::scene::emitters::{primitive_bounds, sample_primitive};
+use crate::settings::{Integrator, Mode, RenderSettings};
+
+/// Keys the light paths' sample streams apart from the camera's.
+const SALT: u64 = 0x6c69_6768_745f_7472;
+/// Light paths per work item.
+const BLOCK: u32 = 4096;
+/// The most light paths of one primitive.
+const MAX_PATHS: u32 = 1 << 24;
+/// A sharp image at most this fraction of the blurred footprint is light-traced.
+const SHARP_FRACTION: f32 = 0.25;
+
+/// One light-traced primitive.
+#[derive(Debug, Clone, Copy)]
+struct Traced {
+    geometry: u32,
+    prim: u32,
+    /// Light paths to trace.
+    paths: u32,
+    /// Film rectangle its light can reach (x0, y0, x1, y1; pixels, the filter's reach
+    /// included), unclipped.
+    reach: [f32; 4],
+}
+
+/// The emissive primitives whose direct view is light-traced in a render, and how many paths
+/// each takes ([`LightTraced::choose`]).
+#[derive(Debug, Default)]
+pub struct LightTraced {
+    traced: Vec<Traced>,
+    set: HashSet<(u32, u32)>,
+    /// Mean lens weight over the aperture under the render's lens filter (1 for the box).
+    lens_weight_mean: f32,
+}
+
+/// Where an emitter's light can land on the film.
+struct Footprint {
+    /// Area (square pixels) of its sharp image's bounding box.
+    sharp_area: f32,
+    /// Film rectangle its light can reach through any lens position, filter included.
+    reach: [f32; 4],
+}
+
+impl LightTraced {
+    /// Nothing light-traced: the camera finds every emitter.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// The primitives of `world` to light-trace for a render through `camera` with
+    /// `settings` (none unless the path tracer renders with
+    /// [`crate::render::PathLimits::light_tracing`]); see the module documentation.
+    pub fn choose(world: &World, camera: &Camera, settings: &RenderSettings) -> Self {
+        if settings.integrator != Integrator::Path || !settings.path.light_tracing {
+            return Self::none();
+        }
+        let pinhole = settings.mode == Mode::Pinhole;
+        let spp = if pinhole { settings.aa } else { settings.spp };
+        let filter_reach = 0.5 * settings.pixel_filter.width;
+        let (w, h) = (camera.width as f32, camera.height as f32);
+        let mut candidates = Vec::new();
+        for (geometry, prim) in world.emitters.primitives() {
+            let (lo, hi) = primitive_bounds(world, geometry, prim);
+            let Some(fp) = footprint(camera, lo, hi, filter_reach, pinhole) else {
+                continue;
+            };
+            let [x0, y0, x1, y1] = fp.reach;
+            let blurred_area = (x1 - x0) * (y1 - y0);
+            if fp.sharp_area > SHARP_FRACTION * blurred_area {
+                continue;
+            }
+            // Only what lands in the frame is traced for.
+            let in_frame = (x1.min(w) - x0.max(0.0)).max(0.0) * (y1.min(h) - y0.max(0.0)).max(0.0);
+            if in_frame <= 0.0 {
+                continue;
+            }
+            let paths = (spp as f64 * f64::from(in_frame))
+                .ceil()
+                .min(f64::from(MAX_PATHS));
+            candidates.push(Traced {
+                geometry,
+                prim,
+                paths: paths as u32,
+                reach: fp.reach,
+            });
+        }
+        candidates.sort_by_key(|t| (t.paths, t.geometry, t.prim));
+        let budget = 0.5 * f64::from(w) * f64::from(h) * spp as f64;
+        let mut total = 0.0f64;
+        let mut traced: Vec<Traced> = candidates
+            .into_iter()
+            .take_while(|t| {
+                total += f64::from(t.paths);
+                total <= budget
+            })
+            .collect();
+        traced.sort_by_key(|t| (t.geometry, t.prim));
+        let set = traced.iter().map(|t| (t.geometry, t.prim)).collect();
+        Self {
+            traced,
+            set,
+            lens_weight_mean: lens_weight_mean(camera, settings.filter),
+        }
+    }
+
+    /// Whether nothing is light-traced.
+    pub fn is_empty(&self) -> bool {
+        self.traced.is_empty()
+    }
+
+    /// Whether primitive `prim` of geometry `geometry` is light-traced: camera paths must
+    /// leave its emission out where they hit it first.
+    #[inline]
+    pub fn contains(&self, geometry: u32, prim: u32) -> bool {
+        !self.set.is_empty() && self.set.contains(&(geometry, prim))
+    }
+
+    /// The light paths a render traces.
+    pub fn paths(&self) -> u64 {
+        self.traced.iter().map(|t| u64::from(t.paths)).sum()
+    }
+}
+
+/// The film footprint of the box `lo`..`hi`: `None` when part of it is not in front of the lens
+/// (behind the camera or around it), whose image has no bound.
+fn footprint(
+    camera: &Camera,
+    lo: Vec3,
+    hi: Vec3,
+    filter_reach: f32,
+    pinhole: bool,
+) -> Option<Footprint> {
+    let mut rect = [
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NEG_INFINITY,
+    ];
+    let (mut near, mut far) = (f32::INFINITY, 0.0f32);
+    for i in 0..8 {
+        let corner = Vec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        );
+        let depth = (corner - camera.eye).dot(camera.forward);
+        let p = camera.project(corner)?;
+        if depth.is_nan() || depth <= 0.0 || !p.is_finite() {
+            return None;
+        }
+        (near, far) = (near.min(depth), far.max(depth));
+        rect = [
+            rect[0].min(p.x),
+            rect[1].min(p.y),
+            rect[2].max(p.x),
+            rect[3].max(p.y),
+        ];
+    }
+    // A box wholly in front projects within its corners' projections; through any lens
+    // position a point moves at most half its CoC from there, and the CoC over a depth range
+    // is largest at one of its ends.
+    let blur = if pinhole {
+        0.0
+    } else {
+        0.5 * camera.coc_px(near).max(camera.coc_px(far))
+    };
+    let grow = blur + filter_reach;
+    let reach = [
+        rect[0] - grow,
+        rect[1] - grow,
+        rect[2] + grow,
+        rect[3] + grow,
+    ];
+    reach.iter().all(|v| v.is_finite()).then_some(Footprint {
+        sharp_area: (rect[2] - rect[0]) * (rect[3] - rect[1]),
+        reach,
+    })
+}
+
+/// The mean lens weight under `filter` over the camera's aperture distribution (4096 Sobol
+/// points), which the camera's weighted mean divides by.
+fn lens_weight_mean(camera: &Camera, filter: LensFilter) -> f32 {
+    if filter == LensFilter::Box {
+        return 1.0;
+    }
+    const POINTS: u32 = 4096;
+    let sampler = PixelSampler::new(SALT, 0);
+    let sum: f64 = (0..POINTS)
+        .map(|i| {
+            let lens = camera.lens.lens_point(sampler.get(i));
+            f64::from(camera.lens.weight(filter, lens))
+        })
+        .sum();
+    (sum / f64::from(POINTS)) as f32
+}
+
+/// Light that landed on the film: its position (pixels) and what it adds there.
+#[derive(Debug, Clone, Copy)]
+struct Splat {
+    film: Vec2,
+    value: Vec3,
+}
+
+/// What every light path of a render shares.
+struct Context<'a> {
+    world: &'a World,
+    camera: &'a Camera,
+    settings: &'a RenderSettings,
+    traced: &'a LightTraced,
+}
+
+/// Traces the light paths of `traced` for the render `shader` describes and adds the light they
+/// land on the film to `image`, the full frame's colours (row-major; only `region`'s pixels
+/// change): what the camera's paths left out.
+pub fn trace(
+    shader: &SiteShader,
+    traced: &LightTraced,
+    region: &Region,
+    progress: &dyn Progress,
+    tally: &mut Tally,
+    image: &mut [Vec3],
+) -> Result<(), RenderError> {
+    let SiteShader {
+        world,
+        camera,
+        settings,
+        ..
+    } = *shader;
+    if traced.is_empty() {
+        return Ok(());
+    }
+    let w = camera.width as usize;
+    // Work items (primitive, first path): only primitives whose light can reach the region.
+    let overlaps = |t: &Traced| {
+        t.reach[0] < region.x1 as f32
+            && t.reach[2] > region.x0 as f32
+            && t.reach[1] < region.y1 as f32
+            && t.reach[3] > region.y0 as f32
+    };
+    let items: Vec<(usize, u32)> = (traced.traced.iter().enumerate())
+        .filter(|(_, t)| overlaps(t))
+        .flat_map(|(i, t)| (0..t.paths).step_by(BLOCK as usize).map(move |f| (i, f)))
+        .collect();
+    progress.start("lights", items.len() as u64);
+    let ctx = Context {
+        world,
+        camera,
+        settings,
+        traced,
+    };
+    let density = settings.pixel_filter.density();
+    // Batches keep the splats held at once bounded: blocks of one batch are traced in
+    // parallel while the previous batch is splatted, in block order.
+    let batch = 8 * rayon::current_num_threads().max(1);
+    let trace_batch = |chunk: &[(usize, u32)]| -> Vec<Result<(Vec<Splat>, Tally), MemoryError>> {
+        chunk
+            .par_iter()
+            .map(|&(i, first)| {
+                let out = trace_block(&ctx, &traced.traced[i], first);
+                progress.advance(1);
+                out
+            })
+            .collect()
+    };
+    let mut splat_batch = |results: Vec<Result<(Vec<Splat>, Tally), MemoryError>>| {
+        for result in results {
+            let (splats, local) = result?;
+            tally.merge(local);
+            for s in &splats {
+                splat(image, w, region, &density, s);
+            }
+        }
+        Ok::<(), MemoryError>(())
+    };
+    let mut pending = Vec::new();
+    for chunk in items.chunks(batch) {
+        check_cancelled(progress)?;
+        let (traced, splatted) = rayon::join(
+            || trace_batch(chunk),
+            || splat_batch(std::mem::take(&mut pending)),
+        );
+        splatted?;
+        pending = traced;
+    }
+    splat_batch(pending)?;
+    check_cancelled(progress)
+}
+
+/// Traces paths `first .. first + BLOCK` (at most the primitive's count) of `t`, 16 at a
+/// time, and returns the unoccluded ones' splats.
+fn trace_block(ctx: &Context, t: &Traced, first: u32) -> Result<(Vec<Splat>, Tally), MemoryError> {
+    let Context {
+        world,
+        camera,
+        settings,
+        traced,
+    } = *ctx;
+    let mut tally = Tally::new(settings.record_rays);
+    let end = first.saturating_add(BLOCK).min(t.paths);
+    let mut splats = try_with_capacity((end - first) as usize, "the light paths' splats")?;
+    let key = hash64(u64::from(t.geometry) << 32 | u64::from(t.prim));
+    let sampler = PixelSampler::new(settings.seed ^ SALT, key);
+    let pinhole = settings.mode == Mode::Pinhole;
+    let filter = settings.filter;
+    // The share of one path, with the exposure the camera's samples get.
+    let share = settings.exposure.exp2() / (t.paths as f32 * traced.lens_weight_mean);
+    let mut shadow = ShadowPacket16::new();
+    for start in (first..end).step_by(LANES) {
+        let mut origin = [[0.0f32; LANES]; 3];
+        let mut dir = [[0.0f32; LANES]; 3];
+        let mut seg_end = [0.0f32; LANES];
+        let mut pending = [None; LANES];
+        let mut lit = 0u32;
+        for (lane, j) in (start..end.min(start + LANES as u32)).enumerate() {
+            let lens = if pinhole {
+                Vec2::ZERO
+            } else {
+                camera.lens.lens_point(sampler.get(j))
+            };
+            let o = camera.lens_origin(lens);
+            let Some(es) = sample_primitive(world, t.geometry, t.prim, o, sampler.get_pixel(j))
+            else {
+                continue;
+            };
+            let Some((film, per_sr)) = camera.film_point(lens, es.dir) else {
+                continue;
+            };
+            let lens_weight = if filter == LensFilter::Box {
+                1.0
+            } else {
+                camera.lens.weight(filter, lens)
+            };
+            let value = es.radiance * (per_sr * lens_weight * share / es.pdf);
+            if !(value.max_element() > 0.0 && value.is_finite()) {
+                continue;
+            }
+            for k in 0..3 {
+                origin[k][lane] = o[k];
+                dir[k][lane] = es.dir[k];
+            }
+            seg_end[lane] = es.distance * (1.0 - 1e-4);
+            pending[lane] = Some(Splat { film, value });
+            lit |= 1 << lane;
+        }
+        if lit == 0 {
+            continue;
+        }
+        shadow.set_segments(lit, &origin, &dir, &seg_end);
+        tally.count(RayKind::Shadow, lit.count_ones() as usize);
+        tally.record(RayKind::Shadow, RayHint::Incoherent, |l| {
+            shadow.is_active(l).then(|| shadow.ray(l))
+        });
+        world.scene.occluded16(&mut shadow, RayHint::Incoherent);
+        for (lane, s) in pending.iter().enumerate() {
+            if let Some(s) = s
+                && shadow.is_active(lane)
+                && !shadow.occluded(lane)
+            {
+                splats.push(*s);
+            }
+        }
+    }
+    Ok((splats, tally))
+}
+
+/// Adds splat `s` to the pixels of `region` whose filter reaches it, weighted by the filter's
+/// density at its offset from each pixel's centre.
+fn splat(image: &mut [Vec3], w: usize, region: &Region, density: &FilterDensity, s: &Splat) {
+    /// Pixels along one axis a filter of the largest width (16 px) reaches.
+    const SPAN: usize = 18;
+    let r = density.reach();
+    // The pixels whose centres (i + 0.5) are within r of the splat, and their weights.
+    let weights = |c: f32, lo: u32, hi: u32| {
+        let first = (c - r - 0.5).ceil().max(lo as f32) as i64;
+        let last = (c + r - 0.5).floor().min(hi as f32 - 1.0) as i64;
+        let mut w = [0.0f32; SPAN];
+        let n = (last - first + 1).clamp(0, SPAN as i64) as usize;
+        for (k, w) in w.iter_mut().enumerate().take(n) {
+            *w = density.at(c - ((first + k as i64) as f32 + 0.5));
+        }
+        (first, n, w)
+    };
+    let (x0, nx, wx) = weights(s.film.x, region.x0, region.x1);
+    let (y0, ny, wy) = weights(s.film.y, region.y0, region.y1);
+    for (j, &wy) in wy.iter().enumerate().take(ny) {
+        let row = (y0 + j as i64) as usize * w;
+        for (i, &wx) in wx.iter().enumerate().take(nx) {
+            if wx * wy > 0.0 {
+                image[row + (x0 + i as i64) as usize] += s.value * (wx * wy);
+            }
+        }
+    }
+}
