@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3};
 use super::light_trace::LightTraced;
 use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
-use crate::sampler::{PATH_DIMENSIONS, path_numbers};
+use crate::sampler::{PATH_DIMENSIONS, SampleKey, path_numbers};
 use crate::scene::World;
 use crate::scene::emitters::{EmitterSample, punctual_sample};
 use crate::settings::{PathLimits, Strategy};
@@ -93,7 +93,7 @@ struct Vertices {
 pub fn trace_path(
     world: &World,
     packet: &mut RayPacket16,
-    keys: &[u64; LANES],
+    keys: &[SampleKey; LANES],
     limits: &PathLimits,
     light_traced: &LightTraced,
     radiance: &mut [Vec3; LANES],

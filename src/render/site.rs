@@ -24,7 +24,7 @@ use super::{Mode, Progress, RenderSettings};
 use crate::camera::{Camera, Lens, LensFilter};
 use crate::embree::{LANES, RayHint, RayPacket16};
 use crate::filter::FilterSampler;
-use crate::sampler::{PixelSampler, sample_key};
+use crate::sampler::{PixelSampler, SampleKey, sample_key};
 use crate::scene::World;
 
 /// What every site of a render shares.
@@ -67,7 +67,7 @@ struct Batch {
     pixel: [usize; LANES],
     /// Each sample's key ([`crate::sampler::sample_key`]): what its path's decisions are drawn
     /// from.
-    key: [u64; LANES],
+    key: [SampleKey; LANES],
     film_x: [f32; LANES],
     film_y: [f32; LANES],
     lens_x: [f32; LANES],
