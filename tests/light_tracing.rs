@@ -22,6 +22,14 @@ const LAMP_DEPTH: f32 = 0.9;
 /// An 85 mm f/1.4 lens focused at 4 m looking down +z from the origin, a lamp of radius
 /// `radius` (metres) at 0.9 m, on black or in front of a dim emissive wall in focus.
 fn scene(radius: f32, wall: bool) -> SceneDesc {
+    scene_with(
+        &format!("type = \"sphere\"\ncenter = [0.01, 0.005, {LAMP_DEPTH}]\nradius = {radius}"),
+        wall,
+    )
+}
+
+/// [`scene`] with the lamp object given by `lamp` (its `[[objects]]` keys but the material).
+fn scene_with(lamp: &str, wall: bool) -> SceneDesc {
     let wall = if wall {
         r#"
 [[materials]]
@@ -66,9 +74,7 @@ diffuse = 0
 emission = {LAMP}
 
 [[objects]]
-type = "sphere"
-center = [0.01, 0.005, {LAMP_DEPTH}]
-radius = {radius}
+{lamp}
 material = "lamp"
 {wall}"#
     );
@@ -165,15 +171,26 @@ fn moments(film: &Film) -> (f64, f64, f64) {
 #[test]
 fn the_light_traced_disc_is_the_one_camera_rays_find() {
     // 6 mm at 0.9 m: about 6 px sharp, blurred by 24 px: light-traced, and big enough for
-    // camera rays to find at 64 samples.
-    let lamp = scene(0.006, false);
-    for filter in [LensFilter::Box, LensFilter::Gaussian] {
+    // camera rays to find at 64 samples. A sphere, and a square of two triangles facing the
+    // camera (a mesh lamp, as glTF brings them).
+    let sphere = scene(0.006, false);
+    let square = scene_with(
+        &format!(
+            "type = \"quad\"\nsize = [0.01, 0.01]\nrotate = [-90, 0, 0]\ntranslate = [0.01, 0.005, {LAMP_DEPTH}]"
+        ),
+        false,
+    );
+    for (lamp, filter) in [
+        (&sphere, LensFilter::Box),
+        (&sphere, LensFilter::Gaussian),
+        (&square, LensFilter::Box),
+    ] {
         let with = |light_tracing| {
             let s = RenderSettings {
                 filter,
                 ..settings(Mode::Dense, 64, light_tracing)
             };
-            render(&lamp, &s)
+            render(lamp, &s)
         };
         let (traced, stats) = with(true);
         assert!(
