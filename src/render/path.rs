@@ -240,8 +240,8 @@ fn vertices(
         let material = world.material(&hit);
         let front = hit.is_front(d);
         let le = material.emitted_towards(sp.uv, front);
-        let seen = unseen.is_none_or(|u| !u.contains(hit.geometry.0, hit.prim));
-        if le != Vec3::ZERO && seen {
+        let seen = || unseen.is_none_or(|u| !u.contains(hit.geometry.0, hit.prim));
+        if le != Vec3::ZERO && seen() {
             let s = &lanes[lane];
             let w = if s.delta {
                 1.0
