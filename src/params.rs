@@ -200,7 +200,7 @@ impl Param {
             Self::GlossyBounces => row("glossy_bounces", Some("--glossy-bounces"), Some("render.glossy_bounces"), None, None),
             Self::TransmissionBounces => row("transmission_bounces", Some("--transmission-bounces"), Some("render.transmission_bounces"), None, None),
             Self::ClampIndirect => row("clamp_indirect", Some("--clamp-indirect"), Some("render.clamp_indirect"), None, None),
-            Self::LightTracing => row("light_tracing", Some("--light-tracing"), Some("render.light_tracing"), None, None),
+            Self::LightTracing => row("light_tracing", Some("--light-tracing"), Some("render.light_tracing"), Some("light_tracing"), None),
         }
     }
 

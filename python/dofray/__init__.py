@@ -66,6 +66,7 @@ def render(
     exposure: Optional[float] = None,
     transparent: bool = False,
     integrator: Optional[str] = None,
+    light_tracing: Optional[bool] = None,
     frame: Optional[int] = None,
     threads: Optional[int] = None,
     progress: Optional[ProgressCallback] = None,
@@ -89,7 +90,9 @@ def render(
     - ``transparent``: the background contributes nothing (alpha is the coverage and RGB
       is premultiplied);
     - ``integrator``: ``"path"`` (default: physically based, as Cycles) or ``"direct"``
-      (the seed's quick direct shading);
+      (the seed's quick direct shading); ``light_tracing``: ``False`` leaves lamps much
+      smaller on screen than their blur to camera rays alone (default ``True``: traced from
+      the light, clean bokeh discs; unbiased either way);
     - ``frame``: the frame of an animated scene (default: its first);
     - ``threads``: worker threads, 1 to 1024 (default: all cores); the image is the same
       for any number;
@@ -120,6 +123,7 @@ def render(
         exposure=exposure,
         transparent=transparent,
         integrator=integrator,
+        light_tracing=light_tracing,
         frame=frame,
         threads=threads,
         progress=progress,

@@ -49,6 +49,7 @@ def render(
     exposure: Optional[float] = ...,
     transparent: bool = ...,
     integrator: Optional[str] = ...,
+    light_tracing: Optional[bool] = ...,
     frame: Optional[int] = ...,
     threads: Optional[int] = ...,
     progress: Optional[Callable[[str, int, int], object]] = ...,

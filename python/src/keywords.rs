@@ -31,6 +31,7 @@ pub(crate) struct SceneKeywords {
     pub(crate) exposure: Option<f32>,
     pub(crate) transparent: bool,
     pub(crate) integrator: Option<String>,
+    pub(crate) light_tracing: Option<bool>,
 }
 
 /// `value` as keyword `name` takes it, or a `TypeError` naming the keyword.
@@ -69,6 +70,7 @@ impl SceneKeywords {
                 "exposure" => k.exposure = item(&name, v)?,
                 "transparent" => k.transparent = item(&name, v)?,
                 "integrator" => k.integrator = item(&name, v)?,
+                "light_tracing" => k.light_tracing = item(&name, v)?,
                 _ => {
                     return Err(PyTypeError::new_err(format!(
                         "render_jobs() got an unexpected keyword argument '{name}'"
@@ -110,6 +112,7 @@ impl SceneKeywords {
             exposure: self.exposure,
             transparent: self.transparent,
             integrator: to_integrator(self.integrator.as_deref())?,
+            light_tracing: self.light_tracing,
             ..Default::default()
         };
         Ok((overrides, settings))

@@ -445,7 +445,7 @@ impl Render {
     scene, *, width=None, height=None, f_number=None, focal_length=None, sensor_width=None,
     focus_distance=None, autofocus=None, aperture_radius=None, blades=None, spp=None, aa=None,
     mode=None, tolerance=None, seed=None, exposure=None, transparent=false, integrator=None,
-    frame=None, threads=None, progress=None
+    light_tracing=None, frame=None, threads=None, progress=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn render(
@@ -468,6 +468,7 @@ fn render(
     exposure: Option<f32>,
     transparent: bool,
     integrator: Option<&str>,
+    light_tracing: Option<bool>,
     frame: Option<i64>,
     threads: Option<i64>,
     progress: Option<Py<PyAny>>,
@@ -497,6 +498,7 @@ fn render(
         exposure,
         transparent,
         integrator: integrator.map(str::to_owned),
+        light_tracing,
     };
     let job = (|| -> Result<Job, Failure> {
         let (overrides, settings) = keywords.parts()?;

@@ -300,3 +300,43 @@ def test_render_from_another_thread():
     t.start()
     t.join()
     assert out["r"].rgba.shape == (12, 16, 4)
+
+
+LAMP = """
+name = "lamp"
+ambient = 0
+[image]
+width = 192
+height = 144
+[camera]
+eye = [0, 0, 0]
+look_at = [0, 0, 1]
+f_number = 1.4
+focal_length_mm = 85
+sensor_width_mm = 36
+focus_distance = 4
+[background]
+horizon = 0
+zenith = 0
+[[materials]]
+name = "lamp"
+diffuse = 0
+emission = 400
+[[objects]]
+type = "sphere"
+center = [0.01, 0.005, 0.9]
+radius = 0.0005
+material = "lamp"
+"""
+
+
+def test_light_tracing(tmp_path):
+    # A 1 mm lamp blurred to a 24 px disc: light-traced by default, its energy kept in
+    # adaptive mode; camera rays alone lose most of it between the sparse sites.
+    scene = tmp_path / "lamp.toml"
+    scene.write_text(LAMP)
+    on = dofray.render(scene, spp=16)
+    off = dofray.render(scene, spp=16, light_tracing=False)
+    assert on.stats["light_paths"] > 0 and off.stats["light_paths"] == 0
+    energy = lambda r: float(r.rgba[..., :3].sum())
+    assert energy(on) > 2 * energy(off)
