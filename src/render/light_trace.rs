@@ -42,7 +42,7 @@ use rayon::prelude::*;
 
 use super::region::Region;
 use super::site::SiteShader;
-use super::trace::{RayKind, Tally};
+use super::trace::{Tally, trace_shadows};
 use super::{Progress, RenderError, check_cancelled};
 use crate::camera::{Camera, Lens, LensFilter};
 use crate::embree::{LANES, RayHint, ShadowPacket16};
@@ -194,11 +194,9 @@ fn footprint(
             if i & 2 == 0 { lo.y } else { hi.y },
             if i & 4 == 0 { lo.z } else { hi.z },
         );
+        // `project` refuses points not in front of the lens; a NaN comes out as one.
+        let p = camera.project(corner).filter(|p| p.is_finite())?;
         let depth = (corner - camera.eye).dot(camera.forward);
-        let p = camera.project(corner)?;
-        if depth.is_nan() || depth <= 0.0 || !p.is_finite() {
-            return None;
-        }
         (near, far) = (near.min(depth), far.max(depth));
         rect = [
             rect[0].min(p.x),
@@ -252,14 +250,6 @@ struct Splat {
     value: Vec3,
 }
 
-/// What every light path of a render shares.
-struct Context<'a> {
-    world: &'a World,
-    camera: &'a Camera,
-    settings: &'a RenderSettings,
-    traced: &'a LightTraced,
-}
-
 /// Traces the light paths of `traced` for the render `shader` describes and adds the light they
 /// land on the film to `image`, the full frame's colours (row-major; only `region`'s pixels
 /// change): what the camera's paths left out.
@@ -271,16 +261,10 @@ pub fn trace(
     tally: &mut Tally,
     image: &mut [Vec3],
 ) -> Result<(), RenderError> {
-    let SiteShader {
-        world,
-        camera,
-        settings,
-        ..
-    } = *shader;
     if traced.is_empty() {
         return Ok(());
     }
-    let w = camera.width as usize;
+    let w = shader.camera.width as usize;
     // Work items (primitive, first path): only primitives whose light can reach the region.
     let overlaps = |t: &Traced| {
         t.reach[0] < region.x1 as f32
@@ -293,13 +277,7 @@ pub fn trace(
         .flat_map(|(i, t)| (0..t.paths).step_by(BLOCK as usize).map(move |f| (i, f)))
         .collect();
     progress.start("lights", items.len() as u64);
-    let ctx = Context {
-        world,
-        camera,
-        settings,
-        traced,
-    };
-    let density = settings.pixel_filter.density();
+    let density = shader.settings.pixel_filter.density();
     // Batches keep the splats held at once bounded: blocks of one batch are traced in
     // parallel while the previous batch is splatted, in block order.
     let batch = 8 * rayon::current_num_threads().max(1);
@@ -307,7 +285,7 @@ pub fn trace(
         chunk
             .par_iter()
             .map(|&(i, first)| {
-                let out = trace_block(&ctx, &traced.traced[i], first);
+                let out = trace_block(shader, traced, &traced.traced[i], first);
                 progress.advance(1);
                 out
             })
@@ -339,13 +317,18 @@ pub fn trace(
 
 /// Traces paths `first .. first + BLOCK` (at most the primitive's count) of `t`, 16 at a
 /// time, and returns the unoccluded ones' splats.
-fn trace_block(ctx: &Context, t: &Traced, first: u32) -> Result<(Vec<Splat>, Tally), MemoryError> {
-    let Context {
+fn trace_block(
+    shader: &SiteShader,
+    traced: &LightTraced,
+    t: &Traced,
+    first: u32,
+) -> Result<(Vec<Splat>, Tally), MemoryError> {
+    let SiteShader {
         world,
         camera,
         settings,
-        traced,
-    } = *ctx;
+        ..
+    } = *shader;
     let mut tally = Tally::new(settings.record_rays);
     let end = first.saturating_add(BLOCK).min(t.paths);
     let mut splats = try_with_capacity((end - first) as usize, "the light paths' splats")?;
@@ -396,12 +379,17 @@ fn trace_block(ctx: &Context, t: &Traced, first: u32) -> Result<(Vec<Splat>, Tal
         if lit == 0 {
             continue;
         }
-        shadow.set_segments(lit, &origin, &dir, &seg_end);
-        tally.count(RayKind::Shadow, lit.count_ones() as usize);
-        tally.record(RayKind::Shadow, RayHint::Incoherent, |l| {
-            shadow.is_active(l).then(|| shadow.ray(l))
-        });
-        world.scene.occluded16(&mut shadow, RayHint::Incoherent);
+        let hint = RayHint::Incoherent;
+        trace_shadows(
+            world,
+            &mut shadow,
+            lit,
+            &origin,
+            &dir,
+            &seg_end,
+            hint,
+            &mut tally,
+        );
         for (lane, s) in pending.iter().enumerate() {
             if let Some(s) = s
                 && shadow.is_active(lane)

@@ -155,7 +155,7 @@ pub fn trace_path(
         if bounce == limits.total {
             break;
         }
-        let numbers: [Numbers; LANES] = std::array::from_fn(|l| path_numbers(keys[l], bounce));
+        let numbers = hit_numbers(keys, hits, bounce);
         let dir = packet.dirs();
         let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
         let at = Shading {
@@ -186,6 +186,18 @@ pub fn trace_path(
         hint = RayHint::Incoherent;
     }
     tally.bounce = 0;
+}
+
+/// The random numbers of bounce `bounce` for the lanes in `hits` (the only ones that make
+/// decisions there; the others get zeros).
+fn hit_numbers(keys: &[SampleKey; LANES], hits: u32, bounce: u32) -> [Numbers; LANES] {
+    std::array::from_fn(|l| {
+        if hits & (1 << l) != 0 {
+            path_numbers(keys[l], bounce)
+        } else {
+            [0.0; PATH_DIMENSIONS]
+        }
+    })
 }
 
 /// Adds the world's radiance to lanes in `missed` (their rays left the scene).
@@ -371,12 +383,10 @@ fn shadow_packet(
         return;
     }
     let shadow = &mut scratch.shadow;
-    shadow.set_segments(lit, &origin, &to_light, &seg_end);
-    tally.count(RayKind::Shadow, lit.count_ones() as usize);
-    tally.record(RayKind::Shadow, RayHint::Incoherent, |l| {
-        shadow.is_active(l).then(|| shadow.ray(l))
-    });
-    world.scene.occluded16(shadow, RayHint::Incoherent);
+    let hint = RayHint::Incoherent;
+    trace::trace_shadows(
+        world, shadow, lit, &origin, &to_light, &seg_end, hint, tally,
+    );
     for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
         if shadow.is_active(lane) && !shadow.occluded(lane) {
             radiance[lane] += contribution[lane];

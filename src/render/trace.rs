@@ -407,6 +407,27 @@ pub fn trace_and_shade(
     }
 }
 
+/// Traces the segments from `origin` along `dir` up to `tfar` of the lanes in `lit` as one
+/// shadow packet, counted (and recorded) in `tally`; `shadow.occluded(lane)` then answers.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn trace_shadows(
+    world: &World,
+    shadow: &mut ShadowPacket16,
+    lit: u32,
+    origin: &[[f32; LANES]; 3],
+    dir: &[[f32; LANES]; 3],
+    tfar: &[f32; LANES],
+    hint: RayHint,
+    tally: &mut Tally,
+) {
+    shadow.set_segments(lit, origin, dir, tfar);
+    tally.count(RayKind::Shadow, lit.count_ones() as usize);
+    tally.record(RayKind::Shadow, hint, |l| {
+        shadow.is_active(l).then(|| shadow.ray(l))
+    });
+    world.scene.occluded16(shadow, hint);
+}
+
 /// Lane `lane` of a structure-of-arrays vector.
 pub(super) fn lane_vec(v: [&[f32; LANES]; 3], lane: usize) -> Vec3 {
     Vec3::new(v[0][lane], v[1][lane], v[2][lane])
@@ -553,12 +574,8 @@ fn add_direct(
     }
     // Unlit lanes (misses among them, whose points are infinite) are inactive: the packet
     // replaces their NaN with an idle ray.
-    shadow.set_segments(lit, leaving.origin, &to_light, &seg_end);
-    tally.count(RayKind::Shadow, lit.count_ones() as usize);
-    tally.record(RayKind::Shadow, RayHint::Coherent, |l| {
-        shadow.is_active(l).then(|| shadow.ray(l))
-    });
-    world.scene.occluded16(shadow, RayHint::Coherent);
+    let (origin, hint) = (leaving.origin, RayHint::Coherent);
+    trace_shadows(world, shadow, lit, origin, &to_light, &seg_end, hint, tally);
     for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
         if !shadow.occluded(lane) {
             let ls = LightSample {

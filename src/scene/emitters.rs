@@ -199,12 +199,12 @@ impl Emitters {
         }
         let u = Vec2::new(u[1], u[2]);
         let s = match self.list[i] {
-            Emitter::Punctual(light) => punctual_sample(&light, p),
-            Emitter::Triangle { geometry, prim } => sample_triangle(world, geometry, prim, p, u)?,
-            Emitter::Sphere { geometry, prim } => sample_sphere(world, geometry, prim, p, u)?,
+            Emitter::Punctual(light) => usable(punctual_sample(&light, p))?,
+            Emitter::Triangle { geometry, prim } | Emitter::Sphere { geometry, prim } => {
+                sample_primitive(world, geometry, prim, p, u)?
+            }
         };
-        let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.max_element() > 0.0;
-        ok.then_some(EmitterSample {
+        Some(EmitterSample {
             pdf: s.pdf * pick,
             ..s
         })
@@ -250,8 +250,7 @@ impl Emitters {
                 }
             }
         };
-        let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.max_element() > 0.0;
-        ok.then_some(s)
+        usable(s)
     }
 
     /// The density [`Emitters::sample`] draws direction `dir` from point `from` with, for a ray
@@ -301,10 +300,14 @@ pub fn sample_primitive(
     p: Vec3,
     u: Vec2,
 ) -> Option<EmitterSample> {
-    let s = match world.scene.geometry(GeometryId(geometry)) {
+    usable(match world.scene.geometry(GeometryId(geometry)) {
         Geometry::Mesh(_) => sample_triangle(world, geometry, prim, p, u)?,
         Geometry::Spheres(_) => sample_sphere(world, geometry, prim, p, u)?,
-    };
+    })
+}
+
+/// `s` if it can be used: a finite, positive density and some radiance.
+fn usable(s: EmitterSample) -> Option<EmitterSample> {
     let ok = s.pdf > 0.0 && s.pdf.is_finite() && s.radiance.max_element() > 0.0;
     ok.then_some(s)
 }
