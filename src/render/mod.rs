@@ -23,6 +23,7 @@
 pub mod estimate;
 pub mod film;
 pub mod interpolate;
+pub mod light_choice;
 pub mod light_trace;
 pub mod maps;
 pub mod path;
@@ -46,7 +47,7 @@ pub use crate::settings::{
 };
 use estimate::Estimate;
 pub use film::Film;
-pub use light_trace::LightTraced;
+pub use light_choice::LightTraced;
 pub use region::{Region, RegionError};
 pub use site::{SiteScratch, SiteShader};
 pub use trace::{RayCounts, RayKind, RecordedPacket, Tally, replay};

@@ -6,7 +6,7 @@
 
 use glam::{Vec2, Vec3};
 
-use super::light_trace::LightTraced;
+use super::light_choice::LightTraced;
 use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::sampler::{PATH_DIMENSIONS, SampleKey, path_numbers};

@@ -17,7 +17,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::estimate::Estimate;
-use super::light_trace::LightTraced;
+use super::light_choice::LightTraced;
 use super::trace::{self, RayKind, Tally};
 use super::{Integrator, path};
 use super::{Mode, Progress, RenderSettings};
