@@ -7,7 +7,7 @@ use dofray::filter::{PixelFilter, PixelFilterKind};
 use dofray::render::Integrator;
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, render};
 use dofray::scene::{Background, MeshMaterials, Object, SceneDesc, World};
-use dofray::shade::{Material, Pattern, Texture};
+use dofray::shade::{Light, Material, Pattern, Texture};
 use glam::Vec3;
 
 /// A 20 x 20 wall at z = 10 facing the camera, rotated by `degrees` about the view axis, with
@@ -217,6 +217,94 @@ fn a_defocused_sphere_smaller_than_a_pixel_adds_its_energy_wherever_it_sits() {
             assert!(
                 (added / expected - 1.0).abs() < tolerance,
                 "{place}, {mode:?}: the sphere added {added:.2}, expected {expected:.2}"
+            );
+        }
+    }
+}
+
+/// A sphere 1.3 px across, lit from behind the camera, between the pixel centres (every
+/// depth-pass ray misses it) and blurred into a disc of 10 px, where the depth pass saw only a
+/// background blurred eight times as much (nothing, or a dark wall): the background's lattice
+/// of sites and cell centres is 16 px apart there and steps over the whole disc. Adaptive mode
+/// still adds the sphere's own energy (the closed form: albedo / pi x irradiance x the projected
+/// disc's integral of cos, 2/3 pi r^2; in front of the wall less the wall's light it hides),
+/// alone on black and in front of the wall.
+#[test]
+fn an_unseen_defocused_sphere_keeps_its_energy_on_any_background() {
+    let size = 64u32;
+    // Pixels per unit at unit distance. Focus at 1, the sphere at 8 / 7: its CoC is 1/8 of
+    // infinity's (80 px), whose lattice starts at 32 px.
+    let k = (size as f32 / 2.0) / 15f32.to_radians().tan();
+    let (depth, r_px) = (8.0f32 / 7.0, 0.65f32);
+    let radius = r_px * depth / k;
+    let aperture = 10.0 / (2.0 * k * 0.125);
+    let (albedo, irradiance) = (0.8f32, 20.0f32);
+    let (lit, wall_albedo) = ((irradiance / std::f32::consts::PI) as f64, 0.02);
+    let disc = std::f64::consts::PI * (r_px as f64).powi(2);
+    let dark_wall = Object::Mesh {
+        mesh: wall(0.0),
+        materials: MeshMaterials::One(0),
+    };
+    // Pixel corners 8 px from every corner and centre of the 16 px lattice the background starts
+    // with: the disc and the pixel filter reach 6.5 px.
+    for (cx, cy) in [(24i32, 16i32), (40, 32), (32, 40)] {
+        // The film position (cx, cy) seen at the sphere's depth.
+        let at = Vec3::new(
+            (cx as f32 - size as f32 / 2.0) * depth / k,
+            (size as f32 / 2.0 - cy as f32) * depth / k,
+            depth,
+        );
+        for wall in [false, true] {
+            let energy = |with_sphere: bool| {
+                let mut objects = Vec::new();
+                if with_sphere {
+                    objects.push(Object::Sphere {
+                        center: at,
+                        radius,
+                        material: 1,
+                    });
+                }
+                if wall {
+                    objects.push(dark_wall.clone());
+                }
+                if objects.is_empty() {
+                    return 0.0;
+                }
+                let mut desc = scene(
+                    size,
+                    aperture,
+                    vec![
+                        Material::diffuse(Vec3::splat(wall_albedo as f32)),
+                        Material::diffuse(Vec3::splat(albedo)),
+                    ],
+                    objects,
+                );
+                desc.camera.focus = Focus::Distance(1.0);
+                desc.ambient = Vec3::ZERO;
+                desc.lights = vec![Light::Directional {
+                    direction: Vec3::Z,
+                    irradiance: Vec3::splat(irradiance),
+                }];
+                let camera = desc.camera.build(|_| None).unwrap();
+                assert!((camera.coc_px(depth) - 10.0).abs() < 0.01);
+                let film = render_desc(
+                    &desc,
+                    &RenderSettings {
+                        integrator: Integrator::Direct,
+                        mode: Mode::Adaptive,
+                        spp: 4096,
+                        ..Default::default()
+                    },
+                );
+                film.color.iter().map(|c| c.x as f64).sum::<f64>()
+            };
+            let added = energy(true) - energy(false);
+            let hidden = if wall { wall_albedo * lit * disc } else { 0.0 };
+            let expected = albedo as f64 * lit * 2.0 / 3.0 * disc - hidden;
+            eprintln!("({cx}, {cy}), wall {wall}: added {added:.2}, expected {expected:.2}");
+            assert!(
+                (added / expected - 1.0).abs() < 0.1,
+                "({cx}, {cy}), wall {wall}: the sphere added {added:.2}, expected {expected:.2}"
             );
         }
     }

@@ -7,11 +7,13 @@
 //! goes in [`lens`] (see there).
 
 pub mod aperture;
+pub mod footprint;
 pub mod lens;
 
 use glam::{Vec2, Vec3};
 
 pub use aperture::{ApertureShape, LensFilter};
+pub use footprint::BoxImage;
 pub use lens::{CameraLens, Lens, Photographic, ThinLens};
 
 use crate::embree::{LANES, Ray};

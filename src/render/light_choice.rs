@@ -17,7 +17,7 @@ use std::collections::HashSet;
 
 use glam::Vec3;
 
-use crate::camera::{Camera, Lens, LensFilter};
+use crate::camera::{BoxImage, Camera, Lens, LensFilter};
 use crate::sampler::PixelSampler;
 use crate::scene::World;
 use crate::scene::emitters::primitive_bounds;
@@ -52,14 +52,6 @@ pub struct LightTraced {
     pub(super) lens_weight_mean: f32,
 }
 
-/// Where an emitter's light can land on the film.
-struct Footprint {
-    /// Area (square pixels) of its sharp image's bounding box.
-    sharp_area: f32,
-    /// Film rectangle its light can reach through any lens position, filter included.
-    reach: [f32; 4],
-}
-
 impl LightTraced {
     /// Nothing light-traced: the camera finds every emitter.
     pub fn none() -> Self {
@@ -80,12 +72,12 @@ impl LightTraced {
         let mut candidates = Vec::new();
         for (geometry, prim) in world.emitters.primitives() {
             let (lo, hi) = primitive_bounds(world, geometry, prim);
-            let Some(fp) = footprint(camera, lo, hi, filter_reach, pinhole) else {
+            let Some((image, reach)) = footprint(camera, lo, hi, filter_reach, pinhole) else {
                 continue;
             };
-            let [x0, y0, x1, y1] = fp.reach;
+            let [x0, y0, x1, y1] = reach;
             let blurred_area = (x1 - x0) * (y1 - y0);
-            if fp.sharp_area > SHARP_FRACTION * blurred_area {
+            if image.sharp_area() > SHARP_FRACTION * blurred_area {
                 continue;
             }
             // Only what lands in the frame is traced for.
@@ -100,7 +92,7 @@ impl LightTraced {
                 geometry,
                 prim,
                 paths: paths as u32,
-                reach: fp.reach,
+                reach,
             });
         }
         candidates.sort_by_key(|t| (t.paths, t.geometry, t.prim));
@@ -140,58 +132,27 @@ impl LightTraced {
     }
 }
 
-/// The film footprint of the box `lo`..`hi`: `None` when part of it is not in front of the lens
-/// (behind the camera or around it), whose image has no bound.
+/// The image of the box `lo`..`hi` and the film rectangle its light can reach (in pinhole mode
+/// its sharp image grown by the filter's reach); `None` when it has no bound.
 fn footprint(
     camera: &Camera,
     lo: Vec3,
     hi: Vec3,
     filter_reach: f32,
     pinhole: bool,
-) -> Option<Footprint> {
-    let mut rect = [
-        f32::INFINITY,
-        f32::INFINITY,
-        f32::NEG_INFINITY,
-        f32::NEG_INFINITY,
-    ];
-    let (mut near, mut far) = (f32::INFINITY, 0.0f32);
-    for i in 0..8 {
-        let corner = Vec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        );
-        // `project` refuses points not in front of the lens; a NaN comes out as one.
-        let p = camera.project(corner).filter(|p| p.is_finite())?;
-        let depth = (corner - camera.eye).dot(camera.forward);
-        (near, far) = (near.min(depth), far.max(depth));
-        rect = [
-            rect[0].min(p.x),
-            rect[1].min(p.y),
-            rect[2].max(p.x),
-            rect[3].max(p.y),
-        ];
-    }
-    // A box wholly in front projects within its corners' projections; through any lens
-    // position a point moves at most half its CoC from there, and the CoC over a depth range
-    // is largest at one of its ends.
-    let blur = if pinhole {
-        0.0
+) -> Option<(BoxImage, [f32; 4])> {
+    let image = camera.box_image(lo, hi)?;
+    let reach = if pinhole {
+        let [x0, y0, x1, y1] = image.sharp;
+        let g = filter_reach;
+        [x0 - g, y0 - g, x1 + g, y1 + g]
     } else {
-        0.5 * camera.coc_px(near).max(camera.coc_px(far))
+        image.reach(camera, filter_reach)?
     };
-    let grow = blur + filter_reach;
-    let reach = [
-        rect[0] - grow,
-        rect[1] - grow,
-        rect[2] + grow,
-        rect[3] + grow,
-    ];
-    reach.iter().all(|v| v.is_finite()).then_some(Footprint {
-        sharp_area: (rect[2] - rect[0]) * (rect[3] - rect[1]),
-        reach,
-    })
+    reach
+        .iter()
+        .all(|v| v.is_finite())
+        .then_some((image, reach))
 }
 
 /// The mean lens weight under `filter` over the camera's aperture distribution (4096 Sobol

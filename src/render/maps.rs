@@ -3,7 +3,55 @@
 
 use rayon::prelude::*;
 
+use super::unseen::UnseenBlur;
 use crate::limits::{MemoryError, try_collect, try_vec};
+
+/// The blur the site rules decide from, per pixel: the depth pass's CoC map, widened by what it
+/// cannot see ([`UnseenBlur`]).
+#[derive(Debug, Clone)]
+pub struct Blur {
+    /// The sharpest blur (CoC, pixels) that may reach the pixel: the depth pass's CoC, lowered
+    /// where an unseen primitive's sharper light reaches. Sample intervals start from it.
+    pub sharpest: Vec<f32>,
+    /// The widest blur that may reach the pixel: how far one highlight's light spreads.
+    pub widest: Vec<f32>,
+    /// Whether blur of more than a pixel reaches the pixel ([`blurred`], or an unseen
+    /// primitive's): such sites take `spp` samples, the others `aa`.
+    pub blurred: Vec<bool>,
+    /// Whether the light of a primitive the depth pass did not see may reach the pixel: an
+    /// adaptive site there takes all its samples at once, since a few that miss a sub-pixel
+    /// highlight would look converged and stop (keeping a fraction of its energy on average).
+    pub unseen: Vec<bool>,
+}
+
+impl Blur {
+    /// The maps of a `width` x `height` frame whose depth pass gave `coc`, with `unseen`.
+    pub fn with_unseen(
+        coc: &[f32],
+        width: usize,
+        height: usize,
+        unseen: &UnseenBlur,
+    ) -> Result<Self, MemoryError> {
+        let mut blurred = blurred(coc, width, height)?;
+        let mut sharpest = try_vec(coc.len(), 0.0, "the blur map")?;
+        let mut widest = try_vec(coc.len(), 0.0, "the blur map")?;
+        let mut reached = try_vec(coc.len(), false, "the blur map")?;
+        for (p, &c) in coc.iter().enumerate() {
+            let (x, y) = (p % width, p / width);
+            let (lo, hi) = (unseen.sharpest(x, y), unseen.widest(x, y));
+            sharpest[p] = c.min(lo);
+            widest[p] = c.max(hi);
+            blurred[p] |= hi > 1.0;
+            reached[p] = lo.is_finite();
+        }
+        Ok(Self {
+            sharpest,
+            widest,
+            blurred,
+            unseen: reached,
+        })
+    }
+}
 
 /// Minima over growing squares by doubling (the sparse-table idea), for every level
 /// `l` in `1..=top`: `out[l - 1][p]` is the minimum of `src` over the (2r + 1)^2 square around

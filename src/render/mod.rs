@@ -31,6 +31,7 @@ pub mod refine;
 pub mod region;
 pub mod site;
 pub mod trace;
+pub mod unseen;
 
 use std::time::Instant;
 
@@ -339,18 +340,31 @@ fn depth_pass(
     check_cancelled(progress)
 }
 
+/// The blur the site rules decide from: the depth pass's, and what it cannot see.
+fn blur_maps(shader: &SiteShader, film: &Film) -> Result<maps::Blur, MemoryError> {
+    let settings = shader.settings;
+    let unseen = if settings.mode == Mode::Pinhole {
+        unseen::UnseenBlur::none(film.width, film.height)?
+    } else {
+        let margin = 0.5 * settings.pixel_filter.width;
+        let (world, camera) = (shader.world, shader.camera);
+        unseen::UnseenBlur::of(world, camera, &film.depth, margin, shader.light_traced)?
+    };
+    maps::Blur::with_unseen(&film.coc, film.width, film.height, &unseen)
+}
+
 /// Pinhole, dense, and adaptive with the seed's rule: fills `film.samples` (0 where the
 /// pixel will be interpolated, or is not needed for `region`) and, for adaptive,
 /// `film.interval`; returns the site mask when some pixels are interpolated.
 fn fixed_sites(
     settings: &RenderSettings,
     film: &mut Film,
-    blurred: &[bool],
+    blur: &maps::Blur,
     region: &Region,
 ) -> Result<Option<Vec<bool>>, MemoryError> {
     let (w, h) = (film.width, film.height);
     let per_site = |p: usize| {
-        if settings.mode == Mode::Pinhole || !blurred[p] {
+        if settings.mode == Mode::Pinhole || !blur.blurred[p] {
             settings.aa
         } else {
             settings.spp
@@ -367,8 +381,14 @@ fn fixed_sites(
         },
     ) = (settings.mode, settings.rule)
     {
+        // The seed's plain rule reads the depth pass alone, as the paper did.
+        let coc = if paper_exact {
+            &film.coc
+        } else {
+            &blur.sharpest
+        };
         film.interval = maps::interval_map(
-            &film.coc,
+            coc,
             w,
             h,
             interval_factor,
@@ -465,20 +485,21 @@ pub fn render_region(
         pixel_filter: &pixel_filter,
         light_traced: &light_traced,
     };
-    let blurred = maps::blurred(&film.coc, w, h)?;
+    let blur = blur_maps(&shader, &film)?;
+    // Choosing light-traced emitters and the blur maps count as maps.
+    stats.maps_seconds = phase.elapsed().as_secs_f64();
+    let phase = Instant::now();
     if let (Mode::Adaptive, Some(tolerance)) = (settings.mode, settings.tolerance()) {
         // Maps, sites and interpolation interleave in rounds: timed as shading.
-        let refined = refine::refine(
-            &shader, tolerance, &film.coc, &blurred, region, progress, &mut tally,
-        )?;
+        let refined = refine::refine(&shader, tolerance, &blur, region, progress, &mut tally)?;
         stats.rounds = refined.rounds;
         film.set_rgba(&refined.color);
         film.interval = refined.interval;
         film.samples = refined.samples;
         stats.sites_seconds = phase.elapsed().as_secs_f64();
     } else {
-        let sites = fixed_sites(settings, &mut film, &blurred, region)?;
-        stats.maps_seconds = phase.elapsed().as_secs_f64();
+        let sites = fixed_sites(settings, &mut film, &blur, region)?;
+        stats.maps_seconds += phase.elapsed().as_secs_f64();
         let phase = Instant::now();
         progress.start(settings.mode.name(), h as u64);
         let mut estimates = try_vec(w * h, Estimate::default(), "the pixels' estimates")?;
@@ -508,9 +529,9 @@ pub fn render_region(
     stats.light_paths = light_traced.paths();
     stats.light_seconds = phase.elapsed().as_secs_f64();
     let (mut film, blurred) = if *region == Region::full(camera.width, camera.height) {
-        (film, blurred)
+        (film, blur.blurred)
     } else {
-        let blurred = region.try_crop(&blurred, w, "the region's blur map")?;
+        let blurred = region.try_crop(&blur.blurred, w, "the region's blur map")?;
         (film.try_crop(region)?, blurred)
     };
     check_finite(&film, region)?;

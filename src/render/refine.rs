@@ -464,12 +464,12 @@ impl Bucket {
 struct Maps<'a> {
     /// The error-controlled rule's tolerance in effect.
     tolerance: f32,
-    blurred: &'a [bool],
+    blur: &'a maps::Blur,
     start: Vec<u32>,
     reach: Vec<u8>,
 }
 
-/// Renders with the error-controlled rule at `tolerance`, given the CoC map and which pixels blur reaches,
+/// Renders with the error-controlled rule at `tolerance`, given the blur that reaches each pixel,
 /// the pixels of `region` (and of the buckets around them; the rest of the returned maps is
 /// left empty: colour 0, no samples).
 ///
@@ -479,8 +479,7 @@ struct Maps<'a> {
 pub fn refine(
     shader: &SiteShader,
     tolerance: f32,
-    coc: &[f32],
-    blurred: &[bool],
+    blur: &maps::Blur,
     region: &super::Region,
     progress: &dyn Progress,
     tally: &mut Tally,
@@ -489,9 +488,15 @@ pub fn refine(
     let (width, height) = (shader.camera.width as usize, shader.camera.height as usize);
     let maps = Maps {
         tolerance,
-        blurred,
-        start: maps::start_intervals(coc, width, height, start_k(tolerance), s.max_interval)?,
-        reach: reach_levels(coc, s.max_interval)?,
+        blur,
+        start: maps::start_intervals(
+            &blur.sharpest,
+            width,
+            height,
+            start_k(tolerance),
+            s.max_interval,
+        )?,
+        reach: reach_levels(&blur.widest, s.max_interval)?,
     };
     let size = s.max_interval as usize;
     let buckets: Vec<Bucket> = (0..height)
@@ -548,10 +553,11 @@ fn refine_bucket(
     let full_width = shader.camera.width as usize;
     let (width, height) = (b.w, b.h);
     let tolerance = maps.tolerance;
-    let blurred = b.slice(maps.blurred, full_width);
+    let blurred = b.slice(&maps.blur.blurred, full_width);
+    let unseen = b.slice(&maps.blur.unseen, full_width);
     let budget = Budget::new(s);
     let target = |p: usize| budget.target(blurred[p]);
-    let first = |p: usize| budget.first(blurred[p]);
+    let first = |p: usize| budget.first(blurred[p], unseen[p]);
     let mut interval = b.slice(&maps.start, full_width);
     let reach = b.slice(&maps.reach, full_width);
     let top_reach = reach.iter().copied().max().unwrap_or(1);
@@ -660,8 +666,11 @@ impl Budget {
         if blurred { self.spp } else { self.in_focus }
     }
 
-    fn first(&self, blurred: bool) -> u32 {
-        if blurred {
+    /// `unseen`: see [`maps::Blur::unseen`].
+    fn first(&self, blurred: bool, unseen: bool) -> u32 {
+        if unseen {
+            self.target(blurred)
+        } else if blurred {
             (self.spp / 4).max(self.aa).max(MIN_TRUSTED).min(self.spp)
         } else if self.in_focus > self.aa {
             // Growing by noise: as for blurred sites, too few samples are never trusted.
