@@ -7,6 +7,7 @@
 //! levels, over a ladder of sample counts, with a PSNR-versus-seconds plot ([`plot`]).
 
 pub mod equal_error;
+pub mod equal_time;
 pub mod plot;
 
 use std::fmt::Write as _;

@@ -451,6 +451,21 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
     assert_eq!(report["plot"], plot.to_str().unwrap());
     let png = image::open(&plot).expect("a PNG");
     assert_eq!((png.width(), png.height()), (960, 600));
+    // The equal-time picture: reference, dense and adaptive, whole and cropped, under labels.
+    let pair = &report["equal_time"];
+    let picture = out_dir.join("equal-time.png");
+    assert_eq!(pair["picture"], picture.to_str().unwrap());
+    let crop: Vec<u64> = (0..4).map(|i| pair["crop"][i].as_u64().unwrap()).collect();
+    assert_eq!(crop[2..], [16, 16], "a third of the shorter side");
+    assert!(crop[0] + 16 <= 64 && crop[1] + 16 <= 48);
+    assert!(
+        pair["dense_rung"].as_u64().unwrap() < 2 && pair["adaptive_rung"].as_u64().unwrap() < 2
+    );
+    let png = image::open(&picture).expect("a PNG").to_rgb8();
+    assert_eq!((png.width(), png.height()), (3 * 64, 40 + 2 * 48));
+    // The reference column's top half is the cached reference's sRGB picture: not blank.
+    let top: std::collections::HashSet<_> = (0..48).map(|y| png.get_pixel(10, 40 + y).0).collect();
+    assert!(top.len() > 3, "{top:?}");
 
     // The table, with the reference now cached.
     let out = dofray(&common);
@@ -462,6 +477,8 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
         "not reached",
         "highest level both reach",
         "plot: ",
+        "at about equal time: dense ",
+        "side by side",
     ] {
         assert!(table.contains(phrase), "table lacks {phrase:?}:\n{table}");
     }

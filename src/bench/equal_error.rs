@@ -10,6 +10,7 @@
 
 use std::path::PathBuf;
 
+use super::equal_time::{EqualTime, Picture, choose_rungs, hardest_window};
 use super::{BenchError, Measure, median, reference};
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
@@ -232,6 +233,11 @@ pub struct EqualErrorReport {
     pub highest_common: Option<Level>,
     /// Where the PSNR-versus-seconds plot was written, if it was.
     pub plot: Option<PathBuf>,
+    /// The equal-time pair the side-by-side picture shows ([`super::equal_time`]).
+    pub equal_time: Option<EqualTime>,
+    /// The reference's, and that pair's, 8-bit sRGB pixels (not serialised).
+    #[serde(skip)]
+    pub pictures: Option<Box<[Picture; 3]>>,
 }
 
 impl EqualErrorReport {
@@ -377,6 +383,7 @@ pub fn run(
     // the samples traced (the images themselves are not kept).
     let mut runs: Vec<Vec<Vec<RenderStats>>> = vec![vec![Vec::new(); ladder.len()]; 2];
     let mut quality: Vec<Vec<(f64, u64)>> = vec![Vec::new(); 2];
+    let mut pictures: Vec<Vec<Picture>> = vec![Vec::new(); 2];
     // Repeats outermost, so machine noise (these are shared machines) spreads over every rung.
     for repeat in 0..config.measure.repeat {
         for (r, &spp) in ladder.iter().enumerate() {
@@ -392,6 +399,7 @@ pub fn run(
                     let psnr = metrics::psnr(&film.rgb(), &reference, w, h, Space::Srgb)?;
                     let samples = film.samples.iter().map(|&n| n as u64).sum();
                     quality[m].push((psnr, samples));
+                    pictures[m].push(srgb8(film.color.iter().map(|&c| c.to_array())));
                 }
                 runs[m][r].push(stats);
             }
@@ -422,6 +430,24 @@ pub fn run(
     };
     let (dense, adaptive) = (rungs(0), rungs(1));
     let (levels, highest_common) = levels(&level_list, &dense, &adaptive);
+    let chosen = choose_rungs(&dense, &adaptive, highest_common.map(|l| l.psnr_db));
+    let (equal_time, pictures) = match chosen {
+        Some((d, a)) => {
+            let reference = srgb8(reference.iter().copied());
+            let [dense_picture, adaptive_picture] =
+                [(0, d), (1, a)].map(|(m, r)| std::mem::take(&mut pictures[m][r]));
+            let crop = hardest_window(&reference, &dense_picture, &adaptive_picture, w, h);
+            let equal_time = EqualTime {
+                dense_rung: d,
+                adaptive_rung: a,
+                crop,
+                picture: None,
+            };
+            let pictures = Box::new([reference, dense_picture, adaptive_picture]);
+            (Some(equal_time), Some(pictures))
+        }
+        None => (None, None),
+    };
     Ok(EqualErrorReport {
         scene: desc.name.clone(),
         integrator: config.measure.base.integrator,
@@ -439,7 +465,14 @@ pub fn run(
         levels,
         highest_common,
         plot: None,
+        equal_time,
+        pictures,
     })
+}
+
+/// Linear RGB pixels as 8-bit sRGB bytes.
+fn srgb8(pixels: impl Iterator<Item = [f32; 3]>) -> Picture {
+    pixels.flat_map(|c| c.map(crate::output::srgb8)).collect()
 }
 
 #[cfg(test)]
@@ -580,6 +613,8 @@ pub(super) mod tests {
             levels,
             highest_common,
             plot: None,
+            equal_time: None,
+            pictures: None,
         }
     }
 

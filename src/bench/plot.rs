@@ -22,7 +22,7 @@ pub const EQUAL_ERROR_PNG: &str = "equal-error.png";
 /// Width and height of the plot in pixels.
 pub const PLOT_SIZE: (u32, u32) = (960, 600);
 
-const FONT: &str = "sans-serif";
+pub(super) const FONT: &str = "sans-serif";
 static DEJAVU_SANS: &[u8] = include_bytes!("fonts/DejaVuSans.ttf");
 
 /// Why the equal-error plot could not be made.
@@ -42,7 +42,7 @@ pub enum PlotError {
 }
 
 /// Registers the embedded font with plotters (once per process).
-fn register_font() {
+pub(super) fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The font is part of the binary: failing to parse it is a build defect.
@@ -278,11 +278,20 @@ impl HasKind for PlotError {
     }
 }
 
-/// Writes the report's plot as `equal-error.png` in `dir` and records its path in the report.
+/// Writes the report's plot as `equal-error.png` in `dir`, and its equal-time picture as
+/// `equal-time.png` ([`super::equal_time`]), and records their paths in the report.
 pub fn write_plot(report: &mut EqualErrorReport, dir: &Path) -> Result<(), PlotError> {
     let path = dir.join(EQUAL_ERROR_PNG);
     write_png(report, &path)?;
     report.plot = Some(path);
+    if let (Some(chosen), Some(pictures)) = (&report.equal_time, &report.pictures) {
+        let path = dir.join(super::equal_time::EQUAL_TIME_PNG);
+        let [r, d, a] = &**pictures;
+        super::equal_time::write_png(report, chosen, [r, d, a], &path)?;
+        if let Some(chosen) = &mut report.equal_time {
+            chosen.picture = Some(path);
+        }
+    }
     Ok(())
 }
 

@@ -388,7 +388,8 @@ pub(crate) struct BenchArgs {
     pub(crate) cache_dir: Option<PathBuf>,
     /// Write every image, the depth (figure 2) and interval (figure 3) maps, a side-by-side
     /// comparison and an error heat map into this directory; with --equal-error, the
-    /// PSNR-versus-seconds plot equal-error.png.
+    /// PSNR-versus-seconds plot equal-error.png and equal-time.png: the reference, dense and
+    /// adaptive at about equal time, whole and the window where they err most enlarged.
     #[arg(long)]
     pub(crate) out: Option<PathBuf>,
     /// Run the equal-error study instead of the seed's table: the time dense and adaptive

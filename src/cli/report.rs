@@ -109,6 +109,21 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
     if let Some(plot) = &r.plot {
         println!("plot: {}", plot.display());
     }
+    if let Some(t) = &r.equal_time {
+        let (d, a) = (&r.dense[t.dense_rung], &r.adaptive[t.adaptive_rung]);
+        let [x, y, w, h] = t.crop;
+        println!(
+            "at about equal time: dense {} spp {:.3} s {:.2} dB, adaptive {} spp {:.3} s {:.2} dB; \
+             hardest {w}x{h} window at {x},{y}",
+            d.spp, d.seconds, d.psnr_vs_reference, a.spp, a.seconds, a.psnr_vs_reference
+        );
+        if let Some(picture) = &t.picture {
+            println!(
+                "side by side (reference, dense, adaptive; whole and the window enlarged): {}",
+                picture.display()
+            );
+        }
+    }
 }
 
 pub(crate) fn print_table(r: &bench::BenchReport) {
