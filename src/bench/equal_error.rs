@@ -357,30 +357,14 @@ pub fn run(
     config: &EqualErrorConfig,
     progress: &dyn Progress,
 ) -> Result<EqualErrorReport, BenchError> {
-    if config.measure.repeat == 0 {
-        return Err(BenchError::ZeroRepeat);
-    }
-    let ladder = checked_ladder(&config.ladder)?;
-    let level_list = checked_levels(&config.levels)?;
-    let top = *ladder.last().expect("checked: not empty");
-    if config.measure.reference_spp <= top {
-        return Err(BenchError::ReferenceBelowLadder {
-            reference_spp: config.measure.reference_spp,
-            top,
-        });
-    }
-    for &spp in &ladder {
-        let m = &config.measure;
-        let dense = Method::Dense.settings(&m.base, spp, config.aa.at(spp), m.seed);
-        dense.validate().map_err(render::RenderError::from)?;
-    }
+    let (ladder, level_list) = checked_config(config)?;
     let (w, h) = (camera.width as usize, camera.height as usize);
     let (reference, reference_cached, reference_seconds) =
         reference(desc, world, camera, &config.measure, progress)?;
 
     let methods = [Method::Dense, Method::Adaptive];
-    // Per method and rung: the stats of every repeat, and from the first repeat the PSNR and
-    // the samples traced (the images themselves are not kept).
+    // Per method and rung: the stats of every repeat, and from the first repeat the PSNR, the
+    // samples traced and the image as 8-bit sRGB (for the equal-time picture).
     let mut runs: Vec<Vec<Vec<RenderStats>>> = vec![vec![Vec::new(); ladder.len()]; 2];
     let mut quality: Vec<Vec<(f64, u64)>> = vec![Vec::new(); 2];
     let mut pictures: Vec<Vec<Picture>> = vec![Vec::new(); 2];
@@ -430,24 +414,13 @@ pub fn run(
     };
     let (dense, adaptive) = (rungs(0), rungs(1));
     let (levels, highest_common) = levels(&level_list, &dense, &adaptive);
-    let chosen = choose_rungs(&dense, &adaptive, highest_common.map(|l| l.psnr_db));
-    let (equal_time, pictures) = match chosen {
-        Some((d, a)) => {
-            let reference = srgb8(reference.iter().copied());
-            let [dense_picture, adaptive_picture] =
-                [(0, d), (1, a)].map(|(m, r)| std::mem::take(&mut pictures[m][r]));
-            let crop = hardest_window(&reference, &dense_picture, &adaptive_picture, w, h);
-            let equal_time = EqualTime {
-                dense_rung: d,
-                adaptive_rung: a,
-                crop,
-                picture: None,
-            };
-            let pictures = Box::new([reference, dense_picture, adaptive_picture]);
-            (Some(equal_time), Some(pictures))
-        }
-        None => (None, None),
-    };
+    let (equal_time, pictures) = equal_time_pair(
+        &reference,
+        &mut pictures,
+        [&dense, &adaptive],
+        highest_common.map(|l| l.psnr_db),
+        (w, h),
+    );
     Ok(EqualErrorReport {
         scene: desc.name.clone(),
         integrator: config.measure.base.integrator,
@@ -468,6 +441,54 @@ pub fn run(
         equal_time,
         pictures,
     })
+}
+
+/// The study's ladder and levels, sorted and checked with the rest of `config`.
+fn checked_config(config: &EqualErrorConfig) -> Result<(Vec<u32>, Vec<f64>), BenchError> {
+    if config.measure.repeat == 0 {
+        return Err(BenchError::ZeroRepeat);
+    }
+    let ladder = checked_ladder(&config.ladder)?;
+    let levels = checked_levels(&config.levels)?;
+    let top = *ladder.last().expect("checked: not empty");
+    if config.measure.reference_spp <= top {
+        return Err(BenchError::ReferenceBelowLadder {
+            reference_spp: config.measure.reference_spp,
+            top,
+        });
+    }
+    for &spp in &ladder {
+        let m = &config.measure;
+        let dense = Method::Dense.settings(&m.base, spp, config.aa.at(spp), m.seed);
+        dense.validate().map_err(render::RenderError::from)?;
+    }
+    Ok((ladder, levels))
+}
+
+/// The pair the equal-time picture shows ([`choose_rungs`]), its window, and the reference's
+/// and the pair's pictures, taken from `pictures` (per method, per rung).
+fn equal_time_pair(
+    reference: &[[f32; 3]],
+    pictures: &mut [Vec<Picture>],
+    [dense, adaptive]: [&[Rung]; 2],
+    level: Option<f64>,
+    (w, h): (usize, usize),
+) -> (Option<EqualTime>, Option<Box<[Picture; 3]>>) {
+    let Some((d, a)) = choose_rungs(&points(dense), &points(adaptive), level) else {
+        return (None, None);
+    };
+    let reference = srgb8(reference.iter().copied());
+    let [dense_picture, adaptive_picture] =
+        [(0, d), (1, a)].map(|(m, r)| std::mem::take(&mut pictures[m][r]));
+    let crop = hardest_window(&reference, &dense_picture, &adaptive_picture, w, h);
+    let equal_time = EqualTime {
+        dense_rung: d,
+        adaptive_rung: a,
+        crop,
+        picture: None,
+    };
+    let pictures = Box::new([reference, dense_picture, adaptive_picture]);
+    (Some(equal_time), Some(pictures))
 }
 
 /// Linear RGB pixels as 8-bit sRGB bytes.

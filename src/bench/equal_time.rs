@@ -6,21 +6,7 @@
 //! (else the middle rung); the dense rung is the one whose median time is nearest to it (in
 //! ratio). The crop is the window a third of the frame's shorter side across where the two
 //! renders' squared sRGB errors add up to the most: the hardest part of the shot (bokeh,
-//! blurred texture, noise), not a chosen one.
-
-use std::path::Path;
-
-use plotters::prelude::*;
-use plotters::style::text_anchor::{HPos, Pos, VPos};
-
-use super::equal_error::{EqualErrorReport, Rung};
-use super::plot::{FONT, PlotError, register_font};
-use crate::output;
-
-/// The file name of the picture in the bench's `--out` directory.
-pub const EQUAL_TIME_PNG: &str = "equal-time.png";
-/// Height of the label strip above each column, pixels.
-const LABEL: usize = 40;
+//! blurred texture, noise), not a chosen one. [`super::plot`] draws the picture.
 
 /// 8-bit sRGB pictures of one render (row-major RGB bytes).
 pub type Picture = Vec<u8>;
@@ -38,11 +24,11 @@ pub struct EqualTime {
     pub picture: Option<std::path::PathBuf>,
 }
 
-/// The rungs to show: adaptive's nearest in PSNR to `level` (else the middle one), and dense's
-/// nearest to it in time. `None` without rungs.
+/// The rungs to show, from each method's rungs' (seconds, PSNR): adaptive's nearest in PSNR to
+/// `level` (else the middle one), and dense's nearest to it in time. `None` without rungs.
 pub fn choose_rungs(
-    dense: &[Rung],
-    adaptive: &[Rung],
+    dense: &[(f64, f64)],
+    adaptive: &[(f64, f64)],
     level: Option<f64>,
 ) -> Option<(usize, usize)> {
     if dense.is_empty() || adaptive.is_empty() {
@@ -50,18 +36,18 @@ pub fn choose_rungs(
     }
     let a = match level {
         Some(level) => (0..adaptive.len())
-            .filter(|&i| adaptive[i].psnr_vs_reference.is_finite())
+            .filter(|&i| adaptive[i].1.is_finite())
             .min_by(|&i, &j| {
-                let off = |r: &Rung| (r.psnr_vs_reference - level).abs();
-                off(&adaptive[i]).total_cmp(&off(&adaptive[j]))
+                let off = |r: (f64, f64)| (r.1 - level).abs();
+                off(adaptive[i]).total_cmp(&off(adaptive[j]))
             })
             .unwrap_or(adaptive.len() / 2),
         None => adaptive.len() / 2,
     };
-    let t = adaptive[a].seconds.max(1e-9);
+    let t = adaptive[a].0.max(1e-9);
     let d = (0..dense.len()).min_by(|&i, &j| {
-        let off = |r: &Rung| (r.seconds.max(1e-9) / t).ln().abs();
-        off(&dense[i]).total_cmp(&off(&dense[j]))
+        let off = |r: (f64, f64)| (r.0.max(1e-9) / t).ln().abs();
+        off(dense[i]).total_cmp(&off(dense[j]))
     })?;
     Some((d, a))
 }
@@ -108,104 +94,14 @@ pub fn hardest_window(
     [best.1, best.2, size, size]
 }
 
-/// Draws the picture: three columns (reference, dense, adaptive), each labelled, the whole
-/// frame above (the crop outlined) and the crop below, enlarged by the largest whole factor
-/// that fits the frame's size. `pictures` are the reference, dense and adaptive renders.
-pub fn write_png(
-    report: &EqualErrorReport,
-    chosen: &EqualTime,
-    pictures: [&[u8]; 3],
-    path: &Path,
-) -> Result<(), PlotError> {
-    let (w, h) = (report.width, report.height);
-    let (cols, rows) = (3 * w, LABEL + 2 * h);
-    let mut rgb = vec![255u8; cols * rows * 3];
-    let [cx, cy, cw, ch] = chosen.crop;
-    let zoom = (w / cw).min(h / ch).max(1);
-    let (ox, oy) = ((w - (cw * zoom).min(w)) / 2, (h - (ch * zoom).min(h)) / 2);
-    for (col, picture) in pictures.iter().enumerate() {
-        for y in 0..h {
-            let src = &picture[3 * y * w..3 * (y + 1) * w];
-            let at = 3 * ((LABEL + y) * cols + col * w);
-            rgb[at..at + 3 * w].copy_from_slice(src);
-        }
-        for y in 0..(ch * zoom).min(h) {
-            for x in 0..(cw * zoom).min(w) {
-                let s = 3 * ((cy + y / zoom) * w + cx + x / zoom);
-                let d = 3 * ((LABEL + h + oy + y) * cols + col * w + ox + x);
-                rgb[d..d + 3].copy_from_slice(&picture[s..s + 3]);
-            }
-        }
-    }
-    let labels = labels(report, chosen);
-    {
-        let size = (cols as u32, rows as u32);
-        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
-        draw_labels(&root, &labels, w, chosen.crop).map_err(|message| PlotError::Draw {
-            path: path.to_path_buf(),
-            message,
-        })?;
-    }
-    output::write_png_srgb8(path, cols, rows, &rgb)?;
-    Ok(())
-}
-
-/// Each column's label: what it is, its samples, time and PSNR.
-fn labels(report: &EqualErrorReport, chosen: &EqualTime) -> [String; 3] {
-    let rung = |name: &str, r: &Rung| {
-        format!(
-            "{name} {} spp: {:.2} s, {:.1} dB",
-            r.spp, r.seconds, r.psnr_vs_reference
-        )
-    };
-    [
-        format!("reference (dense {} spp)", report.reference_spp),
-        rung("dense", &report.dense[chosen.dense_rung]),
-        rung("adaptive", &report.adaptive[chosen.adaptive_rung]),
-    ]
-}
-
-fn draw_labels(
-    root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
-    labels: &[String; 3],
-    w: usize,
-    crop: [usize; 4],
-) -> Result<(), String> {
-    register_font();
-    let err = |e: &dyn std::fmt::Display| e.to_string();
-    let style = TextStyle::from((FONT, 18).into_font())
-        .color(&BLACK)
-        .pos(Pos::new(HPos::Center, VPos::Center));
-    let [cx, cy, cw, ch] = crop;
-    for (col, label) in labels.iter().enumerate() {
-        let x = (col * w + w / 2) as i32;
-        root.draw(&Text::new(label.as_str(), (x, (LABEL / 2) as i32), &style))
-            .map_err(|e| err(&e))?;
-        let x0 = (col * w + cx) as i32;
-        let y0 = (LABEL + cy) as i32;
-        let outline = [(x0, y0), (x0 + cw as i32 - 1, y0 + ch as i32 - 1)];
-        root.draw(&Rectangle::new(
-            outline,
-            RGBColor(255, 210, 0).stroke_width(1),
-        ))
-        .map_err(|e| err(&e))?;
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
-    use super::super::equal_error::tests::rung;
     use super::*;
 
     #[test]
     fn the_pair_is_adaptive_near_the_level_and_dense_near_its_time() {
-        let dense = vec![
-            rung(4, 1.0, 25.0),
-            rung(16, 3.0, 31.0),
-            rung(64, 16.0, 37.0),
-        ];
-        let adaptive = vec![rung(4, 0.5, 28.0), rung(16, 2.0, 34.0), rung(64, 8.0, 40.0)];
+        let dense = [(1.0, 25.0), (3.0, 31.0), (16.0, 37.0)];
+        let adaptive = [(0.5, 28.0), (2.0, 34.0), (8.0, 40.0)];
         assert_eq!(choose_rungs(&dense, &adaptive, Some(34.5)), Some((1, 1)));
         assert_eq!(choose_rungs(&dense, &adaptive, Some(39.0)), Some((2, 2)));
         assert_eq!(choose_rungs(&dense, &adaptive, None), Some((1, 1)));

@@ -13,7 +13,8 @@ use plotters::prelude::*;
 use plotters::style::FontStyle;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use super::equal_error::{EqualErrorReport, Method};
+use super::equal_error::{EqualErrorReport, Method, Rung};
+use super::equal_time::EqualTime;
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::output::{self, OutputError};
 
@@ -21,8 +22,12 @@ use crate::output::{self, OutputError};
 pub const EQUAL_ERROR_PNG: &str = "equal-error.png";
 /// Width and height of the plot in pixels.
 pub const PLOT_SIZE: (u32, u32) = (960, 600);
+/// The file name of the equal-time picture in the bench's `--out` directory.
+pub const EQUAL_TIME_PNG: &str = "equal-time.png";
+/// Height of the label strip above each column of the equal-time picture, pixels.
+const LABEL: usize = 40;
 
-pub(super) const FONT: &str = "sans-serif";
+const FONT: &str = "sans-serif";
 static DEJAVU_SANS: &[u8] = include_bytes!("fonts/DejaVuSans.ttf");
 
 /// Why the equal-error plot could not be made.
@@ -42,7 +47,7 @@ pub enum PlotError {
 }
 
 /// Registers the embedded font with plotters (once per process).
-pub(super) fn register_font() {
+fn register_font() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The font is part of the binary: failing to parse it is a build defect.
@@ -285,12 +290,97 @@ pub fn write_plot(report: &mut EqualErrorReport, dir: &Path) -> Result<(), PlotE
     write_png(report, &path)?;
     report.plot = Some(path);
     if let (Some(chosen), Some(pictures)) = (&report.equal_time, &report.pictures) {
-        let path = dir.join(super::equal_time::EQUAL_TIME_PNG);
+        let path = dir.join(EQUAL_TIME_PNG);
         let [r, d, a] = &**pictures;
-        super::equal_time::write_png(report, chosen, [r, d, a], &path)?;
+        write_equal_time_png(report, chosen, [r, d, a], &path)?;
         if let Some(chosen) = &mut report.equal_time {
             chosen.picture = Some(path);
         }
+    }
+    Ok(())
+}
+
+/// Draws the equal-time picture ([`super::equal_time`]): three columns (reference, dense, adaptive), each labelled, the whole
+/// frame above (the crop outlined) and the crop below, enlarged by the largest whole factor
+/// that fits the frame's size. `pictures` are the reference, dense and adaptive renders.
+pub fn write_equal_time_png(
+    report: &EqualErrorReport,
+    chosen: &EqualTime,
+    pictures: [&[u8]; 3],
+    path: &Path,
+) -> Result<(), PlotError> {
+    let (w, h) = (report.width, report.height);
+    let (cols, rows) = (3 * w, LABEL + 2 * h);
+    let mut rgb = vec![255u8; cols * rows * 3];
+    let [cx, cy, cw, ch] = chosen.crop;
+    let zoom = (w / cw).min(h / ch).max(1);
+    let (ox, oy) = ((w - (cw * zoom).min(w)) / 2, (h - (ch * zoom).min(h)) / 2);
+    for (col, picture) in pictures.iter().enumerate() {
+        for y in 0..h {
+            let src = &picture[3 * y * w..3 * (y + 1) * w];
+            let at = 3 * ((LABEL + y) * cols + col * w);
+            rgb[at..at + 3 * w].copy_from_slice(src);
+        }
+        for y in 0..(ch * zoom).min(h) {
+            for x in 0..(cw * zoom).min(w) {
+                let s = 3 * ((cy + y / zoom) * w + cx + x / zoom);
+                let d = 3 * ((LABEL + h + oy + y) * cols + col * w + ox + x);
+                rgb[d..d + 3].copy_from_slice(&picture[s..s + 3]);
+            }
+        }
+    }
+    let labels = labels(report, chosen);
+    {
+        let size = (cols as u32, rows as u32);
+        let root = BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area();
+        draw_labels(&root, &labels, w, chosen.crop).map_err(|message| PlotError::Draw {
+            path: path.to_path_buf(),
+            message,
+        })?;
+    }
+    output::write_png_srgb8(path, cols, rows, &rgb)?;
+    Ok(())
+}
+
+/// Each column's label: what it is, its samples, time and PSNR.
+fn labels(report: &EqualErrorReport, chosen: &EqualTime) -> [String; 3] {
+    let rung = |name: &str, r: &Rung| {
+        format!(
+            "{name} {} spp: {:.2} s, {:.1} dB",
+            r.spp, r.seconds, r.psnr_vs_reference
+        )
+    };
+    [
+        format!("reference (dense {} spp)", report.reference_spp),
+        rung("dense", &report.dense[chosen.dense_rung]),
+        rung("adaptive", &report.adaptive[chosen.adaptive_rung]),
+    ]
+}
+
+fn draw_labels(
+    root: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    labels: &[String; 3],
+    w: usize,
+    crop: [usize; 4],
+) -> Result<(), String> {
+    register_font();
+    let err = |e: &dyn std::fmt::Display| e.to_string();
+    let style = TextStyle::from((FONT, 18).into_font())
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Center, VPos::Center));
+    let [cx, cy, cw, ch] = crop;
+    for (col, label) in labels.iter().enumerate() {
+        let x = (col * w + w / 2) as i32;
+        root.draw(&Text::new(label.as_str(), (x, (LABEL / 2) as i32), &style))
+            .map_err(|e| err(&e))?;
+        let x0 = (col * w + cx) as i32;
+        let y0 = (LABEL + cy) as i32;
+        let outline = [(x0, y0), (x0 + cw as i32 - 1, y0 + ch as i32 - 1)];
+        root.draw(&Rectangle::new(
+            outline,
+            RGBColor(255, 210, 0).stroke_width(1),
+        ))
+        .map_err(|e| err(&e))?;
     }
     Ok(())
 }
