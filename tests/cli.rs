@@ -419,6 +419,7 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
                 "psnr_vs_reference",
                 "samples",
                 "sample_sites",
+                "light_paths",
             ] {
                 assert!(r.get(key).is_some(), "{key} missing in {r}");
             }

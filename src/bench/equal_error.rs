@@ -127,6 +127,8 @@ pub struct Rung {
     pub sample_sites: u64,
     /// Samples of pixel x lens actually traced: the sum of the film's per-pixel counts.
     pub samples: u64,
+    /// Light paths traced from small emitters to the lens (each one shadow ray, in `rays`).
+    pub light_paths: u64,
     /// sRGB PSNR (dB) against the reference; null if identical to it.
     pub psnr_vs_reference: f64,
 }
@@ -407,6 +409,7 @@ pub fn run(
                     primary_rays: stats[0].rays.primary,
                     sample_sites: stats[0].sample_sites,
                     samples,
+                    light_paths: stats[0].light_paths,
                     psnr_vs_reference: psnr,
                 }
             })
@@ -578,6 +581,7 @@ pub(super) mod tests {
             primary_rays: 0,
             sample_sites: 0,
             samples: 0,
+            light_paths: 0,
             psnr_vs_reference: psnr,
         }
     }
@@ -656,6 +660,7 @@ pub(super) mod tests {
             "primary_rays",
             "sample_sites",
             "samples",
+            "light_paths",
             "psnr_vs_reference",
         ] {
             assert!(json["adaptive"][0].get(key).is_some(), "{key} missing");
