@@ -228,7 +228,7 @@ fn a_defocused_sphere_smaller_than_a_pixel_adds_its_energy_wherever_it_sits() {
 /// of sites and cell centres is 16 px apart there and steps over the whole disc. Adaptive mode
 /// still adds the sphere's own energy (the closed form: albedo / pi x irradiance x the projected
 /// disc's integral of cos, 2/3 pi r^2; in front of the wall less the wall's light it hides),
-/// alone on black and in front of the wall.
+/// alone on black and in front of the wall, with both integrators.
 #[test]
 fn an_unseen_defocused_sphere_keeps_its_energy_on_any_background() {
     let size = 64u32;
@@ -246,8 +246,9 @@ fn an_unseen_defocused_sphere_keeps_its_energy_on_any_background() {
         materials: MeshMaterials::One(0),
     };
     // Pixel corners 8 px from every corner and centre of the 16 px lattice the background starts
-    // with: the disc and the pixel filter reach 6.5 px.
-    for (cx, cy) in [(24i32, 16i32), (40, 32), (32, 40)] {
+    // with: the disc and the pixel filter reach 6.5 px. Both integrators (paths at one place).
+    let direct = [(24i32, 16i32), (40, 32), (32, 40)].map(|at| (Integrator::Direct, at));
+    for (integrator, (cx, cy)) in direct.into_iter().chain([(Integrator::Path, (24, 16))]) {
         // The film position (cx, cy) seen at the sphere's depth.
         let at = Vec3::new(
             (cx as f32 - size as f32 / 2.0) * depth / k,
@@ -290,7 +291,7 @@ fn an_unseen_defocused_sphere_keeps_its_energy_on_any_background() {
                 let film = render_desc(
                     &desc,
                     &RenderSettings {
-                        integrator: Integrator::Direct,
+                        integrator,
                         mode: Mode::Adaptive,
                         spp: 4096,
                         ..Default::default()
@@ -301,10 +302,11 @@ fn an_unseen_defocused_sphere_keeps_its_energy_on_any_background() {
             let added = energy(true) - energy(false);
             let hidden = if wall { wall_albedo * lit * disc } else { 0.0 };
             let expected = albedo as f64 * lit * 2.0 / 3.0 * disc - hidden;
-            eprintln!("({cx}, {cy}), wall {wall}: added {added:.2}, expected {expected:.2}");
+            let case = format!("{integrator:?} at ({cx}, {cy}), wall {wall}");
+            eprintln!("{case}: added {added:.2}, expected {expected:.2}");
             assert!(
                 (added / expected - 1.0).abs() < 0.1,
-                "({cx}, {cy}), wall {wall}: the sphere added {added:.2}, expected {expected:.2}"
+                "{case}: the sphere added {added:.2}, expected {expected:.2}"
             );
         }
     }
