@@ -75,25 +75,33 @@ impl UnseenBlur {
             depth,
             margin,
         };
-        let mut out = empty.clone();
-        for (g, geometry) in world.scene.geometries().iter().enumerate() {
-            let count = match geometry {
-                Geometry::Mesh(m) => m.triangle_count(),
-                Geometry::Spheres(s) => s.len(),
-            };
-            let part = (0..count as u32)
-                .into_par_iter()
-                .filter(|&prim| !light_traced.contains(g as u32, prim))
-                .fold(
-                    || empty.clone(),
-                    |mut map, prim| {
-                        map.add_primitive(&probe, geometry, prim);
-                        map
-                    },
-                )
-                .reduce(|| empty.clone(), Self::merged);
-            out = out.merged(part);
-        }
+        // One pass over every primitive of every geometry, so a scene of many small
+        // geometries does not pay a map per geometry.
+        let primitives =
+            world
+                .scene
+                .geometries()
+                .par_iter()
+                .enumerate()
+                .flat_map(|(g, geometry)| {
+                    let count = match geometry {
+                        Geometry::Mesh(m) => m.triangle_count(),
+                        Geometry::Spheres(s) => s.len(),
+                    };
+                    (0..count as u32)
+                        .into_par_iter()
+                        .map(move |prim| (g as u32, geometry, prim))
+                });
+        let out = primitives
+            .filter(|&(g, _, prim)| !light_traced.contains(g, prim))
+            .fold(
+                || empty.clone(),
+                |mut map, (_, geometry, prim)| {
+                    map.add_primitive(&probe, geometry, prim);
+                    map
+                },
+            )
+            .reduce(|| empty.clone(), Self::merged);
         Ok(out)
     }
 
