@@ -237,9 +237,6 @@ pub struct EqualErrorReport {
     pub plot: Option<PathBuf>,
     /// The equal-time pair the side-by-side picture shows ([`super::equal_time`]).
     pub equal_time: Option<EqualTime>,
-    /// The reference's, and that pair's, 8-bit sRGB pixels (not serialised).
-    #[serde(skip)]
-    pub pictures: Option<Box<[Picture; 3]>>,
 }
 
 impl EqualErrorReport {
@@ -417,7 +414,7 @@ pub fn run(
     };
     let (dense, adaptive) = (rungs(0), rungs(1));
     let (levels, highest_common) = levels(&level_list, &dense, &adaptive);
-    let (equal_time, pictures) = equal_time_pair(
+    let equal_time = equal_time_pair(
         &reference,
         &mut pictures,
         [&dense, &adaptive],
@@ -442,7 +439,6 @@ pub fn run(
         highest_common,
         plot: None,
         equal_time,
-        pictures,
     })
 }
 
@@ -468,30 +464,27 @@ fn checked_config(config: &EqualErrorConfig) -> Result<(Vec<u32>, Vec<f64>), Ben
     Ok((ladder, levels))
 }
 
-/// The pair the equal-time picture shows ([`choose_rungs`]), its window, and the reference's
-/// and the pair's pictures, taken from `pictures` (per method, per rung).
+/// The pair the equal-time picture shows ([`choose_rungs`]) with its window and the
+/// reference's and the pair's pictures, taken from `pictures` (per method, per rung).
 fn equal_time_pair(
     reference: &[[f32; 3]],
     pictures: &mut [Vec<Picture>],
     [dense, adaptive]: [&[Rung]; 2],
     level: Option<f64>,
     (w, h): (usize, usize),
-) -> (Option<EqualTime>, Option<Box<[Picture; 3]>>) {
-    let Some((d, a)) = choose_rungs(&points(dense), &points(adaptive), level) else {
-        return (None, None);
-    };
+) -> Option<EqualTime> {
+    let (d, a) = choose_rungs(&points(dense), &points(adaptive), level)?;
     let reference = srgb8(reference.iter().copied());
     let [dense_picture, adaptive_picture] =
         [(0, d), (1, a)].map(|(m, r)| std::mem::take(&mut pictures[m][r]));
     let crop = hardest_window(&reference, &dense_picture, &adaptive_picture, w, h);
-    let equal_time = EqualTime {
+    Some(EqualTime {
         dense_rung: d,
         adaptive_rung: a,
         crop,
         picture: None,
-    };
-    let pictures = Box::new([reference, dense_picture, adaptive_picture]);
-    (Some(equal_time), Some(pictures))
+        pictures: Box::new([reference, dense_picture, adaptive_picture]),
+    })
 }
 
 /// Linear RGB pixels as 8-bit sRGB bytes.
@@ -639,7 +632,6 @@ pub(super) mod tests {
             highest_common,
             plot: None,
             equal_time: None,
-            pictures: None,
         }
     }
 

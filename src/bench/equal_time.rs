@@ -14,14 +14,17 @@ pub type Picture = Vec<u8>;
 /// The pair the picture shows: which rung of each method, and where the crop is.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct EqualTime {
-    /// Dense's rung shown (index into [`EqualErrorReport::dense`]).
+    /// Dense's rung shown (index into [`super::equal_error::EqualErrorReport::dense`]).
     pub dense_rung: usize,
-    /// Adaptive's rung shown (index into [`EqualErrorReport::adaptive`]).
+    /// Adaptive's rung shown (index into [`super::equal_error::EqualErrorReport::adaptive`]).
     pub adaptive_rung: usize,
     /// The crop window: x, y, width, height in pixels.
     pub crop: [usize; 4],
     /// Where the picture was written, if it was.
     pub picture: Option<std::path::PathBuf>,
+    /// The reference's, dense's and adaptive's pictures (not serialised).
+    #[serde(skip)]
+    pub pictures: Box<[Picture; 3]>,
 }
 
 /// The rungs to show, from each method's rungs' (seconds, PSNR): adaptive's nearest in PSNR to

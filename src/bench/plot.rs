@@ -289,24 +289,22 @@ pub fn write_plot(report: &mut EqualErrorReport, dir: &Path) -> Result<(), PlotE
     let path = dir.join(EQUAL_ERROR_PNG);
     write_png(report, &path)?;
     report.plot = Some(path);
-    if let (Some(chosen), Some(pictures)) = (&report.equal_time, &report.pictures) {
-        let path = dir.join(EQUAL_TIME_PNG);
-        let [r, d, a] = &**pictures;
-        write_equal_time_png(report, chosen, [r, d, a], &path)?;
-        if let Some(chosen) = &mut report.equal_time {
-            chosen.picture = Some(path);
-        }
+    let path = dir.join(EQUAL_TIME_PNG);
+    if let Some(chosen) = &report.equal_time {
+        write_equal_time_png(report, chosen, &path)?;
+    }
+    if let Some(chosen) = &mut report.equal_time {
+        chosen.picture = Some(path);
     }
     Ok(())
 }
 
-/// Draws the equal-time picture ([`super::equal_time`]): three columns (reference, dense, adaptive), each labelled, the whole
-/// frame above (the crop outlined) and the crop below, enlarged by the largest whole factor
-/// that fits the frame's size. `pictures` are the reference, dense and adaptive renders.
-pub fn write_equal_time_png(
+/// Draws the equal-time picture ([`super::equal_time`]) to `path`: three labelled columns (the
+/// reference, dense and adaptive), each whole above with the window outlined, and the window
+/// below, enlarged by the largest whole factor that fits the frame's size.
+fn write_equal_time_png(
     report: &EqualErrorReport,
     chosen: &EqualTime,
-    pictures: [&[u8]; 3],
     path: &Path,
 ) -> Result<(), PlotError> {
     let (w, h) = (report.width, report.height);
@@ -315,7 +313,7 @@ pub fn write_equal_time_png(
     let [cx, cy, cw, ch] = chosen.crop;
     let zoom = (w / cw).min(h / ch).max(1);
     let (ox, oy) = ((w - (cw * zoom).min(w)) / 2, (h - (ch * zoom).min(h)) / 2);
-    for (col, picture) in pictures.iter().enumerate() {
+    for (col, picture) in chosen.pictures.iter().enumerate() {
         for y in 0..h {
             let src = &picture[3 * y * w..3 * (y + 1) * w];
             let at = 3 * ((LABEL + y) * cols + col * w);

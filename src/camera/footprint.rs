@@ -77,32 +77,43 @@ impl BoxImage {
     /// half its CoC from its sharp image), grown by `margin` pixels more (a pixel filter's
     /// reach); `None` if not finite.
     pub fn reach(&self, camera: &Camera, margin: f32) -> Option<[f32; 4]> {
-        let grow = 0.5 * self.max_coc(camera) + margin;
-        let [x0, y0, x1, y1] = self.sharp;
-        let reach = [x0 - grow, y0 - grow, x1 + grow, y1 + grow];
-        reach.iter().all(|v| v.is_finite()).then_some(reach)
+        self.grown(0.5 * self.max_coc(camera) + margin)
     }
+
+    /// The sharp image's rectangle grown by `by` pixels on every side; `None` if not finite.
+    pub fn grown(&self, by: f32) -> Option<[f32; 4]> {
+        let [x0, y0, x1, y1] = self.sharp;
+        let rect = [x0 - by, y0 - by, x1 + by, y1 + by];
+        rect.iter().all(|v| v.is_finite()).then_some(rect)
+    }
+}
+
+/// A `size` x `size` camera at the origin looking along +z (30 degrees), aperture radius 0.2,
+/// focused at 5: what the footprint tests (here and in the renderer) look through.
+#[cfg(test)]
+pub(crate) fn test_camera(size: u32) -> Camera {
+    use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
+    CameraSpec {
+        eye: Vec3::ZERO,
+        look_at: Vec3::Z,
+        up: Vec3::Y,
+        vfov_deg: 30.0,
+        width: size,
+        height: size,
+        lens: LensSpec::Aperture { radius: 0.2 },
+        focus: Focus::Distance(5.0),
+        aperture: ApertureShape::default(),
+    }
+    .build(|_| None)
+    .unwrap()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
 
     fn camera() -> Camera {
-        CameraSpec {
-            eye: Vec3::ZERO,
-            look_at: Vec3::Z,
-            up: Vec3::Y,
-            vfov_deg: 30.0,
-            width: 100,
-            height: 100,
-            lens: LensSpec::Aperture { radius: 0.2 },
-            focus: Focus::Distance(5.0),
-            aperture: ApertureShape::default(),
-        }
-        .build(|_| None)
-        .unwrap()
+        test_camera(100)
     }
 
     #[test]

@@ -143,16 +143,11 @@ fn footprint(
 ) -> Option<(BoxImage, [f32; 4])> {
     let image = camera.box_image(lo, hi)?;
     let reach = if pinhole {
-        let [x0, y0, x1, y1] = image.sharp;
-        let g = filter_reach;
-        [x0 - g, y0 - g, x1 + g, y1 + g]
+        image.grown(filter_reach)?
     } else {
         image.reach(camera, filter_reach)?
     };
-    reach
-        .iter()
-        .all(|v| v.is_finite())
-        .then_some((image, reach))
+    Some((image, reach))
 }
 
 /// The mean lens weight under `filter` over the camera's aperture distribution (4096 Sobol

@@ -146,8 +146,10 @@ impl UnseenBlur {
                 // The image of a sphere at distance d holds a disc of radius k r / d (more off
                 // the axis, where the image stretches).
                 let d = (centre - camera.eye).length();
-                if camera.pixels_per_unit() * r < SEEN_RADIUS * d {
-                    self.add_box(probe, centre - Vec3::splat(r), centre + Vec3::splat(r));
+                if camera.pixels_per_unit() * r < SEEN_RADIUS * d
+                    && let Some(image) = camera.box_image(centre - r, centre + r)
+                {
+                    self.add_image(probe, &image);
                 }
             }
         }
@@ -155,21 +157,17 @@ impl UnseenBlur {
 
     /// Adds triangle `t`, halved along its longest edge until its image fits in a tile.
     fn add_triangle(&mut self, probe: &Probe, t: [Vec3; 3], splits: u32) {
-        let (camera, margin) = (probe.camera, probe.margin);
         let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
-        let Some(image) = camera.box_image(lo, hi) else {
+        let Some(image) = probe.camera.box_image(lo, hi) else {
             return;
         };
         let [x0, y0, x1, y1] = image.sharp;
         if splits == 0 || (x1 - x0).max(y1 - y0) <= TILE as f32 {
-            self.add_box(probe, lo, hi);
+            self.add_image(probe, &image);
             return;
         }
         // Pieces whose light cannot reach the frame are dropped.
-        let Some([rx0, ry0, rx1, ry1]) = image.reach(camera, margin) else {
-            return;
-        };
-        if rx1 < 0.0 || ry1 < 0.0 || rx0 > camera.width as f32 || ry0 > camera.height as f32 {
+        if probe.reach_in_frame(&image).is_none() {
             return;
         }
         let longest = (0..3)
@@ -184,23 +182,16 @@ impl UnseenBlur {
         self.add_triangle(probe, [mid, b, c], splits - 1);
     }
 
-    /// Marks the tiles the light of the box `lo`..`hi` may reach with its blur range, unless
-    /// the depth pass saw a surface at its depths where it lies.
-    fn add_box(&mut self, probe: &Probe, lo: Vec3, hi: Vec3) {
+    /// Marks the tiles the light of the box whose image is `image` may reach with its blur
+    /// range, unless the depth pass saw a surface at its depths where it lies.
+    fn add_image(&mut self, probe: &Probe, image: &BoxImage) {
         let camera = probe.camera;
-        let Some(image) = camera.box_image(lo, hi) else {
-            return;
-        };
-        if probe.saw_surface_at(&image) {
+        if probe.saw_surface_at(image) {
             return;
         }
-        let Some([x0, y0, x1, y1]) = image.reach(camera, probe.margin) else {
+        let Some([x0, y0, x1, y1]) = probe.reach_in_frame(image) else {
             return;
         };
-        let (w, h) = (camera.width as f32, camera.height as f32);
-        if x1 < 0.0 || y1 < 0.0 || x0 >= w || y0 >= h {
-            return;
-        }
         let tile = |v: f32, n: usize| ((v.max(0.0) as usize) / TILE).min(n - 1);
         let (tx0, tx1) = (tile(x0, self.tiles_x), tile(x1, self.tiles_x));
         let (ty0, ty1) = (tile(y0, self.tiles_y), tile(y1, self.tiles_y));
@@ -227,6 +218,14 @@ impl Probe<'_> {
     /// Relative depth slack of [`Probe::saw_surface_at`].
     const SLACK: f32 = 0.02;
 
+    /// The film rectangle the light of the box whose image is `image` can reach, if it
+    /// overlaps the frame.
+    fn reach_in_frame(&self, image: &BoxImage) -> Option<[f32; 4]> {
+        let reach @ [x0, y0, x1, y1] = image.reach(self.camera, self.margin)?;
+        let (w, h) = (self.camera.width as f32, self.camera.height as f32);
+        (x1 >= 0.0 && y1 >= 0.0 && x0 < w && y0 < h).then_some(reach)
+    }
+
     /// Whether a depth-pass ray within a pixel of the centre of `image` found a surface at the
     /// box's depths: then the box is part of a surface the CoC map holds there (a small
     /// triangle of a fine mesh, a sliver between larger ones), whose blur the site rule
@@ -250,12 +249,11 @@ impl Probe<'_> {
 /// Whether the image of triangle `t` through the lens centre surely holds a pixel centre (its
 /// incircle is at least [`SEEN_RADIUS`] wide). False for triangles not wholly in front.
 fn triangle_seen(camera: &Camera, t: [Vec3; 3]) -> bool {
-    let Some([a, b, c]) = t
-        .iter()
-        .map(|&v| camera.project(v))
-        .collect::<Option<Vec<_>>>()
-        .and_then(|v| <[_; 3]>::try_from(v).ok())
-    else {
+    let (Some(a), Some(b), Some(c)) = (
+        camera.project(t[0]),
+        camera.project(t[1]),
+        camera.project(t[2]),
+    ) else {
         return false;
     };
     let area2 = (b - a).perp_dot(c - a).abs();
@@ -267,7 +265,6 @@ fn triangle_seen(camera: &Camera, t: [Vec3; 3]) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec};
     use crate::embree::{Device, TriangleMesh};
     use crate::scene::{MeshMaterials, Object, SceneDesc};
     use crate::shade::Material;
@@ -275,19 +272,7 @@ mod tests {
     const SIZE: u32 = 64;
 
     fn camera() -> Camera {
-        CameraSpec {
-            eye: Vec3::ZERO,
-            look_at: Vec3::Z,
-            up: Vec3::Y,
-            vfov_deg: 30.0,
-            width: SIZE,
-            height: SIZE,
-            lens: LensSpec::Aperture { radius: 0.2 },
-            focus: Focus::Distance(5.0),
-            aperture: ApertureShape::default(),
-        }
-        .build(|_| None)
-        .unwrap()
+        crate::camera::footprint::test_camera(SIZE)
     }
 
     /// The map of `objects` where the depth pass saw `depth` everywhere.
