@@ -363,11 +363,14 @@ fn draw_labels(
 ) -> Result<(), String> {
     register_font();
     let err = |e: &dyn std::fmt::Display| e.to_string();
-    let style = TextStyle::from((FONT, 18).into_font())
-        .color(&BLACK)
-        .pos(Pos::new(HPos::Center, VPos::Center));
     let [cx, cy, cw, ch] = crop;
     for (col, label) in labels.iter().enumerate() {
+        // 18 px text, smaller where a narrow column would make labels overlap (a glyph is
+        // about 0.6 of the size wide).
+        let size = (w as f64 / (0.6 * label.chars().count().max(1) as f64)).clamp(8.0, 18.0);
+        let style = TextStyle::from((FONT, size).into_font())
+            .color(&BLACK)
+            .pos(Pos::new(HPos::Center, VPos::Center));
         let x = (col * w + w / 2) as i32;
         root.draw(&Text::new(label.as_str(), (x, (LABEL / 2) as i32), &style))
             .map_err(|e| err(&e))?;
