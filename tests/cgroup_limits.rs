@@ -1,0 +1,138 @@
+//! Issue 28: a real cgroup memory limit, the kind Slurm and Kubernetes set, rather than a
+//! faked `/sys` tree (`limits.rs`'s unit tests cover the parsing). The test makes a child
+//! memory cgroup (v1 `memory.limit_in_bytes`, else v2 `memory.max`), runs `dofray` inside it,
+//! and checks two things. An image the limit cannot hold is refused with exit 5, naming the
+//! cgroup. An image the guard admits renders to the end, and the kernel's OOM killer is not
+//! needed.
+//!
+//! Making a cgroup needs root and a writable cgroup hierarchy with the memory controller. The
+//! CI machines have both (cgroup v1). Where neither exists, the test says so on stdout and
+//! checks nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The cgroup's limit: 320 MiB.
+const LIMIT: u64 = 320 << 20;
+
+/// A child memory cgroup with a limit, removed on drop.
+struct Cgroup {
+    dir: PathBuf,
+}
+
+impl Cgroup {
+    /// A new cgroup limited to `bytes`, v1 or v2, or why none can be made.
+    fn new(bytes: u64) -> Result<Self, String> {
+        let name = format!("dofray-test-{}", std::process::id());
+        let v1 = Path::new("/sys/fs/cgroup/memory");
+        let v2 = Path::new("/sys/fs/cgroup");
+        let (dir, limit_file) = if v1.join("memory.limit_in_bytes").exists() {
+            (v1.join(&name), "memory.limit_in_bytes")
+        } else if std::fs::read_to_string(v2.join("cgroup.subtree_control"))
+            .is_ok_and(|c| c.split_whitespace().any(|c| c == "memory"))
+        {
+            (v2.join(&name), "memory.max")
+        } else {
+            return Err("no cgroup v1 memory hierarchy, nor cgroup v2 with memory".into());
+        };
+        std::fs::create_dir(&dir).map_err(|e| format!("cannot make {}: {e}", dir.display()))?;
+        let cgroup = Self { dir };
+        std::fs::write(cgroup.dir.join(limit_file), bytes.to_string())
+            .map_err(|e| format!("cannot set {limit_file}: {e}"))?;
+        Ok(cgroup)
+    }
+
+    /// `dofray args...` run inside the cgroup (the shell moves itself in, then execs).
+    fn dofray(&self, args: &[&str]) -> Output {
+        let procs = self.dir.join("cgroup.procs");
+        Command::new("sh")
+            .arg("-c")
+            .arg(format!(
+                "echo $$ > '{}' && exec \"$0\" \"$@\"",
+                procs.display()
+            ))
+            .arg(env!("CARGO_BIN_EXE_dofray"))
+            .args(args)
+            .output()
+            .expect("sh runs")
+    }
+}
+
+impl Drop for Cgroup {
+    fn drop(&mut self) {
+        // Empty once its processes have exited; the kernel may take a moment to notice.
+        for _ in 0..50 {
+            if std::fs::remove_dir(&self.dir).is_ok() {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
+    let cgroup = match Cgroup::new(LIMIT) {
+        Ok(c) => c,
+        Err(why) => {
+            println!("not run: {why}");
+            return;
+        }
+    };
+    let dir = std::env::temp_dir().join(format!("dofray-cgroup-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+
+    // 20000 x 20000 needs about 48 GiB of buffers: refused before anything is allocated.
+    let out = dir.join("big.png");
+    let refused = cgroup.dofray(&[
+        "render",
+        "--width",
+        "20000",
+        "--height",
+        "20000",
+        "--json",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let stdout = text(&refused.stdout);
+    assert_eq!(refused.status.code(), Some(5), "{stdout}{}", text(&refused.stderr));
+    assert!(stdout.contains("\"resource_limit\""), "{stdout}");
+    assert!(stdout.contains("cgroup memory limit"), "{stdout}");
+    assert!(!out.exists(), "nothing is written");
+
+    // About 60% of the limit by the guard's estimate (128 B a pixel): admitted, and it must
+    // then fit for real, or the OOM killer ends it with SIGKILL (no exit code).
+    let out = dir.join("fits.exr");
+    let admitted = cgroup.dofray(&[
+        "render",
+        "--width",
+        "1400",
+        "--height",
+        "1050",
+        "--mode",
+        "pinhole",
+        "--aa",
+        "1",
+        "--json",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(
+        admitted.status.code(),
+        Some(0),
+        "{:?}: {}{}",
+        admitted.status,
+        text(&admitted.stdout),
+        text(&admitted.stderr)
+    );
+    assert!(std::fs::metadata(&out).unwrap().len() > 0);
+    drop(cgroup);
+    let _ = std::fs::remove_dir_all(&dir);
+}
