@@ -101,7 +101,12 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
         out.to_str().unwrap(),
     ]);
     let stdout = text(&refused.stdout);
-    assert_eq!(refused.status.code(), Some(5), "{stdout}{}", text(&refused.stderr));
+    assert_eq!(
+        refused.status.code(),
+        Some(5),
+        "{stdout}{}",
+        text(&refused.stderr)
+    );
     assert!(stdout.contains("\"resource_limit\""), "{stdout}");
     assert!(stdout.contains("cgroup memory limit"), "{stdout}");
     assert!(!out.exists(), "nothing is written");
