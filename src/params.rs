@@ -88,6 +88,8 @@ pub enum Param {
     ClampIndirect,
     /// Light tracing of small emitters seen through the lens.
     LightTracing,
+    /// Sample reuse across adaptive sites.
+    Reuse,
 }
 
 /// What each front end calls a [`Param`].
@@ -124,7 +126,7 @@ const fn row(
 
 impl Param {
     /// Every parameter.
-    pub const ALL: [Param; 35] = [
+    pub const ALL: [Param; 36] = [
         Self::Width,
         Self::Height,
         Self::ApertureRadius,
@@ -160,6 +162,7 @@ impl Param {
         Self::TransmissionBounces,
         Self::ClampIndirect,
         Self::LightTracing,
+        Self::Reuse,
     ];
 
     /// The table: the parameter's name in each front end.
@@ -201,6 +204,7 @@ impl Param {
             Self::TransmissionBounces => row("transmission_bounces", Some("--transmission-bounces"), Some("render.transmission_bounces"), None, None),
             Self::ClampIndirect => row("clamp_indirect", Some("--clamp-indirect"), Some("render.clamp_indirect"), None, None),
             Self::LightTracing => row("light_tracing", Some("--light-tracing"), Some("render.light_tracing"), Some("light_tracing"), None),
+            Self::Reuse => row("reuse", Some("--reuse"), Some("render.reuse"), None, None),
         }
     }
 

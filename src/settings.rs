@@ -107,6 +107,13 @@ pub struct PathLimits {
     /// ([`crate::render::light_trace`]). Either way the image is unbiased; only the noise
     /// differs.
     pub light_tracing: bool,
+    /// Whether adaptive sites lend their lens samples to the sites around them that see the
+    /// same surface points ([`crate::render::reuse`]; the error-controlled rule, a round thin
+    /// lens and the box lens filter only): a blurred site still noisy after its samples
+    /// takes its neighbours' too, which cuts noise in blurred diffuse regions at some cost in
+    /// time. Off by default: it pays where blurred rough surfaces carry the noise (a room's
+    /// walls behind a sharp subject), not where glossy or specular light does.
+    pub reuse: bool,
 }
 
 impl Default for PathLimits {
@@ -119,6 +126,7 @@ impl Default for PathLimits {
             clamp_indirect: f32::INFINITY,
             strategy: Strategy::Mis,
             light_tracing: true,
+            reuse: false,
         }
     }
 }
@@ -496,6 +504,8 @@ pub struct SettingsPatch {
     pub clamp_indirect: Option<f32>,
     /// Light tracing of small emitters ([`PathLimits::light_tracing`]). Default: on.
     pub light_tracing: Option<bool>,
+    /// Sample reuse across sites ([`PathLimits::reuse`]). Default: off.
+    pub reuse: Option<bool>,
 }
 
 impl SettingsPatch {
@@ -555,6 +565,7 @@ impl SettingsPatch {
             transmission_bounces: self.transmission_bounces.or(lower.transmission_bounces),
             clamp_indirect: self.clamp_indirect.or(lower.clamp_indirect),
             light_tracing: self.light_tracing.or(lower.light_tracing),
+            reuse: self.reuse.or(lower.reuse),
         }
     }
 
@@ -605,6 +616,7 @@ impl SettingsPatch {
                 clamp_indirect: self.clamp_indirect.unwrap_or(d.clamp_indirect),
                 strategy: d.strategy,
                 light_tracing: self.light_tracing.unwrap_or(d.light_tracing),
+                reuse: self.reuse.unwrap_or(d.reuse),
             },
             bounces: 1,
             record_rays: false,

@@ -69,6 +69,11 @@ pub trait Lens {
     /// vignetting) must still return a bound of its blur's extent, never less.
     fn coc_px(&self, camera: &Camera, depth: f32) -> f32;
 
+    /// How the film image of a scene point moves with the lens position, when it moves
+    /// rigidly over a round aperture sampled uniformly (what sample reuse,
+    /// [`crate::render::reuse`], needs); `None` for any other lens or aperture.
+    fn reprojection(&self, camera: &Camera) -> Option<Reprojection>;
+
     /// Distance of the plane in focus along the view axis (may be infinite).
     fn focus_distance(&self) -> f32;
 
@@ -149,6 +154,10 @@ impl Lens for CameraLens {
     #[inline]
     fn coc_px(&self, camera: &Camera, depth: f32) -> f32 {
         dispatch!(self, l => l.coc_px(camera, depth))
+    }
+
+    fn reprojection(&self, camera: &Camera) -> Option<Reprojection> {
+        dispatch!(self, l => l.reprojection(camera))
     }
 
     fn focus_distance(&self) -> f32 {
@@ -363,12 +372,53 @@ impl Lens for ThinLens {
         a * k * (self.inv_focus_distance - inv_d).abs()
     }
 
+    /// From [`Lens::film_point`]: a point at depth `z` seen from lens position `l` lands at
+    /// `film_dir = (P - eye) / z + offset (1 / focus - 1 / z)`, so it moves by
+    /// `k r (1 / focus - 1 / z)` pixels per unit of `l` (k = [`Camera::pixels_per_unit`]).
+    /// Round, unstretched apertures only: the reuse kernel is a disc's.
+    fn reprojection(&self, camera: &Camera) -> Option<Reprojection> {
+        let round = self.aperture.blades == 0 && self.aperture.anamorphic == 1.0;
+        (round && self.aperture_radius > 0.0).then(|| Reprojection {
+            scale: camera.pixels_per_unit() * self.aperture_radius,
+            inv_focus_distance: self.inv_focus_distance,
+        })
+    }
+
     fn focus_distance(&self) -> f32 {
         self.focus_distance
     }
 
     fn aperture_radius(&self) -> f32 {
         self.aperture_radius
+    }
+}
+
+/// How a scene point's film image moves with the lens position: seen from lens position `l`
+/// (unit disc), a point at depth `z` along the view axis lands at
+/// `c + shift(z) (l.x, -l.y)` pixels, `c` its image through the lens centre (film y points
+/// down, lens y up). `|shift(z)|` is the radius of its circle of confusion.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reprojection {
+    /// Pixels per unit of `1 / focus - 1 / z`: the aperture radius times
+    /// [`Camera::pixels_per_unit`].
+    pub scale: f32,
+    /// 1 / the focus distance (0 at infinity).
+    pub inv_focus_distance: f32,
+}
+
+impl Reprojection {
+    /// The signed film motion (pixels per unit lens position) of a point at `depth` along the
+    /// view axis (infinite: a point at infinity); positive beyond the focus.
+    #[inline]
+    pub fn shift(&self, depth: f32) -> f32 {
+        self.scale * (self.inv_focus_distance - 1.0 / depth.max(1e-6))
+    }
+
+    /// Where the point that film position `film` saw from lens position `lens` at depth
+    /// shift `shift` lands through the lens centre.
+    #[inline]
+    pub fn centre(film: Vec2, lens: Vec2, shift: f32) -> Vec2 {
+        film - shift * Vec2::new(lens.x, -lens.y)
     }
 }
 

@@ -14,7 +14,7 @@ use glam::{Vec2, Vec3};
 
 pub use aperture::{ApertureShape, LensFilter};
 pub use footprint::BoxImage;
-pub use lens::{CameraLens, Lens, Photographic, ThinLens};
+pub use lens::{CameraLens, Lens, Photographic, Reprojection, ThinLens};
 
 use crate::embree::{LANES, Ray};
 use crate::error_kind::{ErrorKind, HasKind};
@@ -401,6 +401,12 @@ impl Camera {
     /// Distance of the plane in focus along the view axis (may be infinite).
     pub fn focus_distance(&self) -> f32 {
         self.lens.focus_distance()
+    }
+
+    /// How film images move with the lens position, where they move rigidly
+    /// ([`Lens::reprojection`]).
+    pub fn reprojection(&self) -> Option<Reprojection> {
+        self.lens.reprojection(self)
     }
 
     /// Aperture radius in scene units (0 = pinhole).

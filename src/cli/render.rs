@@ -48,6 +48,7 @@ pub(crate) fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<Render
         transmission_bounces: a.transmission_bounces,
         clamp_indirect: a.clamp_indirect,
         light_tracing: a.light_tracing.map(|s| s == Switch::On),
+        reuse: a.reuse.map(|s| s == Switch::On),
     };
     Ok(flags
         .over(&desc.settings)

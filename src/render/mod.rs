@@ -29,6 +29,7 @@ pub mod maps;
 pub mod path;
 pub mod refine;
 pub mod region;
+pub mod reuse;
 pub mod site;
 pub mod trace;
 pub mod unseen;

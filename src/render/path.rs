@@ -86,9 +86,29 @@ struct Vertices {
     origins: trace::Origins,
 }
 
+/// What each camera ray of a packet hit first.
+#[derive(Debug, Clone, Copy)]
+pub struct FirstHits {
+    /// Hit distance (infinite for misses).
+    pub t: [f32; LANES],
+    /// [`Bsdf::view_alpha`] there: over what angle what the ray found may change with the
+    /// viewpoint (infinite for misses: the world looks the same along parallel rays; 0
+    /// where the integrator does not say).
+    pub view_alpha: [f32; LANES],
+}
+
+impl Default for FirstHits {
+    fn default() -> Self {
+        Self {
+            t: [f32::INFINITY; LANES],
+            view_alpha: [0.0; LANES],
+        }
+    }
+}
+
 /// Traces the active lanes of `packet` (camera rays) as paths and writes each lane's radiance
-/// to `radiance` and the camera ray's hit distance to `t_hit` (infinite for misses); inactive
-/// lanes are left as they were. `keys` are the samples' keys ([`crate::sampler::sample_key`]).
+/// to `radiance` and what its camera ray hit to `first`; inactive lanes are left as they
+/// were. `keys` are the samples' keys ([`crate::sampler::sample_key`]).
 #[allow(clippy::too_many_arguments)]
 pub fn trace_path(
     world: &World,
@@ -97,7 +117,7 @@ pub fn trace_path(
     limits: &PathLimits,
     light_traced: &LightTraced,
     radiance: &mut [Vec3; LANES],
-    t_hit: &mut [f32; LANES],
+    first: &mut FirstHits,
     scratch: &mut PathScratch,
     tally: &mut Tally,
 ) {
@@ -129,7 +149,8 @@ pub fn trace_path(
         let hits = trace::trace_depth(world, packet, kind, hint, &mut t, tally);
         if bounce == 0 {
             for lane in (0..LANES).filter(|&l| active & (1 << l) != 0) {
-                t_hit[lane] = t[lane];
+                first.t[lane] = t[lane];
+                first.view_alpha[lane] = f32::INFINITY;
             }
         }
         // Light that reaches the camera after at most one scattering is direct; the rest is
@@ -152,6 +173,11 @@ pub fn trace_path(
         let v = vertices(
             world, packet, hits, &lanes, weigh, unseen, scratch, radiance,
         );
+        if bounce == 0 {
+            for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+                first.view_alpha[lane] = v.bsdf[lane].view_alpha();
+            }
+        }
         if bounce == limits.total {
             break;
         }

@@ -40,6 +40,7 @@ use rayon::prelude::*;
 
 use super::estimate::{Estimate, code3};
 use super::maps;
+use super::reuse::{self, Kernel, SiteRecords};
 use super::site::SiteShader;
 use super::{Progress, Tally};
 use crate::limits::{MemoryError, try_collect, try_copy, try_vec};
@@ -197,6 +198,8 @@ fn interpolate_at(
 /// round: its standard error and its mean, in code values.
 struct Traced {
     est: Vec<Estimate>,
+    /// With sample reuse, each pixel's samples kept for lending ([`reuse`]).
+    records: Option<Vec<SiteRecords>>,
     /// [`Estimate::std_error_code`]: infinite while unknown (fewer than two samples).
     se: Vec<f32>,
     /// [`Estimate::coverage_error_code`], likewise.
@@ -205,9 +208,10 @@ struct Traced {
 }
 
 impl Traced {
-    fn new(n: usize) -> Self {
+    fn new(n: usize, reuse: bool) -> Self {
         Self {
             est: vec![Estimate::default(); n],
+            records: reuse.then(|| vec![SiteRecords::default(); n]),
             se: vec![f32::INFINITY; n],
             se_alpha: vec![f32::INFINITY; n],
             code: vec![Vec3::ZERO; n],
@@ -467,6 +471,8 @@ struct Maps<'a> {
     blur: &'a maps::Blur,
     start: Vec<u32>,
     reach: Vec<u8>,
+    /// With sample reuse, its kernel for the render's pixel filter.
+    kernel: Option<Kernel>,
 }
 
 /// Renders with the error-controlled rule at `tolerance`, given the blur that reaches each pixel,
@@ -497,6 +503,7 @@ pub fn refine(
             s.max_interval,
         )?,
         reach: reach_levels(&blur.widest, s.max_interval)?,
+        kernel: reuses(shader).then(|| Kernel::new(&s.pixel_filter.density())),
     };
     let size = s.max_interval as usize;
     let buckets: Vec<Bucket> = (0..height)
@@ -540,6 +547,17 @@ pub fn refine(
     Ok(out)
 }
 
+/// Whether adaptive sites lend samples ([`reuse`]): asked for, with paths (which say how
+/// rough a surface is), the box lens filter, and a lens whose images move rigidly.
+fn reuses(shader: &SiteShader) -> bool {
+    let s = shader.settings;
+    s.path.reuse
+        && s.integrator == super::Integrator::Path
+        && s.filter == crate::camera::LensFilter::Box
+        && s.mode == super::Mode::Adaptive
+        && shader.camera.reprojection().is_some()
+}
+
 /// The error-controlled rule inside one bucket; the result covers the bucket's closure, of
 /// which the owned pixels are final. `None` when `progress` cancelled it (polled every round).
 fn refine_bucket(
@@ -561,7 +579,7 @@ fn refine_bucket(
     let mut interval = b.slice(&maps.start, full_width);
     let reach = b.slice(&maps.reach, full_width);
     let top_reach = reach.iter().copied().max().unwrap_or(1);
-    let mut traced = Traced::new(width * height);
+    let mut traced = Traced::new(width * height, maps.kernel.is_some());
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
     let (mut need, mut pending) = first_sites(&interval, b);
     // Samples per pixel before and after this round's shading.
@@ -632,10 +650,30 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
+    // Samples traced per pixel: the sites' own, whatever they borrow below.
+    let samples = traced.est.iter().map(|e| e.n).collect();
+    if let (Some(records), Some(kernel)) = (traced.records.as_mut(), maps.kernel.as_ref()) {
+        // The sites' values with their neighbours' samples lent; where and how many samples
+        // were taken was decided on their own samples alone.
+        for (r, &blurred) in records.iter_mut().zip(&blurred) {
+            if !blurred {
+                // In focus: nothing to lend or borrow; kept out of the search.
+                *r = SiteRecords::unlent();
+            }
+        }
+        // Only sites still noisier than the rule wanted borrow: the others' error is already
+        // within what the tolerance allows.
+        let limit = SAMPLING_SHARE * tolerance;
+        let needy: Vec<bool> = (0..traced.est.len())
+            .map(|p| traced.se[p] > limit || (s.transparent && traced.se_alpha[p] > limit))
+            .collect();
+        let (window, size) = ((b.x0, b.y0), (b.w, b.h));
+        traced.est = reuse::lend(kernel, window, size, records, &traced.est, &needy)?;
+    }
     Ok(Some(Refined {
         color: final_colour(&traced, &interval, b),
         interval,
-        samples: traced.est.iter().map(|e| e.n).collect(),
+        samples,
         rounds,
     }))
 }
@@ -713,7 +751,8 @@ fn shade_changed_rows(
                 (b.x0, b.y0 + y),
                 &from[row.clone()],
                 &to[row.clone()],
-                &mut traced.est[row],
+                &mut traced.est[row.clone()],
+                traced.records.as_mut().map(|r| &mut r[row]),
                 scratch,
                 tally,
             );

@@ -18,6 +18,7 @@ use rayon::prelude::*;
 
 use super::estimate::Estimate;
 use super::light_choice::LightTraced;
+use super::reuse::{Record, SiteRecords};
 use super::trace::{self, RayKind, Tally};
 use super::{Integrator, path};
 use super::{Mode, Progress, RenderSettings};
@@ -95,7 +96,7 @@ impl SiteShader<'_> {
             .map_init(SiteScratch::new, |scratch, (y, (row, (from, to)))| {
                 let mut local = Tally::new(record);
                 if from != to && !progress.cancelled() {
-                    self.shade_row((0, y), from, to, row, scratch, &mut local);
+                    self.shade_row((0, y), from, to, row, None, scratch, &mut local);
                 }
                 progress.advance(1);
                 local
@@ -110,13 +111,17 @@ impl SiteShader<'_> {
     /// Adds samples `from[i] .. to[i]` of pixel (x0 + i, y) to `estimates[i]` for every pixel
     /// of a run of row `y` starting at column `x0` (none where `to[i] <= from[i]`). A pixel's
     /// samples are the same whichever call takes them, so an estimate refined in several calls
-    /// (or in a window of the image) equals one made in a single call.
+    /// (or in a window of the image) equals one made in a single call. With `records`
+    /// (indexed as `estimates`), each path-traced sample is also recorded there for lending
+    /// ([`super::reuse`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn shade_row(
         &self,
         (x0, y): (usize, usize),
         from: &[u32],
         to: &[u32],
         estimates: &mut [Estimate],
+        mut records: Option<&mut [SiteRecords]>,
         scratch: &mut SiteScratch,
         tally: &mut Tally,
     ) {
@@ -136,7 +141,7 @@ impl SiteShader<'_> {
                 if count == LANES {
                     // A whole packet of one pixel's coherent rays: traced at once, while any
                     // queued samples of smaller sites wait for more company.
-                    self.trace_batch(&chunk, scratch, estimates, tally);
+                    self.trace_batch(&chunk, scratch, estimates, records.as_deref_mut(), tally);
                     continue;
                 }
                 for lane in 0..count {
@@ -150,13 +155,13 @@ impl SiteShader<'_> {
                     b.key[slot] = chunk.key[lane];
                     b.len += 1;
                     if b.len == LANES {
-                        self.flush(scratch, estimates, tally);
+                        self.flush(scratch, estimates, records.as_deref_mut(), tally);
                     }
                 }
             }
         }
         if scratch.batch.len > 0 {
-            self.flush(scratch, estimates, tally);
+            self.flush(scratch, estimates, records, tally);
         }
     }
 
@@ -194,17 +199,24 @@ impl SiteShader<'_> {
     }
 
     /// Traces the queued samples and empties the queue.
-    fn flush(&self, scratch: &mut SiteScratch, estimates: &mut [Estimate], tally: &mut Tally) {
+    fn flush(
+        &self,
+        scratch: &mut SiteScratch,
+        estimates: &mut [Estimate],
+        records: Option<&mut [SiteRecords]>,
+        tally: &mut Tally,
+    ) {
         let batch = std::mem::take(&mut scratch.batch);
-        self.trace_batch(&batch, scratch, estimates, tally);
+        self.trace_batch(&batch, scratch, estimates, records, tally);
     }
 
-    /// Traces and shades a batch, adding each sample to its pixel's estimate.
+    /// Traces and shades a batch, adding each sample to its pixel's estimate (and record).
     fn trace_batch(
         &self,
         b: &Batch,
         scratch: &mut SiteScratch,
         estimates: &mut [Estimate],
+        records: Option<&mut [SiteRecords]>,
         tally: &mut Tally,
     ) {
         let SiteScratch {
@@ -224,7 +236,7 @@ impl SiteShader<'_> {
         );
         packet.set_lanes(b.len, &origin, &dir);
         let mut radiance = [Vec3::ZERO; LANES];
-        let mut t_hit = [0.0f32; LANES];
+        let mut first = path::FirstHits::default();
         match self.settings.integrator {
             Integrator::Path => path::trace_path(
                 self.world,
@@ -233,7 +245,7 @@ impl SiteShader<'_> {
                 &self.settings.path,
                 self.light_traced,
                 &mut radiance,
-                &mut t_hit,
+                &mut first,
                 path,
                 tally,
             ),
@@ -243,7 +255,7 @@ impl SiteShader<'_> {
                 RayKind::Primary,
                 RayHint::Coherent,
                 &mut radiance,
-                &mut t_hit,
+                &mut first.t,
                 self.settings.bounces,
                 trace,
                 tally,
@@ -253,7 +265,7 @@ impl SiteShader<'_> {
         let transparent = self.settings.transparent;
         let scale = self.settings.exposure.exp2();
         for lane in 0..b.len {
-            let hit = t_hit[lane].is_finite();
+            let hit = first.t[lane].is_finite();
             if transparent && !hit {
                 // The background is left out (the plate goes there); mirrors still see it.
                 radiance[lane] = Vec3::ZERO;
@@ -265,6 +277,21 @@ impl SiteShader<'_> {
                 self.camera.lens.weight(filter, lens)
             };
             estimates[b.pixel[lane]].add(radiance[lane] * scale, w, hit);
+        }
+        if let (Some(records), Some(re)) = (records, self.camera.reprojection()) {
+            let r = self.camera.aperture_radius();
+            for lane in 0..b.len {
+                let d = Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
+                let t = first.t[lane];
+                let depth = t * d.dot(self.camera.forward);
+                let film = Vec2::new(b.film_x[lane], b.film_y[lane]);
+                let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
+                let l = radiance[lane] * scale;
+                let hit = t.is_finite();
+                let alpha = first.view_alpha[lane];
+                let record = Record::new(&re, r, (film, lens), (depth, t), alpha, l, hit);
+                records[b.pixel[lane]].push(record);
+            }
         }
     }
 }

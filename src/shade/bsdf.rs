@@ -334,6 +334,22 @@ impl Bsdf {
         Setup::new(self, n, wo).map_or((Vec3::ZERO, 0.0), |s| s.eval_pdf(n, wo, wi))
     }
 
+    /// The angle (radians) over which what the surface sends a viewer may change as the
+    /// viewer moves: infinite for a Lambertian surface with no interface (it looks the same
+    /// from everywhere), else its specular lobes' GGX width alpha (0 for deltas). Sample reuse
+    /// ([`crate::render::reuse`]) lends a sample to other lens positions only across much
+    /// less than this.
+    pub fn view_alpha(&self) -> f32 {
+        let interface =
+            self.metallic > 0.0 || self.transmission > 0.0 || (self.eta - 1.0).abs() >= MATCHED_ETA;
+        if interface {
+            let r = clamp(self.roughness, 0.0, 1.0);
+            r * r
+        } else {
+            f32::INFINITY
+        }
+    }
+
     /// Whether every lobe is a delta, so that [`Bsdf::eval`] is zero everywhere and light
     /// sampling can be skipped (a smooth metal, or smooth glass with no diffuse part).
     pub fn is_delta(&self) -> bool {

@@ -314,6 +314,7 @@ fn render_settings(ctx: &Ctx, render: RawRender) -> Result<SettingsPatch, LoadEr
         transmission_bounces: render.transmission_bounces.as_ref().map(|s| *s.get_ref()),
         clamp_indirect: render.clamp_indirect.as_ref().map(|s| s.get_ref().0),
         light_tracing: render.light_tracing,
+        reuse: render.reuse,
         ..Default::default()
     };
     if let Err(e) = patch.resolve() {

@@ -362,6 +362,7 @@ pub(super) struct RawRender {
     pub(super) transmission_bounces: Option<Spanned<u32>>,
     pub(super) clamp_indirect: Option<Spanned<Positive>>,
     pub(super) light_tracing: Option<bool>,
+    pub(super) reuse: Option<bool>,
 }
 
 #[derive(Default, Deserialize)]

@@ -1,0 +1,677 @@
+//! Sample reuse across sites (`--reuse on`): once the error-controlled rule has placed its
+//! sites and their samples, a blurred site still noisier than the rule wanted borrows the
+//! samples of the sites around it whose apertures saw the same surface points, so its value
+//! rests on its neighbours' samples as well as its own (Lehtinen et al. 2011 reconstruct the
+//! same light field; here the combination is multiple importance sampling, so it stays
+//! unbiased). Where and how many samples are traced is decided on the sites' own samples
+//! alone, so the error controller stays as conservative as without reuse.
+//!
+//! **Why a sample is valid elsewhere.** A sample of site q is a film position x drawn from
+//! the pixel filter's density f around q and a lens position l uniform on the unit disc. It
+//! found a point at depth z, which lens position l' images at `c + s(z) (l'.x, -l'.y)`
+//! ([`Reprojection`]): a *trajectory* through pixel x lens space, `c` its centre. Where the
+//! point is seen from the whole aperture and looks the same from all of it (a rough surface,
+//! [`crate::shade::Bsdf::view_alpha`]), the sample's radiance is the radiance of every pair
+//! (x', l') on its trajectory. Written over centres, pixel p's value (the filter- and
+//! lens-averaged radiance) is `I(p) = ∫ L(c) K_p(c) dc` with
+//! `K_p(c) = (1 / π) ∫_disc f(c + s l - p) dl`, and `K_q` is exactly the density of the
+//! centres of site q's own samples. So the samples of all sites near p are samples of `I(p)`
+//! from the mixture `Σ_q N_q K_q`, and Veach's balance heuristic (one technique a site)
+//! combines them: `I(p) ≈ Σ_i K_p(c_i) L_i / Σ_q N_q K_q(c_i)`. It is self-normalised here
+//! (divided by the sum of its weights, whose expectation is 1), so a flat region stays flat
+//! and coverage within 0 and 1; that costs a bias of order 1 / (samples), as any weighted mean.
+//!
+//! **Bounded work.** The techniques a receiver combines at a centre c are the *lenders*
+//! there (the sites whose kernel reaches c and that sit on a lattice whose spacing grows with
+//! the blur (`spacing`), so about a dozen overlap any point however dense the sites) plus
+//! itself. The set depends on c alone, so each receiver's estimate stays unbiased; a
+//! lender's sample is offered to every site it reaches, any other sample only to its own.
+//! Work is per bucket (the rule's 64 px squares), so a region renders as in the full frame.
+//!
+//! **Where it does not hold, nothing is lent** (the site keeps its own mean, as without
+//! reuse):
+//! - Occlusion: a site takes part only if its own samples' shifts form one cluster (no gap
+//!   wider than [`GAP`] between them; two surfaces at different depths make a gap), and no
+//!   sample of any site crosses its footprint from nearer than that cluster (a foreground
+//!   edge its own samples missed). A sample goes only to sites of its cluster.
+//! - View dependence: a sample lends only where its surface's [`view_alpha`] is at least
+//!   [`VIEW_MARGIN`] times the angle the aperture subtends from it.
+//! - Sharp samples (`|s|` under [`MIN_SHIFT`]) and lenses other than a round thin lens with
+//!   the box lens filter ([`crate::camera::Lens::reprojection`]).
+//!
+//! Bias that remains, all small: `K` is tabulated radially (the filter is separable, not
+//! round) on a 48 x 48 grid of the filter; `s` varies across a slanted surface, which moves
+//! a trajectory's centre by the slope times the lens offset; the cluster gap lets two surfaces
+//! within [`GAP`] pixels of parallax of each other pass for one.
+//!
+//! [`view_alpha`]: crate::shade::Bsdf::view_alpha
+
+use glam::{Vec2, Vec3};
+
+use super::estimate::Estimate;
+use crate::camera::Reprojection;
+use crate::filter::FilterDensity;
+use crate::limits::{MemoryError, try_vec};
+
+/// Two shifts this far apart (pixels of film motion per unit lens position) count as two
+/// surfaces: their images part by twice this across the aperture.
+pub const GAP: f32 = 0.5;
+/// A sample lends only where its surface's specular lobe is this many times wider than the
+/// aperture seen from it.
+pub const VIEW_MARGIN: f32 = 4.0;
+/// Samples blurred less than this (CoC radius, pixels) are not lent: their trajectories
+/// barely move, and in-focus sites need their own anti-aliasing samples anyway.
+pub const MIN_SHIFT: f32 = 0.5;
+/// A site records at most this many samples for lending; one that takes more (it is noisy
+/// enough to need them) keeps its own mean.
+pub const MAX_RECORDS: usize = 256;
+
+/// One traced sample, as a trajectory.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Record {
+    /// The film position of its point through the lens centre, pixels.
+    pub centre: Vec2,
+    /// Its film motion per unit lens position ([`Reprojection::shift`]).
+    pub shift: f32,
+    /// Its radiance (exposure applied).
+    pub radiance: Vec3,
+    /// Whether its camera ray hit geometry (coverage).
+    pub hit: bool,
+    /// Whether its radiance holds for its whole trajectory (see the module documentation).
+    pub lends: bool,
+}
+
+impl Record {
+    /// The record of a sample at `film` through lens position `lens` whose ray met a point at
+    /// `depth` along the view axis, `distance` from the lens, where what it saw may change
+    /// over `view_alpha` radians; the aperture's radius is `aperture_radius`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        reprojection: &Reprojection,
+        aperture_radius: f32,
+        (film, lens): (Vec2, Vec2),
+        (depth, distance): (f32, f32),
+        view_alpha: f32,
+        radiance: Vec3,
+        hit: bool,
+    ) -> Self {
+        let shift = reprojection.shift(depth);
+        let aperture_angle = 2.0 * aperture_radius / distance;
+        Self {
+            centre: Reprojection::centre(film, lens, shift),
+            shift,
+            radiance,
+            hit,
+            lends: shift.abs() >= MIN_SHIFT
+                && view_alpha >= VIEW_MARGIN * aperture_angle
+                && radiance.is_finite()
+                && shift.is_finite(),
+        }
+    }
+}
+
+/// The samples one site recorded.
+#[derive(Debug, Clone, Default)]
+pub struct SiteRecords {
+    /// Its samples, in the order traced.
+    pub list: Vec<Record>,
+    /// It took more than [`MAX_RECORDS`]: it keeps its own mean.
+    pub overflow: bool,
+}
+
+impl SiteRecords {
+    /// Records of a site that takes no part in reuse.
+    pub fn unlent() -> Self {
+        Self {
+            list: Vec::new(),
+            overflow: true,
+        }
+    }
+
+    /// Keeps `r`, up to [`MAX_RECORDS`].
+    pub fn push(&mut self, r: Record) {
+        if self.list.len() < MAX_RECORDS {
+            self.list.push(r);
+        } else {
+            self.overflow = true;
+        }
+    }
+}
+
+/// `K(d; s)`: the density of the centres of a site's samples at offset `d` from the site, for
+/// points of shift `s` (see the module documentation), tabulated over `|d| / (|s| + reach)`
+/// and `log2 |s|`.
+#[derive(Debug, Clone)]
+pub struct Kernel {
+    reach: f32,
+    table: Vec<f32>,
+}
+
+/// Shift bins per doubling, and doublings from [`MIN_SHIFT`].
+const PER_OCTAVE: usize = 8;
+const OCTAVES: usize = 12;
+/// Distance bins from 0 to `|s| + reach`.
+const RADIAL: usize = 64;
+/// The filter's support is integrated on this grid.
+const GRID: usize = 48;
+
+impl Kernel {
+    /// The kernel of a filter of density `f` (per axis) over the unit-disc aperture.
+    pub fn new(f: &FilterDensity) -> Self {
+        let reach = f.reach();
+        let step = 2.0 * reach / GRID as f32;
+        // The filter as weighted points (mass per grid cell).
+        let mut points = Vec::with_capacity(GRID * GRID);
+        for j in 0..GRID {
+            for i in 0..GRID {
+                let p = Vec2::new(
+                    -reach + (i as f32 + 0.5) * step,
+                    -reach + (j as f32 + 0.5) * step,
+                );
+                let w = f.at(p.x) * f.at(p.y) * step * step;
+                if w > 0.0 {
+                    points.push((p, w));
+                }
+            }
+        }
+        let shifts = OCTAVES * PER_OCTAVE + 1;
+        let mut table = Vec::with_capacity(shifts * (RADIAL + 1));
+        // Averaged over directions across one octant (the filter's symmetry).
+        let dirs = [
+            0.0f32,
+            std::f32::consts::FRAC_PI_8,
+            std::f32::consts::FRAC_PI_4,
+        ]
+        .map(|a| Vec2::new(a.cos(), a.sin()));
+        for k in 0..shifts {
+            let s = MIN_SHIFT * (k as f32 / PER_OCTAVE as f32).exp2();
+            let area = std::f32::consts::PI * s * s;
+            for t in 0..=RADIAL {
+                let r = t as f32 / RADIAL as f32 * (s + reach);
+                let mass: f32 = dirs
+                    .iter()
+                    .map(|&dir| {
+                        let d = dir * r;
+                        points
+                            .iter()
+                            .filter(|(p, _)| (*p - d).length_squared() <= s * s)
+                            .map(|(_, w)| w)
+                            .sum::<f32>()
+                    })
+                    .sum();
+                table.push(mass / (dirs.len() as f32 * area));
+            }
+        }
+        Self { reach, table }
+    }
+
+    /// `K` at squared distance `d2` (pixels) for shift magnitude `s` (at least
+    /// [`MIN_SHIFT`]); 0 beyond `s + reach`.
+    pub fn at(&self, d2: f32, s: f32) -> f32 {
+        let extent = s + self.reach;
+        if d2 >= extent * extent {
+            return 0.0;
+        }
+        let top = (OCTAVES * PER_OCTAVE) as f32;
+        let ks = ((s / MIN_SHIFT).log2() * PER_OCTAVE as f32).clamp(0.0, top);
+        let kt = d2.sqrt() / extent * RADIAL as f32;
+        let (k0, t0) = (ks.floor() as usize, (kt.floor() as usize).min(RADIAL - 1));
+        let k1 = (k0 + 1).min(OCTAVES * PER_OCTAVE);
+        let (fk, ft) = (ks - k0 as f32, kt - t0 as f32);
+        let row = |k: usize| {
+            let base = k * (RADIAL + 1);
+            self.table[base + t0] * (1.0 - ft) + self.table[base + t0 + 1] * ft
+        };
+        let v = row(k0) * (1.0 - fk) + row(k1) * fk;
+        // Beyond the table's widest shift the kernel is the disc's, scaled by area.
+        let widest = MIN_SHIFT * (top / PER_OCTAVE as f32).exp2();
+        if s > widest {
+            v * (widest / s) * (widest / s)
+        } else {
+            v
+        }
+    }
+
+    /// Half the filter's width.
+    pub fn reach(&self) -> f32 {
+        self.reach
+    }
+}
+
+/// A site taking part in reuse.
+#[derive(Debug, Clone, Copy)]
+struct Member {
+    p: usize,
+    at: Vec2,
+    /// Its pixel in the image.
+    pixel: (usize, usize),
+    /// How many samples it lends (all it took).
+    n: f32,
+    /// Its cluster of shifts, widened by [`GAP`].
+    lo: f32,
+    hi: f32,
+    /// Its own estimate is noisier than wanted: it borrows.
+    needy: bool,
+}
+
+/// The sites of a `width` x `height` window whose top left is `origin` by 4 px cells, to find
+/// those near a point.
+struct Grid {
+    origin: Vec2,
+    cols: usize,
+    rows: usize,
+    cells: Vec<Vec<u32>>,
+    /// The greatest [`Member::lo`] of each cell's members (minus infinity when it has none):
+    /// a sample at a shift at least this is nearer than none of them.
+    lo: Vec<f32>,
+    /// The window's size, and the member at each of its pixels (`u32::MAX`: none).
+    size: (usize, usize),
+    index: Vec<u32>,
+}
+
+const CELL: f32 = 4.0;
+
+impl Grid {
+    fn new(origin: Vec2, (width, height): (usize, usize), members: &[Member]) -> Self {
+        let cols = width.div_ceil(CELL as usize).max(1);
+        let rows = height.div_ceil(CELL as usize).max(1);
+        let mut cells = vec![Vec::new(); cols * rows];
+        let mut lo = vec![f32::NEG_INFINITY; cols * rows];
+        let mut index = vec![u32::MAX; width * height];
+        for (i, m) in members.iter().enumerate() {
+            let local = m.at - origin;
+            let (cx, cy) = ((local.x / CELL) as usize, (local.y / CELL) as usize);
+            let cell = cy.min(rows - 1) * cols + cx.min(cols - 1);
+            cells[cell].push(i as u32);
+            lo[cell] = lo[cell].max(m.lo);
+            index[m.p] = i as u32;
+        }
+        Self {
+            origin,
+            cols,
+            rows,
+            cells,
+            lo,
+            size: (width, height),
+            index,
+        }
+    }
+
+    /// The members within `radius` of `c` at pixels whose coordinates in the image are
+    /// multiples of `g` (a superset: a square).
+    fn on_lattice(&self, c: Vec2, radius: f32, g: usize) -> impl Iterator<Item = u32> + '_ {
+        let span = |v: f32, origin: f32, n: usize| {
+            let lo = ((v - 0.5 - radius) / g as f32).ceil().max(0.0) as usize * g;
+            let hi = ((v - 0.5 + radius) / g as f32).floor();
+            let end = origin as usize + n;
+            let hi = if hi < 0.0 {
+                0
+            } else {
+                (hi as usize * g + 1).min(end)
+            };
+            (lo.max(origin as usize)..hi).step_by(g)
+        };
+        let (w, h) = self.size;
+        let (ox, oy) = (self.origin.x as usize, self.origin.y as usize);
+        let xs = span(c.x, self.origin.x, w);
+        span(c.y, self.origin.y, h).flat_map(move |y| {
+            xs.clone()
+                .map(move |x| self.index[(y - oy) * w + (x - ox)])
+                .filter(|&i| i != u32::MAX)
+        })
+    }
+
+    /// The cells within `radius` of `c` (whole cells: a superset).
+    fn cells_near(&self, c: Vec2, radius: f32) -> impl Iterator<Item = usize> + '_ {
+        let c = c - self.origin;
+        let span = |v: f32, n: usize| {
+            let lo = ((v - radius) / CELL).floor().max(0.0) as usize;
+            let hi = ((v + radius) / CELL).floor();
+            // Empty when the disc lies before the window (hi < 0) or after it (lo >= n).
+            let end = if hi < 0.0 {
+                0
+            } else {
+                (hi as usize + 1).min(n)
+            };
+            lo..end.max(lo)
+        };
+        let (xs, ys) = (span(c.x, self.cols), span(c.y, self.rows));
+        ys.flat_map(move |cy| xs.clone().map(move |cx| cy * self.cols + cx))
+    }
+}
+
+/// The lattice spacing of the sites that lend samples of shift `s`: a power of two near
+/// `|s| / 1.5`, so about a dozen lenders' kernels overlap any point however dense the sites.
+fn spacing(s: f32) -> usize {
+    let g = (s.abs() / 1.5).max(1.0);
+    1 << (g.log2().floor() as u32).min(6)
+}
+
+/// Lends sample `r` of member `m`. The techniques a receiver p combines at a centre c are
+/// the *lenders* there, S(c): the members whose kernel reaches c, that share the sample's
+/// cluster and sit on the lattice of [`spacing`] for its shift, plus p itself. A lender's
+/// sample goes to every needy member it reaches; any other sample only to its own site. The
+/// balance heuristic over S(c) and p is unbiased for each receiver (S depends on c alone),
+/// and the work per sample stays bounded where sites are dense.
+#[allow(clippy::too_many_arguments)]
+fn lend_one(
+    kernel: &Kernel,
+    grid: &Grid,
+    members: &[Member],
+    covered: &[bool],
+    (m, r): (usize, &Record),
+    near: &mut Vec<(f32, u32)>,
+    pooled: &mut [Estimate],
+) {
+    let s = r.shift.abs();
+    let extent = s + kernel.reach();
+    let me = &members[m];
+    let g = spacing(s);
+    let lends = |q: &Member| q.pixel.0 % g == 0 && q.pixel.1 % g == 0;
+    let takes = |q: u32| {
+        let other = &members[q as usize];
+        !covered[q as usize] && r.shift >= other.lo && r.shift <= other.hi
+    };
+    let mut lenders = 0.0;
+    near.clear();
+    if lends(me) {
+        // A lender's sample goes to every needy member it reaches.
+        for cell in grid.cells_near(r.centre, extent) {
+            for &q in grid.cells[cell].iter().filter(|&&q| takes(q)) {
+                let other = &members[q as usize];
+                let k = kernel.at((r.centre - other.at).length_squared(), s);
+                if k > 0.0 {
+                    if lends(other) {
+                        lenders += other.n * k;
+                    }
+                    near.push((k, q));
+                }
+            }
+        }
+    } else {
+        // Any other sample goes to its own site alone: only the lenders' kernels and its
+        // site's are needed.
+        if !me.needy {
+            return;
+        }
+        for q in grid.on_lattice(r.centre, extent, g).filter(|&q| takes(q)) {
+            let other = &members[q as usize];
+            lenders += other.n * kernel.at((r.centre - other.at).length_squared(), s);
+        }
+        let k = kernel.at((r.centre - me.at).length_squared(), s);
+        near.push((k, m as u32));
+    }
+    let density = |q: &Member, k: f32| lenders + if lends(q) { 0.0 } else { q.n * k };
+    for &(k, q) in near.iter() {
+        let other = &members[q as usize];
+        if other.needy && k > 0.0 {
+            pooled[q as usize].add(r.radiance, k / density(other, k), r.hit);
+        }
+    }
+}
+
+/// The cluster of a site's shifts, widened by [`GAP`], if its samples all lend and form one.
+fn cluster(records: &SiteRecords) -> Option<(f32, f32)> {
+    if records.overflow || records.list.is_empty() || !records.list.iter().all(|r| r.lends) {
+        return None;
+    }
+    let mut shifts: Vec<f32> = records.list.iter().map(|r| r.shift).collect();
+    shifts.sort_unstable_by(f32::total_cmp);
+    let one = shifts.windows(2).all(|w| w[1] - w[0] <= GAP);
+    one.then(|| (shifts[0] - GAP, shifts[shifts.len() - 1] + GAP))
+}
+
+/// The estimates of a window's sites with their neighbours' samples lent to them: for every
+/// pixel of the `width` x `height` window whose top left pixel is `(x0, y0)` in the image,
+/// `own[p]` where reuse does not hold (see the module documentation), nothing was traced or
+/// `needy[p]` is false (its own samples suffice), else the balance-heuristic combination of
+/// every sample that reaches it. `records[p]` holds pixel p's samples (those `own[p]`
+/// counts). The work is spent only on samples that can reach a needy site.
+pub fn lend(
+    kernel: &Kernel,
+    (x0, y0): (usize, usize),
+    (width, height): (usize, usize),
+    records: &[SiteRecords],
+    own: &[Estimate],
+    needy: &[bool],
+) -> Result<Vec<Estimate>, MemoryError> {
+    let mut members: Vec<Member> = Vec::new();
+    for (p, r) in records.iter().enumerate() {
+        if let Some((lo, hi)) = cluster(r) {
+            let (x, y) = (x0 + p % width, y0 + p / width);
+            let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let n = r.list.len() as f32;
+            let needy = needy[p];
+            members.push(Member {
+                p,
+                at,
+                pixel: (x, y),
+                n,
+                lo,
+                hi,
+                needy,
+            });
+        }
+    }
+    let mut out = try_vec(own.len(), Estimate::default(), "the lent estimates")?;
+    out.copy_from_slice(own);
+    if !members.iter().any(|m| m.needy) {
+        return Ok(out);
+    }
+    let reach = kernel.reach();
+    let origin = Vec2::new(x0 as f32, y0 as f32);
+    let grid = Grid::new(origin, (width, height), &members);
+    // A site whose footprint a nearer sample crosses is partly covered by something its own
+    // samples missed: it neither lends nor borrows.
+    let mut covered = vec![false; members.len()];
+    for r in records.iter().flat_map(|r| &r.list) {
+        let s = r.shift.abs().max(MIN_SHIFT);
+        let extent = (s + reach) * (s + reach);
+        for cell in grid.cells_near(r.centre, s + reach) {
+            if r.shift >= grid.lo[cell] {
+                continue;
+            }
+            for &m in &grid.cells[cell] {
+                let member = &members[m as usize];
+                if r.shift < member.lo && (r.centre - member.at).length_squared() < extent {
+                    covered[m as usize] = true;
+                }
+            }
+        }
+    }
+    let mut pooled = vec![Estimate::default(); members.len()];
+    let mut near: Vec<(f32, u32)> = Vec::new();
+    for (m, member) in members.iter().enumerate() {
+        if covered[m] {
+            continue;
+        }
+        for r in &records[member.p].list {
+            lend_one(
+                kernel,
+                &grid,
+                &members,
+                &covered,
+                (m, r),
+                &mut near,
+                &mut pooled,
+            );
+        }
+    }
+    for (m, member) in members.iter().enumerate() {
+        let lent = &pooled[m];
+        if member.needy && !covered[m] && lent.n > 0 && lent.mean().is_finite() {
+            out[member.p] = *lent;
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::aperture::concentric_disc;
+    use crate::filter::{PixelFilter, PixelFilterKind};
+    use crate::sampler::hash64;
+
+    fn kernel(kind: PixelFilterKind) -> Kernel {
+        Kernel::new(&PixelFilter::new(kind).density())
+    }
+
+    /// A uniform number in [0, 1) from a counter.
+    fn uniform(i: u64) -> f32 {
+        (hash64(i) >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn the_kernel_is_a_density_and_becomes_the_disc() {
+        for kind in [PixelFilterKind::Box, PixelFilterKind::BlackmanHarris] {
+            let k = kernel(kind);
+            for s in [0.5f32, 1.3, 4.0, 17.0, 120.0] {
+                let extent = s + k.reach();
+                let steps = 4000;
+                let dr = extent / steps as f32;
+                let mass: f32 = (0..steps)
+                    .map(|i| {
+                        let r = (i as f32 + 0.5) * dr;
+                        k.at(r * r, s) * std::f32::consts::TAU * r * dr
+                    })
+                    .sum();
+                assert!((mass - 1.0).abs() < 0.03, "{kind:?}, s = {s}: {mass}");
+            }
+            // Wide blur: the disc's uniform density inside, nothing beyond its rim.
+            let s = 50.0;
+            let inside = 1.0 / (std::f32::consts::PI * s * s);
+            assert!((k.at(0.0, s) / inside - 1.0).abs() < 0.02);
+            assert!((k.at(30.0 * 30.0, s) / inside - 1.0).abs() < 0.02);
+            assert_eq!(k.at(52.0 * 52.0, s), 0.0);
+        }
+    }
+
+    /// Sites on a lattice of `interval` in a `size` window, each with `n` samples of a surface
+    /// at shift `shift` whose radiance at centre c is `field(c)`: box-filter film positions and
+    /// uniform lens positions drawn from `seed`.
+    fn lattice(
+        size: usize,
+        interval: usize,
+        n: usize,
+        shift: f32,
+        field: impl Fn(Vec2) -> f32,
+        seed: u64,
+    ) -> (Vec<SiteRecords>, Vec<Estimate>) {
+        let mut records = vec![SiteRecords::default(); size * size];
+        let mut own = vec![Estimate::default(); size * size];
+        for y in (0..size).step_by(interval) {
+            for x in (0..size).step_by(interval) {
+                let p = y * size + x;
+                for i in 0..n {
+                    let key = seed ^ ((p as u64) << 20) ^ ((i as u64) << 4);
+                    let film = Vec2::new(x as f32 + uniform(key), y as f32 + uniform(key + 1));
+                    let lens = concentric_disc(Vec2::new(uniform(key + 2), uniform(key + 3)));
+                    let centre = Reprojection::centre(film, lens, shift);
+                    let radiance = Vec3::splat(field(centre));
+                    records[p].push(Record {
+                        centre,
+                        shift,
+                        radiance,
+                        hit: true,
+                        lends: true,
+                    });
+                    own[p].add(radiance, 1.0, true);
+                }
+            }
+        }
+        (records, own)
+    }
+
+    #[test]
+    fn a_flat_field_stays_exactly_flat() {
+        let k = kernel(PixelFilterKind::Box);
+        let (records, own) = lattice(32, 4, 16, 6.0, |_| 0.3, 1);
+        let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
+        let mut borrowed = 0;
+        for (e, o) in lent.iter().zip(&own) {
+            assert_eq!(e.n == 0, o.n == 0);
+            if o.n > 0 {
+                assert!((e.mean() - Vec3::splat(0.3)).length() < 1e-5);
+                borrowed += usize::from(e.n > o.n);
+            }
+        }
+        assert!(borrowed > 40, "most sites borrow: {borrowed}");
+    }
+
+    /// On a ramp the lent estimate's expected value is the site's own (the ramp at the site:
+    /// the kernel is symmetric), and its variance is several times smaller.
+    #[test]
+    fn lending_is_unbiased_and_cuts_the_variance() {
+        let k = kernel(PixelFilterKind::Box);
+        let field = |c: Vec2| 0.2 + 0.05 * c.x + 0.5 * (0.7 * c.y).sin().abs();
+        let (site, trials) = (12 * 32 + 16, 400);
+        let (mut own_sum, mut own_sq, mut lent_sum, mut lent_sq) = (0.0, 0.0, 0.0, 0.0);
+        for t in 0..trials {
+            let (records, own) = lattice(32, 4, 16, 5.0, field, 1000 + t);
+            let needy = vec![true; 32 * 32];
+            let lent = lend(&k, (0, 0), (32, 32), &records, &own, &needy).unwrap();
+            let (a, b) = (
+                f64::from(own[site].mean().x),
+                f64::from(lent[site].mean().x),
+            );
+            own_sum += a;
+            own_sq += a * a;
+            lent_sum += b;
+            lent_sq += b * b;
+        }
+        let n = trials as f64;
+        let (own_mean, lent_mean) = (own_sum / n, lent_sum / n);
+        let own_var = own_sq / n - own_mean * own_mean;
+        let lent_var = lent_sq / n - lent_mean * lent_mean;
+        // Both estimate the same value: within 4 standard errors of their difference.
+        let se = ((own_var + lent_var) / n).sqrt();
+        assert!(
+            (own_mean - lent_mean).abs() < 4.0 * se,
+            "{own_mean} vs {lent_mean} (se {se})"
+        );
+        assert!(
+            lent_var < own_var / 3.0,
+            "variance {lent_var} vs own {own_var}"
+        );
+    }
+
+    #[test]
+    fn depth_edges_lend_nothing() {
+        let k = kernel(PixelFilterKind::Box);
+        let (mut records, own) = lattice(32, 4, 16, 6.0, |_| 0.3, 7);
+        // A site that saw two surfaces (shifts 6 and 2) keeps its own mean...
+        let two = 16 * 32 + 16;
+        records[two].list[0].shift = 2.0;
+        // ...and one whose footprint a nearer sample crosses keeps its own too.
+        let behind = 8 * 32 + 8;
+        let mut near = records[4 * 32 + 4].list[0];
+        near.shift = 1.0;
+        near.centre = Vec2::new(8.5, 8.5);
+        records[4 * 32 + 4].list.push(near);
+        let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
+        assert_eq!(lent[two], own[two]);
+        assert_eq!(lent[behind], own[behind]);
+        // The others still borrow.
+        assert!(lent[24 * 32 + 24].n > own[24 * 32 + 24].n);
+    }
+
+    #[test]
+    fn glossy_and_sharp_samples_do_not_lend() {
+        let re = Reprojection {
+            scale: 100.0,
+            inv_focus_distance: 0.5,
+        };
+        let at = (Vec2::new(10.0, 10.0), Vec2::new(0.3, -0.2));
+        // 4 m away, a 0.05 radius aperture subtends 0.025 rad: alpha 0.2 lends, 0.05 does not.
+        let rough = Record::new(&re, 0.05, at, (4.0, 4.0), 0.2, Vec3::ONE, true);
+        let glossy = Record::new(&re, 0.05, at, (4.0, 4.0), 0.05, Vec3::ONE, true);
+        assert!(rough.lends && !glossy.lends);
+        assert!((rough.shift - 25.0).abs() < 1e-4);
+        // Its centre is where the lens centre sees it: film - shift (l.x, -l.y).
+        assert!((rough.centre - Vec2::new(10.0 - 7.5, 10.0 - 5.0)).length() < 1e-4);
+        // In focus (shift under MIN_SHIFT): kept to itself.
+        let sharp = Record::new(&re, 0.05, at, (2.0, 2.0), f32::INFINITY, Vec3::ONE, true);
+        assert!(sharp.shift.abs() < MIN_SHIFT && !sharp.lends);
+    }
+}

@@ -1,0 +1,188 @@
+//! Sample reuse across adaptive sites (`render::reuse`, `--reuse on`): on a shot whose noise is
+//! in a blurred diffuse wall behind a sharp subject, with a blurred foreground sphere across
+//! the wall's edge (a depth edge reuse must not lend across), lending brings the adaptive image
+//! closer to a dense reference than the same render without it, keeps its mean (unbiased), and
+//! is no worse anywhere near the depth edge. Settings it cannot serve leave the image as it was.
+
+use std::path::Path;
+
+use dofray::camera::LensFilter;
+use dofray::render::{self, Film, Mode, NoProgress, RenderSettings, SettingsPatch};
+use dofray::scene::{SceneDesc, World};
+
+const WIDTH: u32 = 96;
+const HEIGHT: u32 = 64;
+
+/// An 85 mm f/1.4 lens focused at 1.5 m on a grey sphere, a checkered diffuse wall at 5 m
+/// (blurred to about 6 px) lit by a sun and a sky, and a diffuse sphere at 0.5 m (about
+/// 18 px) across the view.
+fn scene() -> SceneDesc {
+    let src = format!(
+        r#"
+name = "reuse"
+
+[image]
+width = {WIDTH}
+height = {HEIGHT}
+
+[camera]
+eye = [0, 0, 0]
+look_at = [0, 0, 1]
+f_number = 1.4
+focal_length_mm = 85
+sensor_width_mm = 36
+focus_distance = 1.5
+
+[background]
+horizon = [0.5, 0.55, 0.6]
+zenith = [0.2, 0.3, 0.5]
+
+[[lights]]
+type = "directional"
+direction = [0.3, -0.5, 1]
+irradiance = 2
+
+[[textures]]
+name = "checker"
+pattern = "checker"
+a = [0.8, 0.75, 0.6]
+b = [0.1, 0.12, 0.2]
+scale = 4
+
+[[materials]]
+name = "wall"
+texture = "checker"
+
+[[materials]]
+name = "grey"
+diffuse = 0.5
+
+[[objects]]
+type = "quad"
+size = [12, 8]
+rotate = [-90, 0, 0]
+translate = [0, 0, 5]
+material = "wall"
+
+[[objects]]
+type = "sphere"
+center = [0.05, 0, 1.5]
+radius = 0.06
+material = "grey"
+
+[[objects]]
+type = "sphere"
+center = [-0.06, -0.02, 0.5]
+radius = 0.03
+material = "grey"
+"#
+    );
+    dofray::scene::file::parse(&src, Path::new("reuse.toml")).unwrap()
+}
+
+fn settings(mode: Mode, spp: u32, reuse: bool) -> RenderSettings {
+    SettingsPatch {
+        mode: Some(mode),
+        spp: Some(spp),
+        reuse: Some(reuse),
+        ..Default::default()
+    }
+    .resolve()
+    .unwrap()
+}
+
+fn render(desc: &SceneDesc, settings: &RenderSettings) -> Film {
+    let device = dofray::embree::Device::new().unwrap();
+    let world = World::build(desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    render::render(&world, &camera, settings, &NoProgress)
+        .unwrap()
+        .0
+}
+
+/// Squared error of every pixel against `reference` (mean of the channels, linear).
+fn squared_errors(film: &Film, reference: &Film) -> Vec<f64> {
+    film.color
+        .iter()
+        .zip(&reference.color)
+        .map(|(a, b)| f64::from((*a - *b).length_squared()) / 3.0)
+        .collect()
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    sum / n as f64
+}
+
+#[test]
+fn lending_brings_a_blurred_wall_closer_to_the_reference_and_keeps_depth_edges() {
+    let desc = scene();
+    let reference = render(&desc, &settings(Mode::Dense, 1024, false));
+    let own = render(&desc, &settings(Mode::Adaptive, 16, false));
+    let lent = render(&desc, &settings(Mode::Adaptive, 16, true));
+    // The same sites and samples: reuse changes only what the sites report.
+    assert_eq!(own.samples, lent.samples);
+
+    let (e_own, e_lent) = (
+        squared_errors(&own, &reference),
+        squared_errors(&lent, &reference),
+    );
+    let (mse_own, mse_lent) = (mean(e_own.iter().copied()), mean(e_lent.iter().copied()));
+    assert!(
+        mse_lent < 0.7 * mse_own,
+        "lending should cut the error: {mse_lent:e} vs {mse_own:e} without"
+    );
+
+    // Unbiased: the image's mean brightness stays the reference's.
+    let brightness = |f: &Film| mean(f.color.iter().map(|c| f64::from(c.x + c.y + c.z) / 3.0));
+    let (b_ref, b_lent) = (brightness(&reference), brightness(&lent));
+    assert!((b_lent / b_ref - 1.0).abs() < 0.01, "{b_lent} vs {b_ref}");
+
+    // Near the depth edges (pixels whose CoC differs from a neighbour's within 4 px by more
+    // than 4 px: the foreground sphere's blurred rim over the wall), no 8 x 8 tile is worse.
+    let (w, h) = (WIDTH as usize, HEIGHT as usize);
+    let edge = |x: usize, y: usize| {
+        let c = reference.coc[y * w + x];
+        (y.saturating_sub(4)..(y + 5).min(h))
+            .flat_map(|v| (x.saturating_sub(4)..(x + 5).min(w)).map(move |u| (u, v)))
+            .any(|(u, v)| (reference.coc[v * w + u] - c).abs() > 4.0)
+    };
+    let mut edge_tiles = 0;
+    for ty in (0..h).step_by(8) {
+        for tx in (0..w).step_by(8) {
+            let pixels: Vec<usize> = (ty..ty + 8)
+                .flat_map(|y| (tx..tx + 8).map(move |x| (x, y)))
+                .filter(|&(x, y)| edge(x, y))
+                .map(|(x, y)| y * w + x)
+                .collect();
+            if pixels.len() < 16 {
+                continue;
+            }
+            edge_tiles += 1;
+            let (a, b) = (
+                mean(pixels.iter().map(|&p| e_own[p])),
+                mean(pixels.iter().map(|&p| e_lent[p])),
+            );
+            assert!(
+                b <= 1.25 * a + 1e-5,
+                "tile ({tx}, {ty}) at a depth edge: {b:e} with lending vs {a:e}"
+            );
+        }
+    }
+    assert!(edge_tiles >= 3, "the scene has depth edges: {edge_tiles}");
+}
+
+#[test]
+fn settings_it_cannot_serve_change_nothing() {
+    let desc = scene();
+    let base = settings(Mode::Adaptive, 16, false);
+    for change in [
+        |s: &mut RenderSettings| s.integrator = render::Integrator::Direct,
+        |s: &mut RenderSettings| s.filter = LensFilter::Gaussian,
+    ] {
+        let (mut off, mut on) = (base.clone(), settings(Mode::Adaptive, 16, true));
+        change(&mut off);
+        change(&mut on);
+        assert_eq!(render(&desc, &off).color, render(&desc, &on).color);
+    }
+}
