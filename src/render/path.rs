@@ -97,6 +97,24 @@ pub struct FirstHits {
     pub view_alpha: [f32; LANES],
 }
 
+impl FirstHits {
+    /// Notes the hit distances `t` of the lanes in `active` (misses: the world, seen alike
+    /// from anywhere).
+    fn note_distances(&mut self, active: u32, t: &[f32; LANES]) {
+        for lane in (0..LANES).filter(|&l| active & (1 << l) != 0) {
+            self.t[lane] = t[lane];
+            self.view_alpha[lane] = f32::INFINITY;
+        }
+    }
+
+    /// Notes the BSDFs the lanes in `hits` found.
+    fn note_surfaces(&mut self, hits: u32, bsdf: &[Bsdf; LANES]) {
+        for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+            self.view_alpha[lane] = bsdf[lane].view_alpha();
+        }
+    }
+}
+
 impl Default for FirstHits {
     fn default() -> Self {
         Self {
@@ -148,10 +166,7 @@ pub fn trace_path(
         }
         let hits = trace::trace_depth(world, packet, kind, hint, &mut t, tally);
         if bounce == 0 {
-            for lane in (0..LANES).filter(|&l| active & (1 << l) != 0) {
-                first.t[lane] = t[lane];
-                first.view_alpha[lane] = f32::INFINITY;
-            }
+            first.note_distances(active, &t);
         }
         // Light that reaches the camera after at most one scattering is direct; the rest is
         // indirect, what the clamp limits (Cycles' "Indirect Light" clamp). An emitter found
@@ -174,9 +189,7 @@ pub fn trace_path(
             world, packet, hits, &lanes, weigh, unseen, scratch, radiance,
         );
         if bounce == 0 {
-            for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
-                first.view_alpha[lane] = v.bsdf[lane].view_alpha();
-            }
+            first.note_surfaces(hits, &v.bsdf);
         }
         if bounce == limits.total {
             break;

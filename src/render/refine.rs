@@ -218,6 +218,34 @@ impl Traced {
         }
     }
 
+    /// With reuse, the sites' values with their neighbours' samples lent ([`reuse::lend`]);
+    /// where and how many samples were taken was decided on their own samples alone. Only
+    /// blurred sites take part, and only those still noisier than the rule wanted borrow (the
+    /// others' error is already within what the tolerance allows).
+    fn lend(
+        &mut self,
+        maps: &Maps,
+        b: &Bucket,
+        blurred: &[bool],
+        transparent: bool,
+    ) -> Result<(), MemoryError> {
+        let (Some(records), Some(kernel)) = (self.records.as_mut(), maps.kernel.as_ref()) else {
+            return Ok(());
+        };
+        for (r, &blurred) in records.iter_mut().zip(blurred) {
+            if !blurred {
+                *r = SiteRecords::unlent();
+            }
+        }
+        let limit = SAMPLING_SHARE * maps.tolerance;
+        let needy: Vec<bool> = (0..self.est.len())
+            .map(|p| self.se[p] > limit || (transparent && self.se_alpha[p] > limit))
+            .collect();
+        let (window, size) = ((b.x0, b.y0), (b.w, b.h));
+        self.est = reuse::lend(kernel, window, size, records, &self.est, &needy)?;
+        Ok(())
+    }
+
     /// Recomputes the cached values of the pixels in `changed`.
     fn update(&mut self, changed: &[usize]) {
         for &p in changed {
@@ -652,24 +680,7 @@ fn refine_bucket(
 
     // Samples traced per pixel: the sites' own, whatever they borrow below.
     let samples = traced.est.iter().map(|e| e.n).collect();
-    if let (Some(records), Some(kernel)) = (traced.records.as_mut(), maps.kernel.as_ref()) {
-        // The sites' values with their neighbours' samples lent; where and how many samples
-        // were taken was decided on their own samples alone.
-        for (r, &blurred) in records.iter_mut().zip(&blurred) {
-            if !blurred {
-                // In focus: nothing to lend or borrow; kept out of the search.
-                *r = SiteRecords::unlent();
-            }
-        }
-        // Only sites still noisier than the rule wanted borrow: the others' error is already
-        // within what the tolerance allows.
-        let limit = SAMPLING_SHARE * tolerance;
-        let needy: Vec<bool> = (0..traced.est.len())
-            .map(|p| traced.se[p] > limit || (s.transparent && traced.se_alpha[p] > limit))
-            .collect();
-        let (window, size) = ((b.x0, b.y0), (b.w, b.h));
-        traced.est = reuse::lend(kernel, window, size, records, &traced.est, &needy)?;
-    }
+    traced.lend(maps, b, &blurred, s.transparent)?;
     Ok(Some(Refined {
         color: final_colour(&traced, &interval, b),
         interval,
