@@ -528,6 +528,62 @@ mod tests {
     use super::*;
     use crate::camera::{CameraSpec, Focus};
 
+    /// A scene point seen from any lens position lands where [`Reprojection`] says: its
+    /// image through the lens centre moved by the shift at its depth times (l.x, -l.y); the
+    /// shift's size is the CoC's radius. Polygonal and anamorphic apertures have none.
+    #[test]
+    fn reprojection_moves_images_as_the_lens_rays_do() {
+        for focus in [Focus::Distance(3.0), Focus::Distance(f32::INFINITY)] {
+            let spec = CameraSpec {
+                eye: Vec3::new(0.5, 1.0, -2.0),
+                look_at: Vec3::new(-1.0, 0.2, 4.0),
+                width: 320,
+                height: 200,
+                lens: LensSpec::Aperture { radius: 0.2 },
+                focus,
+                ..CameraSpec::default()
+            };
+            let camera = spec.build(|_| None).unwrap();
+            let re = camera.reprojection().unwrap();
+            for (px, py, t) in [
+                (160.0, 100.0, 1.5),
+                (30.5, 170.25, 7.0),
+                (300.0, 20.0, 40.0),
+            ] {
+                let point = camera.pinhole_ray(px, py).at(t);
+                let depth = (point - camera.eye).dot(camera.forward);
+                let shift = re.shift(depth);
+                assert!(
+                    (2.0 * shift.abs() - camera.coc_px(depth)).abs() < 1e-3 * (1.0 + shift.abs())
+                );
+                for lens in [Vec2::new(0.6, -0.3), Vec2::new(-0.2, 0.9)] {
+                    let dir = (point - camera.lens_origin(lens)).normalize();
+                    let (film, _) = camera.film_point(lens, dir).unwrap();
+                    let want = Vec2::new(px, py) + shift * Vec2::new(lens.x, -lens.y);
+                    assert!((film - want).length() < 5e-3, "{focus:?}: {film} vs {want}");
+                }
+            }
+            for aperture in [
+                ApertureShape {
+                    blades: 6,
+                    ..ApertureShape::default()
+                },
+                ApertureShape {
+                    anamorphic: 1.5,
+                    ..ApertureShape::default()
+                },
+            ] {
+                let camera = CameraSpec {
+                    aperture,
+                    ..spec.clone()
+                }
+                .build(|_| None)
+                .unwrap();
+                assert!(camera.reprojection().is_none());
+            }
+        }
+    }
+
     /// `film_point` inverts `ray` for any lens position, and its film area per steradian is
     /// what a small square of film around that position subtends.
     #[test]
