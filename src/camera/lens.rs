@@ -528,21 +528,26 @@ mod tests {
     use super::*;
     use crate::camera::{CameraSpec, Focus};
 
+    /// An oblique 320 x 200 camera with a 0.2 aperture radius focused by `focus`.
+    fn oblique(focus: Focus) -> CameraSpec {
+        CameraSpec {
+            eye: Vec3::new(0.5, 1.0, -2.0),
+            look_at: Vec3::new(-1.0, 0.2, 4.0),
+            width: 320,
+            height: 200,
+            lens: LensSpec::Aperture { radius: 0.2 },
+            focus,
+            ..CameraSpec::default()
+        }
+    }
+
     /// A scene point seen from any lens position lands where [`Reprojection`] says: its
     /// image through the lens centre moved by the shift at its depth times (l.x, -l.y); the
     /// shift's size is the CoC's radius. Polygonal and anamorphic apertures have none.
     #[test]
     fn reprojection_moves_images_as_the_lens_rays_do() {
         for focus in [Focus::Distance(3.0), Focus::Distance(f32::INFINITY)] {
-            let spec = CameraSpec {
-                eye: Vec3::new(0.5, 1.0, -2.0),
-                look_at: Vec3::new(-1.0, 0.2, 4.0),
-                width: 320,
-                height: 200,
-                lens: LensSpec::Aperture { radius: 0.2 },
-                focus,
-                ..CameraSpec::default()
-            };
+            let spec = oblique(focus);
             let camera = spec.build(|_| None).unwrap();
             let re = camera.reprojection().unwrap();
             for (px, py, t) in [
@@ -590,17 +595,11 @@ mod tests {
     fn film_point_inverts_the_lens_rays_and_measures_their_solid_angle() {
         for focus in [Focus::Distance(3.0), Focus::Distance(f32::INFINITY)] {
             let camera = CameraSpec {
-                eye: Vec3::new(0.5, 1.0, -2.0),
-                look_at: Vec3::new(-1.0, 0.2, 4.0),
-                width: 320,
-                height: 200,
-                lens: LensSpec::Aperture { radius: 0.2 },
-                focus,
                 aperture: ApertureShape {
                     anamorphic: 1.5,
                     ..ApertureShape::default()
                 },
-                ..CameraSpec::default()
+                ..oblique(focus)
             }
             .build(|_| None)
             .unwrap();

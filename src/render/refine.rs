@@ -208,10 +208,20 @@ struct Traced {
 }
 
 impl Traced {
-    fn new(n: usize, reuse: bool) -> Self {
+    /// For the pixels of a window, `blurred` or not; with `reuse`, the blurred ones keep
+    /// their samples (the others take no part in it).
+    fn new(blurred: &[bool], reuse: bool) -> Self {
+        let n = blurred.len();
+        let records = |&b: &bool| {
+            if b {
+                SiteRecords::default()
+            } else {
+                SiteRecords::unlent()
+            }
+        };
         Self {
             est: vec![Estimate::default(); n],
-            records: reuse.then(|| vec![SiteRecords::default(); n]),
+            records: reuse.then(|| blurred.iter().map(records).collect()),
             se: vec![f32::INFINITY; n],
             se_alpha: vec![f32::INFINITY; n],
             code: vec![Vec3::ZERO; n],
@@ -222,21 +232,10 @@ impl Traced {
     /// where and how many samples were taken was decided on their own samples alone. Only
     /// blurred sites take part, and only those still noisier than the rule wanted borrow (the
     /// others' error is already within what the tolerance allows).
-    fn lend(
-        &mut self,
-        maps: &Maps,
-        b: &Bucket,
-        blurred: &[bool],
-        transparent: bool,
-    ) -> Result<(), MemoryError> {
-        let (Some(records), Some(kernel)) = (self.records.as_mut(), maps.kernel.as_ref()) else {
+    fn lend(&mut self, maps: &Maps, b: &Bucket, transparent: bool) -> Result<(), MemoryError> {
+        let (Some(records), Some(kernel)) = (self.records.as_ref(), maps.kernel.as_ref()) else {
             return Ok(());
         };
-        for (r, &blurred) in records.iter_mut().zip(blurred) {
-            if !blurred {
-                *r = SiteRecords::unlent();
-            }
-        }
         let limit = SAMPLING_SHARE * maps.tolerance;
         let needy: Vec<bool> = (0..self.est.len())
             .map(|p| self.se[p] > limit || (transparent && self.se_alpha[p] > limit))
@@ -607,7 +606,7 @@ fn refine_bucket(
     let mut interval = b.slice(&maps.start, full_width);
     let reach = b.slice(&maps.reach, full_width);
     let top_reach = reach.iter().copied().max().unwrap_or(1);
-    let mut traced = Traced::new(width * height, maps.kernel.is_some());
+    let mut traced = Traced::new(&blurred, maps.kernel.is_some());
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
     let (mut need, mut pending) = first_sites(&interval, b);
     // Samples per pixel before and after this round's shading.
@@ -680,7 +679,7 @@ fn refine_bucket(
 
     // Samples traced per pixel: the sites' own, whatever they borrow below.
     let samples = traced.est.iter().map(|e| e.n).collect();
-    traced.lend(maps, b, &blurred, s.transparent)?;
+    traced.lend(maps, b, s.transparent)?;
     Ok(Some(Refined {
         color: final_colour(&traced, &interval, b),
         interval,

@@ -128,8 +128,12 @@ impl SiteRecords {
         }
     }
 
-    /// Keeps `r`, up to [`MAX_RECORDS`].
+    /// Keeps `r`, up to [`MAX_RECORDS`]; nothing once the site has overflowed (or takes no
+    /// part, [`SiteRecords::unlent`]).
     pub fn push(&mut self, r: Record) {
+        if self.overflow {
+            return;
+        }
         if self.list.len() < MAX_RECORDS {
             self.list.push(r);
         } else {
@@ -208,27 +212,27 @@ impl Kernel {
     /// `K` at squared distance `d2` (pixels) for shift magnitude `s` (at least
     /// [`MIN_SHIFT`]); 0 beyond `s + reach`.
     pub fn at(&self, d2: f32, s: f32) -> f32 {
-        let extent = s + self.reach;
-        if d2 >= extent * extent {
-            return 0.0;
-        }
+        self.for_shift(s).at(d2)
+    }
+
+    /// `K` for one shift magnitude `s` (at least [`MIN_SHIFT`]): the interpolation between
+    /// the table's shift rows worked out once, for the many distances a sample is lent over.
+    pub fn for_shift(&self, s: f32) -> ShiftKernel<'_> {
         let top = (OCTAVES * PER_OCTAVE) as f32;
         let ks = ((s / MIN_SHIFT).log2() * PER_OCTAVE as f32).clamp(0.0, top);
-        let kt = d2.sqrt() / extent * RADIAL as f32;
-        let (k0, t0) = (ks.floor() as usize, (kt.floor() as usize).min(RADIAL - 1));
-        let k1 = (k0 + 1).min(OCTAVES * PER_OCTAVE);
-        let (fk, ft) = (ks - k0 as f32, kt - t0 as f32);
-        let row = |k: usize| {
-            let base = k * (RADIAL + 1);
-            self.table[base + t0] * (1.0 - ft) + self.table[base + t0 + 1] * ft
-        };
-        let v = row(k0) * (1.0 - fk) + row(k1) * fk;
+        let k0 = ks.floor() as usize;
         // Beyond the table's widest shift the kernel is the disc's, scaled by area.
         let widest = MIN_SHIFT * (top / PER_OCTAVE as f32).exp2();
-        if s > widest {
-            v * (widest / s) * (widest / s)
-        } else {
-            v
+        ShiftKernel {
+            table: &self.table,
+            extent: s + self.reach,
+            rows: (k0, (k0 + 1).min(OCTAVES * PER_OCTAVE)),
+            fk: ks - k0 as f32,
+            scale: if s > widest {
+                (widest / s) * (widest / s)
+            } else {
+                1.0
+            },
         }
     }
 
@@ -238,13 +242,43 @@ impl Kernel {
     }
 }
 
+/// [`Kernel`] at one shift, from [`Kernel::for_shift`].
+#[derive(Debug, Clone, Copy)]
+pub struct ShiftKernel<'a> {
+    table: &'a [f32],
+    /// `s + reach`: the kernel is 0 beyond.
+    extent: f32,
+    /// The two shift rows of the table around `s`, and the weight of the second.
+    rows: (usize, usize),
+    fk: f32,
+    scale: f32,
+}
+
+impl ShiftKernel<'_> {
+    /// `K` at squared distance `d2` (pixels).
+    pub fn at(&self, d2: f32) -> f32 {
+        if d2 >= self.extent * self.extent {
+            return 0.0;
+        }
+        let kt = d2.sqrt() / self.extent * RADIAL as f32;
+        let t0 = (kt.floor() as usize).min(RADIAL - 1);
+        let ft = kt - t0 as f32;
+        let row = |k: usize| {
+            let base = k * (RADIAL + 1);
+            self.table[base + t0] * (1.0 - ft) + self.table[base + t0 + 1] * ft
+        };
+        (row(self.rows.0) * (1.0 - self.fk) + row(self.rows.1) * self.fk) * self.scale
+    }
+}
+
 /// A site taking part in reuse.
 #[derive(Debug, Clone, Copy)]
 struct Member {
+    /// Its index in the window.
     p: usize,
-    at: Vec2,
-    /// Its pixel in the image.
+    /// Its pixel in the image, and that pixel's centre (kernels are centred there).
     pixel: (usize, usize),
+    at: Vec2,
     /// How many samples it lends (all it took).
     n: f32,
     /// Its cluster of shifts, widened by [`GAP`].
@@ -365,6 +399,7 @@ fn lend_one(
 ) {
     let s = r.shift.abs();
     let extent = s + kernel.reach();
+    let k_at = kernel.for_shift(s);
     let me = &members[m];
     let g = spacing(s);
     let lends = |q: &Member| q.pixel.0 % g == 0 && q.pixel.1 % g == 0;
@@ -379,7 +414,7 @@ fn lend_one(
         for cell in grid.cells_near(r.centre, extent) {
             for &q in grid.cells[cell].iter().filter(|&&q| takes(q)) {
                 let other = &members[q as usize];
-                let k = kernel.at((r.centre - other.at).length_squared(), s);
+                let k = k_at.at((r.centre - other.at).length_squared());
                 if k > 0.0 {
                     if lends(other) {
                         lenders += other.n * k;
@@ -396,9 +431,9 @@ fn lend_one(
         }
         for q in grid.on_lattice(r.centre, extent, g).filter(|&q| takes(q)) {
             let other = &members[q as usize];
-            lenders += other.n * kernel.at((r.centre - other.at).length_squared(), s);
+            lenders += other.n * k_at.at((r.centre - other.at).length_squared());
         }
-        let k = kernel.at((r.centre - me.at).length_squared(), s);
+        let k = k_at.at((r.centre - me.at).length_squared());
         near.push((k, m as u32));
     }
     let density = |q: &Member, k: f32| lenders + if lends(q) { 0.0 } else { q.n * k };
