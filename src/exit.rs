@@ -123,6 +123,7 @@ classified! {
     crate::scene::LoadError,
     crate::scene::SceneError,
     crate::camera::CameraError,
+    crate::camera::LensFileError,
     crate::embree::EmbreeError,
     crate::render::RenderError,
     crate::render::RegionError,
@@ -179,6 +180,7 @@ mod tests {
         has_kind::<LoadError>();
         has_kind::<SceneError>();
         has_kind::<CameraError>();
+        has_kind::<crate::camera::LensFileError>();
         has_kind::<EmbreeError>();
         has_kind::<RenderError>();
         has_kind::<RegionError>();
@@ -364,6 +366,14 @@ mod tests {
             ),
             case(SceneError::from(embree(ErrorCode::Unknown)), BadInput),
             case(camera_error(), BadInput),
+            case(
+                crate::camera::LensFileError::Invalid {
+                    path: path(),
+                    line: 3,
+                    message: "x".into(),
+                },
+                BadInput,
+            ),
             case(embree(ErrorCode::OutOfMemory), ResourceLimit),
             case(EmbreeError::InvalidGeometry("NaN".into()), BadInput),
             case(embree(ErrorCode::UnsupportedCpu), Internal),

@@ -8,7 +8,9 @@
 
 use glam::Vec3;
 
-use crate::camera::{ApertureShape, CameraSpec, Focus, LensSpec, Photographic, check_vfov};
+use crate::camera::{
+    ApertureShape, CameraSpec, Focus, LensSpec, Photographic, RealLensSpec, check_vfov,
+};
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::params::Param;
 use crate::scene::SceneDesc;
@@ -65,6 +67,11 @@ pub struct Overrides {
     pub blade_rotation_deg: Option<f32>,
     /// Anamorphic ratio: aperture height over width.
     pub anamorphic: Option<f32>,
+    /// A real lens replacing the scene's (its `f_number` and `sensor_width_mm` are replaced
+    /// by the fields above when given). With a real lens, from here or the scene, `f_number`
+    /// stops it down and `sensor_width_mm` sizes its film; the thin lens's values
+    /// (`aperture_radius`, `focal_length_mm`, `sharp_range`, the aperture's shape) are refused.
+    pub real_lens: Option<RealLensSpec>,
     /// Lights replacing the scene's (empty: the scene's).
     pub lights: Vec<Light>,
     /// Ambient light level replacing the scene's.
@@ -111,6 +118,9 @@ pub enum OverrideError {
         /// How the scene's lens is given (`"a pinhole (no aperture)"`, ...).
         lens: &'static str,
     },
+    /// A thin lens's value for a camera with a real lens.
+    #[error("{}", self.message(Param::field))]
+    RealLens(Param),
     /// The photographic lens gives no usable field of view.
     #[error("{}", self.message(Param::field))]
     NoFieldOfView {
@@ -151,6 +161,14 @@ impl OverrideError {
                  to replace it with a photographic lens",
                 name(param),
                 name(Param::FNumber)
+            ),
+            Self::RealLens(p) => format!(
+                "{} describes the thin lens, but the camera has a real lens (a lens \
+                 prescription), which has its own focal length and round stop; only {} (stops \
+                 it down) and {} apply to it",
+                name(p),
+                name(Param::FNumber),
+                name(Param::SensorWidth)
             ),
             Self::NoFieldOfView {
                 focal_length_mm,
@@ -213,6 +231,9 @@ impl Overrides {
                     .map_err(|_| OverrideError::NotPositive { param, value })?;
             }
         }
+        if self.apply_real_lens(cam)? {
+            return self.apply_focus(cam);
+        }
         if let Some(value) = self.anamorphic
             && !(value.is_finite() && value > 0.0)
         {
@@ -252,15 +273,7 @@ impl Overrides {
             };
         }
         self.apply_photographic(cam)?;
-        if let Some(d) = self.focus_distance {
-            if d.is_nan() || d <= 0.0 {
-                return Err(OverrideError::FocusDistance(d));
-            }
-            cam.focus = Focus::Distance(d);
-        }
-        if let Some((x, y)) = self.autofocus {
-            cam.focus = Focus::Pixel { x, y };
-        }
+        self.apply_focus(cam)?;
         if let Some(b) = self.blades {
             if !ApertureShape::blades_ok(b) {
                 return Err(OverrideError::Blades(b));
@@ -277,6 +290,48 @@ impl Overrides {
             cam.aperture.anamorphic = r;
         }
         Ok(())
+    }
+
+    /// The focus distance or autofocus pixel.
+    fn apply_focus(&self, cam: &mut CameraSpec) -> Result<(), OverrideError> {
+        if let Some(d) = self.focus_distance {
+            if d.is_nan() || d <= 0.0 {
+                return Err(OverrideError::FocusDistance(d));
+            }
+            cam.focus = Focus::Distance(d);
+        }
+        if let Some((x, y)) = self.autofocus {
+            cam.focus = Focus::Pixel { x, y };
+        }
+        Ok(())
+    }
+
+    /// The real lens's part of [`Overrides::apply_camera`]: whether the camera has one.
+    fn apply_real_lens(&self, cam: &mut CameraSpec) -> Result<bool, OverrideError> {
+        if let Some(real) = &self.real_lens {
+            cam.real_lens = Some(real.clone());
+        }
+        let Some(real) = cam.real_lens.as_mut() else {
+            return Ok(false);
+        };
+        let thin = [
+            (Param::ApertureRadius, self.aperture_radius.is_some()),
+            (Param::SharpRange, self.sharp_range.is_some()),
+            (Param::FocalLength, self.focal_length_mm.is_some()),
+            (Param::Blades, self.blades.is_some()),
+            (Param::BladeRotation, self.blade_rotation_deg.is_some()),
+            (Param::Anamorphic, self.anamorphic.is_some()),
+        ];
+        if let Some((param, _)) = thin.into_iter().find(|(_, given)| *given) {
+            return Err(OverrideError::RealLens(param));
+        }
+        if let Some(n) = self.f_number {
+            real.f_number = Some(n);
+        }
+        if let Some(w) = self.sensor_width_mm {
+            real.sensor_width_mm = w;
+        }
+        Ok(true)
     }
 
     /// The photographic lens's part of [`Overrides::apply_camera`].

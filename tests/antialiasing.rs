@@ -51,6 +51,7 @@ fn scene(
             },
             focus: Focus::Distance(10.0),
             aperture: ApertureShape::default(),
+            real_lens: None,
         },
         materials,
         objects,

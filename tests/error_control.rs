@@ -89,6 +89,7 @@ fn a_defocused_highlight_keeps_its_disc_and_rim() {
             lens: LensSpec::Aperture { radius: 0.8 },
             focus: Focus::Distance(10.0),
             aperture: ApertureShape::default(),
+            real_lens: None,
         },
         materials: vec![
             Material {

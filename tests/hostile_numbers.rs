@@ -115,6 +115,7 @@ fn wall_scene(z: f32, material: Material) -> SceneDesc {
             lens: LensSpec::Aperture { radius: 0.01 },
             focus: Focus::Distance(5.0),
             aperture: ApertureShape::default(),
+            real_lens: None,
         },
         materials: vec![material],
         objects: vec![Object::Mesh {

@@ -175,6 +175,7 @@ fn rendered_blur_disc_matches_coc_px() {
             lens: LensSpec::Aperture { radius: 0.8 },
             focus: Focus::Distance(10.0),
             aperture: ApertureShape::default(),
+            real_lens: None,
         },
         materials: vec![Material::diffuse(Vec3::ONE)],
         objects: vec![Object::Sphere {
@@ -301,6 +302,7 @@ fn mirror_reflects_one_bounce() {
             lens: LensSpec::Pinhole,
             focus: Focus::Distance(5.0),
             aperture: ApertureShape::default(),
+            real_lens: None,
         },
         materials: vec![
             Material {

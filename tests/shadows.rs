@@ -29,6 +29,7 @@ fn camera(eye: Vec3, look_at: Vec3, vfov_deg: f32, width: u32, height: u32) -> C
         lens: LensSpec::Pinhole,
         focus: Focus::Point(look_at),
         aperture: ApertureShape::default(),
+        real_lens: None,
     }
 }
 

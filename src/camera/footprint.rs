@@ -103,6 +103,7 @@ pub(crate) fn test_camera(size: u32) -> Camera {
         lens: LensSpec::Aperture { radius: 0.2 },
         focus: Focus::Distance(5.0),
         aperture: ApertureShape::default(),
+        real_lens: None,
     }
     .build(|_| None)
     .unwrap()

@@ -9,6 +9,7 @@
 use glam::{Vec2, Vec3};
 
 use super::aperture::{ApertureShape, LensFilter, aperture_point, aperture_points16};
+use super::real_lens::RealLens;
 use super::{
     Camera, CameraError, DEFAULT_FOCAL_LENGTH_MM, DEFAULT_SENSOR_WIDTH_MM, LensSpec, check,
     positive,
@@ -27,13 +28,17 @@ pub trait Lens {
     /// lane by lane.
     fn lens_points16(&self, u: &[f32; LANES], v: &[f32; LANES]) -> ([f32; LANES], [f32; LANES]);
 
-    /// The ray that leaves lens position `lens` for film position (px, py).
-    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> Ray;
+    /// The ray that leaves lens position `lens` for film position (px, py), and its weight:
+    /// the irradiance it carries relative to the film's centre (1 for a thin lens; less
+    /// towards a real lens's corners, 0 for a ray the lens blocks, whose ray is then any
+    /// valid one).
+    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> (Ray, f32);
 
     /// [`Lens::ray`] for 16 samples, each with its own film position (`px`, `py`) and lens
     /// position (`lens_x`, `lens_y`), bit for bit equal to it lane by lane; writes origins
     /// and unit directions as structure of arrays (x, y, z components), the layout of a ray
-    /// packet. This is the hot path: an implementation keeps it free of calls and branches.
+    /// packet, and the rays' weights. This is the hot path: an implementation keeps it free
+    /// of calls and branches.
     fn rays16(
         &self,
         camera: &Camera,
@@ -41,6 +46,7 @@ pub trait Lens {
         lens: (&[f32; LANES], &[f32; LANES]),
         origin: &mut [[f32; LANES]; 3],
         dir: &mut [[f32; LANES]; 3],
+        weight: &mut [f32; LANES],
     );
 
     /// The ray through the centre of the lens (no depth of field): what autofocus looks along.
@@ -58,6 +64,10 @@ pub trait Lens {
     /// per unit solid angle of `dir` there. `None` when no film position looks that way.
     /// Light tracing ([`crate::render::light_trace`]) lands its paths with it.
     fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)>;
+
+    /// Whether [`Lens::film_point`] answers: light tracing is left out for a lens that
+    /// cannot land light paths on its film.
+    fn lands_light(&self) -> bool;
 
     /// The weight under `filter` of a sample that crossed the lens at `lens`.
     fn weight(&self, filter: LensFilter, lens: Vec2) -> f32;
@@ -89,6 +99,8 @@ pub trait Lens {
 pub enum CameraLens {
     /// An ideal thin lens.
     Thin(ThinLens),
+    /// A lens prescription traced element by element.
+    Real(Box<RealLens>),
 }
 
 /// Calls `$call` on the lens inside a [`CameraLens`], whichever it is.
@@ -96,6 +108,7 @@ macro_rules! dispatch {
     ($lens:expr, $l:ident => $call:expr) => {
         match $lens {
             CameraLens::Thin($l) => $call,
+            CameraLens::Real($l) => $call,
         }
     };
 }
@@ -112,7 +125,7 @@ impl Lens for CameraLens {
     }
 
     #[inline]
-    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> Ray {
+    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> (Ray, f32) {
         dispatch!(self, l => l.ray(camera, px, py, lens))
     }
 
@@ -124,8 +137,9 @@ impl Lens for CameraLens {
         lens: (&[f32; LANES], &[f32; LANES]),
         origin: &mut [[f32; LANES]; 3],
         dir: &mut [[f32; LANES]; 3],
+        weight: &mut [f32; LANES],
     ) {
-        dispatch!(self, l => l.rays16(camera, film, lens, origin, dir))
+        dispatch!(self, l => l.rays16(camera, film, lens, origin, dir, weight))
     }
 
     #[inline]
@@ -144,6 +158,10 @@ impl Lens for CameraLens {
 
     fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)> {
         dispatch!(self, l => l.film_point(camera, lens, dir))
+    }
+
+    fn lands_light(&self) -> bool {
+        dispatch!(self, l => l.lands_light())
     }
 
     #[inline]
@@ -271,10 +289,10 @@ impl Lens for ThinLens {
     /// Computed as the direction `film_dir - offset / focus_distance` (the direction to the
     /// focus point divided by the focus distance), so a lens focused at infinity gives
     /// parallel rays.
-    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> Ray {
+    fn ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> (Ray, f32) {
         let offset = (camera.right * lens.x + camera.up * lens.y) * self.aperture_radius;
         let dir = camera.film_dir(px, py) - offset * self.inv_focus_distance;
-        Ray::new(camera.eye + offset, dir.normalize())
+        (Ray::new(camera.eye + offset, dir.normalize()), 1.0)
     }
 
     #[inline]
@@ -285,7 +303,9 @@ impl Lens for ThinLens {
         (lens_x, lens_y): (&[f32; LANES], &[f32; LANES]),
         origin: &mut [[f32; LANES]; 3],
         dir: &mut [[f32; LANES]; 3],
+        weight: &mut [f32; LANES],
     ) {
+        *weight = [1.0; LANES];
         let (eye, right, up, r) = (camera.eye, camera.right, camera.up, self.aperture_radius);
         let (fwd, inv_fd) = (camera.forward, self.inv_focus_distance);
         let aspect = camera.width as f32 / camera.height as f32;
@@ -354,6 +374,10 @@ impl Lens for ThinLens {
 
     /// The filter's weight at the sample's radius on the unstretched aperture.
     #[inline]
+    fn lands_light(&self) -> bool {
+        true
+    }
+
     fn weight(&self, filter: LensFilter, lens: Vec2) -> f32 {
         filter.weight(lens, self.aperture.anamorphic)
     }

@@ -9,12 +9,17 @@
 pub mod aperture;
 pub mod footprint;
 pub mod lens;
+pub mod optics;
+pub mod prescription;
+pub mod real_lens;
 
 use glam::{Vec2, Vec3};
 
 pub use aperture::{ApertureShape, LensFilter};
 pub use footprint::BoxImage;
 pub use lens::{CameraLens, Lens, Photographic, Reprojection, ThinLens};
+pub use prescription::{LensFileError, Prescription};
+pub use real_lens::{RealLens, RealLensSpec};
 
 use crate::embree::{LANES, Ray};
 use crate::error_kind::{ErrorKind, HasKind};
@@ -200,6 +205,9 @@ pub struct CameraSpec {
     pub focus: Focus,
     /// The aperture's outline (bokeh shape).
     pub aperture: ApertureShape,
+    /// A real lens traced element by element ([`real_lens`]); when given, it replaces the
+    /// thin lens: `lens`, `vfov_deg` and `aperture` are not used.
+    pub real_lens: Option<RealLensSpec>,
 }
 
 /// A pinhole camera at (0, 0, 5) looking at the origin along -z (y up), 640 x 480 pixels with
@@ -217,6 +225,7 @@ impl Default for CameraSpec {
             lens: LensSpec::Pinhole,
             focus: Focus::Distance(5.0),
             aperture: ApertureShape::default(),
+            real_lens: None,
         }
     }
 }
@@ -258,6 +267,43 @@ impl CameraSpec {
         check(self.width > 0, "width", "at least 1 pixel", self.width)?;
         check(self.height > 0, "height", "at least 1 pixel", self.height)?;
         let (forward, right, up) = self.view()?;
+        let size = (self.width, self.height);
+        let tan_half_vfov = match &self.real_lens {
+            // Autofocus looks along the chief rays of the lens at infinity focus.
+            Some(real) => RealLens::build(real, f32::INFINITY, size)?.tan_half_vfov,
+            None => lens::tan_half_fov(self.checked_vfov_deg()?),
+        };
+        let mut camera = Camera {
+            eye: self.eye,
+            forward,
+            right,
+            up,
+            width: self.width,
+            height: self.height,
+            tan_half_vfov,
+            // Autofocus looks through the lens centre, which needs no aperture or focus yet.
+            lens: CameraLens::Thin(ThinLens::new(0.0, 1.0, self.aperture)),
+        };
+        let focus_distance = self.focus_distance(&camera, depth_of)?;
+        camera.lens = match &self.real_lens {
+            Some(real) => {
+                let lens = RealLens::build(real, focus_distance, size)?;
+                camera.tan_half_vfov = lens.tan_half_vfov;
+                CameraLens::Real(Box::new(lens))
+            }
+            None => CameraLens::Thin(ThinLens::build(
+                &self.lens,
+                self.aperture,
+                focus_distance,
+                camera.pixels_per_unit(),
+                self.eye,
+            )?),
+        };
+        Ok(camera)
+    }
+
+    /// The thin lens's field of view, its aperture shape and film checked.
+    fn checked_vfov_deg(&self) -> Result<f32, CameraError> {
         self.check_aperture_shape()?;
         if let Some(p) = self.lens.photographic() {
             p.check_film()?;
@@ -276,26 +322,7 @@ impl CameraSpec {
             )?,
             _ => check_vfov(vfov_deg)?,
         }
-        let mut camera = Camera {
-            eye: self.eye,
-            forward,
-            right,
-            up,
-            width: self.width,
-            height: self.height,
-            tan_half_vfov: lens::tan_half_fov(vfov_deg),
-            // Autofocus looks through the lens centre, which needs no aperture or focus yet.
-            lens: CameraLens::Thin(ThinLens::new(0.0, 1.0, self.aperture)),
-        };
-        let focus_distance = self.focus_distance(&camera, depth_of)?;
-        camera.lens = CameraLens::Thin(ThinLens::build(
-            &self.lens,
-            self.aperture,
-            focus_distance,
-            camera.pixels_per_unit(),
-            self.eye,
-        )?);
-        Ok(camera)
+        Ok(vfov_deg)
     }
 
     /// The unit view axis, image right and image up, checked.
@@ -432,6 +459,12 @@ impl Camera {
     /// through the point on the plane in focus that film position (px, py) images
     /// ([`Camera::focus_point`]).
     pub fn lens_ray(&self, px: f32, py: f32, lens: Vec2) -> Ray {
+        self.lens.ray(self, px, py, lens).0
+    }
+
+    /// [`Camera::lens_ray`] with its weight ([`Lens::ray`]): 1 through a thin lens, the
+    /// irradiance relative to the film's centre through a real one (0: blocked).
+    pub fn lens_ray_weighted(&self, px: f32, py: f32, lens: Vec2) -> (Ray, f32) {
         self.lens.ray(self, px, py, lens)
     }
 
@@ -441,8 +474,9 @@ impl Camera {
         self.lens.focus_point(self, px, py)
     }
 
-    /// [`Camera::lens_ray`] for 16 samples at once ([`Lens::rays16`]): origins and unit
-    /// directions as structure of arrays, bit for bit equal to it lane by lane.
+    /// [`Camera::lens_ray_weighted`] for 16 samples at once ([`Lens::rays16`]): origins and
+    /// unit directions as structure of arrays, bit for bit equal to it lane by lane, and
+    /// their weights.
     #[inline]
     pub fn lens_rays16(
         &self,
@@ -450,8 +484,9 @@ impl Camera {
         lens: (&[f32; LANES], &[f32; LANES]),
         origin: &mut [[f32; LANES]; 3],
         dir: &mut [[f32; LANES]; 3],
+        weight: &mut [f32; LANES],
     ) {
-        self.lens.rays16(self, film, lens, origin, dir);
+        self.lens.rays16(self, film, lens, origin, dir, weight);
     }
 
     /// Where the rays of lens position `lens` ([`Lens::lens_point`]) leave the lens.
@@ -508,6 +543,7 @@ mod tests {
             lens,
             focus: Focus::Distance(12.5),
             aperture: ApertureShape::default(),
+            real_lens: None,
         }
     }
 
@@ -626,7 +662,9 @@ mod tests {
         let lx: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.37).sin());
         let ly: [f32; 16] = std::array::from_fn(|i| (i as f32 * 0.61).cos() * 1.3);
         let (mut origin, mut dir) = ([[0.0; 16]; 3], [[0.0; 16]; 3]);
-        cam.lens_rays16((&px, &py), (&lx, &ly), &mut origin, &mut dir);
+        let mut weight = [0.0; 16];
+        cam.lens_rays16((&px, &py), (&lx, &ly), &mut origin, &mut dir, &mut weight);
+        assert_eq!(weight, [1.0; 16]);
         for lane in 0..16 {
             let r = cam.lens_ray(px[lane], py[lane], Vec2::new(lx[lane], ly[lane]));
             for k in 0..3 {

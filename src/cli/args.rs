@@ -95,6 +95,12 @@ pub(crate) struct SceneArgs {
     /// photographic lens; with any other lens it needs --f-number [default: the scene's, else 36].
     #[arg(long)]
     pub(crate) sensor_width: Option<f32>,
+    /// A real lens: a lens prescription file traced element by element (pbrt's lens format,
+    /// one surface a line: radius, thickness, ior, aperture diameter in mm; see lenses/ and
+    /// docs/lenses.md). Replaces the scene's lens; its focal length sets the field of view,
+    /// --f-number stops it down, --sensor-width sizes the film (default 36 mm).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["aperture_radius", "focal_length", "sharp_range", "blades", "blade_rotation", "anamorphic"])]
+    pub(crate) lens: Option<std::path::PathBuf>,
     /// The seed's lens: depths within this distance (scene units) in front of and behind the
     /// focus stay nearly sharp (replaces the scene's lens; needs --spread). The aperture is
     /// chosen so the blur at the range's ends is --spread pixels across and grows from there.

@@ -23,9 +23,19 @@ pub(crate) mod render;
 pub(crate) mod report;
 pub(crate) mod signals;
 
-/// The scene overrides the flags ask for.
-pub(crate) fn overrides(a: &SceneArgs) -> Overrides {
-    Overrides {
+/// The scene overrides the flags ask for (reading --lens's prescription).
+pub(crate) fn overrides(a: &SceneArgs) -> Result<Overrides> {
+    let real_lens = match &a.lens {
+        Some(path) => Some(dofray::camera::RealLensSpec {
+            prescription: std::sync::Arc::new(dofray::camera::Prescription::load(path)?),
+            f_number: a.f_number,
+            sensor_width_mm: a
+                .sensor_width
+                .unwrap_or(dofray::camera::DEFAULT_SENSOR_WIDTH_MM),
+        }),
+        None => None,
+    };
+    Ok(Overrides {
         width: a.width,
         height: a.height,
         aperture_radius: a.aperture_radius,
@@ -40,7 +50,8 @@ pub(crate) fn overrides(a: &SceneArgs) -> Overrides {
         anamorphic: a.anamorphic,
         lights: a.lights.clone(),
         ambient: a.ambient,
-    }
+        real_lens,
+    })
 }
 
 /// A renderer's error, an override's or a setting's worded for the command line (flag names).
@@ -84,7 +95,7 @@ pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
         None => Device::new(),
     }
     .context("cannot create the Embree device")?;
-    let renderer = Renderer::with_overrides(desc, overrides(a), &device).map_err(cli_error)?;
+    let renderer = Renderer::with_overrides(desc, overrides(a)?, &device).map_err(cli_error)?;
     // After the overrides: a lens flag answers the warning about a guessed lens.
     for warning in &renderer.desc().warnings {
         eprintln!("warning: {warning}");

@@ -62,7 +62,10 @@ impl LightTraced {
     /// `settings` (none unless the path tracer renders with
     /// [`crate::render::PathLimits::light_tracing`]); see the module documentation.
     pub fn choose(world: &World, camera: &Camera, settings: &RenderSettings) -> Self {
-        if settings.integrator != Integrator::Path || !settings.path.light_tracing {
+        if settings.integrator != Integrator::Path
+            || !settings.path.light_tracing
+            || !camera.lens.lands_light()
+        {
             return Self::none();
         }
         let pinhole = settings.mode == Mode::Pinhole;

@@ -227,12 +227,14 @@ impl SiteShader<'_> {
         } = scratch;
         let mut origin = [[0.0f32; LANES]; 3];
         let mut dir = [[0.0f32; LANES]; 3];
+        let mut lens_weight = [0.0f32; LANES];
         // All 16 lanes are computed (lanes past `len` are simply not traced).
         self.camera.lens_rays16(
             (&b.film_x, &b.film_y),
             (&b.lens_x, &b.lens_y),
             &mut origin,
             &mut dir,
+            &mut lens_weight,
         );
         packet.set_lanes(b.len, &origin, &dir);
         let mut radiance = [Vec3::ZERO; LANES];
@@ -276,7 +278,8 @@ impl SiteShader<'_> {
                 let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
                 self.camera.lens.weight(filter, lens)
             };
-            estimates[b.pixel[lane]].add(radiance[lane] * scale, w, hit);
+            // A real lens's ray carries its irradiance (vignetting; 0 when blocked).
+            estimates[b.pixel[lane]].add(radiance[lane] * (scale * lens_weight[lane]), w, hit);
         }
         if let (Some(records), Some(re)) = (records, self.camera.reprojection()) {
             let r = self.camera.aperture_radius();

@@ -103,6 +103,7 @@ pub fn paper() -> SceneDesc {
             lens: LensSpec::Aperture { radius: 0.2 },
             focus: Focus::Distance(focus_distance),
             aperture: ApertureShape::default(),
+            real_lens: None,
         },
         materials,
         objects,

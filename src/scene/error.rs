@@ -162,6 +162,9 @@ pub enum LoadError {
         /// What is wrong and what was expected.
         message: String,
     },
+    /// A lens prescription file that cannot be read or is invalid.
+    #[error(transparent)]
+    Lens(#[from] crate::camera::LensFileError),
     /// An image that could not be decoded.
     #[error("{}: {message}", shown(path))]
     Image {

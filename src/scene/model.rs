@@ -350,6 +350,7 @@ pub fn model_scene(path: &Path, model: Model) -> Result<SceneDesc, LoadError> {
             lens,
             focus,
             aperture,
+            real_lens: None,
         },
         materials,
         objects,

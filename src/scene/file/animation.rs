@@ -179,7 +179,11 @@ pub(super) fn animation(
     let dioptres = read.scalar("focus_distance", |d| 1.0 / d)?;
     let focus_point = read.point("focus_point")?;
     let places = read.places;
-    check_lens_keys(ctx, &camera.lens, &places)?;
+    if camera.real_lens.is_some() {
+        check_real_lens_keys(ctx, &places)?;
+    } else {
+        check_lens_keys(ctx, &camera.lens, &places)?;
+    }
     check_focus_keys(ctx, &places)?;
     let focus = match (dioptres, focus_point) {
         (Some(d), _) => Some(FocusTrack::Dioptres(d)),
@@ -270,6 +274,21 @@ fn shot(ctx: &Ctx, raw: &RawAnimation, table: &Range<usize>) -> Result<(i64, i64
 fn first_key<'a>(places: &'a Places, name: &str) -> Option<&'a Place> {
     let spots = keys_of(places, name)?;
     spots.iter().min_by_key(|p| p.index)
+}
+
+/// Refuses keys that animate a lens when the `[camera]` has a real lens (a prescription):
+/// only its focus and the view are animated.
+fn check_real_lens_keys(ctx: &Ctx, places: &Places) -> Result<(), LoadError> {
+    for name in ["vfov", "focal_length_mm", "f_number", "aperture_radius"] {
+        if let Some(p) = first_key(places, name) {
+            return Err(ctx.invalid(
+                p.span.clone(),
+                format!("animation.key[{}].{name}", p.index),
+                format!("`{name}` cannot be animated with a real lens (`camera.lens`): keys may move the view and the focus"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Refuses keys that animate another lens than the `[camera]`'s.

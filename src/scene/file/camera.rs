@@ -9,7 +9,8 @@ use super::Ctx;
 use super::objects::{FromModel, Objects};
 use super::raw::{RawCamera, V3, v3};
 use crate::camera::{
-    ApertureShape, CameraError, CameraSpec, DEFAULT_VFOV, Focus, LensSpec, Photographic,
+    ApertureShape, CameraError, CameraSpec, DEFAULT_SENSOR_WIDTH_MM, DEFAULT_VFOV, Focus, LensSpec,
+    Photographic, Prescription, RealLensSpec,
 };
 use crate::scene::Object;
 use crate::scene::error::LoadError;
@@ -43,7 +44,10 @@ pub(super) fn camera(
     };
     let view = view(ctx, &raw, vfov_deg, width, height, objects)?;
     check_view(ctx, &raw, &table, &view)?;
-    check_lens_keys(ctx, &raw)?;
+    let real_lens = real_lens(ctx, &raw)?;
+    if real_lens.is_none() {
+        check_lens_keys(ctx, &raw)?;
+    }
     let lens = lens(&raw, from_model.is_some(), vfov_deg, width, height);
     let focus = focus(ctx, &raw, &table, width, height, &view)?;
     let blades = raw.blades.as_ref().map_or(0, |b| b.get_ref().0);
@@ -68,6 +72,7 @@ pub(super) fn camera(
             rotation_deg: raw.blade_rotation.as_ref().map_or(0.0, |r| r.get_ref().0),
             anamorphic: raw.anamorphic.as_ref().map_or(1.0, |a| a.get_ref().0),
         },
+        real_lens,
     };
     check_built(ctx, &raw, &table, &spec)?;
     Ok(spec)
@@ -114,6 +119,7 @@ fn check_built(
         ("anamorphic", at(&raw.anamorphic)),
         ("blade_rotation", at(&raw.blade_rotation)),
         ("blades", at(&raw.blades)),
+        ("lens", at(&raw.lens)),
     ];
     let candidates: &[&str] = match name {
         "eye" => &["eye"],
@@ -128,6 +134,7 @@ fn check_built(
         "anamorphic ratio" => &["anamorphic"],
         "aperture rotation" => &["blade_rotation"],
         "aperture blades" => &["blades"],
+        "lens" | "focus distance" if raw.lens.is_some() => &["lens"],
         _ => &[
             "aperture_radius",
             "f_number",
@@ -145,6 +152,52 @@ fn check_built(
         Some((key, span)) => ctx.invalid(span, format!("camera.{key}"), error.to_string()),
         None => ctx.invalid(table.clone(), "camera", error.to_string()),
     })
+}
+
+/// The `lens` key's prescription with the keys a real lens takes (`f_number` stops it
+/// down, `sensor_width_mm` sizes the film); the thin lens's keys are refused beside it.
+fn real_lens(ctx: &Ctx, raw: &RawCamera) -> Result<Option<RealLensSpec>, LoadError> {
+    let Some(file) = &raw.lens else {
+        return Ok(None);
+    };
+    let thin = [
+        ("vfov", raw.vfov.as_ref().map(Spanned::span)),
+        (
+            "focal_length_mm",
+            raw.focal_length_mm.as_ref().map(Spanned::span),
+        ),
+        (
+            "aperture_radius",
+            raw.aperture_radius.as_ref().map(Spanned::span),
+        ),
+        ("sharp_range", raw.sharp_range.as_ref().map(Spanned::span)),
+        ("spread", raw.spread.as_ref().map(Spanned::span)),
+        ("blades", raw.blades.as_ref().map(Spanned::span)),
+        (
+            "blade_rotation",
+            raw.blade_rotation.as_ref().map(Spanned::span),
+        ),
+        ("anamorphic", raw.anamorphic.as_ref().map(Spanned::span)),
+    ];
+    if let Some((key, Some(span))) = thin.into_iter().find(|(_, s)| s.is_some()) {
+        return Err(ctx.invalid(
+            span,
+            format!("camera.{key}"),
+            format!("`{key}` describes the thin lens; with `lens` (a real lens's prescription) the lens gives its own focal length, field of view and round stop: remove `{key}`"),
+        ));
+    }
+    let path = ctx.resolve(file.get_ref());
+    let prescription = Prescription::load(&path).map_err(|e| {
+        LoadError::from(e).referenced(ctx.at_key(file.span(), "camera.lens"), "lens")
+    })?;
+    Ok(Some(RealLensSpec {
+        prescription: std::sync::Arc::new(prescription),
+        f_number: raw.f_number.as_ref().map(|f| f.get_ref().0),
+        sensor_width_mm: raw
+            .sensor_width_mm
+            .as_ref()
+            .map_or(DEFAULT_SENSOR_WIDTH_MM, |s| s.get_ref().0),
+    }))
 }
 
 /// Refuses view keys when the view comes from the model of object `key`.

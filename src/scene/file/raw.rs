@@ -384,6 +384,8 @@ pub(super) struct RawCamera {
     pub(super) blades: Option<Spanned<Whole>>,
     pub(super) blade_rotation: Option<Spanned<Finite>>,
     pub(super) anamorphic: Option<Spanned<Positive>>,
+    /// A lens prescription file (relative to the scene file).
+    pub(super) lens: Option<Spanned<String>>,
 }
 
 /// The `[animation]` table: the shot's range and rate, and its keys.
