@@ -28,7 +28,7 @@ cd "$repo"
 secs=${1:-20}
 case "$secs" in '' | *[!0-9]*) echo "usage: scripts/fuzz.sh [SECONDS_PER_TARGET]" >&2; exit 2 ;; esac
 sanitizer=${FUZZ_SANITIZER:-none}
-read -r -a targets <<<"${FUZZ_TARGETS:-scene_file obj_mtl gltf_glb merge_tile frames frame_pattern}"
+read -r -a targets <<<"${FUZZ_TARGETS:-scene_file obj_mtl gltf_glb merge_tile frames frame_pattern lens_file}"
 export RUSTC_BOOTSTRAP=1
 CARGO_FUZZ_VERSION=0.13.2
 

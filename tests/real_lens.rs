@@ -437,3 +437,27 @@ fn bokeh_becomes_a_cats_eye_towards_the_corners() {
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The blur bound stays a bound beyond its table, nearer than any lens focuses: it grows as
+/// depth shrinks and never goes negative (the fuzzer found a lens whose last chord fell, so
+/// extrapolating along it gave -767 px at 1 cm).
+#[test]
+fn the_blur_bound_holds_nearer_than_its_table() {
+    let mut text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses/double-gauss-50mm.dat"),
+    )
+    .unwrap();
+    text = text.replace("437.065", "874.065");
+    let p = Arc::new(Prescription::parse(&text, "fuzzed").unwrap());
+    let c = camera_sized(&p, None, 0.336, 12);
+    let mut last = 0.0;
+    // The table ends 5 cm in front of the front element, about 7 cm from the camera.
+    for depth in [0.03f32, 0.02, 0.01, 0.001] {
+        let coc = c.coc_px(depth);
+        assert!(
+            coc.is_finite() && coc >= last,
+            "{coc} px at {depth} m after {last}"
+        );
+        last = coc;
+    }
+}

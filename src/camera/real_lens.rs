@@ -564,8 +564,15 @@ impl Lens for RealLens {
         let x = inv / self.max_inv_depth * (COC_ENTRIES - 1) as f64;
         let k = (x.floor() as usize).min(COC_ENTRIES - 2);
         let f = (x - k as f64) as f32;
-        // Linear on the last chord beyond the table (nearer than any lens can focus).
-        self.coc[k] + (self.coc[k + 1] - self.coc[k]) * f
+        let rise = self.coc[k + 1] - self.coc[k];
+        if f <= 1.0 {
+            return (self.coc[k] + rise * f).max(0.0);
+        }
+        // Nearer than the table (within 5 cm of the front element): blur grows at least as
+        // the inverse depth from the last entry, or along the last chord where it rises.
+        let last = self.coc[COC_ENTRIES - 1];
+        let along = last + rise.max(0.0) * (f - 1.0);
+        along.max(last * (inv / self.max_inv_depth) as f32).max(0.0)
     }
 
     fn reprojection(&self, _camera: &Camera) -> Option<Reprojection> {
