@@ -5,8 +5,9 @@
 //! - **Placement.** The camera's position (`eye`) is the lens's entrance pupil at infinity
 //!   focus, its centre of perspective, so a real lens frames a scene as a thin lens of the
 //!   same focal length does. The film stays where it is; focusing moves the lens forward
-//!   (the paraxial focus solve of [`optics::focus_film_distance`]), so the field of view
-//!   breathes with focus as the lens's own does.
+//!   (the paraxial focus solve of [`optics::focus_film_distance`], refined to the smallest
+//!   RMS spot by [`optics::best_focus`]), so the field of view breathes with focus as the
+//!   lens's own does.
 //! - **Sampling.** Rays from a film point are aimed at the rear element within a bound of
 //!   the exit pupil that depends on the film point's distance from the axis (computed once
 //!   per focus setting by tracing a grid, as pbrt does), uniformly over it; a ray the lens
@@ -16,9 +17,11 @@
 //!   divided by that of the film's centre: the centre of the frame is exposed as a thin
 //!   lens exposes it, the corners darken as the real lens darkens them.
 //! - **Blur bound.** [`Lens::coc_px`] is a table over inverse depth of the largest spot a
-//!   point at that depth makes anywhere on the film (traced at five film radii over the
-//!   pupil), interpolated linearly: spots grow about linearly in inverse depth on either
-//!   side of focus (a V), so the chords of the table stay above them.
+//!   point at that depth makes anywhere on the film (traced at five film radii through the
+//!   rim of each one's pupil, found by bisection in 32 directions; 5% wider), interpolated
+//!   linearly: spots grow about linearly in inverse depth on either side of focus (a V), so
+//!   the chords of the table stay above them. Nearer than the table it grows with inverse
+//!   depth from the last entry.
 //!
 //! Lens positions ([`Lens::lens_point`]) are points of [-1, 1]^2, mapped onto each film
 //! point's pupil bound. Light tracing ([`Lens::film_point`]) and sample reuse
