@@ -269,8 +269,12 @@ impl CameraSpec {
         let (forward, right, up) = self.view()?;
         let size = (self.width, self.height);
         let tan_half_vfov = match &self.real_lens {
-            // Autofocus looks along the chief rays of the lens at infinity focus.
-            Some(real) => RealLens::build(real, f32::INFINITY, size)?.tan_half_vfov,
+            // Only autofocus looks before the lens is focused: along the chief rays of the lens
+            // at infinity focus (placing a real lens traces its pupil tables: not twice).
+            Some(real) if matches!(self.focus, Focus::Pixel { .. }) => {
+                RealLens::build(real, f32::INFINITY, size)?.tan_half_vfov
+            }
+            Some(_) => 1.0,
             None => lens::tan_half_fov(self.checked_vfov_deg()?),
         };
         let mut camera = Camera {
