@@ -56,18 +56,34 @@ pub trait Lens {
     /// passes through it (infinitely far when focused at infinity).
     fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3;
 
-    /// Where the rays of lens position `lens` leave the lens (their common origin).
-    fn lens_origin(&self, camera: &Camera, lens: Vec2) -> Vec3;
+    /// Where a light path enters the lens, for uniform numbers `u` in [0, 1)^2: the entry
+    /// position [`Lens::entry_origin`] and [`Lens::film_point`] take. For a thin lens it is
+    /// the lens position [`Lens::lens_point`] gives; a real lens's light enters through its
+    /// front element.
+    fn entry_point(&self, u: Vec2) -> Vec2;
 
-    /// The inverse of [`Lens::ray`] for light arriving at the lens: the film position whose
-    /// ray from lens position `lens` leaves along unit `dir`, and the film area (square pixels)
-    /// per unit solid angle of `dir` there. `None` when no film position looks that way.
-    /// Light tracing ([`crate::render::light_trace`]) lands its paths with it.
-    fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)>;
+    /// The world point of entry position `entry`, where light arriving there crosses into
+    /// the lens.
+    fn entry_origin(&self, camera: &Camera, entry: Vec2) -> Vec3;
 
-    /// Whether [`Lens::film_point`] answers: light tracing is left out for a lens that
-    /// cannot land light paths on its film.
-    fn lands_light(&self) -> bool;
+    /// The inverse of [`Lens::ray`] for light arriving at the lens: where on the film light
+    /// entering at `entry` from unit direction `dir` (pointing away from the lens, towards
+    /// where the light comes from) lands, with what a light path there estimates
+    /// ([`Landing`]). `None` when the lens does not pass it to the film, or the camera's own
+    /// rays could not sample it. Light tracing ([`crate::render::light_trace`]) lands its
+    /// paths with it.
+    fn film_point(&self, camera: &Camera, entry: Vec2, dir: Vec3) -> Option<Landing>;
+
+    /// The fraction of light paths from world point `from` whose entry positions (of
+    /// uniform numbers) reach the film: 1 for a thin lens, less for a real lens's front
+    /// element, which is larger than the beam it passes. Light tracing takes that many
+    /// times more paths so the film gets as many.
+    fn entry_yield(&self, camera: &Camera, from: Vec3) -> f32;
+
+    /// Whether film images depart from the pinhole projection [`Camera::project`] (a real
+    /// lens's distortion and pupil): footprints projected that way are then estimates, and
+    /// nothing may be left out because of them.
+    fn distorts(&self) -> bool;
 
     /// The weight under `filter` of a sample that crossed the lens at `lens`.
     fn weight(&self, filter: LensFilter, lens: Vec2) -> f32;
@@ -152,16 +168,24 @@ impl Lens for CameraLens {
         dispatch!(self, l => l.focus_point(camera, px, py))
     }
 
-    fn lens_origin(&self, camera: &Camera, lens: Vec2) -> Vec3 {
-        dispatch!(self, l => l.lens_origin(camera, lens))
+    fn entry_point(&self, u: Vec2) -> Vec2 {
+        dispatch!(self, l => l.entry_point(u))
     }
 
-    fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)> {
-        dispatch!(self, l => l.film_point(camera, lens, dir))
+    fn entry_origin(&self, camera: &Camera, entry: Vec2) -> Vec3 {
+        dispatch!(self, l => l.entry_origin(camera, entry))
     }
 
-    fn lands_light(&self) -> bool {
-        dispatch!(self, l => l.lands_light())
+    fn film_point(&self, camera: &Camera, entry: Vec2, dir: Vec3) -> Option<Landing> {
+        dispatch!(self, l => l.film_point(camera, entry, dir))
+    }
+
+    fn entry_yield(&self, camera: &Camera, from: Vec3) -> f32 {
+        dispatch!(self, l => l.entry_yield(camera, from))
+    }
+
+    fn distorts(&self) -> bool {
+        dispatch!(self, l => l.distorts())
     }
 
     #[inline]
@@ -345,7 +369,11 @@ impl Lens for ThinLens {
         camera.eye + camera.film_dir(px, py) * self.focus_distance
     }
 
-    fn lens_origin(&self, camera: &Camera, lens: Vec2) -> Vec3 {
+    fn entry_point(&self, u: Vec2) -> Vec2 {
+        self.lens_point(u)
+    }
+
+    fn entry_origin(&self, camera: &Camera, lens: Vec2) -> Vec3 {
         camera.eye + (camera.right * lens.x + camera.up * lens.y) * self.aperture_radius
     }
 
@@ -355,7 +383,7 @@ impl Lens for ThinLens {
     /// position. Film positions map to the plane at unit distance with pixels of side
     /// `s = 2 tan(vfov / 2) / height`, which a ray at angle theta to the axis sees as
     /// `s^2 cos^3 theta` steradians: `c^3 s^2`.
-    fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)> {
+    fn film_point(&self, camera: &Camera, lens: Vec2, dir: Vec3) -> Option<Landing> {
         let c = dir.dot(camera.forward);
         if c.is_nan() || c <= 0.0 {
             return None;
@@ -369,15 +397,19 @@ impl Lens for ThinLens {
         let film = Vec2::new((sx + 1.0) * 0.5 * w, (1.0 - sy) * 0.5 * h);
         let s = 2.0 * tan / h;
         let per_sr = 1.0 / (c * c * c * s * s);
-        (film.is_finite() && per_sr.is_finite()).then_some((film, per_sr))
+        (film.is_finite() && per_sr.is_finite()).then_some(Landing { film, per_sr, lens })
+    }
+
+    fn entry_yield(&self, _camera: &Camera, _from: Vec3) -> f32 {
+        1.0
+    }
+
+    fn distorts(&self) -> bool {
+        false
     }
 
     /// The filter's weight at the sample's radius on the unstretched aperture.
     #[inline]
-    fn lands_light(&self) -> bool {
-        true
-    }
-
     fn weight(&self, filter: LensFilter, lens: Vec2) -> f32 {
         filter.weight(lens, self.aperture.anamorphic)
     }
@@ -415,6 +447,22 @@ impl Lens for ThinLens {
     fn aperture_radius(&self) -> f32 {
         self.aperture_radius
     }
+}
+
+/// Where light arriving at a lens lands on the film ([`Lens::film_point`]), and what a light
+/// path there estimates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Landing {
+    /// Film position, pixels.
+    pub film: Vec2,
+    /// The pixel measure per unit of the arriving light's radiance and solid angle: for a
+    /// light path that entered at an entry position of uniform density and came from a
+    /// direction of density `p` (per steradian), radiance `L` adds `L per_sr / p` to a pixel
+    /// whose filter has unit density at `film`. For a thin lens it is the film area (square
+    /// pixels) per steradian of the direction.
+    pub per_sr: f32,
+    /// The camera's lens position of the same ray, which the lens filter weighs.
+    pub lens: Vec2,
 }
 
 /// How a scene point's film image moves with the lens position: seen from lens position `l`
@@ -586,8 +634,8 @@ mod tests {
                     (2.0 * shift.abs() - camera.coc_px(depth)).abs() < 1e-3 * (1.0 + shift.abs())
                 );
                 for lens in [Vec2::new(0.6, -0.3), Vec2::new(-0.2, 0.9)] {
-                    let dir = (point - camera.lens_origin(lens)).normalize();
-                    let (film, _) = camera.film_point(lens, dir).unwrap();
+                    let dir = (point - camera.entry_origin(lens)).normalize();
+                    let film = camera.film_point(lens, dir).unwrap().film;
                     let want = Vec2::new(px, py) + shift * Vec2::new(lens.x, -lens.y);
                     assert!((film - want).length() < 5e-3, "{focus:?}: {film} vs {want}");
                 }
@@ -634,8 +682,9 @@ mod tests {
             ] {
                 let lens = Vec2::new(lx, ly);
                 let ray = camera.lens_ray(px, py, lens);
-                assert!((ray.origin - camera.lens_origin(lens)).length() < 1e-6);
-                let (film, per_sr) = camera.film_point(lens, ray.dir).unwrap();
+                assert!((ray.origin - camera.entry_origin(lens)).length() < 1e-6);
+                let crate::camera::Landing { film, per_sr, .. } =
+                    camera.film_point(lens, ray.dir).unwrap();
                 assert!(
                     (film - Vec2::new(px, py)).length() < 2e-3,
                     "{focus:?}: {film} for ({px}, {py})"

@@ -17,7 +17,7 @@ use glam::{Vec2, Vec3};
 
 pub use aperture::{ApertureShape, LensFilter};
 pub use footprint::BoxImage;
-pub use lens::{CameraLens, Lens, Photographic, Reprojection, ThinLens};
+pub use lens::{CameraLens, Landing, Lens, Photographic, Reprojection, ThinLens};
 pub use prescription::{LensFileError, Prescription};
 pub use real_lens::{RealLens, RealLensSpec};
 
@@ -493,15 +493,16 @@ impl Camera {
         self.lens.rays16(self, film, lens, origin, dir, weight);
     }
 
-    /// Where the rays of lens position `lens` ([`Lens::lens_point`]) leave the lens.
-    pub fn lens_origin(&self, lens: Vec2) -> Vec3 {
-        self.lens.lens_origin(self, lens)
+    /// Where light entering the lens at entry position `entry` ([`Lens::entry_point`])
+    /// crosses into it (for a thin lens, where the rays of that lens position leave it).
+    pub fn entry_origin(&self, entry: Vec2) -> Vec3 {
+        self.lens.entry_origin(self, entry)
     }
 
-    /// The film position (pixels) whose ray from lens position `lens` leaves along unit `dir`,
-    /// with the film area in square pixels per steradian of `dir` there ([`Lens::film_point`]).
-    pub fn film_point(&self, lens: Vec2, dir: Vec3) -> Option<(Vec2, f32)> {
-        self.lens.film_point(self, lens, dir)
+    /// Where light entering at `entry` from unit direction `dir` lands on the film, and what
+    /// a light path there estimates ([`Lens::film_point`]).
+    pub fn film_point(&self, entry: Vec2, dir: Vec3) -> Option<Landing> {
+        self.lens.film_point(self, entry, dir)
     }
 
     /// Depth along the view axis of the point at parameter `t` of `ray` (unit direction).

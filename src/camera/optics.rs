@@ -7,7 +7,7 @@
 //! Lens space, millimetres, f64: the optical axis is z, the film is the plane z = 0 and the
 //! scene lies towards +z.
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 
 use super::prescription::Prescription;
 
@@ -187,6 +187,74 @@ impl Optics {
             return None;
         }
         Some(o.z - o.y / d.y * d.z)
+    }
+}
+
+/// The front surface's clear aperture as a surface light enters through: the part of its
+/// sphere (or plane) within its semi-aperture, on the vertex's side of the centre, which
+/// [`Optics::trace_from_scene`] accepts. Light tracing samples it uniformly by area.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrontCap {
+    surface: Surface,
+    /// cos of the cap's half angle seen from the sphere's centre (1 for a plane).
+    cos_alpha: f64,
+    /// Area, mm^2.
+    pub area: f64,
+}
+
+impl FrontCap {
+    /// The cap of `optics`' front surface.
+    pub fn of(optics: &Optics) -> Self {
+        let surface = optics.surfaces[0];
+        let (a, r) = (surface.semi_aperture, surface.radius.abs());
+        if surface.radius == 0.0 {
+            let area = std::f64::consts::PI * a * a;
+            return Self {
+                surface,
+                cos_alpha: 1.0,
+                area,
+            };
+        }
+        // A semi-aperture beyond the radius leaves the whole hemisphere.
+        let sin = (a / r).min(1.0);
+        let cos_alpha = (1.0 - sin * sin).sqrt();
+        Self {
+            surface,
+            cos_alpha,
+            area: std::f64::consts::TAU * r * r * (1.0 - cos_alpha),
+        }
+    }
+
+    /// The point of uniform numbers `u` in [0, 1]^2 (uniform by area: on a sphere the axial
+    /// coordinate is uniform, Archimedes' hat-box theorem) and the unit normal there facing
+    /// the scene (+z).
+    pub fn point(&self, u: DVec2) -> (DVec3, DVec3) {
+        let s = &self.surface;
+        let azimuth = std::f64::consts::TAU * u.y;
+        if s.radius == 0.0 {
+            let rho = s.semi_aperture * u.x.sqrt();
+            let p = DVec3::new(rho * azimuth.cos(), rho * azimuth.sin(), s.z);
+            return (p, DVec3::Z);
+        }
+        let cos = 1.0 - u.x * (1.0 - self.cos_alpha);
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let r = s.radius.abs();
+        // Convex towards the scene (radius > 0): the cap bulges to +z around a centre behind
+        // the vertex; concave: it dips to -z around a centre in front.
+        let sign = s.radius.signum();
+        let centre_z = s.z - s.radius;
+        let n = DVec3::new(sin * azimuth.cos(), sin * azimuth.sin(), sign * cos);
+        let p = DVec3::new(r * n.x, r * n.y, centre_z + r * n.z);
+        let facing = if sign > 0.0 { n } else { -n };
+        (p, facing)
+    }
+
+    /// Whether a ray arriving along `d` (towards the lens) from `start` first meets the
+    /// front surface `distance` along it, at the cap point it was aimed at (rays can graze a
+    /// curved cap and meet it earlier elsewhere).
+    pub fn first_hit_at(&self, start: DVec3, d: DVec3, distance: f64) -> bool {
+        intersect(&self.surface, start, d)
+            .is_some_and(|(t, _)| (t - distance).abs() < 1e-6 * distance.max(1.0))
     }
 }
 

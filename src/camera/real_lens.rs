@@ -23,17 +23,25 @@
 //!   the chords of the table stay above them. Nearer than the table it grows with inverse
 //!   depth from the last entry.
 //!
+//! - **Light tracing.** Light paths enter through the front element's clear aperture,
+//!   sampled uniformly by area ([`FrontCap`]), and are traced through the lens to the film
+//!   ([`Lens::film_point`]); by conservation of étendue their contribution is the camera's
+//!   own measure, so the two estimators meet exactly. Paths the camera's pupil bounds could
+//!   not sample are dropped with them, which keeps the split between the two exact. The front
+//!   element is larger than the beam any one point sends through, so light tracing takes
+//!   more paths by [`Lens::entry_yield`].
+//!
 //! Lens positions ([`Lens::lens_point`]) are points of [-1, 1]^2, mapped onto each film
-//! point's pupil bound. Light tracing ([`Lens::film_point`]) and sample reuse
-//! ([`Lens::reprojection`]) have no real-lens form yet: the renderer leaves them out.
+//! point's pupil bound. Sample reuse ([`Lens::reprojection`]) has no real-lens form yet:
+//! the renderer leaves it out.
 
 use std::sync::Arc;
 
 use glam::{DVec2, DVec3, Vec2, Vec3};
 
 use super::aperture::LensFilter;
-use super::lens::{Lens, Reprojection};
-use super::optics::{self, LensRay, Optics};
+use super::lens::{Landing, Lens, Reprojection};
+use super::optics::{self, FrontCap, LensRay, Optics};
 use super::prescription::Prescription;
 use super::{Camera, CameraError, check};
 use crate::embree::{LANES, Ray};
@@ -85,6 +93,8 @@ pub struct RealLens {
     pub name: String,
     /// The surfaces, placed for the focus distance.
     optics: Optics,
+    /// The front element's clear aperture, where light paths enter.
+    cap: FrontCap,
     /// Effective focal length (mm) and working f-number, the lens's own.
     pub focal_length_mm: f32,
     /// See `focal_length_mm`.
@@ -179,6 +189,7 @@ impl RealLens {
             pitch,
             size,
             half_diagonal: 0.5 * pitch * size.0.hypot(size.1),
+            cap: FrontCap::of(&optics),
             optics,
             pupil: Vec::new(),
             centre_irradiance: 1.0,
@@ -463,6 +474,57 @@ impl RealLens {
         Ray::new(origin, axes(d).normalize())
     }
 
+    /// Lens space (mm) of world point `p` for `camera`: [`RealLens::world_ray`]'s inverse.
+    fn lens_point_of(&self, camera: &Camera, p: Vec3) -> DVec3 {
+        let v = p - camera.eye;
+        let along = |a: Vec3| f64::from(v.dot(a)) * 1e3;
+        DVec3::new(
+            along(camera.right),
+            along(camera.up),
+            along(camera.forward) + self.eye_z,
+        )
+    }
+
+    /// Light entering at the front cap's point of uniform numbers `u` from unit direction
+    /// `out` (lens space, pointing back towards the light): the film point (mm) it lands on,
+    /// the cosine between `out` and the cap's normal there, and the camera's lens position
+    /// of the same ray. `None` when the lens blocks it, or the camera's rays from that film
+    /// point (aimed within its exit pupil bound) cannot take that path.
+    fn land(&self, u: DVec2, out: DVec3) -> Option<(DVec2, f64, Vec2)> {
+        if out.z <= 0.0 {
+            return None;
+        }
+        let (q, normal) = self.cap.point(u);
+        let cos = normal.dot(out);
+        if cos <= 0.0 {
+            return None;
+        }
+        // Start 1 mm towards the light, and only if the cap is where it enters first.
+        let start = q + out;
+        if !self.cap.first_hit_at(start, -out, 1.0) {
+            return None;
+        }
+        let (o, d) = self.optics.trace_from_scene((start, -out))?;
+        if d.z >= 0.0 {
+            return None;
+        }
+        let f = (o + d * (-o.z / d.z)).truncate();
+        // The camera's ray from f runs back along the light: where it crosses the rear
+        // plane, in the frame of f's pupil bound (rotated onto +x).
+        let rear = f - d.truncate() * (self.optics.rear_z() / -d.z);
+        let r = f.length();
+        let (c, s) = if r > 0.0 {
+            (f.x / r, f.y / r)
+        } else {
+            (1.0, 0.0)
+        };
+        let local = DVec2::new(c * rear.x + s * rear.y, -s * rear.x + c * rear.y);
+        let b = self.bounds_at(r);
+        let t = (local - b.lo) / (b.hi - b.lo);
+        let inside = t.cmpge(DVec2::ZERO).all() && t.cmple(DVec2::ONE).all();
+        (inside && f.is_finite()).then(|| (f, cos, (t * 2.0 - 1.0).as_vec2()))
+    }
+
     /// The ray of film position (px, py) and lens position `lens` with its weight (0: lost).
     fn weighted_ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> (Ray, f32) {
         let u = (lens.as_dvec2() * 0.5 + 0.5).clamp(DVec2::ZERO, DVec2::ONE);
@@ -542,16 +604,58 @@ impl Lens for RealLens {
         ray.origin + ray.dir * (depth / along)
     }
 
-    fn lens_origin(&self, camera: &Camera, _lens: Vec2) -> Vec3 {
-        camera.eye
+    /// Uniform numbers of the front cap (by area).
+    fn entry_point(&self, u: Vec2) -> Vec2 {
+        u.clamp(Vec2::ZERO, Vec2::ONE)
     }
 
-    fn film_point(&self, _camera: &Camera, _lens: Vec2, _dir: Vec3) -> Option<(Vec2, f32)> {
-        None
+    fn entry_origin(&self, camera: &Camera, entry: Vec2) -> Vec3 {
+        let (q, _) = self.cap.point(entry.as_dvec2());
+        self.world_ray(camera, (q, DVec3::Z)).origin
     }
 
-    fn lands_light(&self) -> bool {
-        false
+    /// Light through the front cap (area `A`) lands where the traced lens takes it. Its
+    /// étendue there is `A cos(n, dir) dw` per unit of entry numbers and of solid angle, which
+    /// a lossless lens carries unchanged to the film, where the camera measures
+    /// `cos(theta) dw dA_film / (C0 pitch^2)` per square pixel (C0: the centre's
+    /// irradiance; [`RealLens::trace`]'s weight is that measure), so
+    /// `per_sr = A cos / (C0 pitch^2)`.
+    fn film_point(&self, camera: &Camera, entry: Vec2, dir: Vec3) -> Option<Landing> {
+        let axes = |a: Vec3| f64::from(dir.dot(a));
+        let out = DVec3::new(axes(camera.right), axes(camera.up), axes(camera.forward));
+        let (f, cos, lens) = self.land(entry.as_dvec2(), out.try_normalize()?)?;
+        let film = Vec2::new(
+            (-f.x / self.pitch + 0.5 * self.size.0) as f32,
+            (f.y / self.pitch + 0.5 * self.size.1) as f32,
+        );
+        let per_sr =
+            (self.cap.area * cos / (self.centre_irradiance * self.pitch * self.pitch)) as f32;
+        (film.is_finite() && per_sr.is_finite() && per_sr > 0.0).then_some(Landing {
+            film,
+            per_sr,
+            lens,
+        })
+    }
+
+    /// Over a 16 x 16 grid of the front cap, the share of rays from `from` that land.
+    fn entry_yield(&self, camera: &Camera, from: Vec3) -> f32 {
+        const N: usize = 16;
+        let p = self.lens_point_of(camera, from);
+        let landed = (0..N * N)
+            .filter(|k| {
+                let u = (DVec2::new((k % N) as f64, (k / N) as f64) + 0.5) / N as f64;
+                let (q, _) = self.cap.point(u);
+                (p - q)
+                    .try_normalize()
+                    .and_then(|out| self.land(u, out))
+                    .is_some()
+            })
+            .count();
+        landed as f32 / (N * N) as f32
+    }
+
+    fn distorts(&self) -> bool {
+        true
     }
 
     fn weight(&self, filter: LensFilter, lens: Vec2) -> f32 {

@@ -5,7 +5,7 @@
 //! its projected bounds) covers at most a quarter of its blurred footprint (that box grown by
 //! half the largest CoC over its depths and the pixel filter's reach): defocused lamps and
 //! sub-pixel ones. Each takes `spp` paths per pixel of its footprint in the frame, so its disc
-//! converges as a dense render's pixels do; smallest footprints first, within a budget of half
+//! converges as a dense render's pixels do; smallest footprints first, within a budget (of landing paths) of half
 //! the samples of a dense render (what is left over stays with the camera). Emitters the camera
 //! sees large and sharp are better found by its own rays.
 //!
@@ -27,6 +27,9 @@ use crate::settings::{Integrator, Mode, RenderSettings};
 pub(super) const SALT: u64 = 0x6c69_6768_745f_7472;
 /// The most light paths of one primitive.
 const MAX_PATHS: u32 = 1 << 24;
+/// The least share of landing light paths assumed when choosing how many to trace (a lamp
+/// whose centre sends nothing through may still send light from its edges).
+const MIN_YIELD: f32 = 1.0 / 16.0;
 /// A sharp image at most this fraction of the blurred footprint is light-traced.
 const SHARP_FRACTION: f32 = 0.25;
 
@@ -62,13 +65,15 @@ impl LightTraced {
     /// `settings` (none unless the path tracer renders with
     /// [`crate::render::PathLimits::light_tracing`]); see the module documentation.
     pub fn choose(world: &World, camera: &Camera, settings: &RenderSettings) -> Self {
+        let pinhole = settings.mode == Mode::Pinhole;
+        // A pinhole render of a real lens looks along its chief rays, which light paths
+        // through its front element do not follow.
         if settings.integrator != Integrator::Path
             || !settings.path.light_tracing
-            || !camera.lens.lands_light()
+            || (pinhole && camera.lens.distorts())
         {
             return Self::none();
         }
-        let pinhole = settings.mode == Mode::Pinhole;
         let spp = if pinhole { settings.aa } else { settings.spp };
         let filter_reach = 0.5 * settings.pixel_filter.width;
         let (w, h) = (camera.width as f32, camera.height as f32);
@@ -88,25 +93,38 @@ impl LightTraced {
             if in_frame <= 0.0 {
                 continue;
             }
-            let paths = (spp as f64 * f64::from(in_frame))
+            // Paths the lens blocks land nowhere: take more so as many land.
+            let landing = if pinhole {
+                1.0
+            } else {
+                camera
+                    .lens
+                    .entry_yield(camera, 0.5 * (lo + hi))
+                    .max(MIN_YIELD)
+            };
+            let paths = (spp as f64 * f64::from(in_frame) / f64::from(landing))
                 .ceil()
                 .min(f64::from(MAX_PATHS));
-            candidates.push(Traced {
+            let t = Traced {
                 geometry,
                 prim,
                 paths: paths as u32,
                 reach,
-            });
+            };
+            candidates.push((t, landing));
         }
-        candidates.sort_by_key(|t| (t.paths, t.geometry, t.prim));
+        candidates.sort_by_key(|(t, _)| (t.paths, t.geometry, t.prim));
+        // The budget counts paths that land: one the lens blocks costs a fraction of a
+        // camera sample (no ray leaves the lens).
         let budget = 0.5 * f64::from(w) * f64::from(h) * spp as f64;
         let mut total = 0.0f64;
         let mut traced: Vec<Traced> = candidates
             .into_iter()
-            .take_while(|t| {
-                total += f64::from(t.paths);
+            .take_while(|(t, landing)| {
+                total += f64::from(t.paths) * f64::from(*landing);
                 total <= budget
             })
+            .map(|(t, _)| t)
             .collect();
         traced.sort_by_key(|t| (t.geometry, t.prim));
         let set = traced.iter().map(|t| (t.geometry, t.prim)).collect();

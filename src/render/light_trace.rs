@@ -5,9 +5,9 @@
 //! a pixel inside its bokeh disc sees it through a fraction (sharp area / disc area) of the
 //! aperture, so at 16 samples a 24 px disc of a sub-pixel lamp is a few speckles, and adaptive
 //! sites that all miss it lose the disc. From the light's side every path lands in the disc:
-//! pick a point on the aperture, a direction from it towards the lamp, test that nothing is in
-//! between, and the lens says where on the film that ray belongs
-//! ([`crate::camera::Lens::film_point`]).
+//! pick a point where light enters the lens (the thin lens's aperture, a real lens's front
+//! element), a direction from it towards the lamp, test that nothing is in between, and the
+//! lens says where on the film that ray belongs ([`crate::camera::Lens::film_point`]).
 //!
 //! Which primitives, and how many paths each takes: [`super::light_choice`].
 //!
@@ -22,8 +22,9 @@
 //! ([`crate::filter::FilterDensity`]). For one lens position the film area per steradian of
 //! ray direction is the lens's `per_sr`, so a direction `w` drawn towards the lamp with
 //! density `p(w)` contributes `f(x - c_p) L_e V per_sr / p(w)` to every pixel `p` whose filter
-//! reaches `x`; `N` paths each add a `1 / N` share. A non-box lens filter weighs each path by
-//! its lens weight over the weights' mean, as the camera's weighted mean does.
+//! reaches `x`; `N` paths each add a `1 / N` share. (A real lens's `per_sr` measures the same
+//! from its front element, [`crate::camera::Landing`].) A non-box lens filter weighs each path
+//! by its lens weight over the weights' mean, as the camera's weighted mean does.
 //!
 //! **Deterministic.** Paths are numbered per primitive (Owen-scrambled Sobol points keyed by
 //! it), traced in parallel in fixed blocks and splatted in block order: the image is the same
@@ -37,7 +38,7 @@ use super::region::Region;
 use super::site::SiteShader;
 use super::trace::{Tally, trace_shadows};
 use super::{Progress, RenderError, check_cancelled};
-use crate::camera::{Lens, LensFilter};
+use crate::camera::{Landing, Lens, LensFilter};
 use crate::embree::{LANES, RayHint, ShadowPacket16};
 use crate::filter::FilterDensity;
 use crate::limits::{MemoryError, try_with_capacity};
@@ -71,11 +72,14 @@ pub fn trace(
     }
     let w = shader.camera.width as usize;
     // Work items (primitive, first path): only primitives whose light can reach the region.
+    // A lens that distorts lands light away from the pinhole footprints: trace it all.
+    let exact = !shader.camera.lens.distorts();
     let overlaps = |t: &Traced| {
-        t.reach[0] < region.x1 as f32
-            && t.reach[2] > region.x0 as f32
-            && t.reach[1] < region.y1 as f32
-            && t.reach[3] > region.y0 as f32
+        !exact
+            || t.reach[0] < region.x1 as f32
+                && t.reach[2] > region.x0 as f32
+                && t.reach[1] < region.y1 as f32
+                && t.reach[3] > region.y0 as f32
     };
     let items: Vec<(usize, u32)> = (traced.traced.iter().enumerate())
         .filter(|(_, t)| overlaps(t))
@@ -151,17 +155,17 @@ fn trace_block(
         let mut pending = [None; LANES];
         let mut lit = 0u32;
         for (lane, j) in (start..end.min(start + LANES as u32)).enumerate() {
-            let lens = if pinhole {
+            let entry = if pinhole {
                 Vec2::ZERO
             } else {
-                camera.lens.lens_point(sampler.get(j))
+                camera.lens.entry_point(sampler.get(j))
             };
-            let o = camera.lens_origin(lens);
+            let o = camera.entry_origin(entry);
             let Some(es) = sample_primitive(world, t.geometry, t.prim, o, sampler.get_pixel(j))
             else {
                 continue;
             };
-            let Some((film, per_sr)) = camera.film_point(lens, es.dir) else {
+            let Some(Landing { film, per_sr, lens }) = camera.film_point(entry, es.dir) else {
                 continue;
             };
             let lens_weight = if filter == LensFilter::Box {
