@@ -457,17 +457,28 @@ impl RayPacket16 {
         origin: &[[f32; LANES]; 3],
         dir: &[[f32; LANES]; 3],
     ) {
+        let wanted = if active >= LANES {
+            u32::MAX
+        } else {
+            (1u32 << active) - 1
+        };
+        self.set_lanes_masked(wanted, origin, dir);
+    }
+
+    /// [`RayPacket16::set_lanes`] activating the lanes whose bit is set in `wanted` (lane
+    /// `i` is bit `i`): rays a lens blocked need not be traced.
+    pub fn set_lanes_masked(
+        &mut self,
+        wanted: u32,
+        origin: &[[f32; LANES]; 3],
+        dir: &[[f32; LANES]; 3],
+    ) {
         let hit = &mut self.rayhit.hit;
         hit.geomID = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
         hit.primID = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
         for level in hit.instID.iter_mut() {
             *level = [sys::RTC_INVALID_GEOMETRY_ID; LANES];
         }
-        let wanted = if active >= LANES {
-            u32::MAX
-        } else {
-            (1u32 << active) - 1
-        };
         let tfar = [f32::INFINITY; LANES];
         self.valid = fill_segments(&mut self.rayhit.ray, wanted, origin, dir, &tfar);
     }

@@ -13,6 +13,8 @@ pub struct Estimate {
     sum: Vec3,
     /// Weight of the samples whose camera ray hit geometry (for the coverage).
     hit_w: f32,
+    /// Weight of the samples the lens blocked (no light; not part of the coverage).
+    blocked_w: f32,
     w: f32,
     w2: f32,
     /// Weighted first and second moments of luminance (f64: 65536 samples of bright
@@ -54,6 +56,15 @@ impl Estimate {
         self.peak = self.peak.max(y as f32);
     }
 
+    /// Adds a sample that a real lens blocked (its vignetting), with lens-filter weight `w`:
+    /// it brings no light, and the coverage is that of the samples that passed.
+    pub fn add_blocked(&mut self, w: f32) {
+        self.n += 1;
+        self.w += w;
+        self.w2 += w * w;
+        self.blocked_w += w;
+    }
+
     /// The brightest sample's luminance (0 before any sample).
     pub fn peak(&self) -> f32 {
         self.peak
@@ -83,8 +94,9 @@ impl Estimate {
 
     /// The weighted fraction of samples that hit geometry (0 when nothing was added).
     pub fn coverage(&self) -> f32 {
-        if self.w > 0.0 {
-            (self.hit_w / self.w).min(1.0)
+        let seen = self.w - self.blocked_w;
+        if seen > 0.0 {
+            (self.hit_w / seen).min(1.0)
         } else {
             0.0
         }
@@ -161,6 +173,23 @@ mod tests {
         }
         assert_eq!(constant.std_error(), 0.0);
         assert_eq!(constant.std_error_code(), 0.0);
+    }
+
+    /// Samples a real lens blocked darken the mean (vignetting) but leave the coverage to
+    /// the samples that passed.
+    #[test]
+    fn blocked_samples_darken_but_do_not_uncover() {
+        let mut e = Estimate::default();
+        for k in 0..8 {
+            e.add(Vec3::ONE, 1.0, k % 2 == 0);
+            e.add_blocked(1.0);
+        }
+        assert_eq!(e.n, 16);
+        assert!((e.mean() - Vec3::splat(0.5)).length() < 1e-6);
+        assert!((e.coverage() - 0.5).abs() < 1e-6);
+        let mut all = Estimate::default();
+        all.add_blocked(1.0);
+        assert_eq!((all.mean(), all.coverage()), (Vec3::ZERO, 0.0));
     }
 
     #[test]

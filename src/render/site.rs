@@ -236,7 +236,11 @@ impl SiteShader<'_> {
             &mut dir,
             &mut lens_weight,
         );
-        packet.set_lanes(b.len, &origin, &dir);
+        // Rays the lens blocked (weight 0: a real lens's vignetting) are not traced.
+        let wanted = (0..b.len)
+            .filter(|&l| lens_weight[l] > 0.0)
+            .fold(0u32, |m, l| m | 1 << l);
+        packet.set_lanes_masked(wanted, &origin, &dir);
         let mut radiance = [Vec3::ZERO; LANES];
         let mut first = path::FirstHits::default();
         match self.settings.integrator {
@@ -278,7 +282,12 @@ impl SiteShader<'_> {
                 let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
                 self.camera.lens.weight(filter, lens)
             };
-            // A real lens's ray carries its irradiance (vignetting; 0 when blocked).
+            // A real lens's ray carries its irradiance (vignetting); a blocked one brings
+            // no light and says nothing of the coverage.
+            if wanted & (1 << lane) == 0 {
+                estimates[b.pixel[lane]].add_blocked(w);
+                continue;
+            }
             estimates[b.pixel[lane]].add(radiance[lane] * (scale * lens_weight[lane]), w, hit);
         }
         if let (Some(records), Some(re)) = (records, self.camera.reprojection()) {
