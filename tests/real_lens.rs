@@ -258,14 +258,27 @@ fn the_command_line_renders_through_a_lens() {
             .output()
             .unwrap()
     };
-    let real = render(&["--lens", lens.to_str().unwrap()], "real.png");
+    let real = render(&["--lens", lens.to_str().unwrap(), "--json"], "real.png");
     assert!(
         real.status.success(),
         "{}",
         String::from_utf8_lossy(&real.stderr)
     );
-    let thin = render(&["--f-number", "2", "--focal-length", "50"], "thin.png");
+    // --json names the lens and its own numbers as focused.
+    let json: serde_json::Value = serde_json::from_slice(&real.stdout).unwrap();
+    let l = &json["lens"];
+    assert!(l["name"].as_str().unwrap().contains("Gauss"), "{l}");
+    let focal = l["focal_length_mm"].as_f64().unwrap();
+    assert!((45.0..56.0).contains(&focal), "{l}");
+    assert!((l["f_number"].as_f64().unwrap() - 2.0).abs() < 0.2, "{l}");
+    assert!(l["vfov_deg"].as_f64().unwrap() > 20.0, "{l}");
+    let thin = render(
+        &["--f-number", "2", "--focal-length", "50", "--json"],
+        "thin.png",
+    );
     assert!(thin.status.success());
+    let json: serde_json::Value = serde_json::from_slice(&thin.stdout).unwrap();
+    assert!(json["lens"].is_null());
     let luma = |name: &str| {
         let img = image::open(dir.join(name)).unwrap().to_luma32f();
         let mean = |x0: u32, y0: u32| {

@@ -39,4 +39,4 @@ pub use run::{
 };
 pub use select::{FrameRequest, FrameSelectError, select_frames};
 pub use shard::{Shard, ShardError, ShardSource};
-pub use summary::JobSummary;
+pub use summary::{JobSummary, LensSummary};

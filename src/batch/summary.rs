@@ -100,6 +100,7 @@ pub struct JobSummary {
     pub mrays_per_s: f64,
     pub aperture_radius: f64,
     pub focus_distance: f64,
+    pub lens: Option<LensSummary>,
     pub threads: usize,
     pub process_threads: Option<usize>,
     pub embree: EmbreeSummary,
@@ -107,6 +108,35 @@ pub struct JobSummary {
     /// The render's statistics as measured (not in the JSON: their fields are above).
     #[serde(skip)]
     pub stats: RenderStats,
+}
+
+/// A real lens's own numbers, as focused for the render (`lens` in the JSON; null for a
+/// thin lens).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LensSummary {
+    /// The prescription's name (its file's first comment).
+    pub name: String,
+    /// Effective focal length at the focus distance, mm.
+    pub focal_length_mm: f64,
+    /// Working f-number (focal length over the entrance pupil's diameter).
+    pub f_number: f64,
+    /// Vertical field of view at the focus distance, degrees (it breathes with focus).
+    pub vfov_deg: f64,
+}
+
+impl LensSummary {
+    /// The summary of `camera`'s lens, if it is a real one.
+    pub fn of(camera: &Camera) -> Option<Self> {
+        match &camera.lens {
+            crate::camera::CameraLens::Real(l) => Some(Self {
+                name: l.name.clone(),
+                focal_length_mm: json_f32(l.focal_length_mm),
+                f_number: json_f32(l.f_number),
+                vfov_deg: json_f32(2.0 * l.tan_half_vfov.atan().to_degrees()),
+            }),
+            _ => None,
+        }
+    }
 }
 
 /// What a [`JobSummary`] is made of besides the render's settings, camera and stats.
@@ -188,6 +218,7 @@ impl JobSummary {
             mrays_per_s: stats.mrays_per_s(),
             aperture_radius: json_f32(camera.aperture_radius()),
             focus_distance: json_f32(camera.focus_distance()),
+            lens: LensSummary::of(camera),
             threads: facts.threads,
             process_threads: crate::limits::process_threads(),
             embree: facts.embree,
