@@ -309,6 +309,20 @@ enum DofrayStatus dofray_scene_set_focal_length_mm(struct DofrayScene *scene,
                                                    float focal_length_mm);
 
 /**
+ * A real lens: the lens prescription file at `path` (pbrt's lens format; see `lenses/` and
+ * `docs/lenses.md`), traced element by element, replacing the scene's lens. Its focal
+ * length frames the shot; `dofray_scene_set_f_number` stops it down and
+ * `dofray_scene_set_sensor_width_mm` sizes its film. The file is read now: a missing or
+ * malformed one fails with `DOFRAY_BAD_INPUT` naming the file and line (the scene is then
+ * unchanged). NULL clears it.
+ *
+ * # Safety
+ * `scene` is NULL or a live scene used by no other thread; `path` is NULL or a
+ * NUL-terminated string.
+ */
+enum DofrayStatus dofray_scene_set_lens(struct DofrayScene *scene, const char *path);
+
+/**
  * A lens of this aperture radius in scene units (>= 0; 0: a pinhole), replacing the
  * scene's lens.
  *

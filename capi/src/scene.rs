@@ -208,6 +208,36 @@ pub unsafe extern "C" fn dofray_scene_set_focal_length_mm(
     }
 }
 
+/// A real lens: the lens prescription file at `path` (pbrt's lens format; see `lenses/` and
+/// `docs/lenses.md`), traced element by element, replacing the scene's lens. Its focal
+/// length frames the shot; `dofray_scene_set_f_number` stops it down and
+/// `dofray_scene_set_sensor_width_mm` sizes its film. The file is read now: a missing or
+/// malformed one fails with `DOFRAY_BAD_INPUT` naming the file and line (the scene is then
+/// unchanged). NULL clears it.
+///
+/// # Safety
+/// `scene` is NULL or a live scene used by no other thread; `path` is NULL or a
+/// NUL-terminated string.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dofray_scene_set_lens(
+    scene: *mut DofrayScene,
+    path: *const c_char,
+) -> DofrayStatus {
+    // SAFETY: the function's contract.
+    unsafe {
+        with_scene(scene, |s| {
+            s.overrides.real_lens = if path.is_null() {
+                None
+            } else {
+                // SAFETY: non-NULL, and the function's contract makes it a string.
+                let path = str_arg(path, "path")?;
+                Some(dofray::camera::RealLensSpec::load(Path::new(path))?)
+            };
+            Ok(())
+        })
+    }
+}
+
 /// A lens of this aperture radius in scene units (>= 0; 0: a pinhole), replacing the
 /// scene's lens.
 ///

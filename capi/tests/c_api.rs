@@ -195,7 +195,8 @@ fn smoke(shared: bool) {
     let dir = out_dir(name);
     let exe = dir.join(name);
     compile(&root().join("capi/tests/c/smoke.c"), &exe, &lib_dir, shared);
-    let text = run(&exe, &[&dir], &dir);
+    let lens = root().join("lenses/double-gauss-50mm.dat");
+    let text = run(&exe, &[&dir, &lens], &dir);
     assert!(text.contains("all checks passed"), "{text}");
     for file in ["smoke.png", "smoke.exr", "sphere.png"] {
         assert!(dir.join(file).is_file(), "{file} was not written");

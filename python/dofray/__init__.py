@@ -58,6 +58,7 @@ def render(
     autofocus: Optional[Tuple[int, int]] = None,
     aperture_radius: Optional[float] = None,
     blades: Optional[int] = None,
+    lens: Optional[Union[str, "os.PathLike[str]"]] = None,
     spp: Optional[int] = None,
     aa: Optional[int] = None,
     mode: Optional[str] = None,
@@ -81,7 +82,9 @@ def render(
     - ``width``, ``height``: image size in pixels (one alone keeps the aspect);
     - ``f_number``, ``focal_length`` (mm), ``sensor_width`` (mm): a photographic lens;
       ``aperture_radius``: a lens of this radius in scene units; ``blades``: aperture
-      blades (0: circular);
+      blades (0: circular); ``lens``: a real lens, the path of a lens prescription file
+      traced element by element (see ``lenses/`` and ``docs/lenses.md``; ``f_number``
+      stops it down and ``sensor_width`` sizes its film);
     - ``focus_distance``: along the view axis (``float("inf")``: infinity);
       ``autofocus``: focus on the surface seen through pixel ``(x, y)``;
     - ``mode``: ``"adaptive"`` (default), ``"dense"`` or ``"pinhole"``; ``spp``: samples
@@ -115,6 +118,7 @@ def render(
         autofocus=autofocus,
         aperture_radius=aperture_radius,
         blades=blades,
+        lens=None if lens is None else os.fspath(lens),
         spp=spp,
         aa=aa,
         mode=mode,

@@ -41,6 +41,7 @@ def render(
     autofocus: Optional[Tuple[int, int]] = ...,
     aperture_radius: Optional[float] = ...,
     blades: Optional[int] = ...,
+    lens: Optional[str] = ...,
     spp: Optional[int] = ...,
     aa: Optional[int] = ...,
     mode: Optional[str] = ...,

@@ -1,6 +1,7 @@
 //! The scene keywords of `render` and `render_jobs`: the scene overrides and render settings
 //! they ask for, each named as the parameter table names it for Python.
 
+use dofray::camera::RealLensSpec;
 use dofray::overrides::Overrides;
 use dofray::params::Param;
 use dofray::render::{Integrator, Mode, RulePatch, SettingsPatch};
@@ -23,6 +24,7 @@ pub(crate) struct SceneKeywords {
     pub(crate) autofocus: Option<(i64, i64)>,
     pub(crate) aperture_radius: Option<f32>,
     pub(crate) blades: Option<i64>,
+    pub(crate) lens: Option<std::path::PathBuf>,
     pub(crate) spp: Option<i64>,
     pub(crate) aa: Option<i64>,
     pub(crate) mode: Option<String>,
@@ -62,6 +64,7 @@ impl SceneKeywords {
                 "autofocus" => k.autofocus = item(&name, v)?,
                 "aperture_radius" => k.aperture_radius = item(&name, v)?,
                 "blades" => k.blades = item(&name, v)?,
+                "lens" => k.lens = item(&name, v)?,
                 "spp" => k.spp = item(&name, v)?,
                 "aa" => k.aa = item(&name, v)?,
                 "mode" => k.mode = item(&name, v)?,
@@ -91,6 +94,11 @@ impl SceneKeywords {
             )),
             None => None,
         };
+        // A real lens's file is read here: its faults are bad input naming file and line.
+        let real_lens = match &self.lens {
+            Some(path) => Some(RealLensSpec::load(path).map_err(|e| Failure::from_error(&e))?),
+            None => None,
+        };
         let overrides = Overrides {
             width: to_u32(Param::Width.keyword_name(), self.width)?,
             height: to_u32(Param::Height.keyword_name(), self.height)?,
@@ -101,6 +109,7 @@ impl SceneKeywords {
             autofocus,
             aperture_radius: self.aperture_radius,
             blades: to_u32(Param::Blades.keyword_name(), self.blades)?,
+            real_lens,
             ..Default::default()
         };
         let settings = SettingsPatch {

@@ -443,7 +443,7 @@ impl Render {
 #[pyfunction]
 #[pyo3(signature = (
     scene, *, width=None, height=None, f_number=None, focal_length=None, sensor_width=None,
-    focus_distance=None, autofocus=None, aperture_radius=None, blades=None, spp=None, aa=None,
+    focus_distance=None, autofocus=None, aperture_radius=None, blades=None, lens=None, spp=None, aa=None,
     mode=None, tolerance=None, seed=None, exposure=None, transparent=false, integrator=None,
     light_tracing=None, frame=None, threads=None, progress=None
 ))]
@@ -460,6 +460,7 @@ fn render(
     autofocus: Option<(i64, i64)>,
     aperture_radius: Option<f32>,
     blades: Option<i64>,
+    lens: Option<PathBuf>,
     spp: Option<i64>,
     aa: Option<i64>,
     mode: Option<&str>,
@@ -490,6 +491,7 @@ fn render(
         autofocus,
         aperture_radius,
         blades,
+        lens,
         spp,
         aa,
         mode: mode.map(str::to_owned),

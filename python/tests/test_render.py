@@ -1,6 +1,7 @@
 """Tests of the dofray Python module (run by scripts/python-test.sh)."""
 
 import _thread
+import os
 import threading
 
 import numpy as np
@@ -340,3 +341,29 @@ def test_light_tracing(tmp_path):
     assert on.stats["light_paths"] > 0 and off.stats["light_paths"] == 0
     energy = lambda r: float(r.rgba[..., :3].sum())
     assert energy(on) > 2 * energy(off)
+
+
+LENSES = os.path.join(os.path.dirname(__file__), "..", "..", "lenses")
+
+
+def test_real_lens(tmp_path):
+    # A lens prescription traced element by element: its own focal length frames the shot
+    # (the double Gauss is a 50 mm: the same framing as a thin 50 mm lens), the corners
+    # vignette, and a bad lens file is bad input naming its line.
+    lens = os.path.join(LENSES, "double-gauss-50mm.dat")
+    real = dofray.render("paper", width=96, height=64, spp=8, mode="dense", lens=lens)
+    thin = dofray.render(
+        "paper", width=96, height=64, spp=8, mode="dense", f_number=2, focal_length=50
+    )
+    assert np.isfinite(real.rgba).all()
+    centre = lambda r: float(r.rgba[24:40, 40:56, :3].mean())
+    assert abs(centre(real) / centre(thin) - 1.0) < 0.15
+    bad = tmp_path / "bad.dat"
+    bad.write_text("# bad\n10 2 1.5\n")
+    with pytest.raises(dofray.Error) as info:
+        dofray.render("paper", width=32, height=24, spp=1, lens=bad)
+    assert info.value.kind == "bad_input"
+    assert "bad.dat:2" in str(info.value)
+    # Thin-lens keywords beside a real lens are refused, naming the keyword.
+    with pytest.raises(dofray.UsageError, match="aperture_radius"):
+        dofray.render("paper", width=32, height=24, spp=1, lens=lens, aperture_radius=0.1)

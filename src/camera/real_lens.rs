@@ -58,6 +58,18 @@ pub struct RealLensSpec {
     pub sensor_width_mm: f32,
 }
 
+impl RealLensSpec {
+    /// The lens in the prescription file at `path`, wide open on a film of the default
+    /// width ([`super::DEFAULT_SENSOR_WIDTH_MM`]); errors name the file and line.
+    pub fn load(path: &std::path::Path) -> Result<Self, super::LensFileError> {
+        Ok(Self {
+            prescription: Arc::new(Prescription::load(path)?),
+            f_number: None,
+            sensor_width_mm: super::DEFAULT_SENSOR_WIDTH_MM,
+        })
+    }
+}
+
 /// Radial bins of the exit pupil bounds over the film's half diagonal.
 const PUPIL_BINS: usize = 32;
 /// Grid (per axis) over the rear element that the bounds are found with.

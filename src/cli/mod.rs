@@ -25,14 +25,9 @@ pub(crate) mod signals;
 
 /// The scene overrides the flags ask for (reading --lens's prescription).
 pub(crate) fn overrides(a: &SceneArgs) -> Result<Overrides> {
+    // The f-number and sensor width apply to it as to a scene's lens (Overrides).
     let real_lens = match &a.lens {
-        Some(path) => Some(dofray::camera::RealLensSpec {
-            prescription: std::sync::Arc::new(dofray::camera::Prescription::load(path)?),
-            f_number: a.f_number,
-            sensor_width_mm: a
-                .sensor_width
-                .unwrap_or(dofray::camera::DEFAULT_SENSOR_WIDTH_MM),
-        }),
+        Some(path) => Some(dofray::camera::RealLensSpec::load(path)?),
         None => None,
     };
     Ok(Overrides {

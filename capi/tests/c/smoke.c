@@ -128,11 +128,12 @@ static const char SPHERE[] =
     "[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 6]\nradius = 1\n";
 
 int main(int argc, char **argv) {
-    if (argc != 2) {
-        fprintf(stderr, "usage: %s OUTPUT_DIR\n", argv[0]);
+    if (argc != 3) {
+        fprintf(stderr, "usage: %s OUTPUT_DIR LENS_FILE\n", argv[0]);
         return 2;
     }
     const char *dir = argv[1];
+    const char *lens = argv[2];
     printf("dofray %s\n", dofray_version());
     CHECK(strlen(dofray_version()) > 0);
     CHECK(strcmp(dofray_status_name(DOFRAY_CANCELLED), "cancelled") == 0);
@@ -206,6 +207,36 @@ int main(int argc, char **argv) {
     CHECK(dofray_image_width(image) == 32 && dofray_image_height(image) == 24);
     dofray_image_free(image);
     image = NULL;
+
+    /* A real lens from its prescription file, stopped down; a broken file is bad input
+     * naming its line, and leaves the scene's lens as it was. */
+    CHECK(dofray_scene_reset_overrides(scene) == DOFRAY_OK);
+    CHECK(dofray_scene_set_size(scene, 48, 32) == DOFRAY_OK);
+    CHECK(dofray_scene_set_spp(scene, 4) == DOFRAY_OK);
+    CHECK(dofray_scene_set_lens(scene, lens) == DOFRAY_OK);
+    CHECK(dofray_scene_set_f_number(scene, 4.0f) == DOFRAY_OK);
+    CHECK(dofray_render(scene, device, NULL, NULL, NULL, &image) == DOFRAY_OK);
+    if (image != NULL) {
+        const float *rgba = dofray_image_rgba(image);
+        size_t centre = 16 * 48 + 24;
+        printf("real lens: centre %.3f\n", rgba[4 * centre]);
+        CHECK(rgba[4 * centre] > 0.0f && isfinite(rgba[4 * centre]));
+    }
+    dofray_image_free(image);
+    image = NULL;
+    char bad_lens[4096];
+    snprintf(bad_lens, sizeof bad_lens, "%s/bad-lens.dat", dir);
+    FILE *bad = fopen(bad_lens, "w");
+    CHECK(bad != NULL);
+    if (bad != NULL) {
+        fputs("# bad\n10 2 1.5\n", bad);
+        fclose(bad);
+    }
+    CHECK_ERROR(dofray_scene_set_lens(scene, bad_lens), DOFRAY_BAD_INPUT, "bad-lens.dat:2");
+    CHECK(dofray_scene_set_lens(scene, NULL) == DOFRAY_OK);
+    CHECK(dofray_scene_set_f_number(scene, -1.0f) == DOFRAY_OK);
+    CHECK_ERROR(dofray_render(scene, device, NULL, NULL, NULL, &image), DOFRAY_USAGE,
+                "dofray_scene_set_f_number");
     dofray_scene_free(scene);
     scene = NULL;
 
