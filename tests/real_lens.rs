@@ -562,3 +562,66 @@ fn light_traced_lamps_through_a_real_lens_match_the_camera() {
     assert!((ratio - 1.0).abs() < 0.03, "whole image {ratio}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A real lens projects a point where its chief ray images it, distortion included: the
+/// fisheye's barrel distortion (far from the pinhole projection) and the double Gauss's
+/// near-rectilinear image, at near and far depths.
+#[test]
+fn points_project_along_the_chief_rays() {
+    for (name, sensor, focus) in [
+        ("double-gauss-50mm.dat", 36.0, 2.0),
+        ("fisheye-10mm.dat", 24.0, 1.0),
+    ] {
+        let camera = CameraSpec {
+            width: 240,
+            height: 160,
+            focus: Focus::Distance(focus),
+            real_lens: Some(RealLensSpec {
+                prescription: lens(name),
+                f_number: None,
+                sensor_width_mm: sensor,
+            }),
+            ..CameraSpec::default()
+        }
+        .build(|_| None)
+        .unwrap();
+        let mut off_pinhole = 0.0f32;
+        for (px, py) in [
+            (120.0, 80.0),
+            (30.5, 20.5),
+            (200.0, 150.0),
+            (5.0, 80.0),
+            (235.0, 3.0),
+        ] {
+            // Beyond the fisheye's image circle the lens passes no chief ray.
+            let (ray, weight) = camera.lens_ray_weighted(px, py, glam::Vec2::ZERO);
+            if weight == 0.0 {
+                continue;
+            }
+            for depth in [0.5f32, 3.0, 100.0] {
+                let t = (depth - (ray.origin - camera.eye).dot(camera.forward))
+                    / ray.dir.dot(camera.forward);
+                // The fisheye's far corners look more than 90 degrees off the axis: no point
+                // in front of the lens lies on those rays.
+                if t.is_nan() || t <= 0.0 {
+                    continue;
+                }
+                let p = ray.at(t);
+                let got = camera.project(p).unwrap();
+                assert!(
+                    (got - glam::Vec2::new(px, py)).length() < 0.25,
+                    "{name}: ({px}, {py}) at {depth} m projects to {got}"
+                );
+                if let Some(pin) = camera.pinhole_project(p) {
+                    off_pinhole = off_pinhole.max((pin - got).length());
+                }
+            }
+        }
+        eprintln!("{name}: the pinhole projection is up to {off_pinhole:.1} px off");
+        if name.starts_with("fisheye") {
+            assert!(off_pinhole > 10.0, "{off_pinhole}");
+        }
+        // Behind the lens: no image.
+        assert!(camera.project(camera.eye - camera.forward).is_none());
+    }
+}

@@ -52,6 +52,11 @@ pub trait Lens {
     /// The ray through the centre of the lens (no depth of field): what autofocus looks along.
     fn pinhole_ray(&self, camera: &Camera, px: f32, py: f32) -> Ray;
 
+    /// The film position (px, py) of world point `p`'s image through the middle of the lens
+    /// (along [`Lens::pinhole_ray`]s: the pinhole projection for a thin lens, the chief rays'
+    /// for a real one, distortion included); `None` when `p` is not in front of the lens.
+    fn project(&self, camera: &Camera, p: Vec3) -> Option<Vec2>;
+
     /// The point that film position (px, py) images sharply: every ray of that film position
     /// passes through it (infinitely far when focused at infinity).
     fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3;
@@ -161,6 +166,10 @@ impl Lens for CameraLens {
     #[inline]
     fn pinhole_ray(&self, camera: &Camera, px: f32, py: f32) -> Ray {
         dispatch!(self, l => l.pinhole_ray(camera, px, py))
+    }
+
+    fn project(&self, camera: &Camera, p: Vec3) -> Option<Vec2> {
+        dispatch!(self, l => l.project(camera, p))
     }
 
     #[inline]
@@ -363,6 +372,10 @@ impl Lens for ThinLens {
 
     fn pinhole_ray(&self, camera: &Camera, px: f32, py: f32) -> Ray {
         Ray::new(camera.eye, camera.film_dir(px, py).normalize())
+    }
+
+    fn project(&self, camera: &Camera, p: Vec3) -> Option<Vec2> {
+        camera.pinhole_project(p)
     }
 
     fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3 {

@@ -510,8 +510,15 @@ impl Camera {
         (ray.at(t) - self.eye).dot(self.forward)
     }
 
-    /// Film position (px, py) of a world point seen through the lens centre, if in front.
+    /// Film position (px, py) of a world point's image through the middle of the lens
+    /// ([`Lens::project`]: a real lens's distortion included), if it is in front.
     pub fn project(&self, p: Vec3) -> Option<Vec2> {
+        self.lens.project(self, p)
+    }
+
+    /// Film position (px, py) of a world point seen from the eye through a pinhole of the
+    /// camera's field of view, if in front.
+    pub fn pinhole_project(&self, p: Vec3) -> Option<Vec2> {
         let v = p - self.eye;
         let z = v.dot(self.forward);
         if z <= 0.0 {

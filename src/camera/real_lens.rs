@@ -78,6 +78,8 @@ const PUPIL_GRID: usize = 40;
 const COC_ENTRIES: usize = 48;
 /// Grid (per axis) that finds a passing pupil point when the bound's middle is blocked.
 const SPOT_GRID: usize = 16;
+/// Chief rays tabulated for [`Lens::project`].
+const CHIEF_RAYS: usize = 64;
 /// Directions in which a spot's pupil rim is found.
 const RIM_DIRECTIONS: usize = 32;
 
@@ -130,6 +132,9 @@ pub struct RealLens {
     max_inv_depth: f64,
     /// tan of half the vertical field of view of the chief rays, at this focus.
     pub tan_half_vfov: f32,
+    /// Chief rays (leaving the front of the lens) of film points at increasing radii on +x,
+    /// up to the first the lens blocks: [`Lens::project`] inverts them.
+    chief: Vec<(f64, LensRay)>,
 }
 
 impl RealLens {
@@ -208,6 +213,7 @@ impl RealLens {
             coc: Vec::new(),
             max_inv_depth: 0.0,
             tan_half_vfov: 0.0,
+            chief: Vec::new(),
         };
         lens.pupil = lens.pupil_bounds();
         lens.centre_irradiance = lens.centre_irradiance();
@@ -226,6 +232,7 @@ impl RealLens {
             format!("{} mm with {}", spec.sensor_width_mm, p.name),
         )?;
         lens.coc_table();
+        lens.chief = lens.chief_rays();
         Ok(lens)
     }
 
@@ -282,6 +289,47 @@ impl RealLens {
     /// lens passes it.
     fn chief_ray(&self, f: DVec2) -> Option<LensRay> {
         self.trace(f, DVec2::splat(0.5)).map(|(r, _)| r)
+    }
+
+    /// The chief rays of film points at [`CHIEF_RAYS`] radii from the centre to a quarter
+    /// beyond the film's corner, up to the first the lens blocks or that leaves sideways.
+    fn chief_rays(&self) -> Vec<(f64, LensRay)> {
+        (0..CHIEF_RAYS)
+            .map(|k| k as f64 / (CHIEF_RAYS - 1) as f64 * 1.25 * self.half_diagonal)
+            .map_while(|r| self.chief_ray(DVec2::new(r, 0.0)).map(|ray| (r, ray)))
+            // A fisheye's corners look sideways or back: depths no longer order them.
+            .take_while(|(_, (_, d))| d.z > 1e-3)
+            .collect()
+    }
+
+    /// The film radius (mm) whose chief ray passes the axis distance `rho` at lens-space
+    /// depth `z` (interpolated between the tabulated chief rays, extrapolated beyond them).
+    fn film_radius_towards(&self, rho: f64, z: f64) -> Option<f64> {
+        // Where chief ray k is at depth z, measured on the side it leaves towards (the image
+        // is inverted: film points on +x look towards -x).
+        let at = |k: usize| {
+            let (_, (o, d)) = self.chief[k];
+            -(o.x + d.x * (z - o.z) / d.z)
+        };
+        let n = self.chief.len();
+        if n < 2 {
+            return None;
+        }
+        // The first tabulated ray past rho (the rays fan out monotonically), by bisection.
+        let (mut lo, mut hi) = (0, n - 1);
+        if at(hi) > rho {
+            while hi - lo > 1 {
+                let mid = (lo + hi) / 2;
+                if at(mid) > rho { hi = mid } else { lo = mid }
+            }
+        } else {
+            lo = n - 2;
+        }
+        let (a, b) = (at(lo), at(lo + 1));
+        let (ra, rb) = (self.chief[lo].0, self.chief[lo + 1].0);
+        let t = if b != a { (rho - a) / (b - a) } else { 0.0 };
+        let r = ra + (rb - ra) * t;
+        r.is_finite().then_some(r.max(0.0))
     }
 
     /// Exit pupil bounds per radial bin: the rear-plane points through which rays from film
@@ -607,6 +655,27 @@ impl Lens for RealLens {
             Some(ray) => self.world_ray(camera, ray),
             None => Ray::new(camera.eye, camera.film_dir(px, py).normalize()),
         }
+    }
+
+    /// Inverts the chief rays: the film radius whose chief ray reaches the point's distance
+    /// from the axis at its depth, on the opposite side of the film (the image is inverted).
+    fn project(&self, camera: &Camera, p: Vec3) -> Option<Vec2> {
+        let q = self.lens_point_of(camera, p);
+        if q.z.is_nan() || q.z <= self.optics.front_z() {
+            return None;
+        }
+        let rho = q.x.hypot(q.y);
+        let r = self.film_radius_towards(rho, q.z)?;
+        let (c, s) = if rho > 0.0 {
+            (q.x / rho, q.y / rho)
+        } else {
+            (1.0, 0.0)
+        };
+        let film = Vec2::new(
+            (r * c / self.pitch + 0.5 * self.size.0) as f32,
+            (-r * s / self.pitch + 0.5 * self.size.1) as f32,
+        );
+        film.is_finite().then_some(film)
     }
 
     fn focus_point(&self, camera: &Camera, px: f32, py: f32) -> Vec3 {
