@@ -206,6 +206,59 @@ fn a_mesh_placed_half_a_million_times_in_one_place_is_built_once() {
     );
 }
 
+/// Nodes `0..n` of a DAG whose every level places the one below twice, once where it is and
+/// once moved by `1e-6 * 2^level` along x: 2^(n - 1) placements of the triangle, all
+/// different, all within 0.07 of one another.
+fn near_dag_nodes(n: usize) -> String {
+    let mut nodes: Vec<String> = (0..n)
+        .map(|i| {
+            if i + 1 < n {
+                format!(r#"{{"children":[{},{}]}}"#, i + 1, n + i)
+            } else {
+                r#"{"mesh":0}"#.to_string()
+            }
+        })
+        .collect();
+    for i in 0..n - 1 {
+        let dx = 1e-6 * (1u64 << i) as f64;
+        nodes.push(format!(
+            r#"{{"children":[{}],"translation":[{dx},0,0]}}"#,
+            i + 1
+        ));
+    }
+    format!("[{}]", nodes.join(","))
+}
+
+/// 131,072 placements of one triangle a millionth apart are all loaded (they differ), but no
+/// BVH can separate them: the scene is refused as a resource limit naming where they pile up,
+/// at once, instead of a render that tests every copy on every ray (8 to 10 s for 32 x 32
+/// pixels). A few thousand of them still render.
+#[test]
+fn near_coincident_copies_are_refused_before_rendering() {
+    let dir = scratch("near-coincident");
+    let many = dir.join("near.gltf");
+    std::fs::write(&many, gltf_with_nodes(&near_dag_nodes(18), "[0]")).unwrap();
+    let desc = quick(Duration::from_secs(5), || load(&many).unwrap());
+    let device = dofray::embree::Device::new().unwrap();
+    let e = quick(
+        Duration::from_secs(3),
+        || match dofray::renderer::Renderer::new(desc, &device) {
+            Ok(_) => panic!("a pile of 131072 triangles was accepted"),
+            Err(e) => e,
+        },
+    );
+    assert_eq!(
+        dofray::exit::classify(&e),
+        dofray::exit::ErrorKind::ResourceLimit
+    );
+    let message = dofray::exit::full_message(&e);
+    assert_contains(&message, &["131072 primitives", "piled up", "(1, 1, 1)"]);
+    // 2^11 of them are few enough to render.
+    std::fs::write(&many, gltf_with_nodes(&near_dag_nodes(12), "[0]")).unwrap();
+    let film = render_small(load(&many).unwrap());
+    assert!(film.color.iter().any(|c| c.max_element() > 0.0));
+}
+
 #[test]
 fn gltf_node_cycles_are_an_error() {
     let dir = scratch("cycle");

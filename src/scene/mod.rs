@@ -12,6 +12,7 @@ pub mod input;
 mod mesh_input;
 pub mod model;
 pub mod obj;
+pub mod stacking;
 pub mod texture;
 mod world;
 

@@ -40,6 +40,15 @@ pub enum SceneError {
         /// What it must be.
         expected: &'static str,
     },
+    /// Primitives piled up in one place, which every ray there would test
+    /// ([`super::stacking`]).
+    #[error(
+        "{} primitives at most {} across are piled up within {} of ({}, {}, {}): every ray \
+         there would test them all (at most {} may share a place; exact repeats are skipped \
+         when loading, near ones are not)",
+        .0.count, .0.size, .0.size, .0.at.x, .0.at.y, .0.at.z, super::stacking::MAX_STACKED
+    )]
+    Stacked(super::stacking::Stack),
     /// Embree failed to build the scene.
     #[error(transparent)]
     Embree(#[from] EmbreeError),
@@ -337,6 +346,9 @@ impl World {
         };
         // Lights and ambient light are checked with everything else numeric.
         check_ranges(desc)?;
+        if let Some(stack) = super::stacking::find_stack(desc) {
+            return Err(SceneError::Stacked(stack));
+        }
 
         let mut builder = SceneBuilder::new(device)?;
         let mut geometry_materials = Vec::new();
@@ -606,6 +618,8 @@ impl HasKind for SceneError {
         match self {
             // Geometry Embree refused came from the scene.
             Self::Embree(e) => e.kind_or(ErrorKind::BadInput),
+            // A budget of time the scene would exceed.
+            Self::Stacked(_) => ErrorKind::ResourceLimit,
             _ => ErrorKind::BadInput,
         }
     }
