@@ -173,19 +173,19 @@ pub(crate) fn write_bench_images(
         &dir.join("depth.png"),
         w,
         h,
-        &output::depth_picture(adaptive),
+        &output::depth_picture(adaptive)?,
     )?;
     output::write_png_rgb(
         &dir.join("interval.png"),
         w,
         h,
-        &output::interval_picture(adaptive),
+        &output::interval_picture(adaptive)?,
     )?;
     output::write_png_rgb(
         &dir.join("samples.png"),
         w,
         h,
-        &output::samples_picture(adaptive),
+        &output::samples_picture(adaptive)?,
     )?;
     // Side by side: reference | dense | adaptive (error-controlled).
     let panels = [&reference, &dense.color, &adaptive.color];
@@ -208,7 +208,7 @@ pub(crate) fn write_bench_images(
             &dir.join(format!("error-{label}.png")),
             w,
             h,
-            &output::heat_picture(&errors, 0.25),
+            &output::heat_picture(&errors, 0.25)?,
         )?;
     }
     Ok(())

@@ -300,9 +300,9 @@ fn srgb8_png(width: usize, height: usize, bytes: &[u8]) -> png::Png<'_> {
 /// [`samples_picture`]) to their targets.
 pub fn write_aov_pictures(aovs: &AovTargets, film: &Film) -> Result<(), OutputError> {
     let (w, h) = (film.width, film.height);
-    write_png_rgb_to(&aovs.depth, w, h, &depth_picture(film))?;
-    write_png_rgb_to(&aovs.interval, w, h, &interval_picture(film))?;
-    write_png_rgb_to(&aovs.samples, w, h, &samples_picture(film))
+    write_png_rgb_to(&aovs.depth, w, h, &depth_picture(film)?)?;
+    write_png_rgb_to(&aovs.interval, w, h, &interval_picture(film)?)?;
+    write_png_rgb_to(&aovs.samples, w, h, &samples_picture(film)?)
 }
 
 /// Checks that every buffer of `film` has `width * height` entries.

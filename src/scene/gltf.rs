@@ -1079,9 +1079,13 @@ impl Loader<'_> {
         let tangents = match &b.uvs {
             Some(uv) if normal_mapped => {
                 let given = self.read_tangents(prim, world, b.positions.len())?;
-                Some(given.unwrap_or_else(|| {
-                    compute_tangents(&b.positions, &b.triangles, b.normals.as_deref(), uv)
-                }))
+                match given {
+                    Some(t) => Some(t),
+                    None => Some(
+                        compute_tangents(&b.positions, &b.triangles, b.normals.as_deref(), uv)
+                            .map_err(|e| super::mesh_input::memory_error(self.file.path, e))?,
+                    ),
+                }
             }
             _ => None,
         };
@@ -1547,10 +1551,11 @@ fn compute_tangents(
     tris: &[[u32; 3]],
     normals: Option<&[[f32; 3]]>,
     uv: &[[f32; 2]],
-) -> Vec<[f32; 4]> {
-    let mut t = vec![Vec3::ZERO; p.len()];
-    let mut b = vec![Vec3::ZERO; p.len()];
-    let mut face = vec![Vec3::ZERO; p.len()];
+) -> Result<Vec<[f32; 4]>, crate::limits::MemoryError> {
+    use crate::limits::{try_collect, try_vec};
+    let mut t = try_vec(p.len(), Vec3::ZERO, "tangent sums")?;
+    let mut b = try_vec(p.len(), Vec3::ZERO, "bitangent sums")?;
+    let mut face = try_vec(p.len(), Vec3::ZERO, "face normal sums")?;
     for tri in tris {
         let [i0, i1, i2] = tri.map(|i| i as usize);
         let (Some(&p0), Some(&p1), Some(&p2)) = (p.get(i0), p.get(i1), p.get(i2)) else {
@@ -1581,33 +1586,32 @@ fn compute_tangents(
             b[i] += bitangent;
         }
     }
-    (0..p.len())
-        .map(|i| {
-            let n = normals
-                .and_then(|n| n.get(i))
-                .map_or(face[i], |&n| Vec3::from(n))
-                .normalize_or_zero();
-            let mut tangent = (t[i] - n * n.dot(t[i])).normalize_or_zero();
-            if tangent == Vec3::ZERO {
-                tangent = if n == Vec3::ZERO {
-                    Vec3::X
-                } else {
-                    n.any_orthonormal_vector()
-                };
-            }
-            let w = if n.cross(tangent).dot(b[i]) < 0.0 {
-                -1.0
-            } else {
-                1.0
-            };
-            let tangent = if tangent.is_finite() {
-                tangent
-            } else {
+    let tangents = (0..p.len()).map(|i| {
+        let n = normals
+            .and_then(|n| n.get(i))
+            .map_or(face[i], |&n| Vec3::from(n))
+            .normalize_or_zero();
+        let mut tangent = (t[i] - n * n.dot(t[i])).normalize_or_zero();
+        if tangent == Vec3::ZERO {
+            tangent = if n == Vec3::ZERO {
                 Vec3::X
+            } else {
+                n.any_orthonormal_vector()
             };
-            [tangent.x, tangent.y, tangent.z, w]
-        })
-        .collect()
+        }
+        let w = if n.cross(tangent).dot(b[i]) < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        let tangent = if tangent.is_finite() {
+            tangent
+        } else {
+            Vec3::X
+        };
+        [tangent.x, tangent.y, tangent.z, w]
+    });
+    try_collect(tangents, "the tangents")
 }
 
 /// The texture coordinate set a primitive is loaded with: the base-colour texture's, else the
