@@ -1,14 +1,15 @@
 //! Lens prescription files (`--lens`, `[camera] lens`): any text either is refused with a
 //! line number or gives a prescription, and a prescription either is refused as a camera or
 //! makes one whose numbers are sane: a finite positive field of view, finite blur bounds at
-//! any depth, and rays with finite origins, unit directions and weights in [0, a bound].
+//! any depth, rays with finite origins, unit directions and weights in [0, a bound], and
+//! finite projections and light landings.
 //! The first byte picks the focus distance; inputs of more than 32 surfaces are skipped (the
 //! camera's pupil tables grow with the surface count, past the fuzzer's time per input).
 #![no_main]
 
 use std::sync::Arc;
 
-use dofray::camera::{CameraSpec, Focus, Prescription, RealLensSpec};
+use dofray::camera::{CameraSpec, Focus, Lens, Prescription, RealLensSpec};
 use dofray::glam::Vec2;
 use libfuzzer_sys::fuzz_target;
 
@@ -54,6 +55,18 @@ fuzz_target!(|data: &[u8]| {
             assert!(w.is_finite() && w >= 0.0, "weight {w}");
             assert!(ray.origin.is_finite() && ray.dir.is_finite());
             assert!((ray.dir.length() - 1.0).abs() < 1e-3);
+            // Where the lens images a point of that ray, and light arriving back along it:
+            // finite film positions, a positive measure, a share in [0, 1].
+            let p = ray.at(2.0);
+            if let Some(film) = camera.project(p) {
+                assert!(film.is_finite(), "projected to {film}");
+            }
+            let entry = camera.lens.entry_point(Vec2::new(0.5 + 0.4 * lx, 0.5 + 0.4 * ly));
+            if let Some(l) = camera.film_point(entry, ray.dir) {
+                assert!(l.film.is_finite() && l.per_sr.is_finite() && l.per_sr > 0.0);
+            }
+            let share = camera.lens.entry_yield(&camera, p);
+            assert!((0.0..=1.0).contains(&share), "yield {share}");
         }
     });
 });

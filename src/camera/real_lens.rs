@@ -135,7 +135,29 @@ pub struct RealLens {
     /// Chief rays (leaving the front of the lens) of film points at increasing radii on +x,
     /// up to the first the lens blocks: [`Lens::project`] inverts them.
     chief: Vec<(f64, LensRay)>,
+    /// [`Lens::entry_yield`]'s table, made when light tracing first asks.
+    yields: YieldTable,
 }
+
+/// The share of light paths that land, from points at [`YIELD_ANGLES`] angles off the axis
+/// (0 to 90 degrees, seen from the eye) and [`YIELD_DEPTHS`] inverse distances (infinity to
+/// 5 cm in front of the front element), built once on first use: light tracing asks it for
+/// every small lamp (an emissive mesh may have thousands of triangles), and the answer only
+/// sets how many paths each takes, so an interpolated one serves.
+#[derive(Debug, Clone, Default)]
+struct YieldTable(std::sync::OnceLock<Vec<f32>>);
+
+impl PartialEq for YieldTable {
+    /// Derived from the lens: equal lenses have equal tables.
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+/// Angle bins of the yield table.
+const YIELD_ANGLES: usize = 24;
+/// Inverse-distance bins of the yield table.
+const YIELD_DEPTHS: usize = 6;
 
 impl RealLens {
     /// Places `spec`'s lens for a `width` x `height` image focused at `focus_distance` scene
@@ -214,6 +236,7 @@ impl RealLens {
             max_inv_depth: 0.0,
             tan_half_vfov: 0.0,
             chief: Vec::new(),
+            yields: YieldTable::default(),
         };
         lens.pupil = lens.pupil_bounds();
         lens.centre_irradiance = lens.centre_irradiance();
@@ -585,6 +608,50 @@ impl RealLens {
         (inside && f.is_finite()).then(|| (f, cos, (t * 2.0 - 1.0).as_vec2()))
     }
 
+    /// The inverse distance (1/mm, from the eye) of the yield table's nearest points: 5 cm in
+    /// front of the front element.
+    fn yield_max_inv(&self) -> f64 {
+        1.0 / (self.optics.front_z() + 50.0 - self.eye_z).max(1.0)
+    }
+
+    /// The share of a 16 x 16 grid of the front cap's rays from lens-space point `p` that
+    /// land on the film.
+    fn landing_share(&self, p: DVec3) -> f32 {
+        const N: usize = 16;
+        let landed = (0..N * N)
+            .filter(|k| {
+                let u = (DVec2::new((k % N) as f64, (k / N) as f64) + 0.5) / N as f64;
+                let (q, _) = self.cap.point(u);
+                (p - q)
+                    .try_normalize()
+                    .and_then(|out| self.land(u, out))
+                    .is_some()
+            })
+            .count();
+        landed as f32 / (N * N) as f32
+    }
+
+    /// [`YieldTable`]'s entries, angle-major.
+    fn yield_table(&self) -> Vec<f32> {
+        let max_inv = self.yield_max_inv();
+        let mut table = Vec::with_capacity(YIELD_ANGLES * YIELD_DEPTHS);
+        for i in 0..YIELD_ANGLES {
+            let angle = i as f64 / (YIELD_ANGLES - 1) as f64 * std::f64::consts::FRAC_PI_2;
+            for j in 0..YIELD_DEPTHS {
+                let inv = j as f64 / (YIELD_DEPTHS - 1) as f64 * max_inv;
+                // Infinity: far enough that the rays are parallel.
+                let distance = if inv > 0.0 { 1.0 / inv } else { 1e9 };
+                let p = DVec3::new(
+                    distance * angle.sin(),
+                    0.0,
+                    self.eye_z + distance * angle.cos(),
+                );
+                table.push(self.landing_share(p));
+            }
+        }
+        table
+    }
+
     /// The ray of film position (px, py) and lens position `lens` with its weight (0: lost).
     fn weighted_ray(&self, camera: &Camera, px: f32, py: f32, lens: Vec2) -> (Ray, f32) {
         let u = (lens.as_dvec2() * 0.5 + 0.5).clamp(DVec2::ZERO, DVec2::ONE);
@@ -718,21 +785,26 @@ impl Lens for RealLens {
         })
     }
 
-    /// Over a 16 x 16 grid of the front cap, the share of rays from `from` that land.
+    /// The share of a 16 x 16 grid of the front cap's rays from `from` that land,
+    /// interpolated in a table over the angle off the axis and the inverse distance.
     fn entry_yield(&self, camera: &Camera, from: Vec3) -> f32 {
-        const N: usize = 16;
         let p = self.lens_point_of(camera, from);
-        let landed = (0..N * N)
-            .filter(|k| {
-                let u = (DVec2::new((k % N) as f64, (k / N) as f64) + 0.5) / N as f64;
-                let (q, _) = self.cap.point(u);
-                (p - q)
-                    .try_normalize()
-                    .and_then(|out| self.land(u, out))
-                    .is_some()
-            })
-            .count();
-        landed as f32 / (N * N) as f32
+        let (rho, z) = (p.x.hypot(p.y), p.z - self.eye_z);
+        let angle = rho.atan2(z);
+        let inv = 1.0 / rho.hypot(z).max(1e-9);
+        let table = self.yields.0.get_or_init(|| self.yield_table());
+        let max_inv = self.yield_max_inv();
+        let a = (angle / std::f64::consts::FRAC_PI_2).clamp(0.0, 1.0) * (YIELD_ANGLES - 1) as f64;
+        let d = (inv / max_inv).clamp(0.0, 1.0) * (YIELD_DEPTHS - 1) as f64;
+        let (i, j) = (
+            (a as usize).min(YIELD_ANGLES - 2),
+            (d as usize).min(YIELD_DEPTHS - 2),
+        );
+        let (fa, fd) = ((a - i as f64) as f32, (d - j as f64) as f32);
+        let at = |i: usize, j: usize| table[i * YIELD_DEPTHS + j];
+        let near = at(i, j) + (at(i + 1, j) - at(i, j)) * fa;
+        let far = at(i, j + 1) + (at(i + 1, j + 1) - at(i, j + 1)) * fa;
+        (near + (far - near) * fd).clamp(0.0, 1.0)
     }
 
     fn distorts(&self) -> bool {
