@@ -254,3 +254,45 @@ fn regions_and_thread_counts_get_the_same_splats() {
         .install(|| render::render(&world, &camera, &s, &NoProgress).unwrap().0);
     assert_eq!(one.color, full.color);
 }
+
+/// A night scene's worth of sub-pixel lamps, far more than light tracing's budget of paths at
+/// 4 spp: every lamp's share shrinks alike instead of the largest being left to camera rays
+/// (which find a half-pixel lamp by luck, and adaptive sites miss most of them), so their
+/// energy is kept in adaptive mode, within the budget.
+#[test]
+fn lamps_beyond_the_budget_share_it_and_keep_their_energy() {
+    let (n, radius) = (20, 0.0005f32);
+    let mut lamps = String::new();
+    let mut want = 0.0;
+    let camera = scene(radius, false).camera.build(|_| None).unwrap();
+    let k = f64::from(camera.pixels_per_unit());
+    for j in 0..n {
+        for i in 0..n {
+            let x = -0.06 + 0.12 * i as f32 / (n - 1) as f32;
+            let y = -0.045 + 0.09 * j as f32 / (n - 1) as f32;
+            if !lamps.is_empty() {
+                lamps += "\nmaterial = \"lamp\"\n\n[[objects]]\n";
+            }
+            lamps +=
+                &format!("type = \"sphere\"\ncenter = [{x}, {y}, {LAMP_DEPTH}]\nradius = {radius}");
+            let d = f64::from(Vec3::new(x, y, LAMP_DEPTH).length());
+            let r = f64::from(radius);
+            let solid_angle = 2.0 * std::f64::consts::PI * (1.0 - (1.0 - r * r / (d * d)).sqrt());
+            // Pixels per steradian fall as cos^3 off the axis.
+            let cos = f64::from(LAMP_DEPTH) / d;
+            want += f64::from(LAMP) * solid_angle * k * k * cos.powi(3);
+        }
+    }
+    let desc = scene_with(&lamps, false);
+    let spp = 4;
+    let (film, stats) = render(&desc, &settings(Mode::Adaptive, spp, true));
+    let got = total(&film);
+    eprintln!("{} lamps keep {:.3} of their energy", n * n, got / want);
+    assert!((got / want - 1.0).abs() < 0.05, "{got} of {want}");
+    let budget = 0.5 * f64::from(WIDTH * HEIGHT) * f64::from(spp);
+    assert!(
+        stats.light_paths > 0 && (stats.light_paths as f64) < 1.5 * budget,
+        "{} light paths, budget {budget}",
+        stats.light_paths
+    );
+}

@@ -5,9 +5,12 @@
 //! its projected bounds) covers at most a quarter of its blurred footprint (that box grown by
 //! half the largest CoC over its depths and the pixel filter's reach): defocused lamps and
 //! sub-pixel ones. Each takes `spp` paths per pixel of its footprint in the frame, so its disc
-//! converges as a dense render's pixels do; smallest footprints first, within a budget (of landing paths) of half
-//! the samples of a dense render (what is left over stays with the camera). Emitters the camera
-//! sees large and sharp are better found by its own rays.
+//! converges as a dense render's pixels do (more where a real lens's front element passes only
+//! part of them, [`crate::camera::Lens::entry_yield`]). Their landing paths are held to half the
+//! samples of a dense render: over it, every lamp's share shrinks alike (a night scene of
+//! thousands of distant lamps), down to one path each, and only if even that does not fit are
+//! the largest footprints left to the camera. Emitters the camera sees large and sharp are
+//! better found by its own rays.
 //!
 //!
 //! The choice depends only on the scene, the camera and the settings, so every region of a
@@ -30,6 +33,8 @@ const MAX_PATHS: u32 = 1 << 24;
 /// The least share of landing light paths assumed when choosing how many to trace (a lamp
 /// whose centre sends nothing through may still send light from its edges).
 const MIN_YIELD: f32 = 1.0 / 16.0;
+/// How far the rounding up of shrunk shares may take the paths over the budget.
+const BUDGET_SLACK: f64 = 1.5;
 /// A sharp image at most this fraction of the blurred footprint is light-traced.
 const SHARP_FRACTION: f32 = 0.25;
 
@@ -113,16 +118,30 @@ impl LightTraced {
             };
             candidates.push((t, landing));
         }
-        candidates.sort_by_key(|(t, _)| (t.paths, t.geometry, t.prim));
         // The budget counts paths that land: one the lens blocks costs a fraction of a
-        // camera sample (no ray leaves the lens).
+        // camera sample (no ray leaves the lens). Over it, every lamp's share shrinks alike
+        // (a few light paths still find a sub-pixel lamp far more often than camera rays
+        // do); the smallest footprints come first while even one path each does not fit.
         let budget = 0.5 * f64::from(w) * f64::from(h) * spp as f64;
+        let wanted: f64 = candidates
+            .iter()
+            .map(|(t, landing)| f64::from(t.paths) * f64::from(*landing))
+            .sum();
+        let share = if wanted > budget {
+            budget / wanted
+        } else {
+            1.0
+        };
+        for (t, _) in &mut candidates {
+            t.paths = ((f64::from(t.paths) * share).ceil() as u32).max(1);
+        }
+        candidates.sort_by_key(|(t, _)| (t.paths, t.geometry, t.prim));
         let mut total = 0.0f64;
         let mut traced: Vec<Traced> = candidates
             .into_iter()
             .take_while(|(t, landing)| {
                 total += f64::from(t.paths) * f64::from(*landing);
-                total <= budget
+                total <= BUDGET_SLACK * budget
             })
             .map(|(t, _)| t)
             .collect();
