@@ -766,7 +766,7 @@ impl Lens for RealLens {
     /// étendue there is `A cos(n, dir) dw` per unit of entry numbers and of solid angle, which
     /// a lossless lens carries unchanged to the film, where the camera measures
     /// `cos(theta) dw dA_film / (C0 pitch^2)` per square pixel (C0: the centre's
-    /// irradiance; [`RealLens::trace`]'s weight is that measure), so
+    /// irradiance; the camera rays' weight is that measure), so
     /// `per_sr = A cos / (C0 pitch^2)`.
     fn film_point(&self, camera: &Camera, entry: Vec2, dir: Vec3) -> Option<Landing> {
         let axes = |a: Vec3| f64::from(dir.dot(a));
