@@ -7,6 +7,7 @@
 //! goes in [`lens`] (see there).
 
 pub mod aperture;
+mod camera_lens;
 pub mod footprint;
 pub mod lens;
 pub mod optics;
@@ -16,8 +17,9 @@ pub mod real_lens;
 use glam::{Vec2, Vec3};
 
 pub use aperture::{ApertureShape, LensFilter};
+pub use camera_lens::CameraLens;
 pub use footprint::BoxImage;
-pub use lens::{CameraLens, Landing, Lens, Photographic, Reprojection, ThinLens};
+pub use lens::{Landing, Lens, Photographic, Reprojection, ThinLens};
 pub use prescription::{LensFileError, Prescription};
 pub use real_lens::{RealLens, RealLensSpec};
 
