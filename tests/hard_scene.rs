@@ -115,11 +115,13 @@ fn the_hard_scene_renders_at_a_small_size() {
     };
     let film = render(&world, &camera, &settings, &NoProgress).unwrap().0;
     assert!(film.color.iter().all(|c| c.is_finite()));
-    // Bokeh: some pixels are bright, and the night is dark elsewhere.
+    // Bokeh: some pixels are bright, and the night is dark elsewhere. Converged (1024 spp
+    // dense, camera rays only) 3373 of the 4800 pixels are bright and 720 dark; noisier
+    // renders, whose lamps' discs are speckled, have more of both extremes.
     let bright = film.color.iter().filter(|c| c.max_element() > 0.3).count();
     let dark = film.color.iter().filter(|c| c.max_element() < 0.1).count();
     assert!(
-        bright > 200 && dark > 800,
+        bright > 200 && dark > 500,
         "{bright} bright, {dark} dark pixels"
     );
 }
