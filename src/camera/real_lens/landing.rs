@@ -57,11 +57,7 @@ impl RealLens {
         // plane, in the frame of f's pupil bound (rotated onto +x).
         let rear = f - d.truncate() * (self.optics.rear_z() / -d.z);
         let r = f.length();
-        let (c, s) = if r > 0.0 {
-            (f.x / r, f.y / r)
-        } else {
-            (1.0, 0.0)
-        };
+        let (c, s) = super::azimuth(f, r);
         let local = DVec2::new(c * rear.x + s * rear.y, -s * rear.x + c * rear.y);
         let b = self.bounds_at(r);
         let t = (local - b.lo) / (b.hi - b.lo);

@@ -278,11 +278,7 @@ impl RealLens {
             return None;
         }
         let q = b.lerp(u);
-        let (c, s) = if r > 0.0 {
-            (f.x / r, f.y / r)
-        } else {
-            (1.0, 0.0)
-        };
+        let (c, s) = azimuth(f, r);
         let q = DVec2::new(c * q.x - s * q.y, s * q.x + c * q.y);
         let z = self.optics.rear_z();
         let d = (DVec3::new(q.x - f.x, q.y - f.y, z)).normalize();
@@ -520,6 +516,16 @@ impl RealLens {
             ),
             None => (Ray::new(camera.eye, camera.forward), 0.0),
         }
+    }
+}
+
+/// cos and sin of film point `f`'s angle about the axis (`r` its length; +x at the centre):
+/// the rotation from the frame the pupil bounds are found in (film points on +x) to `f`'s.
+fn azimuth(f: DVec2, r: f64) -> (f64, f64) {
+    if r > 0.0 {
+        (f.x / r, f.y / r)
+    } else {
+        (1.0, 0.0)
     }
 }
 
