@@ -211,6 +211,10 @@ pub struct BenchReport {
     pub reference_cached: bool,
     /// Time to render the reference (0 when it came from the cache).
     pub reference_seconds: f64,
+    /// The sRGB PSNR a noise-free render would measure against the reference, from the
+    /// reference's own noise (estimated from two independent halves of its samples): PSNRs
+    /// near it measure the reference's noise as much as the render's. Null when unknown.
+    pub reference_ceiling_db: Option<f64>,
     /// Rays per second of the intersect-only replay of exactly the rays dense traces.
     pub intersect_only_mrays_per_s: f64,
     /// Median seconds of the intersect-only replay.
@@ -297,26 +301,50 @@ pub fn reference_key(desc: &SceneDesc, camera: &Camera, settings: &RenderSetting
     )
 }
 
-const MAGIC: &[u8; 8] = b"DOFREF01";
+const MAGIC: &[u8; 8] = b"DOFREF02";
+/// Magic, width, height, and the ceiling (f64; infinite when unknown).
+const HEADER: usize = 24;
 
-fn read_reference(path: &Path, width: usize, height: usize) -> Option<Vec<[f32; 3]>> {
+/// The converged reference every render is judged against.
+#[derive(Debug, Clone)]
+pub(crate) struct Reference {
+    /// Linear RGB, row-major, top row first.
+    pub rgb: Vec<[f32; 3]>,
+    /// Read from the cache instead of rendered.
+    pub cached: bool,
+    /// Time to render it (0 when cached).
+    pub seconds: f64,
+    /// The sRGB PSNR a noise-free render would measure against it: its own noise, estimated
+    /// from two independent halves. `None` when unknown (1 spp, or halves alike).
+    pub ceiling_db: Option<f64>,
+}
+
+fn read_reference(
+    path: &Path,
+    width: usize,
+    height: usize,
+) -> Option<(Vec<[f32; 3]>, Option<f64>)> {
     let bytes = std::fs::read(path).ok()?;
-    let header = 16;
-    if bytes.len() != header + width * height * 12 || &bytes[..8] != MAGIC {
+    if bytes.len() != HEADER + width * height * 12 || &bytes[..8] != MAGIC {
         return None;
     }
     let dim = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().unwrap()) as usize;
     if dim(8) != width || dim(12) != height {
         return None;
     }
-    let floats: Vec<f32> = bytes[header..]
+    let ceiling = f64::from_le_bytes(bytes[16..24].try_into().unwrap());
+    if ceiling.is_nan() {
+        return None;
+    }
+    let floats: Vec<f32> = bytes[HEADER..]
         .chunks_exact(4)
         .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
         .collect();
     if floats.iter().any(|v| !v.is_finite()) {
         return None;
     }
-    Some(floats.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+    let rgb = floats.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    Some((rgb, ceiling.is_finite().then_some(ceiling)))
 }
 
 fn write_reference(
@@ -324,11 +352,13 @@ fn write_reference(
     width: usize,
     height: usize,
     rgb: &[[f32; 3]],
+    ceiling_db: Option<f64>,
 ) -> std::io::Result<()> {
-    let mut bytes = Vec::with_capacity(16 + rgb.len() * 12);
+    let mut bytes = Vec::with_capacity(HEADER + rgb.len() * 12);
     bytes.extend_from_slice(MAGIC);
     bytes.extend_from_slice(&(width as u32).to_le_bytes());
     bytes.extend_from_slice(&(height as u32).to_le_bytes());
+    bytes.extend_from_slice(&ceiling_db.unwrap_or(f64::INFINITY).to_le_bytes());
     for v in rgb.iter().flatten() {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
@@ -354,44 +384,86 @@ pub fn check_cache_dir(dir: &Path) -> Result<(), BenchError> {
     Ok(())
 }
 
-/// The converged reference: dense with `reference_spp` samples per pixel and a seed of its own
+/// The converged reference: dense with `reference_spp` samples per pixel and seeds of its own
 /// (derived from `seed`, so its noise is independent of the renders it judges), from the cache
 /// in `cache_dir` when possible (an unusable `cache_dir` fails here, before anything is
-/// rendered). Returns the image, whether it was cached, and its render time.
+/// rendered).
+///
+/// It is rendered as two independent halves (`reference_spp / 2` samples and the rest, with
+/// different seeds) and their weighted mean, which is a dense render at `reference_spp` like
+/// any other. The halves' difference measures the reference's own noise: a reference that has
+/// not converged (rare bright paths, caustics) caps every PSNR measured against it.
 pub(crate) fn reference(
     desc: &SceneDesc,
     world: &World,
     camera: &Camera,
     measure: &Measure,
     progress: &dyn Progress,
-) -> Result<(Vec<[f32; 3]>, bool, f64), BenchError> {
+) -> Result<Reference, BenchError> {
     let (reference_spp, seed) = (measure.reference_spp, measure.seed);
     let cache_dir = measure.cache_dir.as_deref();
     if let Some(dir) = cache_dir {
         check_cache_dir(dir)?;
     }
     // Every pixel converges: in-focus ones take as many samples as defocused ones.
-    let settings = RenderSettings {
+    let settings = |spp: u32, salt: u64| RenderSettings {
         mode: Mode::Dense,
-        spp: reference_spp,
-        aa: reference_spp,
+        spp,
+        aa: spp,
         rule: SamplingRule::ErrorControlled { tolerance: None },
-        seed: crate::sampler::hash64(seed ^ 0x5eed_5eed),
+        seed: crate::sampler::hash64(crate::sampler::hash64(seed ^ 0x5eed_5eed) ^ salt),
         record_rays: false,
         ..measure.base.clone()
     };
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let path =
-        cache_dir.map(|dir| dir.join(format!("{}.ref", reference_key(desc, camera, &settings))));
-    if let Some(rgb) = path.as_deref().and_then(|p| read_reference(p, w, h)) {
-        return Ok((rgb, true, 0.0));
+    let key = reference_key(desc, camera, &settings(reference_spp, 0));
+    let path = cache_dir.map(|dir| dir.join(format!("{key}.ref")));
+    if let Some((rgb, ceiling_db)) = path.as_deref().and_then(|p| read_reference(p, w, h)) {
+        return Ok(Reference {
+            rgb,
+            cached: true,
+            seconds: 0.0,
+            ceiling_db,
+        });
     }
-    let (film, stats) = render::render(world, camera, &settings, progress)?;
-    let rgb = film.rgb();
+    let (a, b) = (reference_spp / 2, reference_spp - reference_spp / 2);
+    let (rgb, ceiling_db, seconds) = if a == 0 {
+        let (film, stats) = render::render(world, camera, &settings(b, 0), progress)?;
+        (film.rgb(), None, stats.seconds)
+    } else {
+        let (first, s1) = render::render(world, camera, &settings(a, 0), progress)?;
+        let (second, s2) = render::render(world, camera, &settings(b, 1), progress)?;
+        let (first, second) = (first.rgb(), second.rgb());
+        let (wa, wb) = (
+            a as f32 / reference_spp as f32,
+            b as f32 / reference_spp as f32,
+        );
+        let rgb = first
+            .iter()
+            .zip(&second)
+            .map(|(p, q)| std::array::from_fn(|c| wa * p[c] + wb * q[c]))
+            .collect();
+        // The halves differ by noise of variance s^2 (1/a + 1/b) per pixel; the mean carries
+        // s^2 / (a + b) of it, a fraction a b / (a + b)^2 of the difference's.
+        let halves_db = metrics::psnr(&first, &second, w, h, Space::Srgb)?;
+        let ab = f64::from(a) * f64::from(b);
+        let ceiling = halves_db + 10.0 * (f64::from(reference_spp).powi(2) / ab).log10();
+        (
+            rgb,
+            ceiling.is_finite().then_some(ceiling),
+            s1.seconds + s2.seconds,
+        )
+    };
     if let Some(path) = path {
-        write_reference(&path, w, h, &rgb).map_err(|error| BenchError::Cache { path, error })?;
+        write_reference(&path, w, h, &rgb, ceiling_db)
+            .map_err(|error| BenchError::Cache { path, error })?;
     }
-    Ok((rgb, false, stats.seconds))
+    Ok(Reference {
+        rgb,
+        cached: false,
+        seconds,
+        ceiling_db,
+    })
 }
 
 /// Runs the benchmark. `desc` is only used for the reference cache key.
@@ -406,8 +478,12 @@ pub fn run(
         return Err(BenchError::ZeroRepeat);
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let (reference, reference_cached, reference_seconds) =
-        reference(desc, world, camera, &config.measure, progress)?;
+    let Reference {
+        rgb: reference,
+        cached: reference_cached,
+        seconds: reference_seconds,
+        ceiling_db: reference_ceiling_db,
+    } = reference(desc, world, camera, &config.measure, progress)?;
 
     // Intersect-only: replay exactly the packets dense traces, without shading or sampling.
     let recording = RenderSettings {
@@ -473,6 +549,7 @@ pub fn run(
             reference_spp: config.measure.reference_spp,
             reference_cached,
             reference_seconds,
+            reference_ceiling_db,
             intersect_only_mrays_per_s,
             intersect_only_seconds,
             dense_vs_intersect_only: median(dense_vs_replay),
@@ -581,10 +658,12 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("dofray-bench-cache-{}", std::process::id()));
         let path = dir.join("x.ref");
         let rgb = vec![[0.25, 0.5, 1.0], [0.0, 2.0, 3.5]];
-        write_reference(&path, 2, 1, &rgb).unwrap();
-        assert_eq!(read_reference(&path, 2, 1), Some(rgb));
+        write_reference(&path, 2, 1, &rgb, Some(41.5)).unwrap();
+        assert_eq!(read_reference(&path, 2, 1), Some((rgb.clone(), Some(41.5))));
         assert_eq!(read_reference(&path, 1, 2), None);
-        std::fs::write(&path, b"DOFREF01garbage").unwrap();
+        write_reference(&path, 2, 1, &rgb, None).unwrap();
+        assert_eq!(read_reference(&path, 2, 1), Some((rgb, None)));
+        std::fs::write(&path, b"DOFREF02garbage").unwrap();
         assert_eq!(read_reference(&path, 2, 1), None);
         std::fs::remove_dir_all(dir).unwrap();
     }

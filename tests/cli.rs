@@ -376,6 +376,71 @@ fn bench_reports_every_mode_and_caches_the_reference() {
 }
 
 #[test]
+fn bench_reference_ceiling_predicts_what_dense_measures() {
+    // The reference (32 spp) is two independent 16-spp halves, averaged. A dense rung at 16
+    // spp is a third such render: its squared error against the reference is v + v / 2 (its
+    // own noise v, the reference's v / 2), three times the reference's, so the ceiling (what
+    // a noise-free render would measure) lies 10 log10(3) = 4.77 dB above dense's PSNR.
+    let dir = scratch("ceiling");
+    let cache = dir.join("cache");
+    let out = dofray(&[
+        "bench",
+        "--equal-error",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--ladder",
+        "16",
+        "--levels",
+        "30",
+        "--reference-spp",
+        "32",
+        "--repeat",
+        "1",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let ceiling = report["reference_ceiling_db"].as_f64().expect("a ceiling");
+    let dense = report["dense"][0]["psnr_vs_reference"].as_f64().unwrap();
+    assert!(
+        (ceiling - dense - 4.77).abs() < 0.75,
+        "ceiling {ceiling:.2} dB, dense {dense:.2} dB: {:.2} apart",
+        ceiling - dense
+    );
+    // The cached reference keeps its ceiling.
+    let again = dofray(&[
+        "bench",
+        "--equal-error",
+        "--width",
+        "128",
+        "--height",
+        "96",
+        "--ladder",
+        "16",
+        "--levels",
+        "30",
+        "--reference-spp",
+        "32",
+        "--repeat",
+        "1",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+    ]);
+    assert!(again.status.success(), "{}", stderr(&again));
+    let text = String::from_utf8_lossy(&again.stdout);
+    assert!(text.contains("(cached)"), "{text}");
+    assert!(
+        text.contains(&format!("would measure {ceiling:.2} dB against it")),
+        "{text}"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
 fn bench_equal_error_reports_levels_rungs_and_a_plot() {
     let dir = scratch("equal-error");
     let cache = dir.join("cache");

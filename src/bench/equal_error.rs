@@ -11,7 +11,7 @@
 use std::path::PathBuf;
 
 use super::equal_time::{EqualTime, Picture, choose_rungs, hardest_window};
-use super::{BenchError, Measure, median, reference};
+use super::{BenchError, Measure, Reference, median, reference};
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
 use crate::render::{self, Mode, Progress, RenderSettings, RenderStats, SamplingRule};
@@ -222,6 +222,10 @@ pub struct EqualErrorReport {
     pub reference_cached: bool,
     /// Time to render the reference (0 when it came from the cache).
     pub reference_seconds: f64,
+    /// The sRGB PSNR a noise-free render would measure against the reference (from its own
+    /// noise, estimated from two independent halves of its samples): levels near it measure
+    /// the reference's noise as much as the renders'. Null when unknown.
+    pub reference_ceiling_db: Option<f64>,
     /// How each rung's aa was chosen.
     pub aa: RungAa,
     /// Dense's rungs, in ladder order (ascending spp).
@@ -358,8 +362,12 @@ pub fn run(
 ) -> Result<EqualErrorReport, BenchError> {
     let (ladder, level_list) = checked_config(config)?;
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let (reference, reference_cached, reference_seconds) =
-        reference(desc, world, camera, &config.measure, progress)?;
+    let Reference {
+        rgb: reference,
+        cached: reference_cached,
+        seconds: reference_seconds,
+        ceiling_db: reference_ceiling_db,
+    } = reference(desc, world, camera, &config.measure, progress)?;
 
     let methods = [Method::Dense, Method::Adaptive];
     // Per method and rung: the stats of every repeat, and from the first repeat the PSNR, the
@@ -432,6 +440,7 @@ pub fn run(
         reference_spp: config.measure.reference_spp,
         reference_cached,
         reference_seconds,
+        reference_ceiling_db,
         aa: config.aa,
         dense,
         adaptive,
@@ -625,6 +634,7 @@ pub(super) mod tests {
             reference_spp: 64,
             reference_cached: false,
             reference_seconds: 0.0,
+            reference_ceiling_db: None,
             aa: RungAa::Ratio(0.25),
             dense,
             adaptive,

@@ -106,6 +106,13 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
         "PSNR in sRGB against the reference; \"<=\": the cheapest rung already reaches the level \
          (an upper bound)."
     );
+    let measured = r
+        .dense
+        .iter()
+        .chain(&r.adaptive)
+        .map(|g| g.psnr_vs_reference);
+    let asked = r.levels.iter().map(|l| l.psnr_db);
+    print_reference_noise(r.reference_ceiling_db, measured.chain(asked));
     if let Some(plot) = &r.plot {
         println!("plot: {}", plot.display());
     }
@@ -124,6 +131,27 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
             );
         }
     }
+}
+
+/// Says how far the reference's own noise lets a PSNR against it go, and warns when the
+/// `psnrs` measured or asked for come within 3 dB of that.
+fn print_reference_noise(ceiling_db: Option<f64>, psnrs: impl Iterator<Item = f64>) {
+    let Some(ceiling) = ceiling_db else {
+        return;
+    };
+    let top = psnrs
+        .filter(|p| p.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max);
+    let limited = if top >= ceiling - 3.0 {
+        "; PSNRs within 3 dB of it measure the reference's noise as much as the render's \
+         (raise --reference-spp)"
+    } else {
+        ""
+    };
+    println!(
+        "reference noise (from its two independent halves): a noise-free render would measure \
+         {ceiling:.2} dB against it{limited}"
+    );
 }
 
 pub(crate) fn print_table(r: &bench::BenchReport) {
@@ -191,6 +219,8 @@ pub(crate) fn print_table(r: &bench::BenchReport) {
         );
     }
     println!("PSNR/SSIM in sRGB (what a viewer sees); \"inf\" = identical images.");
+    let measured = r.rows.iter().map(|row| row.psnr_vs_reference);
+    print_reference_noise(r.reference_ceiling_db, measured);
 }
 
 /// A bench report (or any serialisable object) with `schema_version`, `dofray_version` and
