@@ -116,6 +116,11 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
     if let Some(plot) = &r.plot {
         println!("plot: {}", plot.display());
     }
+    print_equal_time(r);
+}
+
+/// The equal-time pair of the side-by-side picture, and where the picture is.
+fn print_equal_time(r: &equal_error::EqualErrorReport) {
     if let Some(t) = &r.equal_time {
         let (d, a) = (&r.dense[t.dense_rung], &r.adaptive[t.adaptive_rung]);
         let [x, y, w, h] = t.crop;
