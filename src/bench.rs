@@ -478,12 +478,7 @@ pub fn run(
         return Err(BenchError::ZeroRepeat);
     }
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let Reference {
-        rgb: reference,
-        cached: reference_cached,
-        seconds: reference_seconds,
-        ceiling_db: reference_ceiling_db,
-    } = reference(desc, world, camera, &config.measure, progress)?;
+    let reference = reference(desc, world, camera, &config.measure, progress)?;
 
     // Intersect-only: replay exactly the packets dense traces, without shading or sampling.
     let recording = RenderSettings {
@@ -523,7 +518,7 @@ pub fn run(
     let intersect_only_mrays_per_s = replayed as f64 / intersect_only_seconds / 1e6;
 
     let compare = Compare {
-        reference: &reference,
+        reference: &reference.rgb,
         dense_rgb: images[1].as_ref().map(Film::rgb).unwrap_or_default(),
         size: (w, h),
         pinhole_seconds: median_of(&runs[0], |s| s.seconds),
@@ -547,15 +542,18 @@ pub fn run(
             repeat: config.measure.repeat,
             threads: rayon::current_num_threads(),
             reference_spp: config.measure.reference_spp,
-            reference_cached,
-            reference_seconds,
-            reference_ceiling_db,
+            reference_cached: reference.cached,
+            reference_seconds: reference.seconds,
+            reference_ceiling_db: reference.ceiling_db,
             intersect_only_mrays_per_s,
             intersect_only_seconds,
             dense_vs_intersect_only: median(dense_vs_replay),
             rows,
         },
-        BenchImages { films, reference },
+        BenchImages {
+            films,
+            reference: reference.rgb,
+        },
     ))
 }
 

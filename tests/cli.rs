@@ -383,7 +383,7 @@ fn bench_reference_ceiling_predicts_what_dense_measures() {
     // a noise-free render would measure) lies 10 log10(3) = 4.77 dB above dense's PSNR.
     let dir = scratch("ceiling");
     let cache = dir.join("cache");
-    let out = dofray(&[
+    let args = [
         "bench",
         "--equal-error",
         "--width",
@@ -400,8 +400,8 @@ fn bench_reference_ceiling_predicts_what_dense_measures() {
         "1",
         "--cache-dir",
         cache.to_str().unwrap(),
-        "--json",
-    ]);
+    ];
+    let out = dofray(&[&args[..], &["--json"]].concat());
     assert!(out.status.success(), "{}", stderr(&out));
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
     let ceiling = report["reference_ceiling_db"].as_f64().expect("a ceiling");
@@ -412,24 +412,7 @@ fn bench_reference_ceiling_predicts_what_dense_measures() {
         ceiling - dense
     );
     // The cached reference keeps its ceiling.
-    let again = dofray(&[
-        "bench",
-        "--equal-error",
-        "--width",
-        "128",
-        "--height",
-        "96",
-        "--ladder",
-        "16",
-        "--levels",
-        "30",
-        "--reference-spp",
-        "32",
-        "--repeat",
-        "1",
-        "--cache-dir",
-        cache.to_str().unwrap(),
-    ]);
+    let again = dofray(&args);
     assert!(again.status.success(), "{}", stderr(&again));
     let text = String::from_utf8_lossy(&again.stdout);
     assert!(text.contains("(cached)"), "{text}");

@@ -11,7 +11,7 @@
 use std::path::PathBuf;
 
 use super::equal_time::{EqualTime, Picture, choose_rungs, hardest_window};
-use super::{BenchError, Measure, Reference, median, reference};
+use super::{BenchError, Measure, median, reference};
 use crate::camera::Camera;
 use crate::metrics::{self, Space};
 use crate::render::{self, Mode, Progress, RenderSettings, RenderStats, SamplingRule};
@@ -362,12 +362,7 @@ pub fn run(
 ) -> Result<EqualErrorReport, BenchError> {
     let (ladder, level_list) = checked_config(config)?;
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let Reference {
-        rgb: reference,
-        cached: reference_cached,
-        seconds: reference_seconds,
-        ceiling_db: reference_ceiling_db,
-    } = reference(desc, world, camera, &config.measure, progress)?;
+    let reference = reference(desc, world, camera, &config.measure, progress)?;
 
     let methods = [Method::Dense, Method::Adaptive];
     // Per method and rung: the stats of every repeat, and from the first repeat the PSNR, the
@@ -387,7 +382,7 @@ pub fn run(
                 );
                 let (film, stats) = render::render(world, camera, &settings, progress)?;
                 if repeat == 0 {
-                    let psnr = metrics::psnr(&film.rgb(), &reference, w, h, Space::Srgb)?;
+                    let psnr = metrics::psnr(&film.rgb(), &reference.rgb, w, h, Space::Srgb)?;
                     let samples = film.samples.iter().map(|&n| n as u64).sum();
                     quality[m].push((psnr, samples));
                     pictures[m].push(srgb8(film.color.iter().map(|&c| c.to_array())));
@@ -423,7 +418,7 @@ pub fn run(
     let (dense, adaptive) = (rungs(0), rungs(1));
     let (levels, highest_common) = levels(&level_list, &dense, &adaptive);
     let equal_time = equal_time_pair(
-        &reference,
+        &reference.rgb,
         &mut pictures,
         [&dense, &adaptive],
         highest_common.map(|l| l.psnr_db),
@@ -438,9 +433,9 @@ pub fn run(
         threads: rayon::current_num_threads(),
         seed: config.measure.seed,
         reference_spp: config.measure.reference_spp,
-        reference_cached,
-        reference_seconds,
-        reference_ceiling_db,
+        reference_cached: reference.cached,
+        reference_seconds: reference.seconds,
+        reference_ceiling_db: reference.ceiling_db,
         aa: config.aa,
         dense,
         adaptive,
