@@ -86,6 +86,8 @@ pub enum Param {
     TransmissionBounces,
     /// Clamp on indirect samples.
     ClampIndirect,
+    /// The glossy filter (Cycles' Filter Glossy).
+    FilterGlossy,
     /// Light tracing of small emitters seen through the lens.
     LightTracing,
     /// Sample reuse across adaptive sites.
@@ -126,7 +128,7 @@ const fn row(
 
 impl Param {
     /// Every parameter.
-    pub const ALL: [Param; 36] = [
+    pub const ALL: [Param; 37] = [
         Self::Width,
         Self::Height,
         Self::ApertureRadius,
@@ -161,6 +163,7 @@ impl Param {
         Self::GlossyBounces,
         Self::TransmissionBounces,
         Self::ClampIndirect,
+        Self::FilterGlossy,
         Self::LightTracing,
         Self::Reuse,
     ];
@@ -203,6 +206,7 @@ impl Param {
             Self::GlossyBounces => row("glossy_bounces", Some("--glossy-bounces"), Some("render.glossy_bounces"), None, None),
             Self::TransmissionBounces => row("transmission_bounces", Some("--transmission-bounces"), Some("render.transmission_bounces"), None, None),
             Self::ClampIndirect => row("clamp_indirect", Some("--clamp-indirect"), Some("render.clamp_indirect"), None, None),
+            Self::FilterGlossy => row("filter_glossy", Some("--filter-glossy"), Some("render.filter_glossy"), None, None),
             Self::LightTracing => row("light_tracing", Some("--light-tracing"), Some("render.light_tracing"), Some("light_tracing"), None),
             Self::Reuse => row("reuse", Some("--reuse"), Some("render.reuse"), None, None),
         }

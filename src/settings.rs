@@ -99,6 +99,14 @@ pub struct PathLimits {
     /// `f32::INFINITY` (the default) clamps nothing, so the image is unbiased. Cycles' default is
     /// 10: clamping trades fireflies for energy lost where light is bright and indirect.
     pub clamp_indirect: f32,
+    /// Cycles' Filter Glossy: after a bounce whose direction was unlikely (a diffuse or rough
+    /// glossy one), glossy and refractive lobes are made rougher, to GGX alpha
+    /// `sqrt(1 - min_pdf / filter_glossy) / 2` where `min_pdf` is the smallest solid-angle
+    /// density the path's scattered directions had. Caustics (light a near-mirror reflects
+    /// or glass refracts onto a rough surface, which camera paths find only by luck) come out
+    /// smooth instead of as fireflies, at the cost of bias: they are blurred. 0 (the default)
+    /// filters nothing, so the image is unbiased; Cycles' default is 1.
+    pub filter_glossy: f32,
     /// How light samples and BSDF samples are weighed.
     pub strategy: Strategy,
     /// Whether emitters much smaller on screen than their blur (and sub-pixel ones) are seen
@@ -124,6 +132,7 @@ impl Default for PathLimits {
             glossy: 4,
             transmission: 12,
             clamp_indirect: f32::INFINITY,
+            filter_glossy: 0.0,
             strategy: Strategy::Mis,
             light_tracing: true,
             reuse: false,
@@ -328,6 +337,9 @@ impl RenderSettings {
         if p.clamp_indirect.is_nan() || p.clamp_indirect <= 0.0 {
             return Err(SettingError::ClampIndirect(p.clamp_indirect));
         }
+        if !(p.filter_glossy.is_finite() && p.filter_glossy >= 0.0) {
+            return Err(SettingError::FilterGlossy(p.filter_glossy));
+        }
         Ok(())
     }
 }
@@ -371,6 +383,9 @@ pub enum SettingError {
     /// The indirect clamp is not a number > 0.
     #[error("{}", self.message(Param::field))]
     ClampIndirect(f32),
+    /// The glossy filter is not a finite number >= 0.
+    #[error("{}", self.message(Param::field))]
+    FilterGlossy(f32),
 }
 
 impl SettingError {
@@ -385,6 +400,7 @@ impl SettingError {
             Self::Exposure(_) => Param::Exposure,
             Self::Bounces { param, .. } => param,
             Self::ClampIndirect(_) => Param::ClampIndirect,
+            Self::FilterGlossy(_) => Param::FilterGlossy,
         }
     }
 
@@ -417,6 +433,11 @@ impl SettingError {
             ),
             Self::ClampIndirect(c) => {
                 format!("{name} must be a number > 0 (radiance; inf for no clamp), got {c}")
+            }
+            Self::FilterGlossy(f) => {
+                format!(
+                    "{name} must be a finite number >= 0 (0: no filter; Cycles' default 1), got {f}"
+                )
             }
         }
     }
@@ -502,6 +523,8 @@ pub struct SettingsPatch {
     pub transmission_bounces: Option<u32>,
     /// Clamp on indirect samples. Default: none.
     pub clamp_indirect: Option<f32>,
+    /// Glossy filter ([`PathLimits::filter_glossy`]). Default: 0, none.
+    pub filter_glossy: Option<f32>,
     /// Light tracing of small emitters ([`PathLimits::light_tracing`]). Default: on.
     pub light_tracing: Option<bool>,
     /// Sample reuse across sites ([`PathLimits::reuse`]). Default: off.
@@ -564,6 +587,7 @@ impl SettingsPatch {
             glossy_bounces: self.glossy_bounces.or(lower.glossy_bounces),
             transmission_bounces: self.transmission_bounces.or(lower.transmission_bounces),
             clamp_indirect: self.clamp_indirect.or(lower.clamp_indirect),
+            filter_glossy: self.filter_glossy.or(lower.filter_glossy),
             light_tracing: self.light_tracing.or(lower.light_tracing),
             reuse: self.reuse.or(lower.reuse),
         }
@@ -614,6 +638,7 @@ impl SettingsPatch {
                 glossy: self.glossy_bounces.unwrap_or(d.glossy),
                 transmission: self.transmission_bounces.unwrap_or(d.transmission),
                 clamp_indirect: self.clamp_indirect.unwrap_or(d.clamp_indirect),
+                filter_glossy: self.filter_glossy.unwrap_or(d.filter_glossy),
                 strategy: d.strategy,
                 light_tracing: self.light_tracing.unwrap_or(d.light_tracing),
                 reuse: self.reuse.unwrap_or(d.reuse),

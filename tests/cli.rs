@@ -1557,3 +1557,31 @@ fn png_views_apply_record_and_reject_what_they_cannot_do() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// `--filter-glossy` and a scene's `filter_glossy` take a finite number >= 0; anything else is
+/// refused with the flag's or the key's name (and the file and line), before rendering.
+#[test]
+fn a_bad_glossy_filter_is_refused_by_name() {
+    let dir = scratch("filter-glossy");
+    let png = dir.join("out.png");
+    let png = png.to_str().unwrap();
+    let out = dofray(&["render", "--width", "16", "--filter-glossy=-1", "-o", png]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--filter-glossy"), "{}", stderr(&out));
+    let scene = dir.join("glossy.toml");
+    let base = "[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 5]\nradius = 1\n\
+                [image]\nwidth = 16\nheight = 12\n[render]\n";
+    std::fs::write(&scene, format!("{base}filter_glossy = nan\n")).unwrap();
+    let out = dofray(&["render", scene.to_str().unwrap(), "-o", png]);
+    let err = stderr(&out);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("render.filter_glossy") && err.contains("glossy.toml:9"),
+        "{err}"
+    );
+    std::fs::write(&scene, format!("{base}filter_glossy = 1\n")).unwrap();
+    let out = dofray(&["render", scene.to_str().unwrap(), "--spp", "1", "-o", png]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!std::path::Path::new(png).with_extension("png.tmp").exists());
+    std::fs::remove_dir_all(dir).unwrap();
+}

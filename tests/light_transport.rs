@@ -448,3 +448,152 @@ fn light_bsdf_and_mis_estimates_agree() {
         }
     }
 }
+
+/// A near-mirror ball (GGX alpha 0.0025) over a grey floor under a point light: the floor
+/// around it holds the lamp's caustic, which camera paths find only by a diffuse bounce that
+/// happens to hit the ball where it reflects the lamp (fireflies).
+fn caustic_scene(floor: Material, ball: Material) -> SceneDesc {
+    SceneDesc {
+        camera: camera(Vec3::new(0.0, 4.0, 2.5), Vec3::new(0.0, 0.0, 0.0), 50.0),
+        materials: vec![floor, ball],
+        objects: vec![
+            Object::Mesh {
+                mesh: ground(20.0),
+                materials: MeshMaterials::One(0),
+            },
+            Object::Sphere {
+                center: Vec3::new(0.0, 0.6, 0.0),
+                radius: 0.5,
+                material: 1,
+            },
+        ],
+        lights: vec![Light::Point {
+            position: Vec3::new(1.5, 3.0, 0.0),
+            intensity: Vec3::splat(100.0),
+        }],
+        ambient: Vec3::ZERO,
+        background: Background::uniform(Vec3::ZERO),
+        ..Default::default()
+    }
+}
+
+/// Renders `desc` with the path tracer through a pinhole at `spp`, seed `seed`, with Cycles'
+/// Filter Glossy at `filter`.
+fn render_filtered(desc: &SceneDesc, spp: u32, seed: u64, filter: f32) -> Film {
+    let device = Device::new().unwrap();
+    let world = World::build(desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    let settings = RenderSettings {
+        mode: Mode::Pinhole,
+        aa: spp,
+        seed,
+        path: PathLimits {
+            filter_glossy: filter,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    render(&world, &camera, &settings, &NoProgress).unwrap().0
+}
+
+/// Mean squared difference of two renders' pixels in `mask` (their noise, when only the seed
+/// differs).
+fn mean_square_difference(a: &Film, b: &Film, mask: &[bool]) -> f32 {
+    let sum: f32 = (0..a.color.len())
+        .filter(|&p| mask[p])
+        .map(|p| (a.color[p] - b.color[p]).length_squared())
+        .sum();
+    sum / mask.iter().filter(|&&m| m).count() as f32
+}
+
+/// Mean of the pixels in `mask`.
+fn masked_mean(film: &Film, mask: &[bool]) -> Vec3 {
+    let sum: Vec3 = (0..film.color.len())
+        .filter(|&p| mask[p])
+        .map(|p| film.color[p])
+        .sum();
+    sum / mask.iter().filter(|&&m| m).count() as f32
+}
+
+/// The pixels of `with` that see only what `without` sees, at least 2 px (the pixel filter's
+/// reach) from any pixel whose depth differs.
+fn unchanged_pixels(with: &Film, without: &Film) -> Vec<bool> {
+    let (w, h) = (with.width as i64, with.height as i64);
+    let differs = |x: i64, y: i64| {
+        let p = (y * w + x) as usize;
+        (with.depth[p] - without.depth[p]).abs() > 1e-3
+    };
+    (0..w * h)
+        .map(|p| {
+            let (x, y) = (p % w, p / w);
+            !(-2..=2).any(|dy: i64| {
+                (-2..=2).any(|dx: i64| {
+                    let (u, v) = (x + dx, y + dy);
+                    (0..w).contains(&u) && (0..h).contains(&v) && differs(u, v)
+                })
+            })
+        })
+        .collect()
+}
+
+/// Cycles' Filter Glossy: the caustic's fireflies go (renders with different seeds agree far
+/// better on the floor around the ball), the floor's light stays, and a scene of fully rough
+/// surfaces, which the filter cannot make rougher, renders bit for bit as without it.
+#[test]
+fn the_glossy_filter_smooths_a_caustic_and_keeps_its_light() {
+    let floor = Material {
+        roughness: 1.0,
+        ..Material::diffuse(Vec3::splat(0.5))
+    };
+    let glossy = Material {
+        metallic: 1.0,
+        roughness: 0.2,
+        ..Material::diffuse(Vec3::splat(0.9))
+    };
+    let desc = caustic_scene(floor.clone(), glossy);
+    // The floor around the ball, not the ball itself: its own highlight is a tiny lamp seen
+    // directly, which the filter leaves alone (so does Cycles').
+    let mut bare = desc.clone();
+    bare.objects.truncate(1);
+    let mask = unchanged_pixels(
+        &render_filtered(&desc, 1, 1, 0.0),
+        &render_filtered(&bare, 1, 1, 0.0),
+    );
+    assert!(mask.iter().filter(|&&m| m).count() > 150);
+    let (mut noise, mut light) = ([0.0f32; 2], [0.0f32; 2]);
+    for (i, filter) in [0.0, 1.0].into_iter().enumerate() {
+        for seeds in [(1, 2), (3, 4), (5, 6)] {
+            let a = render_filtered(&desc, 64, seeds.0, filter);
+            let b = render_filtered(&desc, 64, seeds.1, filter);
+            noise[i] += mean_square_difference(&a, &b, &mask);
+            light[i] += (masked_mean(&a, &mask).x + masked_mean(&b, &mask).x) / 6.0;
+        }
+    }
+    assert!(
+        noise[1] < 0.1 * noise[0],
+        "renders with different seeds differ by {} with the filter, {} without",
+        noise[1],
+        noise[0]
+    );
+    assert_close(
+        light[1],
+        light[0],
+        0.02,
+        "the floor's light with the filter",
+    );
+
+    let rough = Material {
+        metallic: 1.0,
+        roughness: 1.0,
+        ..Material::diffuse(Vec3::splat(0.9))
+    };
+    let desc = caustic_scene(floor, rough);
+    let (off, on) = (
+        render_filtered(&desc, 4, 1, 0.0),
+        render_filtered(&desc, 4, 1, 1.0),
+    );
+    assert!(
+        off.color == on.color,
+        "fully rough surfaces changed under the filter"
+    );
+}

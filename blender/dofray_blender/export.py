@@ -219,6 +219,11 @@ def render_table(scene, settings, warnings):
         out["transmission_bounces"] = clamp_int(cycles.transmission_bounces, BOUNCE_RANGE)
         if cycles.sample_clamp_indirect > 0.0:
             out["clamp_indirect"] = float(cycles.sample_clamp_indirect)
+        if cycles.blur_glossy > 0.0:
+            out["filter_glossy"] = float(cycles.blur_glossy)
+        if not (cycles.caustics_reflective and cycles.caustics_refractive):
+            warnings.add("Cycles' caustics switches are not carried (dofray traces every "
+                         "caustic; Filter Glossy is carried)")
         if cycles.sample_clamp_direct > 0.0:
             warnings.add("Cycles' direct light clamp is not carried (dofray clamps indirect "
                          "light only)")

@@ -57,6 +57,7 @@ class RENDER_PT_dofray_light_paths(DofrayPanel, bpy.types.Panel):
         col.prop(c, "glossy_bounces", text="Glossy")
         col.prop(c, "transmission_bounces", text="Transmission")
         layout.prop(c, "sample_clamp_indirect", text="Clamp Indirect")
+        layout.prop(c, "blur_glossy", text="Filter Glossy")
 
 
 class RENDER_PT_dofray_film(DofrayPanel, bpy.types.Panel):

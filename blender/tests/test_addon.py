@@ -305,6 +305,14 @@ class AddonTest(unittest.TestCase):
         for k in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces"):
             self.assertEqual(r[k], getattr(c, k), k)
         self.close(r["clamp_indirect"], c.sample_clamp_indirect, msg="clamp")
+        self.close(r["filter_glossy"], c.blur_glossy, msg="filter glossy")
+        before, c.blur_glossy = c.blur_glossy, 0.0  # off: left out (dofray's default)
+        try:
+            self.assertNotIn("filter_glossy",
+                             dexport.render_table(self.scene, self.scene.dofray,
+                                                  dexport.Warnings()))
+        finally:
+            c.blur_glossy = before
         # Samples from Cycles instead: clamped, with a warning.
         settings = self.scene.dofray
         settings.use_cycles_samples = True

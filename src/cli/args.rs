@@ -228,6 +228,13 @@ pub(crate) struct RenderArgs {
     /// of bias (bright indirect light gets darker) [default: the scene's, else no clamp].
     #[arg(long, value_name = "RADIANCE")]
     pub(crate) clamp_indirect: Option<f32>,
+    /// Path tracer: Cycles' Filter Glossy. After a diffuse or rough bounce, glossy and
+    /// refractive surfaces are made rougher, the more so the less likely that bounce's
+    /// direction was: caustics (a lamp reflected by a near-mirror or refracted by glass onto a
+    /// rough surface) come out smooth instead of as fireflies, at the cost of bias (blurred
+    /// caustics). 1 is Cycles' default; 0 filters nothing [default: the scene's, else 0].
+    #[arg(long, value_name = "AMOUNT")]
+    pub(crate) filter_glossy: Option<f32>,
     /// Path tracer: lamps much smaller on screen than their blur (and sub-pixel ones) are seen
     /// through the lens by tracing light from them to the lens, so their bokeh discs come out
     /// clean instead of speckled, and adaptive sites cannot miss them. Unbiased either way;

@@ -47,6 +47,7 @@ pub(crate) fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<Render
         glossy_bounces: a.glossy_bounces,
         transmission_bounces: a.transmission_bounces,
         clamp_indirect: a.clamp_indirect,
+        filter_glossy: a.filter_glossy,
         light_tracing: a.light_tracing.map(|s| s == Switch::On),
         reuse: a.reuse.map(|s| s == Switch::On),
     };

@@ -38,6 +38,9 @@ struct Lane {
     delta: bool,
     /// Where the last bounce left from.
     from: Vec3,
+    /// The smallest density of the non-delta directions the path took so far (infinite on
+    /// the camera ray): what the glossy filter ([`PathLimits::filter_glossy`]) reads.
+    min_pdf: f32,
     diffuse: u32,
     glossy: u32,
     transmission: u32,
@@ -144,6 +147,7 @@ pub fn trace_path(
         pdf: 1.0,
         delta: true,
         from: Vec3::ZERO,
+        min_pdf: f32::INFINITY,
         diffuse: 0,
         glossy: 0,
         transmission: 0,
@@ -185,9 +189,10 @@ pub fn trace_path(
         }
         // The emitters light tracing sees through the lens send nothing to camera rays.
         let unseen = (bounce == 0).then_some(light_traced);
-        let v = vertices(
+        let mut v = vertices(
             world, packet, hits, &lanes, weigh, unseen, scratch, radiance,
         );
+        filter_glossy(&mut v.bsdf, hits, &lanes, limits.filter_glossy);
         if bounce == 0 {
             first.note_surfaces(hits, &v.bsdf);
         }
@@ -318,6 +323,27 @@ fn vertices(
         &lift,
     );
     Vertices { bsdf, origins }
+}
+
+/// Cycles' Filter Glossy ([`PathLimits::filter_glossy`]; 0: off): makes the BSDFs of the lanes
+/// in `hits` at least as rough as GGX alpha `sqrt(1 - min_pdf / amount) / 2`, where `min_pdf`
+/// is the least likely direction their path took so far. A camera ray's first surface keeps its
+/// own roughness; after a diffuse bounce (density at most 1 / pi) alpha is at least 0.41 at
+/// Cycles' default of 1. Next-event estimation and BSDF sampling both see the rougher lobe,
+/// so the estimate stays consistent with it; what it estimates is the blurred caustic.
+fn filter_glossy(bsdf: &mut [Bsdf; LANES], hits: u32, lanes: &[Lane; LANES], amount: f32) {
+    if amount <= 0.0 {
+        return;
+    }
+    for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+        let blur_pdf = lanes[lane].min_pdf / amount;
+        if blur_pdf < 1.0 {
+            let alpha = (1.0 - blur_pdf).sqrt() * 0.5;
+            // Roughness is perceptual: GGX alpha is its square.
+            let b = &mut bsdf[lane];
+            b.roughness = b.roughness.max(alpha.sqrt());
+        }
+    }
 }
 
 /// One bounce's vertices as next-event estimation reads them.
@@ -474,6 +500,9 @@ fn scatter(
     s.throughput = throughput;
     s.pdf = sample.pdf;
     s.delta = sample.delta;
+    if !sample.delta {
+        s.min_pdf = s.min_pdf.min(sample.pdf);
+    }
     s.from = origin;
     Some(Ray::new(origin, sample.wi))
 }

@@ -313,6 +313,7 @@ fn render_settings(ctx: &Ctx, render: RawRender) -> Result<SettingsPatch, LoadEr
         glossy_bounces: render.glossy_bounces.as_ref().map(|s| *s.get_ref()),
         transmission_bounces: render.transmission_bounces.as_ref().map(|s| *s.get_ref()),
         clamp_indirect: render.clamp_indirect.as_ref().map(|s| s.get_ref().0),
+        filter_glossy: render.filter_glossy.as_ref().map(|s| *s.get_ref()),
         light_tracing: render.light_tracing,
         reuse: render.reuse,
         ..Default::default()
@@ -328,6 +329,7 @@ fn render_settings(ctx: &Ctx, render: RawRender) -> Result<SettingsPatch, LoadEr
             Param::DiffuseBounces => render.diffuse_bounces.map(|s| s.span()),
             Param::GlossyBounces => render.glossy_bounces.map(|s| s.span()),
             Param::TransmissionBounces => render.transmission_bounces.map(|s| s.span()),
+            Param::FilterGlossy => render.filter_glossy.as_ref().map(|s| s.span()),
             _ => None,
         };
         let at = ctx.at(span.unwrap_or(0..0));

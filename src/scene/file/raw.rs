@@ -361,6 +361,7 @@ pub(super) struct RawRender {
     pub(super) glossy_bounces: Option<Spanned<u32>>,
     pub(super) transmission_bounces: Option<Spanned<u32>>,
     pub(super) clamp_indirect: Option<Spanned<Positive>>,
+    pub(super) filter_glossy: Option<Spanned<f32>>,
     pub(super) light_tracing: Option<bool>,
     pub(super) reuse: Option<bool>,
 }
