@@ -6,10 +6,16 @@
 //! bit (colour, alpha, depth, CoC, interval, samples).
 //!
 //! Embree is pinned to its AVX2 kernels (`DOFRAY_EMBREE_CONFIG=isa=avx2`, which every machine
-//! this runs on has), so the hashes do not depend on whether the CPU has AVX-512.
+//! this runs on has), so the hashes do not depend on whether the CPU has AVX-512. They do depend
+//! on the CPU's maker: Embree's kernels use the approximate reciprocal instructions (`rcpps`,
+//! refined by a Newton step), whose last bits differ between AMD and Intel, so hit distances,
+//! and with them every pixel, round differently. The table keeps a section per Embree version
+//! and CPU vendor (`# embree 3.13.5 on GenuineIntel`); a platform without one is skipped with
+//! a notice.
 //!
 //! A change that is meant to change pixels re-blesses the table, and says so in its commit:
-//! `DOFRAY_BLESS=1 cargo test --test pixel_identity`.
+//! `DOFRAY_BLESS=1 cargo test --test pixel_identity` rewrites this platform's section (and
+//! drops the others, which no longer hold: bless on the other vendor's machine too).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -187,16 +193,17 @@ fn every_scene_and_mode_renders_the_pixels_it_did_before() {
         return;
     }
     // Another Embree (Debian 13's 4.x under scripts/embree4-check.sh) may round hits
-    // differently: the table holds the hashes of the Embree it was written with.
+    // differently, and so does another CPU vendor: each section holds the hashes of one.
     let embree = dofray::embree::Device::new().unwrap().embree_version();
     let table = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(TABLE);
-    let written_with = format!("# embree {embree}");
+    let platform = format!("# embree {embree} on {}", cpu_vendor());
     let bless = std::env::var_os("DOFRAY_BLESS").is_some();
     let text = std::fs::read_to_string(&table).unwrap();
-    if !bless && text.lines().next() != Some(written_with.as_str()) {
+    let sections = sections(&text);
+    if !bless && !sections.contains_key(&platform) {
         eprintln!(
-            "NOTICE: pixel identity skipped: the table was written with {:?}, this is embree {embree}",
-            text.lines().next().unwrap_or("")
+            "NOTICE: pixel identity skipped: the table has no hashes for {platform:?} (it has {:?})",
+            sections.keys().collect::<Vec<_>>()
         );
         return;
     }
@@ -207,21 +214,16 @@ fn every_scene_and_mode_renders_the_pixels_it_did_before() {
         got.insert(name.to_string(), format!("{hash:016x}"));
     }
     std::fs::remove_dir_all(&dir).ok();
-    if std::env::var_os("DOFRAY_BLESS").is_some() {
+    if bless {
         let text: String = got.iter().map(|(k, v)| format!("{k} {v}\n")).collect();
-        std::fs::write(&table, format!("{written_with}\n{text}")).unwrap();
-        eprintln!("wrote {}", table.display());
+        std::fs::write(&table, format!("{platform}\n{text}")).unwrap();
+        eprintln!("wrote {} for {platform}", table.display());
         return;
     }
-    let want: BTreeMap<String, String> = text
-        .lines()
-        .filter(|l| !l.starts_with('#'))
-        .filter_map(|l| l.split_once(' '))
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect();
+    let want = &sections[&platform];
     let differ: Vec<_> = got
         .iter()
-        .filter(|(k, v)| want.get(*k) != Some(v))
+        .filter(|(k, v)| want.get(*k) != Some(*v))
         .map(|(k, v)| format!("{k}: now {v}, was {:?}", want.get(k)))
         .collect();
     assert!(differ.is_empty(), "renders changed:\n{}", differ.join("\n"));
@@ -230,6 +232,35 @@ fn every_scene_and_mode_renders_the_pixels_it_did_before() {
         want.len(),
         "the table has cases this test no longer renders"
     );
+}
+
+/// The table's sections: each `# embree ... on VENDOR` line's cases and hashes.
+fn sections(text: &str) -> BTreeMap<String, BTreeMap<String, String>> {
+    let mut out: BTreeMap<String, BTreeMap<String, String>> = BTreeMap::new();
+    let mut current = None;
+    for line in text.lines() {
+        if line.starts_with("# embree ") {
+            current = Some(line.to_string());
+            out.entry(line.to_string()).or_default();
+        } else if let (Some(header), Some((k, v))) = (&current, line.split_once(' ')) {
+            let section = out.get_mut(header).expect("every header has a section");
+            section.insert(k.to_string(), v.to_string());
+        }
+    }
+    out
+}
+
+/// The CPU's vendor string (`GenuineIntel`, `AuthenticAMD`), from /proc/cpuinfo.
+fn cpu_vendor() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|info| {
+            info.lines()
+                .find_map(|l| l.strip_prefix("vendor_id"))
+                .and_then(|rest| rest.split(':').nth(1))
+                .map(|v| v.trim().to_string())
+        })
+        .unwrap_or_else(|| "an unknown CPU".to_string())
 }
 
 fn tempdir() -> PathBuf {
