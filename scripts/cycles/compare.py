@@ -49,7 +49,14 @@ def common_tables(side, dof):
              # Cycles' Blackman-Harris of filter_width w spans +-w (its filter_table doubles
              # the width), so its default 1.5 is dofray's full width 3.
              f"pixel_filter = {fmt('blackman-harris')}",
-             f"pixel_filter_width = {fmt(2.0 * side['cycles']['pixel_filter_width'])}", ""]
+             f"pixel_filter_width = {fmt(2.0 * side['cycles']['pixel_filter_width'])}"]
+    # Cycles' biased defaults (scenes.py --blender-biased), as the add-on carries them.
+    cycles = side["cycles"]
+    if cycles.get("sample_clamp_indirect", 0.0) > 0.0:
+        lines.append(f"clamp_indirect = {fmt(float(cycles['sample_clamp_indirect']))}")
+    if cycles.get("blur_glossy", 0.0) > 0.0:
+        lines.append(f"filter_glossy = {fmt(float(cycles['blur_glossy']))}")
+    lines.append("")
     if dof:
         d = side["camera"]["dof"]
         lines += ["[camera]", f"f_number = {fmt(d['f_number'])}",
