@@ -31,11 +31,16 @@ fn camera(eye: Vec3, look_at: Vec3, vfov: f32) -> CameraSpec {
     }
 }
 
-/// Renders `desc` with the path tracer, `spp` samples per pixel, paths up to `bounces` long.
-fn render_path(desc: &SceneDesc, spp: u32, bounces: u32) -> Film {
+/// Renders `desc` with `settings`.
+fn render_with(desc: &SceneDesc, settings: &RenderSettings) -> Film {
     let device = Device::new().unwrap();
     let world = World::build(desc, &device).unwrap();
     let camera = desc.camera.build(|_| None).unwrap();
+    render(&world, &camera, settings, &NoProgress).unwrap().0
+}
+
+/// Renders `desc` with the path tracer, `spp` samples per pixel, paths up to `bounces` long.
+fn render_path(desc: &SceneDesc, spp: u32, bounces: u32) -> Film {
     let settings = RenderSettings {
         mode: Mode::Pinhole,
         aa: spp,
@@ -49,7 +54,7 @@ fn render_path(desc: &SceneDesc, spp: u32, bounces: u32) -> Film {
         },
         ..Default::default()
     };
-    render(&world, &camera, &settings, &NoProgress).unwrap().0
+    render_with(desc, &settings)
 }
 
 fn mean(film: &Film) -> Vec3 {
@@ -480,9 +485,6 @@ fn caustic_scene(floor: Material, ball: Material) -> SceneDesc {
 /// Renders `desc` with the path tracer through a pinhole at `spp`, seed `seed`, with Cycles'
 /// Filter Glossy at `filter`.
 fn render_filtered(desc: &SceneDesc, spp: u32, seed: u64, filter: f32) -> Film {
-    let device = Device::new().unwrap();
-    let world = World::build(desc, &device).unwrap();
-    let camera = desc.camera.build(|_| None).unwrap();
     let settings = RenderSettings {
         mode: Mode::Pinhole,
         aa: spp,
@@ -493,7 +495,7 @@ fn render_filtered(desc: &SceneDesc, spp: u32, seed: u64, filter: f32) -> Film {
         },
         ..Default::default()
     };
-    render(&world, &camera, &settings, &NoProgress).unwrap().0
+    render_with(desc, &settings)
 }
 
 /// Mean squared difference of two renders' pixels in `mask` (their noise, when only the seed

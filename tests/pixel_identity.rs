@@ -7,9 +7,10 @@
 //!
 //! Embree is pinned to its AVX2 kernels (`DOFRAY_EMBREE_CONFIG=isa=avx2`, which every machine
 //! this runs on has), so the hashes do not depend on whether the CPU has AVX-512. They do depend
-//! on the CPU's maker: Embree's kernels use the approximate reciprocal instructions (`rcpps`,
-//! refined by a Newton step), whose last bits differ between AMD and Intel, so hit distances,
-//! and with them every pixel, round differently. The table keeps a section per Embree version
+//! on the CPU's maker: every case hashed differently on an AMD EPYC than on the Intel Xeon the
+//! table was first written on, the pinhole and direct-integrator ones too. The likely cause is
+//! Embree's kernels, which refine approximate reciprocals (`rcpps`, whose last bits differ
+//! between AMD and Intel), so hit distances, and with them every pixel, round differently. The table keeps a section per Embree version
 //! and CPU vendor (`# embree 3.13.5 on GenuineIntel`); a platform without one is skipped with
 //! a notice.
 //!
@@ -237,14 +238,15 @@ fn every_scene_and_mode_renders_the_pixels_it_did_before() {
 /// The table's sections: each `# embree ... on VENDOR` line's cases and hashes.
 fn sections(text: &str) -> BTreeMap<String, BTreeMap<String, String>> {
     let mut out: BTreeMap<String, BTreeMap<String, String>> = BTreeMap::new();
-    let mut current = None;
+    let mut header = None;
     for line in text.lines() {
         if line.starts_with("# embree ") {
-            current = Some(line.to_string());
+            header = Some(line);
             out.entry(line.to_string()).or_default();
-        } else if let (Some(header), Some((k, v))) = (&current, line.split_once(' ')) {
-            let section = out.get_mut(header).expect("every header has a section");
-            section.insert(k.to_string(), v.to_string());
+        } else if let (Some(h), Some((k, v))) = (header, line.split_once(' ')) {
+            out.entry(h.to_string())
+                .or_default()
+                .insert(k.to_string(), v.to_string());
         }
     }
     out
