@@ -20,6 +20,7 @@ use std::collections::HashSet;
 
 use glam::Vec3;
 
+use super::glossy_light::GlossyPaths;
 use crate::camera::{BoxImage, Camera, Lens, LensFilter};
 use crate::sampler::PixelSampler;
 use crate::scene::World;
@@ -58,6 +59,8 @@ pub struct LightTraced {
     set: HashSet<(u32, u32)>,
     /// Mean lens weight over the aperture under the render's lens filter (1 for the box).
     pub(super) lens_weight_mean: f32,
+    /// Point and spot lights whose glossy reflections are traced from the light too.
+    pub(super) glossy: Option<GlossyPaths>,
 }
 
 impl LightTraced {
@@ -147,10 +150,12 @@ impl LightTraced {
             .collect();
         traced.sort_by_key(|t| (t.geometry, t.prim));
         let set = traced.iter().map(|t| (t.geometry, t.prim)).collect();
+        let lens_weight_mean = lens_weight_mean(camera, settings.filter);
         Self {
             traced,
             set,
-            lens_weight_mean: lens_weight_mean(camera, settings.filter),
+            lens_weight_mean,
+            glossy: GlossyPaths::choose(world, camera, settings, lens_weight_mean),
         }
     }
 
@@ -166,9 +171,10 @@ impl LightTraced {
         !self.set.is_empty() && self.set.contains(&(geometry, prim))
     }
 
-    /// The light paths a render traces.
+    /// The light paths a render traces (small lamps' and glossy reflections').
     pub fn paths(&self) -> u64 {
-        self.traced.iter().map(|t| u64::from(t.paths)).sum()
+        let glossy = self.glossy.as_ref().map_or(0, GlossyPaths::paths);
+        self.traced.iter().map(|t| u64::from(t.paths)).sum::<u64>() + glossy
     }
 }
 

@@ -51,9 +51,11 @@ const BLOCK: u32 = 4096;
 
 /// Light that landed on the film: its position (pixels) and what it adds there.
 #[derive(Debug, Clone, Copy)]
-struct Splat {
-    film: Vec2,
-    value: Vec3,
+pub(super) struct Splat {
+    /// Film position, pixels.
+    pub(super) film: Vec2,
+    /// What it adds to the pixels its filter reaches (weighted by the filter's density).
+    pub(super) value: Vec3,
 }
 
 /// Traces the light paths of `traced` for the render `shader` describes and adds the light they
@@ -70,7 +72,6 @@ pub fn trace(
     if traced.is_empty() {
         return Ok(());
     }
-    let w = shader.camera.width as usize;
     // Work items (primitive, first path): only primitives whose light can reach the region.
     // A lens that distorts lands light away from the pinhole footprints: trace it all.
     let exact = !shader.camera.lens.distorts();
@@ -85,16 +86,36 @@ pub fn trace(
         .filter(|(_, t)| overlaps(t))
         .flat_map(|(i, t)| (0..t.paths).step_by(BLOCK as usize).map(move |f| (i, f)))
         .collect();
-    progress.start("lights", items.len() as u64);
+    let block = |&(i, first): &(usize, u32)| trace_block(shader, traced, &traced.traced[i], first);
+    splat_blocks(
+        shader, "lights", &items, block, region, progress, tally, image,
+    )
+}
+
+/// Traces the work items `items` with `block` and adds the light they land on the film to
+/// `image` (only `region`'s pixels change), in item order whatever the thread count. Batches
+/// keep the splats held at once bounded: the items of one batch are traced in parallel while
+/// the previous batch is splatted.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn splat_blocks<I: Sync>(
+    shader: &SiteShader,
+    name: &str,
+    items: &[I],
+    block: impl Fn(&I) -> Result<(Vec<Splat>, Tally), MemoryError> + Sync,
+    region: &Region,
+    progress: &dyn Progress,
+    tally: &mut Tally,
+    image: &mut [Vec3],
+) -> Result<(), RenderError> {
+    let w = shader.camera.width as usize;
+    progress.start(name, items.len() as u64);
     let density = shader.settings.pixel_filter.density();
-    // Batches keep the splats held at once bounded: blocks of one batch are traced in
-    // parallel while the previous batch is splatted, in block order.
     let batch = 8 * rayon::current_num_threads().max(1);
-    let trace_batch = |chunk: &[(usize, u32)]| -> Vec<Result<(Vec<Splat>, Tally), MemoryError>> {
+    let trace_batch = |chunk: &[I]| -> Vec<Result<(Vec<Splat>, Tally), MemoryError>> {
         chunk
             .par_iter()
-            .map(|&(i, first)| {
-                let out = trace_block(shader, traced, &traced.traced[i], first);
+            .map(|item| {
+                let out = block(item);
                 progress.advance(1);
                 out
             })

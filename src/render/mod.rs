@@ -22,6 +22,7 @@
 
 pub mod estimate;
 pub mod film;
+pub mod glossy_light;
 pub mod interpolate;
 pub mod light_choice;
 pub mod light_trace;
@@ -527,6 +528,9 @@ pub fn render_region(
         &mut tally,
         &mut film.color,
     )?;
+    if let Some(glossy) = &light_traced.glossy {
+        glossy.trace(&shader, region, progress, &mut tally, &mut film.color)?;
+    }
     stats.light_paths = light_traced.paths();
     stats.light_seconds = phase.elapsed().as_secs_f64();
     let (mut film, blurred) = if *region == Region::full(camera.width, camera.height) {

@@ -6,6 +6,7 @@
 
 use glam::{Vec2, Vec3};
 
+use super::glossy_light::{GlossyPaths, Lit};
 use super::light_choice::LightTraced;
 use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
@@ -44,6 +45,20 @@ struct Lane {
     diffuse: u32,
     glossy: u32,
     transmission: u32,
+}
+
+impl Lane {
+    /// A camera ray's state (its origin is set per lane).
+    const CAMERA: Self = Self {
+        throughput: Vec3::ONE,
+        pdf: 1.0,
+        delta: true,
+        from: Vec3::ZERO,
+        min_pdf: f32::INFINITY,
+        diffuse: 0,
+        glossy: 0,
+        transmission: 0,
+    };
 }
 
 /// The power heuristic (beta = 2) weight of a strategy of density `a` against one of `b`.
@@ -87,6 +102,10 @@ fn clamped(c: Vec3, clamp: f32) -> Vec3 {
 struct Vertices {
     bsdf: [Bsdf; LANES],
     origins: trace::Origins,
+    /// Unit geometric normals.
+    ng: [Vec3; LANES],
+    /// Distances from the rays' origins.
+    t: [f32; LANES],
 }
 
 /// What each camera ray of a packet hit first.
@@ -142,16 +161,7 @@ pub fn trace_path(
     scratch: &mut PathScratch,
     tally: &mut Tally,
 ) {
-    let mut lanes = [Lane {
-        throughput: Vec3::ONE,
-        pdf: 1.0,
-        delta: true,
-        from: Vec3::ZERO,
-        min_pdf: f32::INFINITY,
-        diffuse: 0,
-        glossy: 0,
-        transmission: 0,
-    }; LANES];
+    let mut lanes = [Lane::CAMERA; LANES];
     for lane in 0..LANES {
         if packet.is_active(lane) {
             radiance[lane] = Vec3::ZERO;
@@ -209,6 +219,7 @@ pub fn trace_path(
             wo: &wo,
             numbers: &numbers,
             lanes: &lanes,
+            glossy: light_traced.glossy.as_ref().filter(|_| bounce == 0),
         };
         next_event(
             world,
@@ -287,6 +298,7 @@ fn vertices(
     world.surface_points16(packet, hits, points);
     let dir = packet.dirs();
     let mut bsdf = [Bsdf::diffuse(Vec3::ZERO); LANES];
+    let mut ng = [Vec3::Z; LANES];
     let mut extent = [0.0f32; LANES];
     let mut lift = [[0.0f32; LANES]; 3];
     for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
@@ -308,6 +320,7 @@ fn vertices(
             radiance[lane] += clamped(s.throughput * le * w, clamp);
         }
         bsdf[lane] = material.bsdf(sp.uv, front);
+        ng[lane] = hit.ng.normalize_or(Vec3::Z);
         extent[lane] = trace::primitive_extent(world, &hit);
         let up = trace::terminator_lift(world, &hit, sp.position, sp.normal);
         for k in 0..3 {
@@ -322,7 +335,12 @@ fn vertices(
         &extent,
         &lift,
     );
-    Vertices { bsdf, origins }
+    Vertices {
+        bsdf,
+        origins,
+        ng,
+        t: *packet.tfars(),
+    }
 }
 
 /// Cycles' Filter Glossy ([`PathLimits::filter_glossy`]; 0: off): makes the BSDFs of the lanes
@@ -357,6 +375,8 @@ struct Shading<'a> {
     wo: &'a [Vec3; LANES],
     numbers: &'a [Numbers; LANES],
     lanes: &'a [Lane; LANES],
+    /// At a camera ray's first surface: the lamps whose glossy reflections light paths share.
+    glossy: Option<&'a GlossyPaths>,
 }
 
 /// Next-event estimation: a shadow packet for each always-sampled punctual light, one for the
@@ -371,27 +391,30 @@ fn next_event(
     tally: &mut Tally,
 ) {
     let emitters = &world.emitters;
-    for light in &emitters.always {
+    for (i, light) in emitters.always.iter().enumerate() {
         let sample = |p: Vec3, _: &Numbers| Some(punctual_sample(light, p));
-        shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
+        shadow_packet(world, at, clamp, sample, Some(i), scratch, radiance, tally);
     }
     if emitters.samples_world() {
         let sample = |_: Vec3, u: &Numbers| emitters.sample_world(world, Vec2::new(u[8], u[9]));
-        shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
+        shadow_packet(world, at, clamp, sample, None, scratch, radiance, tally);
     }
     if emitters.has_distribution() {
         let sample = |p: Vec3, u: &Numbers| emitters.sample(world, p, [u[0], u[1], u[2]]);
-        shadow_packet(world, at, clamp, sample, scratch, radiance, tally);
+        shadow_packet(world, at, clamp, sample, None, scratch, radiance, tally);
     }
 }
 
 /// Draws one light sample per lane that hit with `sample` (from the lane's leaving origin and
-/// numbers), traces them as one shadow packet and adds the unoccluded ones.
+/// numbers), traces them as one shadow packet and adds the unoccluded ones. `punctual` is the
+/// index of the punctual light sampled, whose glossy reflections light paths may share.
+#[allow(clippy::too_many_arguments)]
 fn shadow_packet(
     world: &World,
     at: &Shading,
     clamp: f32,
     sample: impl Fn(Vec3, &Numbers) -> Option<EmitterSample>,
+    punctual: Option<usize>,
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
     tally: &mut Tally,
@@ -409,6 +432,7 @@ fn shadow_packet(
         wo,
         numbers,
         lanes,
+        glossy,
     } = *at;
     // A vertex whose BSDF is all deltas (a smooth mirror or clear glass) takes no light sample.
     let sampled = (0..LANES).filter(|&l| hits & (1 << l) != 0 && !v.bsdf[l].is_delta());
@@ -422,10 +446,20 @@ fn shadow_packet(
         if f == Vec3::ZERO {
             continue;
         }
-        let w = if es.delta {
-            1.0
-        } else {
-            light_weight(strategy, es.pdf, bsdf_pdf)
+        let w = match (es.delta, glossy, punctual) {
+            (true, Some(g), Some(light)) => {
+                let at = Lit {
+                    b: v.bsdf[lane],
+                    n,
+                    ng: v.ng[lane],
+                    to_light: es.dir,
+                    d_light: es.distance,
+                    irradiance: es.radiance,
+                };
+                g.camera_weight(light, &at, wo[lane], v.t[lane])
+            }
+            (true, ..) => 1.0,
+            (false, ..) => light_weight(strategy, es.pdf, bsdf_pdf),
         };
         let c = lanes[lane].throughput * f * es.radiance * (w / es.pdf);
         if !(c.max_element() > 0.0 && c.is_finite()) {

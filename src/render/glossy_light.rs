@@ -1,0 +1,814 @@
+//! Point and spot lights seen in glossy surfaces, traced from the light as well as from the
+//! camera: light tracing through one reflection, combined with the camera's next-event
+//! estimation by multiple importance sampling.
+//!
+//! **Why.** A lamp's highlight on a polished surface (brass, chrome, lacquer) is, out of focus,
+//! a bokeh disc of the lamp's mirror image. A camera sample there finds it only when its lens
+//! position happens to look along the reflection (a fraction: sharp highlight / disc), so at
+//! 16 or 128 samples the disc is a cloud of speckles, and more samples barely help. From the
+//! light's side the same paths are easy: a direction from the lamp that meets the glossy
+//! surface, then either
+//! - **t = 1**: a point on the aperture, uniformly, and a shadow ray between the two (good where
+//!   the lobe is wider than the aperture seen from the surface), or
+//! - **t = 0**: a direction drawn from the surface's BSDF, followed to the lens plane; it counts
+//!   where it crosses the aperture (good for near-mirrors, whose narrow lobes fall into the
+//!   aperture whole).
+//!
+//! The thin lens says where on the film each landed path belongs ([`crate::camera::Lens::film_point`])
+//! and it is splatted there, as [`super::light_trace`] does for small lamps.
+//!
+//! **Weights.** The camera's strategy (a film point and a lens point, then the lamp by
+//! next-event estimation) and the two light strategies sample the same paths (lamp, surface
+//! point x, lens point u). Their densities, counted per steradian at u and per unit lens area,
+//! with `N` light paths, `n` camera samples per pixel (`spp`), `A` the aperture's area:
+//! - camera: `n per_sr / A` (`per_sr`: film area per steradian at u, [`crate::camera::Landing`]);
+//! - t = 1: `N p_u / A`, with `p_u` the light path's density of x converted to the solid angle
+//!   at u: `p_w cos_l / d_l^2 * d_u^2 / cos_u` (p_w the lamp's direction density, cos and d the
+//!   angles to x's geometric normal and the distances to the lamp and to u);
+//! - t = 0: `N p_u p_b cos_a / d_u^2`, p_b the BSDF's density of the direction towards u given
+//!   the lamp's, cos_a that direction's angle to the view axis.
+//!
+//! Each takes the power heuristic's share of the path; the shares sum to one whatever the
+//! surface, so the sum of the three estimators is unbiased. Both sides compute them from the
+//! same quantities (`GlossyPaths::densities`); where the lamp's direction sampling cannot
+//! reach a point (outside every cone below) the camera's share is 1.
+//!
+//! **Which paths.** The first surface a lamp's ray meets, when its BSDF is glossy
+//! ([`eligible`]: no rougher than [`MAX_ROUGHNESS`], opaque, not a perfect mirror) and it is
+//! out of focus (a CoC of at least [`MIN_COC_PX`]: a sharp highlight is found as well by the
+//! camera's stratified samples), seen directly through a thin lens with an aperture, in the
+//! path tracer with light tracing on. Suns and area lights stay with the camera (an area
+//! light's reflection is found by BSDF sampling too, and a sun has no position to trace from).
+//!
+//! **Where the lamp's paths go.** Directions are drawn within cones around the bounds of the
+//! geometry whose materials can be glossy, each cone's directions on a [`GRID`] x [`GRID`] grid.
+//! Only a small patch of a curved mirror sends a lamp's light into the lens, so a pilot of
+//! [`PILOT`] paths drawn evenly measures how much light each cell lands, and the render's paths
+//! draw cells in proportion to it ([`DEFENSIVE`] of them evenly, so nothing the pilot missed
+//! loses its density). A lamp whose pilot lands nothing is left to the camera entirely. The
+//! paths number a quarter of a dense render's camera samples, shared by the lamps. The lamp's
+//! direction density is evaluated from the cell a direction falls in, on both sides; a
+//! direction within float rounding of a cell's edge may be given its neighbour's density, the
+//! only (negligible) departure from an unbiased estimate.
+//!
+//! **Deterministic.** Paths are numbered per lamp (Owen-scrambled Sobol points keyed by it),
+//! traced in fixed blocks and splatted in block order: the image is the same for any thread
+//! count, and a region gets exactly the splats the full frame gives it (every region traces
+//! every path: a reflection may land anywhere).
+
+use std::f32::consts::{PI, TAU};
+
+use glam::{Vec2, Vec3};
+
+use super::light_trace::{Splat, splat_blocks};
+use super::region::Region;
+use super::site::SiteShader;
+use super::trace::{RayKind, Tally, trace_depth, trace_shadows};
+use super::{Progress, RenderError};
+use crate::camera::{ApertureShape, Camera, CameraLens, Landing, Lens, LensFilter};
+use crate::embree::{GeometryId, LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
+use crate::limits::{MemoryError, try_with_capacity};
+use crate::sampler::{path_numbers, sample_key};
+use crate::scene::World;
+use crate::scene::emitters::punctual_sample;
+use crate::settings::{Integrator, Mode, RenderSettings};
+use crate::shade::{Bsdf, Light, Material, SurfacePoints16, basis};
+
+/// Surfaces at most this rough (perceptual roughness, GGX alpha = its square) take light paths.
+/// Rougher lobes are wide enough that the camera's lens samples find the lamp's reflection
+/// often; light paths spent there would mostly be outweighed.
+pub const MAX_ROUGHNESS: f32 = 0.3;
+/// Surfaces blurred less than this (circle of confusion, pixels) stay with the camera: its
+/// stratified samples find a sharp highlight as well as light paths scattered over the film
+/// would, and better.
+pub const MIN_COC_PX: f32 = 4.0;
+/// Light paths per work item.
+const BLOCK: u32 = 4096;
+/// Keys the light paths' sample streams apart from the camera's and the small lamps'.
+const SALT: u64 = 0x676c_6f73_7379_5f6c;
+/// Light paths per camera sample of a dense render (all lamps together).
+const PATHS_PER_SAMPLE: f64 = 0.25;
+/// The most cones a lamp samples directions in (more glossy spheres share one per geometry).
+const MAX_CONES: usize = 64;
+/// Cells per side of a cone's grid of directions, which the pilot paths weigh.
+pub const GRID: usize = 16;
+/// Pilot paths per lamp: where the lamp's light lands, to draw the render's paths there.
+pub const PILOT: u32 = 16384;
+/// The share of each lamp's paths drawn evenly over its cones whatever the pilot found (so
+/// every direction keeps a density and what the pilot missed is still found).
+pub const DEFENSIVE: f32 = 0.25;
+
+/// Whether the camera and the lamps share the light a surface of BSDF `b` reflects: glossy,
+/// opaque and not a perfect mirror (whose reflection of a point lamp no path finds).
+#[inline]
+pub fn eligible(b: &Bsdf) -> bool {
+    b.roughness <= MAX_ROUGHNESS && b.transmission <= 0.0 && !b.is_delta()
+}
+
+/// Whether a surface of `m` can be [`eligible`] somewhere (its roughness texture can only
+/// lower the factor).
+fn may_be_glossy(m: &Material) -> bool {
+    m.transmission <= 0.0 && (m.roughness <= MAX_ROUGHNESS || m.maps.metal_rough.is_some())
+}
+
+/// A cone of directions from a lamp, sampled uniformly.
+#[derive(Debug, Clone, Copy)]
+struct Cone {
+    axis: Vec3,
+    /// Cosine of its half-angle (-1: every direction).
+    cos: f32,
+    /// 1 / its solid angle.
+    inv_solid_angle: f32,
+}
+
+impl Cone {
+    /// The cone from `from` that holds the sphere at `centre` of `radius`.
+    fn towards(from: Vec3, centre: Vec3, radius: f32) -> Option<Self> {
+        let v = centre - from;
+        let d = v.length();
+        if !(d.is_finite() && radius.is_finite()) {
+            return None;
+        }
+        if d <= radius * 1.001 || d == 0.0 {
+            return Some(Self {
+                axis: Vec3::Z,
+                cos: -1.0,
+                inv_solid_angle: 1.0 / (4.0 * PI),
+            });
+        }
+        let sin2 = (radius / d).powi(2);
+        let cos = (1.0 - sin2).max(0.0).sqrt();
+        // 1 - cos without cancellation for small cones.
+        let one_minus = sin2 / (1.0 + cos);
+        (one_minus > 0.0).then(|| Self {
+            axis: v / d,
+            cos,
+            inv_solid_angle: 1.0 / (TAU * one_minus),
+        })
+    }
+
+    /// Where unit `dir` is in the unit square [`Cone::sample`] maps onto the cone, if inside.
+    fn square(&self, dir: Vec3) -> Option<Vec2> {
+        // 1 - cos as |dir - axis|^2 / 2: exact for small angles, where 1 - dot is not.
+        let one_minus = 0.5 * (dir - self.axis).length_squared();
+        let u1 = one_minus / (1.0 - self.cos);
+        if u1.is_nan() || u1 > 1.0 {
+            return None;
+        }
+        let (t, b) = basis(self.axis);
+        let u2 = dir.dot(b).atan2(dir.dot(t)) / TAU;
+        Some(Vec2::new(u1, if u2 < 0.0 { u2 + 1.0 } else { u2 }))
+    }
+
+    /// The cell of the cone's [`GRID`] x [`GRID`] grid that unit square position `q` is in.
+    fn cell(q: Vec2) -> usize {
+        let i = ((q.x * GRID as f32) as usize).min(GRID - 1);
+        let j = ((q.y * GRID as f32) as usize).min(GRID - 1);
+        i * GRID + j
+    }
+
+    /// A direction uniformly within the cone, from a point `u` of the unit square.
+    fn sample(&self, u: Vec2) -> Vec3 {
+        let cos = 1.0 - (u.x * (1.0 - self.cos)).min(2.0);
+        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let (s, c) = (TAU * u.y).sin_cos();
+        let (t, b) = basis(self.axis);
+        (t * (c * sin) + b * (s * sin) + self.axis * cos).normalize()
+    }
+}
+
+/// One lamp's light paths.
+#[derive(Debug, Clone)]
+struct Lamp {
+    /// Its index in [`crate::scene::emitters::Emitters::always`].
+    light: usize,
+    position: Vec3,
+    /// Light paths to trace.
+    paths: u32,
+    cones: Vec<Cone>,
+    /// Probability of each cell of each cone's grid (cone-major, [`GRID`]^2 per cone).
+    cells: Vec<f32>,
+    /// Running sum of `cells` (the last entry is 1).
+    cdf: Vec<f32>,
+}
+
+impl Lamp {
+    /// A lamp at `position` drawing directions in `cones`, each cell alike.
+    fn new(light: usize, position: Vec3, paths: u32, cones: Vec<Cone>) -> Self {
+        let n = cones.len() * GRID * GRID;
+        let mut lamp = Self {
+            light,
+            position,
+            paths,
+            cones,
+            cells: Vec::new(),
+            cdf: Vec::new(),
+        };
+        lamp.set_cells(vec![1.0 / n as f32; n]);
+        lamp
+    }
+
+    /// Draws cell `k` with probability `cells[k]` (normalised here).
+    fn set_cells(&mut self, mut cells: Vec<f32>) {
+        let sum: f64 = cells.iter().map(|&p| f64::from(p)).sum();
+        let mut run = 0.0f64;
+        self.cdf = (cells.iter_mut())
+            .map(|p| {
+                *p = (f64::from(*p) / sum) as f32;
+                run += f64::from(*p);
+                run as f32
+            })
+            .collect();
+        if let Some(last) = self.cdf.last_mut() {
+            *last = 1.0;
+        }
+        self.cells = cells;
+    }
+
+    /// The density (per steradian) of drawing unit direction `dir` from the lamp.
+    fn pdf(&self, dir: Vec3) -> f32 {
+        let per_cell = (GRID * GRID) as f32;
+        (self.cones.iter().enumerate())
+            .filter_map(|(k, c)| {
+                let q = c.square(dir)?;
+                let p = self.cells[k * GRID * GRID + Cone::cell(q)];
+                Some(p * per_cell * c.inv_solid_angle)
+            })
+            .sum()
+    }
+
+    /// A direction from three uniform numbers (the first picks the cell) and its cell.
+    fn sample(&self, u: [f32; 3]) -> (Vec3, usize) {
+        let c = self
+            .cdf
+            .partition_point(|&f| f <= u[0])
+            .min(self.cdf.len() - 1);
+        let (k, ij) = (c / (GRID * GRID), c % (GRID * GRID));
+        let q = Vec2::new(
+            ((ij / GRID) as f32 + u[1]) / GRID as f32,
+            ((ij % GRID) as f32 + u[2]) / GRID as f32,
+        );
+        (self.cones[k].sample(q), c)
+    }
+}
+
+/// The densities of one path under the three strategies (module documentation).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Densities {
+    camera: f32,
+    t1: f32,
+    t0: f32,
+}
+
+impl Densities {
+    fn sum_sq(&self) -> f32 {
+        self.camera * self.camera + self.t1 * self.t1 + self.t0 * self.t0
+    }
+
+    /// The camera's power-heuristic weight.
+    pub(super) fn camera_weight(&self) -> f32 {
+        let s = self.sum_sq();
+        if s > 0.0 && s.is_finite() {
+            self.camera * self.camera / s
+        } else {
+            1.0
+        }
+    }
+}
+
+/// The lamps traced through glossy reflections in a render, and the thin lens they land
+/// through (chosen per render from the scene, the camera and the settings).
+#[derive(Debug, Clone)]
+pub struct GlossyPaths {
+    lamps: Vec<Lamp>,
+    /// For each light of [`crate::scene::emitters::Emitters::always`], its lamp.
+    by_light: Vec<Option<usize>>,
+    eye: Vec3,
+    forward: Vec3,
+    right: Vec3,
+    up: Vec3,
+    /// Aperture radius, scene units.
+    radius: f32,
+    aperture: ApertureShape,
+    /// The aperture's area, scene units squared.
+    area: f32,
+    /// Side of a pixel on the plane at unit distance.
+    pixel: f32,
+    /// Camera samples per pixel (the camera's density per film area).
+    spp: f32,
+    /// CoC in pixels per unit of |1 / focus distance - 1 / depth|.
+    coc_scale: f32,
+    /// 1 / the focus distance.
+    inv_focus: f32,
+    lens_weight_mean: f32,
+}
+
+impl GlossyPaths {
+    /// The lamps of `world` whose glossy reflections a render through `camera` with
+    /// `settings` also traces from the light; `None` when there are none or the render cannot
+    /// (not the path tracer with light tracing, a pinhole, a real lens).
+    pub(super) fn choose(
+        world: &World,
+        camera: &Camera,
+        settings: &RenderSettings,
+        lens_weight_mean: f32,
+    ) -> Option<Self> {
+        let CameraLens::Thin(thin) = &camera.lens else {
+            return None;
+        };
+        if settings.integrator != Integrator::Path
+            || !settings.path.light_tracing
+            || settings.mode == Mode::Pinhole
+            || thin.aperture_radius.is_nan()
+            || thin.aperture_radius <= 0.0
+        {
+            return None;
+        }
+        let spheres = glossy_bounds(world);
+        if spheres.is_empty() {
+            return None;
+        }
+        let positions: Vec<(usize, Vec3)> = (world.emitters.always.iter().enumerate())
+            .filter_map(|(i, l)| match *l {
+                Light::Point { position, .. } | Light::Spot { position, .. } => Some((i, position)),
+                Light::Directional { .. } => None,
+            })
+            .collect();
+        if positions.is_empty() {
+            return None;
+        }
+        let (w, h) = (camera.width as f64, camera.height as f64);
+        let total = PATHS_PER_SAMPLE * w * h * f64::from(settings.spp);
+        let paths = (total / positions.len() as f64)
+            .ceil()
+            .clamp(1.0, f64::from(u32::MAX)) as u32;
+        let mut by_light = vec![None; world.emitters.always.len()];
+        let mut lamps = Vec::new();
+        for (light, position) in positions {
+            let cones: Vec<Cone> = (spheres.iter())
+                .filter_map(|&(c, r)| Cone::towards(position, c, r))
+                .collect();
+            if cones.is_empty() {
+                continue;
+            }
+            by_light[light] = Some(lamps.len());
+            lamps.push(Lamp::new(light, position, paths, cones));
+        }
+        if lamps.is_empty() {
+            return None;
+        }
+        let aperture = thin.aperture;
+        let unit_area = if aperture.blades >= 3 {
+            let n = aperture.blades as f32;
+            0.5 * n * (TAU / n).sin()
+        } else {
+            PI
+        };
+        Some(Self {
+            lamps,
+            by_light,
+            eye: camera.eye,
+            forward: camera.forward,
+            right: camera.right,
+            up: camera.up,
+            radius: thin.aperture_radius,
+            aperture,
+            area: unit_area * aperture.anamorphic * thin.aperture_radius.powi(2),
+            pixel: 2.0 * camera.tan_half_vfov / camera.height as f32,
+            spp: settings.spp as f32,
+            coc_scale: 2.0
+                * thin.aperture_radius
+                * aperture.anamorphic.max(1.0)
+                * camera.pixels_per_unit(),
+            inv_focus: thin.inv_focus_distance,
+            lens_weight_mean,
+        })
+        .and_then(|mut g| {
+            g.guide(world, camera, settings);
+            g.drop_idle();
+            (!g.lamps.is_empty()).then_some(g)
+        })
+    }
+
+    /// Draws each lamp's directions where its light lands: [`PILOT`] paths drawn evenly
+    /// over its cones say how much light each cell of their grids sends into the lens (its
+    /// share after the weights, with the render's counts); the render's paths then draw
+    /// cells in proportion to it, [`DEFENSIVE`] evenly. Deterministic: fixed numbers, summed
+    /// in order. (A pilot that fails for memory leaves the even draw, which is as unbiased.)
+    fn guide(&mut self, world: &World, camera: &Camera, settings: &RenderSettings) {
+        let seed = settings.seed ^ SALT ^ 0x0070_696c_6f74;
+        for i in 0..self.lamps.len() {
+            let lamp = &self.lamps[i];
+            let Ok((splats, _)) = self.trace_block(world, camera, settings, lamp, seed, 0..PILOT)
+            else {
+                continue;
+            };
+            let n = lamp.cells.len();
+            let mut score = vec![0.0f32; n];
+            for (s, cell) in &splats {
+                score[*cell] += s.value.max_element();
+            }
+            let total: f32 = score.iter().sum();
+            if total == 0.0 {
+                // Nothing it sends through a glossy reflection lands: the camera keeps it all.
+                self.lamps[i].paths = 0;
+                continue;
+            }
+            if !total.is_finite() {
+                continue;
+            }
+            let even = DEFENSIVE / n as f32;
+            let cells = score
+                .iter()
+                .map(|&s| even + (1.0 - DEFENSIVE) * s / total)
+                .collect();
+            self.lamps[i].set_cells(cells);
+        }
+    }
+
+    /// Forgets the lamps without paths (the camera's weight for them is 1).
+    fn drop_idle(&mut self) {
+        self.lamps.retain(|l| l.paths > 0);
+        self.by_light.fill(None);
+        for (i, l) in self.lamps.iter().enumerate() {
+            self.by_light[l.light] = Some(i);
+        }
+    }
+
+    /// The light paths a render traces.
+    pub fn paths(&self) -> u64 {
+        self.lamps.iter().map(|l| u64::from(l.paths)).sum()
+    }
+
+    /// The camera's share of the light that light `light` of
+    /// [`crate::scene::emitters::Emitters::always`] sends to the eye by one reflection at a
+    /// camera ray's first surface `at`, seen along unit `to_lens` (back along the camera ray)
+    /// from `d_lens` away.
+    pub(super) fn camera_weight(&self, light: usize, at: &Lit, to_lens: Vec3, d_lens: f32) -> f32 {
+        let Some(&Some(lamp)) = self.by_light.get(light) else {
+            return 1.0;
+        };
+        if !(eligible(&at.b) && self.blurred(d_lens * -to_lens.dot(self.forward))) {
+            return 1.0;
+        }
+        (self.densities(&self.lamps[lamp], at, to_lens, d_lens)).map_or(1.0, |d| d.camera_weight())
+    }
+
+    /// Whether a surface at `depth` along the view axis is blurred enough to take light paths
+    /// ([`MIN_COC_PX`]).
+    fn blurred(&self, depth: f32) -> bool {
+        self.coc_scale * (self.inv_focus - 1.0 / depth.max(1e-6)).abs() >= MIN_COC_PX
+    }
+
+    /// The three strategies' densities of the path lamp -> `at` -> lens, along unit `to_lens`
+    /// for `d_lens` (module documentation).
+    fn densities(&self, lamp: &Lamp, at: &Lit, to_lens: Vec3, d_lens: f32) -> Option<Densities> {
+        let Lit {
+            ref b,
+            n,
+            ng,
+            to_light,
+            d_light,
+            ..
+        } = *at;
+        let c = -to_lens.dot(self.forward);
+        let cos_u = ng.dot(to_lens).abs();
+        if !(c > 0.0 && cos_u > 0.0 && d_lens > 0.0) {
+            return None;
+        }
+        let per_sr = 1.0 / (c * c * c * self.pixel * self.pixel);
+        let camera = self.spp * per_sr / self.area;
+        let p_w = lamp.pdf(-to_light);
+        if p_w <= 0.0 {
+            return Some(Densities {
+                camera,
+                t1: 0.0,
+                t0: 0.0,
+            });
+        }
+        let cos_l = ng.dot(to_light).abs();
+        let p_u = p_w * cos_l / (d_light * d_light) * (d_lens * d_lens) / cos_u;
+        let count = lamp.paths as f32;
+        let p_b = b.pdf(n, to_light, to_lens);
+        let d = Densities {
+            camera,
+            t1: count * p_u / self.area,
+            t0: count * p_u * p_b * c / (d_lens * d_lens),
+        };
+        (d.t1.is_finite() && d.t0.is_finite()).then_some(d)
+    }
+
+    /// The lens position (unit aperture coordinates, as [`Lens::lens_point`] gives them)
+    /// where a ray from `from` along unit `dir` crosses the lens plane, and the distance to
+    /// it; `None` when it misses the aperture.
+    fn lens_crossing(&self, from: Vec3, dir: Vec3) -> Option<(Vec2, f32)> {
+        let along = dir.dot(self.forward);
+        if along.is_nan() || along >= 0.0 {
+            return None;
+        }
+        let t = (self.eye - from).dot(self.forward) / along;
+        if !(t > 0.0 && t.is_finite()) {
+            return None;
+        }
+        let p = from + dir * t - self.eye;
+        let lens = Vec2::new(p.dot(self.right), p.dot(self.up)) / self.radius;
+        inside_aperture(lens, &self.aperture).then_some((lens, t))
+    }
+
+    /// Traces the light paths for the render `shader` describes and adds what lands in
+    /// `region` to `image` (the full frame's colours, row-major).
+    pub(super) fn trace(
+        &self,
+        shader: &SiteShader,
+        region: &Region,
+        progress: &dyn Progress,
+        tally: &mut Tally,
+        image: &mut [Vec3],
+    ) -> Result<(), RenderError> {
+        let items: Vec<(usize, u32)> = (self.lamps.iter().enumerate())
+            .flat_map(|(i, l)| (0..l.paths).step_by(BLOCK as usize).map(move |f| (i, f)))
+            .collect();
+        let block = |&(i, first): &(usize, u32)| {
+            let lamp = &self.lamps[i];
+            let end = first.saturating_add(BLOCK).min(lamp.paths);
+            let (world, camera, settings) = (shader.world, shader.camera, shader.settings);
+            let seed = settings.seed ^ SALT;
+            let (splats, tally) =
+                self.trace_block(world, camera, settings, lamp, seed, first..end)?;
+            Ok((splats.into_iter().map(|(s, ..)| s).collect(), tally))
+        };
+        splat_blocks(
+            shader,
+            "glossy lights",
+            &items,
+            block,
+            region,
+            progress,
+            tally,
+            image,
+        )
+    }
+
+    /// Traces paths `range` of `lamp` (numbered in the sample stream `seed`), 16 at a time,
+    /// and returns the splats of those that reach the lens, each with the cell of the lamp's
+    /// direction grid its path left through.
+    #[allow(clippy::too_many_arguments)]
+    fn trace_block(
+        &self,
+        world: &World,
+        camera: &Camera,
+        settings: &RenderSettings,
+        lamp: &Lamp,
+        seed: u64,
+        range: std::ops::Range<u32>,
+    ) -> Result<(Vec<(Splat, usize)>, Tally), MemoryError> {
+        let mut tally = Tally::new(settings.record_rays);
+        let (first, end) = (range.start, range.end);
+        let mut splats = try_with_capacity(2 * (end - first) as usize, "the light paths' splats")?;
+        let light = &world.emitters.always[lamp.light];
+        let view = View {
+            camera,
+            share: settings.exposure.exp2() / self.lens_weight_mean,
+            filter: settings.filter,
+        };
+        let mut packet = RayPacket16::new();
+        let mut points = SurfacePoints16::default();
+        let mut shadow = ShadowPacket16::new();
+        let mut t_hit = [f32::INFINITY; LANES];
+        for start in (first..end).step_by(LANES) {
+            let count = (end - start).min(LANES as u32);
+            let numbers: [[f32; 10]; LANES] = std::array::from_fn(|l| {
+                let j = start + (l as u32).min(count - 1);
+                path_numbers(sample_key(seed, lamp.light as u64, j), 0)
+            });
+            packet.clear();
+            let mut cells = [0usize; LANES];
+            for (lane, u) in numbers.iter().enumerate().take(count as usize) {
+                let (dir, cell) = lamp.sample([u[0], u[1], u[2]]);
+                cells[lane] = cell;
+                packet.set(lane, &Ray::new(lamp.position, dir));
+            }
+            let (kind, hint) = (RayKind::Secondary, RayHint::Incoherent);
+            let hits = trace_depth(world, &mut packet, kind, hint, &mut t_hit, &mut tally);
+            if hits == 0 {
+                continue;
+            }
+            world.surface_points16(&packet, hits, &mut points);
+            let mut connections = Connections::default();
+            let dirs = packet.dirs();
+            for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
+                let hit = packet.hit(lane).expect("lanes in `hits` hit");
+                let sp = points.get(lane);
+                let d = Vec3::new(dirs[0][lane], dirs[1][lane], dirs[2][lane]);
+                let b = world.material(&hit).bsdf(sp.uv, hit.is_front(d));
+                let x = sp.position;
+                if !(eligible(&b) && self.blurred((x - self.eye).dot(self.forward))) {
+                    continue;
+                }
+                let es = punctual_sample(light, x);
+                let at = Lit {
+                    b,
+                    n: sp.normal,
+                    ng: hit.ng.normalize(),
+                    to_light: es.dir,
+                    d_light: es.distance,
+                    irradiance: es.radiance,
+                };
+                let u = &numbers[lane];
+                // t = 1: a uniform point of the aperture.
+                let lens = camera.lens.lens_point(Vec2::new(u[8], u[9]));
+                let o = self.eye + (self.right * lens.x + self.up * lens.y) * self.radius;
+                let (v, d_lens) = ((o - x), (o - x).length());
+                if d_lens > 0.0
+                    && let Some(s) = self.landing(&view, lamp, &at, 0, lens, v / d_lens, d_lens)
+                {
+                    connections.add(0, lane, x, v / d_lens, d_lens, s);
+                }
+                // t = 0: the BSDF's direction, if it crosses the aperture.
+                if let Some(bs) = at.b.sample(at.n, at.to_light, [u[3], u[4], u[5]])
+                    && !bs.delta
+                    && let Some((lens, d_lens)) = self.lens_crossing(x, bs.wi)
+                    && let Some(s) = self.landing(&view, lamp, &at, 1, lens, bs.wi, d_lens)
+                {
+                    connections.add(1, lane, x, bs.wi, d_lens, s);
+                }
+            }
+            connections.trace(world, &mut shadow, &mut tally, &cells, &mut splats);
+        }
+        Ok((splats, tally))
+    }
+
+    /// The splat of the path from `lamp` to the surface point `at` and on to lens position
+    /// `lens` (unit aperture coordinates), along unit `to_lens` for `d_lens`, by strategy
+    /// `k` (0: t = 1, 1: t = 0), weighted by its power-heuristic share; `None` when it carries
+    /// nothing or misses the film. Visibility is the caller's.
+    #[allow(clippy::too_many_arguments)]
+    fn landing(
+        &self,
+        view: &View,
+        lamp: &Lamp,
+        at: &Lit,
+        k: usize,
+        lens: Vec2,
+        to_lens: Vec3,
+        d_lens: f32,
+    ) -> Option<Splat> {
+        let Lit { b, n, .. } = *at;
+        let q = self.densities(lamp, at, to_lens, d_lens)?;
+        let Landing { film, per_sr, .. } = view.camera.film_point(lens, -to_lens)?;
+        let own = if k == 0 { q.t1 } else { q.t0 };
+        let lens_weight = if view.filter == LensFilter::Box {
+            1.0
+        } else {
+            view.camera.lens.weight(view.filter, lens)
+        };
+        // F E per_sr / (A q_s), times the power heuristic's q_s^2 / sum q^2.
+        let value = b.eval(n, to_lens, at.to_light)
+            * at.irradiance
+            * (per_sr * own / (self.area * q.sum_sq()) * view.share * lens_weight);
+        (value.max_element() > 0.0 && value.is_finite()).then_some(Splat { film, value })
+    }
+}
+
+/// What splats need of the render: where paths land, and their common factor.
+struct View<'a> {
+    camera: &'a Camera,
+    /// Exposure over the mean lens weight.
+    share: f32,
+    filter: LensFilter,
+}
+
+/// A surface point a lamp lights, as both sides see it.
+pub(super) struct Lit {
+    pub(super) b: Bsdf,
+    /// Shading normal (on the side of the ray that found the point).
+    pub(super) n: Vec3,
+    /// Unit geometric normal.
+    pub(super) ng: Vec3,
+    /// Unit direction and distance to the lamp.
+    pub(super) to_light: Vec3,
+    pub(super) d_light: f32,
+    /// The irradiance the lamp sends (normal to its direction).
+    pub(super) irradiance: Vec3,
+}
+
+/// One packet's connections from surface points to the lens, by strategy (0: t = 1, 1: t = 0):
+/// their shadow rays (from the lens towards the point) and what each lands if unoccluded.
+#[derive(Default)]
+struct Connections {
+    pending: [[Option<Splat>; LANES]; 2],
+    origin: [[[f32; LANES]; 3]; 2],
+    to_x: [[[f32; LANES]; 3]; 2],
+    seg_end: [[f32; LANES]; 2],
+}
+
+impl Connections {
+    /// Lane `lane`'s connection by strategy `k` from `x` along `to_lens` for `d_lens`.
+    fn add(&mut self, k: usize, lane: usize, x: Vec3, to_lens: Vec3, d_lens: f32, s: Splat) {
+        let o = x + to_lens * d_lens;
+        for a in 0..3 {
+            self.origin[k][a][lane] = o[a];
+            self.to_x[k][a][lane] = -to_lens[a];
+        }
+        self.seg_end[k][lane] = d_lens * (1.0 - 1e-4);
+        self.pending[k][lane] = Some(s);
+    }
+
+    /// Traces the shadow rays (a packet per strategy) and adds the unoccluded splats to
+    /// `splats`, with the cell of each lane's direction.
+    fn trace(
+        &self,
+        world: &World,
+        shadow: &mut ShadowPacket16,
+        tally: &mut Tally,
+        cells: &[usize; LANES],
+        splats: &mut Vec<(Splat, usize)>,
+    ) {
+        for k in 0..2 {
+            let lit = (0..LANES)
+                .filter(|&l| self.pending[k][l].is_some())
+                .fold(0u32, |m, l| m | 1 << l);
+            if lit == 0 {
+                continue;
+            }
+            let (origin, to_x, seg_end) = (&self.origin[k], &self.to_x[k], &self.seg_end[k]);
+            let hint = RayHint::Incoherent;
+            trace_shadows(world, shadow, lit, origin, to_x, seg_end, hint, tally);
+            for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
+                if shadow.is_active(lane) && !shadow.occluded(lane) {
+                    splats.extend(self.pending[k][lane].map(|s| (s, cells[lane])));
+                }
+            }
+        }
+    }
+}
+
+/// Whether `lens` (aperture coordinates: the unit disc or polygon, stretched vertically by the
+/// anamorphic ratio) is inside the aperture.
+fn inside_aperture(lens: Vec2, shape: &ApertureShape) -> bool {
+    let q = Vec2::new(lens.x, lens.y / shape.anamorphic);
+    if shape.blades >= 3 {
+        let n = shape.blades as f32;
+        let rot = shape.rotation_deg.to_radians();
+        let apothem = (PI / n).cos();
+        (0..shape.blades).all(|k| {
+            let a = rot + TAU * (k as f32 + 0.5) / n;
+            q.dot(Vec2::new(a.cos(), a.sin())) <= apothem
+        })
+    } else {
+        q.length_squared() <= 1.0
+    }
+}
+
+/// Bounding spheres (centre, radius) of the glossy geometry of `world`: one per mesh and one
+/// per sphere while there are at most [`MAX_CONES`], else one per geometry, else one for all.
+fn glossy_bounds(world: &World) -> Vec<(Vec3, f32)> {
+    use crate::embree::Geometry;
+    let bound = |lo: Vec3, hi: Vec3| (0.5 * (lo + hi), 0.5 * (hi - lo).length());
+    let mut meshes = Vec::new();
+    let mut spheres = Vec::new();
+    let mut per_geometry = Vec::new();
+    let (mut all_lo, mut all_hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for (g, geometry) in world.scene.geometries().iter().enumerate() {
+        let id = GeometryId(g as u32);
+        let glossy = |prim: u32| may_be_glossy(world.material_of(id, prim));
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        match geometry {
+            Geometry::Mesh(m) => {
+                for (prim, tri) in m.indices().iter().enumerate() {
+                    if glossy(prim as u32) {
+                        for &v in tri {
+                            let p = Vec3::from(m.positions()[v as usize]);
+                            lo = lo.min(p);
+                            hi = hi.max(p);
+                        }
+                    }
+                }
+                if lo.x <= hi.x {
+                    meshes.push(bound(lo, hi));
+                }
+            }
+            Geometry::Spheres(s) => {
+                for prim in (0..s.len() as u32).filter(|&p| glossy(p)) {
+                    let (c, r) = (s.center(prim), s.radius(prim));
+                    spheres.push((c, r));
+                    lo = lo.min(c - Vec3::splat(r));
+                    hi = hi.max(c + Vec3::splat(r));
+                }
+            }
+        }
+        if lo.x <= hi.x {
+            per_geometry.push(bound(lo, hi));
+            all_lo = all_lo.min(lo);
+            all_hi = all_hi.max(hi);
+        }
+    }
+    if meshes.len() + spheres.len() <= MAX_CONES {
+        meshes.extend(spheres);
+        meshes
+    } else if per_geometry.len() <= MAX_CONES {
+        per_geometry
+    } else {
+        vec![bound(all_lo, all_hi)]
+    }
+}

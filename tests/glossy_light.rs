@@ -1,0 +1,206 @@
+//! Point lights seen in glossy surfaces, traced from the light too (`render::glossy_light`): a
+//! polished ball's highlight, out of focus, keeps its energy (light tracing on or off agree),
+//! comes out far less noisy, and regions and thread counts get the same splats; a scene with
+//! nothing glossy renders exactly as without it.
+
+use std::path::Path;
+
+use dofray::render::{self, Film, Mode, NoProgress, Region, RenderSettings, SettingsPatch};
+use dofray::scene::{SceneDesc, World};
+
+const WIDTH: u32 = 96;
+const HEIGHT: u32 = 72;
+
+/// An 85 mm f/1.4 lens focused at 4 m looking down +z from the origin at a ball of `roughness`
+/// (metal) 1.2 m away, blurred to a disc about 8 px across, lit by a point light above and
+/// beside the camera; black around it, a grey floor far below.
+fn scene(roughness: f32, metallic: f32) -> SceneDesc {
+    let src = format!(
+        r#"
+name = "ball"
+ambient = 0
+
+[image]
+width = {WIDTH}
+height = {HEIGHT}
+
+[camera]
+eye = [0, 0, 0]
+look_at = [0, 0, 1]
+f_number = 1.4
+focal_length_mm = 85
+sensor_width_mm = 36
+focus_distance = 4
+
+[background]
+horizon = 0
+zenith = 0
+
+[[lights]]
+type = "point"
+position = [0.4, 0.5, 0.3]
+intensity = 20
+
+[[materials]]
+name = "ball"
+diffuse = 0.9
+metallic = {metallic}
+roughness = {roughness}
+
+[[materials]]
+name = "floor"
+diffuse = 0.5
+
+[[objects]]
+type = "sphere"
+center = [0, 0, 1.2]
+radius = 0.12
+material = "ball"
+
+[[objects]]
+type = "quad"
+size = [20, 20]
+translate = [0, -1, 2]
+material = "floor"
+"#
+    );
+    dofray::scene::file::parse(&src, Path::new("ball.toml")).unwrap()
+}
+
+fn settings(mode: Mode, spp: u32, light_tracing: bool, seed: u64) -> RenderSettings {
+    SettingsPatch {
+        mode: Some(mode),
+        spp: Some(spp),
+        light_tracing: Some(light_tracing),
+        seed: Some(seed),
+        ..Default::default()
+    }
+    .resolve()
+    .unwrap()
+}
+
+fn render(desc: &SceneDesc, settings: &RenderSettings) -> Film {
+    let device = dofray::embree::Device::new().unwrap();
+    let world = World::build(desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    render::render(&world, &camera, settings, &NoProgress)
+        .unwrap()
+        .0
+}
+
+/// The summed colour (mean of the channels) of the pixels where `mask` holds.
+fn total(film: &Film, mask: impl Fn(usize) -> bool) -> f64 {
+    (film.color.iter().enumerate())
+        .filter(|&(i, _)| mask(i))
+        .map(|(_, c)| f64::from(c.x + c.y + c.z) / 3.0)
+        .sum()
+}
+
+/// Root mean square difference of two films over the pixels where `mask` holds.
+fn rms_difference(a: &Film, b: &Film, mask: impl Fn(usize) -> bool) -> f64 {
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for (i, (p, q)) in a.color.iter().zip(&b.color).enumerate() {
+        if mask(i) {
+            sum += f64::from((*p - *q).length_squared());
+            n += 1;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
+}
+
+/// The ball's blurred image: the upper middle of the frame (the floor is lower down).
+fn on_ball(i: usize) -> bool {
+    let (x, y) = (i % WIDTH as usize, i / WIDTH as usize);
+    (28..68).contains(&x) && (10..56).contains(&y)
+}
+
+#[test]
+fn a_polished_balls_highlight_keeps_its_light_and_loses_its_speckle() {
+    let ball = scene(0.08, 1.0);
+    // Energy: the ball's light with the camera alone (many samples: it finds the highlight
+    // rarely) against the camera and the lamp's paths together, at a quarter of the samples.
+    let seeds = [1u64, 2, 3];
+    let off: f64 = (seeds.iter())
+        .map(|&s| {
+            total(
+                &render(&ball, &settings(Mode::Dense, 256, false, s)),
+                on_ball,
+            )
+        })
+        .sum::<f64>()
+        / seeds.len() as f64;
+    let on: f64 = (seeds.iter())
+        .map(|&s| total(&render(&ball, &settings(Mode::Dense, 64, true, s)), on_ball))
+        .sum::<f64>()
+        / seeds.len() as f64;
+    eprintln!("light on the ball: camera alone {off:.3}, with light paths {on:.3}");
+    assert!(off > 10.0, "the highlight is there: {off}");
+    assert!(
+        (on / off - 1.0).abs() < 0.03,
+        "light on the ball: camera alone {off:.2}, with light paths {on:.2}"
+    );
+    // Noise: two seeds differ far less with light paths.
+    let pair = |lt: bool| {
+        let a = render(&ball, &settings(Mode::Dense, 32, lt, 11));
+        let b = render(&ball, &settings(Mode::Dense, 32, lt, 12));
+        rms_difference(&a, &b, on_ball)
+    };
+    let (noise_off, noise_on) = (pair(false), pair(true));
+    eprintln!(
+        "seed-to-seed difference: {noise_off:.4} camera alone, {noise_on:.4} with light paths"
+    );
+    assert!(
+        noise_on * 4.0 < noise_off,
+        "seed-to-seed difference on the ball: {noise_off:.4} camera alone, {noise_on:.4} with light paths"
+    );
+}
+
+#[test]
+fn adaptive_mode_keeps_the_highlights_light() {
+    let ball = scene(0.08, 1.0);
+    let dense = total(&render(&ball, &settings(Mode::Dense, 64, true, 5)), on_ball);
+    let adaptive = total(
+        &render(&ball, &settings(Mode::Adaptive, 64, true, 5)),
+        on_ball,
+    );
+    eprintln!("light on the ball: dense {dense:.3}, adaptive {adaptive:.3}");
+    assert!(
+        (adaptive / dense - 1.0).abs() < 0.05,
+        "light on the ball: dense {dense:.2}, adaptive {adaptive:.2}"
+    );
+}
+
+#[test]
+fn a_rough_ball_renders_as_without_light_paths() {
+    // Roughness 0.6: nothing is glossy enough to trace from the lamp, so nothing changes.
+    let ball = scene(0.6, 1.0);
+    let on = render(&ball, &settings(Mode::Adaptive, 16, true, 1));
+    let off = render(&ball, &settings(Mode::Adaptive, 16, false, 1));
+    assert_eq!(on.color, off.color);
+}
+
+#[test]
+fn regions_and_thread_counts_get_the_same_glossy_splats() {
+    let ball = scene(0.1, 0.5);
+    let s = settings(Mode::Adaptive, 16, true, 1);
+    let device = dofray::embree::Device::new().unwrap();
+    let world = World::build(&ball, &device).unwrap();
+    let camera = ball.camera.build(|_| None).unwrap();
+    let full = render::render(&world, &camera, &s, &NoProgress).unwrap().0;
+    let region = Region {
+        x0: 40,
+        y0: 20,
+        x1: 70,
+        y1: 40,
+    };
+    let part = render::render_region(&world, &camera, &s, &region, &NoProgress)
+        .unwrap()
+        .0;
+    assert_eq!(part.color, full.crop(&region).color);
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| render::render(&world, &camera, &s, &NoProgress).unwrap().0);
+    assert_eq!(one.color, full.color);
+}
