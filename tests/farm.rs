@@ -81,6 +81,10 @@ fn png_pixels(path: &Path) -> (u32, u32, Vec<u8>) {
 }
 
 const SIZE: [&str; 4] = ["--width", "160", "--height", "120"];
+/// The focus pull's frames: [`SIZE`], 8 samples per blurred site, 4 where in focus.
+const PULL: [&str; 8] = [
+    "--width", "160", "--height", "120", "--spp", "8", "--aa", "4",
+];
 
 #[test]
 fn tiles_merge_into_the_full_render_bit_for_bit() {
@@ -381,6 +385,8 @@ fn a_failing_frame_is_reported_and_the_others_still_render() {
 /// The acceptance run: scenes/focus_pull.toml's 48 frames from one command, killed
 /// part-way (SIGKILL: no clean-up), then resumed with --skip-existing, which renders only the
 /// rest. Writes a contact sheet of every 8th frame (and the last) for a person to look at.
+/// Half size and 8 samples ([`PULL`]): the test is about the frames, not their pixels (at the
+/// scene's own 320 x 240 and 32 spp it took over two minutes of the suite).
 #[test]
 fn a_killed_focus_pull_resumes_with_skip_existing() {
     let dir = scratch("pull");
@@ -388,6 +394,7 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
     let pattern = dir.join("pull_####.png");
     let mut child = cmd()
         .args(["render", s(&scene), "-o", s(&pattern), "-q"])
+        .args(PULL)
         .spawn()
         .unwrap();
     let started = std::time::Instant::now();
@@ -414,15 +421,21 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
         .map(|n| std::fs::metadata(dir.join(n)).unwrap().modified().unwrap())
         .collect();
 
-    let o = dofray(&[
-        "render",
-        s(&scene),
-        "-o",
-        s(&pattern),
-        "--skip-existing",
-        "--json",
-        "-q",
-    ]);
+    let o = dofray(
+        &[
+            &[
+                "render",
+                s(&scene),
+                "-o",
+                s(&pattern),
+                "--skip-existing",
+                "--json",
+                "-q",
+            ][..],
+            &PULL,
+        ]
+        .concat(),
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     let j = json(&o);
     assert_eq!(j["jobs"], 48);
@@ -462,13 +475,13 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
 
     // Contact sheet: frames 1, 9, ..., 41 and 48, four to a row.
     let picks = [1, 9, 17, 25, 33, 41, 48];
-    let mut sheet = image::RgbImage::new(320 * 4, 240 * 2);
+    let mut sheet = image::RgbImage::new(160 * 4, 120 * 2);
     for (i, f) in picks.iter().enumerate() {
         let frame = image::open(dir.join(format!("pull_{f:04}.png")))
             .unwrap()
             .to_rgb8();
-        assert_eq!(frame.dimensions(), (320, 240));
-        let (x, y) = ((i % 4) as i64 * 320, (i / 4) as i64 * 240);
+        assert_eq!(frame.dimensions(), (160, 120));
+        let (x, y) = ((i % 4) as i64 * 160, (i / 4) as i64 * 120);
         image::imageops::overlay(&mut sheet, &frame, x, y);
     }
     let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("focus_pull_contact_sheet.png");
