@@ -88,7 +88,7 @@ pub enum Param {
     ClampIndirect,
     /// The glossy filter (Cycles' Filter Glossy).
     FilterGlossy,
-    /// Light tracing of small emitters seen through the lens.
+    /// Light tracing of small emitters, and of lamps' glossy highlights, seen through the lens.
     LightTracing,
     /// Sample reuse across adaptive sites.
     Reuse,

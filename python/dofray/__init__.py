@@ -94,8 +94,9 @@ def render(
       is premultiplied);
     - ``integrator``: ``"path"`` (default: physically based, as Cycles) or ``"direct"``
       (the seed's quick direct shading); ``light_tracing``: ``False`` leaves lamps much
-      smaller on screen than their blur to camera rays alone (default ``True``: traced from
-      the light, clean bokeh discs; unbiased either way);
+      smaller on screen than their blur, and lamps' highlights on glossy surfaces out of
+      focus, to camera rays alone (default ``True``: traced from the light too, clean bokeh
+      discs; unbiased either way);
     - ``frame``: the frame of an animated scene (default: its first);
     - ``threads``: worker threads, 1 to 1024 (default: all cores); the image is the same
       for any number;
