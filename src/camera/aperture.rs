@@ -24,6 +24,35 @@ impl ApertureShape {
     pub fn blades_ok(blades: u32) -> bool {
         blades == 0 || blades >= 3
     }
+
+    /// The area of the aperture in lens units (the unit disc or polygon [`aperture_point`]
+    /// maps onto, stretched by the anamorphic ratio): the camera's area times the radius^2.
+    pub fn area(&self) -> f32 {
+        let unit = if self.blades >= 3 {
+            let n = self.blades as f32;
+            0.5 * n * (TAU / n).sin()
+        } else {
+            std::f32::consts::PI
+        };
+        unit * self.anamorphic
+    }
+
+    /// Whether `lens` (lens units, as [`aperture_point`] gives them) is inside the aperture.
+    pub fn contains(&self, lens: Vec2) -> bool {
+        let q = Vec2::new(lens.x, lens.y / self.anamorphic);
+        if self.blades >= 3 {
+            // Inside every edge: [`polygon`]'s corners are at rotation + k 2 pi / n.
+            let n = self.blades as f32;
+            let rot = self.rotation_deg.to_radians();
+            let apothem = (std::f32::consts::PI / n).cos();
+            (0..self.blades).all(|k| {
+                let a = rot + TAU * (k as f32 + 0.5) / n;
+                q.dot(Vec2::new(a.cos(), a.sin())) <= apothem
+            })
+        } else {
+            q.length_squared() <= 1.0
+        }
+    }
 }
 
 impl Default for ApertureShape {
@@ -278,6 +307,48 @@ mod tests {
         }
         let frac = inside_half as f32 / (n * n) as f32;
         assert!((frac - 0.25).abs() < 0.01, "{frac}");
+    }
+
+    #[test]
+    fn contains_and_area_match_the_sample_map() {
+        for shape in [
+            ApertureShape::default(),
+            ApertureShape {
+                blades: 5,
+                rotation_deg: 10.0,
+                anamorphic: 1.6,
+            },
+            ApertureShape {
+                blades: 6,
+                rotation_deg: 0.0,
+                anamorphic: 0.7,
+            },
+        ] {
+            // Every sample is inside; slightly outside the outline is not.
+            for i in 0..64u32 {
+                let u = Vec2::new((i % 8) as f32 / 8.0 + 0.06, (i / 8) as f32 / 8.0 + 0.06);
+                let p = aperture_point(u, &shape);
+                assert!(shape.contains(p), "{shape:?} {p:?}");
+                let far = aperture_point(Vec2::new(u.x, 1.0), &shape) * 1.01;
+                assert!(!shape.contains(far), "{shape:?} {far:?}");
+            }
+            // The share of a grid over the bounding box inside is the area over the box's.
+            let (w, h) = (1.0f32, shape.anamorphic);
+            let n = 400;
+            let inside = (0..n * n)
+                .filter(|k| {
+                    let x = ((k % n) as f32 + 0.5) / n as f32 * 2.0 - 1.0;
+                    let y = ((k / n) as f32 + 0.5) / n as f32 * 2.0 - 1.0;
+                    shape.contains(Vec2::new(x * w, y * h))
+                })
+                .count();
+            let area = inside as f32 / (n * n) as f32 * 4.0 * w * h;
+            assert!(
+                (area / shape.area() - 1.0).abs() < 0.01,
+                "{shape:?}: {area} vs {}",
+                shape.area()
+            );
+        }
     }
 
     #[test]

@@ -129,7 +129,7 @@ impl Cone {
         if !(d.is_finite() && radius.is_finite()) {
             return None;
         }
-        if d <= radius * 1.001 || d == 0.0 {
+        if d <= radius * 1.001 {
             return Some(Self {
                 axis: Vec3::Z,
                 cos: -1.0,
@@ -342,7 +342,6 @@ impl GlossyPaths {
         let paths = (total / positions.len() as f64)
             .ceil()
             .clamp(1.0, f64::from(u32::MAX)) as u32;
-        let mut by_light = vec![None; world.emitters.always.len()];
         let mut lamps = Vec::new();
         for (light, position) in positions {
             let cones: Vec<Cone> = (spheres.iter())
@@ -351,29 +350,22 @@ impl GlossyPaths {
             if cones.is_empty() {
                 continue;
             }
-            by_light[light] = Some(lamps.len());
             lamps.push(Lamp::new(light, position, paths, cones));
         }
         if lamps.is_empty() {
             return None;
         }
         let aperture = thin.aperture;
-        let unit_area = if aperture.blades >= 3 {
-            let n = aperture.blades as f32;
-            0.5 * n * (TAU / n).sin()
-        } else {
-            PI
-        };
-        Some(Self {
+        let mut g = Self {
             lamps,
-            by_light,
+            by_light: Vec::new(),
             eye: camera.eye,
             forward: camera.forward,
             right: camera.right,
             up: camera.up,
             radius: thin.aperture_radius,
             aperture,
-            area: unit_area * aperture.anamorphic * thin.aperture_radius.powi(2),
+            area: aperture.area() * thin.aperture_radius.powi(2),
             pixel: 2.0 * camera.tan_half_vfov / camera.height as f32,
             spp: settings.spp as f32,
             coc_scale: 2.0
@@ -382,12 +374,15 @@ impl GlossyPaths {
                 * camera.pixels_per_unit(),
             inv_focus: thin.inv_focus_distance,
             lens_weight_mean,
-        })
-        .and_then(|mut g| {
-            g.guide(world, camera, settings);
-            g.drop_idle();
-            (!g.lamps.is_empty()).then_some(g)
-        })
+        };
+        g.guide(world, camera, settings);
+        // Lamps whose pilot landed nothing are left to the camera (its weight for them is 1).
+        g.lamps.retain(|l| l.paths > 0);
+        g.by_light = vec![None; world.emitters.always.len()];
+        for (i, l) in g.lamps.iter().enumerate() {
+            g.by_light[l.light] = Some(i);
+        }
+        (!g.lamps.is_empty()).then_some(g)
     }
 
     /// Draws each lamp's directions where its light lands: [`PILOT`] paths drawn evenly
@@ -423,15 +418,6 @@ impl GlossyPaths {
                 .map(|&s| even + (1.0 - DEFENSIVE) * s / total)
                 .collect();
             self.lamps[i].set_cells(cells);
-        }
-    }
-
-    /// Forgets the lamps without paths (the camera's weight for them is 1).
-    fn drop_idle(&mut self) {
-        self.lamps.retain(|l| l.paths > 0);
-        self.by_light.fill(None);
-        for (i, l) in self.lamps.iter().enumerate() {
-            self.by_light[l.light] = Some(i);
         }
     }
 
@@ -512,7 +498,7 @@ impl GlossyPaths {
         }
         let p = from + dir * t - self.eye;
         let lens = Vec2::new(p.dot(self.right), p.dot(self.up)) / self.radius;
-        inside_aperture(lens, &self.aperture).then_some((lens, t))
+        self.aperture.contains(lens).then_some((lens, t))
     }
 
     /// Traces the light paths for the render `shader` describes and adds what lands in
@@ -740,23 +726,6 @@ impl Connections {
                 }
             }
         }
-    }
-}
-
-/// Whether `lens` (aperture coordinates: the unit disc or polygon, stretched vertically by the
-/// anamorphic ratio) is inside the aperture.
-fn inside_aperture(lens: Vec2, shape: &ApertureShape) -> bool {
-    let q = Vec2::new(lens.x, lens.y / shape.anamorphic);
-    if shape.blades >= 3 {
-        let n = shape.blades as f32;
-        let rot = shape.rotation_deg.to_radians();
-        let apothem = (PI / n).cos();
-        (0..shape.blades).all(|k| {
-            let a = rot + TAU * (k as f32 + 0.5) / n;
-            q.dot(Vec2::new(a.cos(), a.sin())) <= apothem
-        })
-    } else {
-        q.length_squared() <= 1.0
     }
 }
 

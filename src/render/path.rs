@@ -102,7 +102,7 @@ fn clamped(c: Vec3, clamp: f32) -> Vec3 {
 struct Vertices {
     bsdf: [Bsdf; LANES],
     origins: trace::Origins,
-    /// Unit geometric normals.
+    /// Geometric normals as Embree reports them (not unit: only the glossy weight needs them).
     ng: [Vec3; LANES],
     /// Distances from the rays' origins.
     t: [f32; LANES],
@@ -320,7 +320,7 @@ fn vertices(
             radiance[lane] += clamped(s.throughput * le * w, clamp);
         }
         bsdf[lane] = material.bsdf(sp.uv, front);
-        ng[lane] = hit.ng.normalize_or(Vec3::Z);
+        ng[lane] = hit.ng;
         extent[lane] = trace::primitive_extent(world, &hit);
         let up = trace::terminator_lift(world, &hit, sp.position, sp.normal);
         for k in 0..3 {
@@ -451,7 +451,7 @@ fn shadow_packet(
                 let at = Lit {
                     b: v.bsdf[lane],
                     n,
-                    ng: v.ng[lane],
+                    ng: v.ng[lane].normalize_or(Vec3::Z),
                     to_light: es.dir,
                     d_light: es.distance,
                     irradiance: es.radiance,
