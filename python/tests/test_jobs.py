@@ -109,7 +109,7 @@ def test_progress_exception_cancels_the_run(tmp_path):
     assert not (tmp_path / "s_02.png").exists() and not (tmp_path / "s_03.png").exists()
 
 
-def test_keyboard_interrupt_cancels_the_run(tmp_path):
+def test_keyboard_interrupt_cancels_the_run(tmp_path, sigint_handled):
     timer = threading.Timer(0.3, _thread.interrupt_main)
     timer.start()
     try:

@@ -256,7 +256,7 @@ def test_gil_is_released():
     assert during > 100_000
 
 
-def test_keyboard_interrupt_cancels():
+def test_keyboard_interrupt_cancels(sigint_handled):
     # Many seconds of work; interrupted after 0.3 s it must stop (and not hang).
     timer = threading.Timer(0.3, _thread.interrupt_main)
     timer.start()
