@@ -93,7 +93,7 @@ const MAX_CONES: usize = 64;
 /// Cells per side of a cone's grid of directions, which the pilot paths weigh.
 pub const GRID: usize = 16;
 /// Pilot paths per lamp: where the lamp's light lands, to draw the render's paths there.
-pub const PILOT: u32 = 16384;
+pub const PILOT: u32 = 65536;
 /// The share of each lamp's paths drawn evenly over its cones whatever the pilot found (so
 /// every direction keeps a density and what the pilot missed is still found).
 pub const DEFENSIVE: f32 = 0.25;
