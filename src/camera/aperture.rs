@@ -2,7 +2,7 @@
 //! warps from lens sample numbers in [0, 1)^2 onto it, and the lens filter that weights
 //! samples by where they cross it.
 
-use std::f32::consts::{FRAC_PI_4, TAU};
+use std::f32::consts::{FRAC_PI_4, PI, TAU};
 
 use glam::Vec2;
 
@@ -32,7 +32,7 @@ impl ApertureShape {
             let n = self.blades as f32;
             0.5 * n * (TAU / n).sin()
         } else {
-            std::f32::consts::PI
+            PI
         };
         unit * self.anamorphic
     }
@@ -44,7 +44,7 @@ impl ApertureShape {
             // Inside every edge: [`polygon`]'s corners are at rotation + k 2 pi / n.
             let n = self.blades as f32;
             let rot = self.rotation_deg.to_radians();
-            let apothem = (std::f32::consts::PI / n).cos();
+            let apothem = (PI / n).cos();
             (0..self.blades).all(|k| {
                 let a = rot + TAU * (k as f32 + 0.5) / n;
                 q.dot(Vec2::new(a.cos(), a.sin())) <= apothem

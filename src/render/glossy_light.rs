@@ -457,6 +457,7 @@ impl GlossyPaths {
             d_light,
             ..
         } = *at;
+        let ng = ng.normalize_or(Vec3::Z);
         let c = -to_lens.dot(self.forward);
         let cos_u = ng.dot(to_lens).abs();
         if !(c > 0.0 && cos_u > 0.0 && d_lens > 0.0) {
@@ -595,7 +596,7 @@ impl GlossyPaths {
                 let at = Lit {
                     b,
                     n: sp.normal,
-                    ng: hit.ng.normalize(),
+                    ng: hit.ng,
                     to_light: es.dir,
                     d_light: es.distance,
                     irradiance: es.radiance,
@@ -669,7 +670,8 @@ pub(super) struct Lit {
     pub(super) b: Bsdf,
     /// Shading normal (on the side of the ray that found the point).
     pub(super) n: Vec3,
-    /// Unit geometric normal.
+    /// Geometric normal, any length (as Embree reports it: [`GlossyPaths::densities`]
+    /// normalises it, so paths the weights never reach pay nothing for it).
     pub(super) ng: Vec3,
     /// Unit direction and distance to the lamp.
     pub(super) to_light: Vec3,

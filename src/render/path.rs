@@ -102,7 +102,8 @@ fn clamped(c: Vec3, clamp: f32) -> Vec3 {
 struct Vertices {
     bsdf: [Bsdf; LANES],
     origins: trace::Origins,
-    /// Geometric normals as Embree reports them (not unit: only the glossy weight needs them).
+    /// Geometric normals as Embree reports them (not unit: only the glossy weight needs them,
+    /// and normalises them where it does).
     ng: [Vec3; LANES],
     /// Distances from the rays' origins.
     t: [f32; LANES],
@@ -451,7 +452,7 @@ fn shadow_packet(
                 let at = Lit {
                     b: v.bsdf[lane],
                     n,
-                    ng: v.ng[lane].normalize_or(Vec3::Z),
+                    ng: v.ng[lane],
                     to_light: es.dir,
                     d_light: es.distance,
                     irradiance: es.radiance,
