@@ -46,10 +46,11 @@
 //! [`PILOT`] paths drawn evenly measures how much light each cell lands, and the render's paths
 //! draw cells in proportion to it ([`DEFENSIVE`] of them evenly, so nothing the pilot missed
 //! loses its density). A lamp whose pilot lands nothing is left to the camera entirely. The
-//! paths number a quarter of a dense render's camera samples, shared by the lamps. The lamp's
-//! direction density is evaluated from the cell a direction falls in, on both sides; a
-//! direction within float rounding of a cell's edge may be given its neighbour's density, the
-//! only (negligible) departure from an unbiased estimate.
+//! paths number a quarter of a dense render's camera samples, shared by the lamps. A light
+//! path's direction density is its cell's, as drawn; the camera's side measures the cell from
+//! the direction, which within float rounding of a cell's edge may give its neighbour's: the
+//! weights there need not sum to one, the only (bounded, negligible) departure from an
+//! unbiased estimate ([`Lamp::pdf`]).
 //!
 //! **Deterministic.** Paths are numbered per lamp (Owen-scrambled Sobol points keyed by it),
 //! traced in fixed blocks and splatted in block order: the image is the same for any thread
@@ -115,8 +116,9 @@ fn may_be_glossy(m: &Material) -> bool {
 #[derive(Debug, Clone, Copy)]
 struct Cone {
     axis: Vec3,
-    /// Cosine of its half-angle (-1: every direction).
-    cos: f32,
+    /// 1 - the cosine of its half-angle (2: every direction), kept as such: a small or far
+    /// sphere's cone has a cosine within a few float steps of 1.
+    one_minus: f32,
     /// 1 / its solid angle.
     inv_solid_angle: f32,
 }
@@ -132,7 +134,7 @@ impl Cone {
         if d <= radius * 1.001 {
             return Some(Self {
                 axis: Vec3::Z,
-                cos: -1.0,
+                one_minus: 2.0,
                 inv_solid_angle: 1.0 / (4.0 * PI),
             });
         }
@@ -142,7 +144,7 @@ impl Cone {
         let one_minus = sin2 / (1.0 + cos);
         (one_minus > 0.0).then(|| Self {
             axis: v / d,
-            cos,
+            one_minus,
             inv_solid_angle: 1.0 / (TAU * one_minus),
         })
     }
@@ -151,7 +153,7 @@ impl Cone {
     fn square(&self, dir: Vec3) -> Option<Vec2> {
         // 1 - cos as |dir - axis|^2 / 2: exact for small angles, where 1 - dot is not.
         let one_minus = 0.5 * (dir - self.axis).length_squared();
-        let u1 = one_minus / (1.0 - self.cos);
+        let u1 = one_minus / self.one_minus;
         if u1.is_nan() || u1 > 1.0 {
             return None;
         }
@@ -167,13 +169,15 @@ impl Cone {
         i * GRID + j
     }
 
-    /// A direction uniformly within the cone, from a point `u` of the unit square.
+    /// A direction uniformly within the cone, from a point `u` of the unit square. Drawn by
+    /// 1 - cos theta, as [`Cone::square`] measures it back: through cos theta, a small cone's
+    /// rows of cells would blur by float steps of 1.
     fn sample(&self, u: Vec2) -> Vec3 {
-        let cos = 1.0 - (u.x * (1.0 - self.cos)).min(2.0);
-        let sin = (1.0 - cos * cos).max(0.0).sqrt();
+        let one_minus = (u.x * self.one_minus).min(2.0);
+        let sin = (one_minus * (2.0 - one_minus)).max(0.0).sqrt();
         let (s, c) = (TAU * u.y).sin_cos();
         let (t, b) = basis(self.axis);
-        (t * (c * sin) + b * (s * sin) + self.axis * cos).normalize()
+        (t * (c * sin) + b * (s * sin) + self.axis * (1.0 - one_minus)).normalize()
     }
 }
 
@@ -225,14 +229,24 @@ impl Lamp {
         self.cells = cells;
     }
 
-    /// The density (per steradian) of drawing unit direction `dir` from the lamp.
-    fn pdf(&self, dir: Vec3) -> f32 {
+    /// The density (per steradian) of drawing unit direction `dir` from the lamp; `drawn`:
+    /// the cell it was drawn in, if known.
+    ///
+    /// Which cell a direction lies in is measured back from it, and within float rounding of
+    /// a cell's edge may come out as its neighbour's, whose probability can be 10^4 times
+    /// smaller. A light path's own cell is therefore taken as drawn: its density is then
+    /// never underestimated by more than the other cones' share, so its weight stays bounded
+    /// and the only departure from an unbiased estimate is bounded by the share of the light
+    /// that falls within rounding of an edge.
+    fn pdf(&self, dir: Vec3, drawn: Option<usize>) -> f32 {
         let per_cell = (GRID * GRID) as f32;
         (self.cones.iter().enumerate())
             .filter_map(|(k, c)| {
-                let q = c.square(dir)?;
-                let p = self.cells[k * GRID * GRID + Cone::cell(q)];
-                Some(p * per_cell * c.inv_solid_angle)
+                let cell = match drawn {
+                    Some(d) if d / (GRID * GRID) == k => d,
+                    _ => k * GRID * GRID + Cone::cell(c.square(dir)?),
+                };
+                Some(self.cells[cell] * per_cell * c.inv_solid_angle)
             })
             .sum()
     }
@@ -465,7 +479,7 @@ impl GlossyPaths {
         }
         let per_sr = 1.0 / (c * c * c * self.pixel * self.pixel);
         let camera = self.spp * per_sr / self.area;
-        let p_w = lamp.pdf(-to_light);
+        let p_w = lamp.pdf(-to_light, at.drawn);
         if p_w <= 0.0 {
             return Some(Densities {
                 camera,
@@ -600,6 +614,7 @@ impl GlossyPaths {
                     to_light: es.dir,
                     d_light: es.distance,
                     irradiance: es.radiance,
+                    drawn: Some(cells[lane]),
                 };
                 let u = &numbers[lane];
                 // t = 1: a uniform point of the aperture.
@@ -678,6 +693,9 @@ pub(super) struct Lit {
     pub(super) d_light: f32,
     /// The irradiance the lamp sends (normal to its direction).
     pub(super) irradiance: Vec3,
+    /// The cell of the lamp's directions a light path was drawn in (`None` on the camera's
+    /// side; [`Lamp::pdf`]).
+    pub(super) drawn: Option<usize>,
 }
 
 /// One packet's connections from surface points to the lens, by strategy (0: t = 1, 1: t = 0):
@@ -781,5 +799,58 @@ fn glossy_bounds(world: &World) -> Vec<(Vec3, f32)> {
         per_geometry
     } else {
         vec![bound(all_lo, all_hi)]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lamp's light paths draw cells whose probabilities can differ 10^4 times between
+    /// neighbours, so a direction must be measured back into the cell it was drawn in: for a
+    /// small far cone (a 5 cm ball 10 m away) even a 1e-3 share of mismatches would bias the
+    /// image visibly.
+    #[test]
+    fn small_cones_give_directions_back_to_the_cells_they_were_drawn_in() {
+        let cone = Cone::towards(Vec3::ZERO, Vec3::new(3.0, -7.0, 6.5), 0.05).unwrap();
+        assert!(cone.one_minus < 2e-5, "a small cone: {}", cone.one_minus);
+        let n = 1u32 << 16;
+        let mut mismatched = 0;
+        for i in 0..n {
+            let key = crate::sampler::hash64(u64::from(i));
+            let u = Vec2::new(
+                (key >> 40) as f32 / (1u64 << 24) as f32,
+                ((key >> 8) & 0xff_ffff) as f32 / (1u64 << 24) as f32,
+            );
+            let drawn = Cone::cell(u);
+            let back = cone.square(cone.sample(u)).map(Cone::cell);
+            if back != Some(drawn) {
+                mismatched += 1;
+            }
+        }
+        // Only directions within rounding of an edge may move.
+        eprintln!("{mismatched} of {n} directions measured into another cell");
+        assert!(
+            (mismatched as f64) < 1e-3 * f64::from(n),
+            "{mismatched} of {n} directions measured into another cell"
+        );
+    }
+
+    /// A light path's density is its drawn cell's, whatever the direction measures back as.
+    #[test]
+    fn a_light_paths_density_is_its_drawn_cells() {
+        let cone = Cone::towards(Vec3::ZERO, Vec3::new(0.0, 0.0, 10.0), 0.05).unwrap();
+        let mut lamp = Lamp::new(0, Vec3::ZERO, 1, vec![cone]);
+        // One cell holds nearly everything, its neighbours almost nothing.
+        let mut cells = vec![1e-6f32; GRID * GRID];
+        cells[5 * GRID + 7] = 1.0;
+        lamp.set_cells(cells);
+        let want = lamp.cells[5 * GRID + 7] * (GRID * GRID) as f32 * cone.inv_solid_angle;
+        // A direction on the drawn cell's edge with its neighbour's row.
+        let dir = cone.sample(Vec2::new(6.0 / GRID as f32, 7.5 / GRID as f32));
+        let drawn = lamp.pdf(dir, Some(5 * GRID + 7));
+        assert_eq!(drawn, want);
+        let measured = lamp.pdf(dir, None);
+        assert!(measured > 0.0 && measured <= want, "{measured} vs {want}");
     }
 }

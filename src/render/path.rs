@@ -456,6 +456,7 @@ fn shadow_packet(
                     to_light: es.dir,
                     d_light: es.distance,
                     irradiance: es.radiance,
+                    drawn: None,
                 };
                 g.camera_weight(light, &at, wo[lane], v.t[lane])
             }
