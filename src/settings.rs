@@ -112,8 +112,9 @@ pub struct PathLimits {
     /// Whether emitters much smaller on screen than their blur (and sub-pixel ones) are seen
     /// through the lens by light tracing, from the light's side (default), instead of by the
     /// camera's rays alone: a clean bokeh disc where camera samples find the lamp by luck
-    /// ([`crate::render::light_trace`]); and whether point and spot lights' highlights on
-    /// glossy surfaces out of focus are also traced from the lamp into the lens
+    /// ([`crate::render::light_trace`]); and whether lamps' highlights (point and spot
+    /// lights', emissive triangles' and spheres') on glossy surfaces out of focus are also
+    /// traced from the lamp into the lens
     /// ([`crate::render::glossy_light`]). Either way the image is unbiased; only the noise
     /// differs.
     pub light_tracing: bool,

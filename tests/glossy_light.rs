@@ -15,10 +15,51 @@ const HEIGHT: u32 = 72;
 /// (metal) 1.2 m away, blurred to a disc about 8 px across, lit by a point light above and
 /// beside the camera; black around it, a grey floor far below.
 fn scene(roughness: f32, metallic: f32) -> SceneDesc {
+    with_lamp(roughness, metallic, POINT_LAMP)
+}
+
+/// The point light of [`scene`].
+const POINT_LAMP: &str = r#"
+[[lights]]
+type = "point"
+position = [0.4, 0.5, 0.3]
+intensity = 20
+"#;
+
+/// [`scene`]'s lamp as an emissive ball `diameter` cm across instead (out of view, as bright
+/// in all): its glossy reflection is traced from the emitter's surface.
+fn emissive_lamp(diameter: f32) -> String {
+    let emission = 20.0 / (std::f32::consts::PI * (diameter / 200.0).powi(2));
+    format!(
+        r#"
+[[materials]]
+name = "lamp"
+diffuse = 0
+emission = {emission}
+
+[[objects]]
+type = "sphere"
+center = [0.4, 0.5, 0.3]
+radius = {}
+material = "lamp"
+"#,
+        diameter / 200.0
+    )
+}
+
+/// [`scene`] lit by `lamp` (scene-file tables) alone.
+fn with_lamp(roughness: f32, metallic: f32, lamp: &str) -> SceneDesc {
+    // Without `[[lights]]` a scene file gets a default key light.
+    let no_lights = if lamp.contains("[[lights]]") {
+        ""
+    } else {
+        "lights = []"
+    };
     let src = format!(
         r#"
 name = "ball"
 ambient = 0
+{no_lights}
 
 [image]
 width = {WIDTH}
@@ -36,10 +77,7 @@ focus_distance = 4
 horizon = 0
 zenith = 0
 
-[[lights]]
-type = "point"
-position = [0.4, 0.5, 0.3]
-intensity = 20
+{lamp}
 
 [[materials]]
 name = "ball"
@@ -108,6 +146,19 @@ fn rms_difference(a: &Film, b: &Film, mask: impl Fn(usize) -> bool) -> f64 {
     (sum / n.max(1) as f64).sqrt()
 }
 
+/// How much two seeds' renders of `desc` differ on the ball at 32 spp (rms), with the camera
+/// alone and with light paths.
+fn seed_noise(desc: &SceneDesc) -> (f64, f64) {
+    let pair = |lt: bool| {
+        let a = render(desc, &settings(Mode::Dense, 32, lt, 11));
+        let b = render(desc, &settings(Mode::Dense, 32, lt, 12));
+        rms_difference(&a, &b, on_ball)
+    };
+    let (off, on) = (pair(false), pair(true));
+    eprintln!("seed-to-seed difference: {off:.4} camera alone, {on:.4} with light paths");
+    (off, on)
+}
+
 /// The ball's blurred image: the upper middle of the frame (the floor is lower down).
 fn on_ball(i: usize) -> bool {
     let (x, y) = (i % WIDTH as usize, i / WIDTH as usize);
@@ -140,17 +191,36 @@ fn a_polished_balls_highlight_keeps_its_light_and_loses_its_speckle() {
         "light on the ball: camera alone {off:.2}, with light paths {on:.2}"
     );
     // Noise: two seeds differ far less with light paths.
-    let pair = |lt: bool| {
-        let a = render(&ball, &settings(Mode::Dense, 32, lt, 11));
-        let b = render(&ball, &settings(Mode::Dense, 32, lt, 12));
-        rms_difference(&a, &b, on_ball)
-    };
-    let (noise_off, noise_on) = (pair(false), pair(true));
-    eprintln!(
-        "seed-to-seed difference: {noise_off:.4} camera alone, {noise_on:.4} with light paths"
-    );
+    let (noise_off, noise_on) = seed_noise(&ball);
     assert!(
         noise_on * 4.0 < noise_off,
+        "seed-to-seed difference on the ball: {noise_off:.4} camera alone, {noise_on:.4} with light paths"
+    );
+}
+
+#[test]
+fn an_emissive_balls_reflection_keeps_its_light_and_loses_its_speckle() {
+    // Energy, where the camera alone is precise enough to check it: a 10 cm lamp on a ball
+    // of roughness 0.15.
+    let ball = with_lamp(0.15, 1.0, &emissive_lamp(10.0));
+    let mean = |spp: u32, lt: bool, seeds: std::ops::RangeInclusive<u64>| {
+        let n = seeds.clone().count() as f64;
+        (seeds.map(|s| total(&render(&ball, &settings(Mode::Dense, spp, lt, s)), on_ball)))
+            .sum::<f64>()
+            / n
+    };
+    let (off, on) = (mean(256, false, 1..=3), mean(64, true, 1..=6));
+    eprintln!("light on the ball: camera alone {off:.3}, with light paths {on:.3}");
+    assert!(off > 100.0, "the highlight is there: {off}");
+    assert!(
+        (on / off - 1.0).abs() < 0.04,
+        "light on the ball: camera alone {off:.2}, with light paths {on:.2}"
+    );
+    // Noise, where the camera finds the lamp rarely: a 4 cm lamp on a ball of roughness 0.08.
+    let ball = with_lamp(0.08, 1.0, &emissive_lamp(4.0));
+    let (noise_off, noise_on) = seed_noise(&ball);
+    assert!(
+        noise_on * 3.0 < noise_off,
         "seed-to-seed difference on the ball: {noise_off:.4} camera alone, {noise_on:.4} with light paths"
     );
 }

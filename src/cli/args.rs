@@ -237,8 +237,9 @@ pub(crate) struct RenderArgs {
     pub(crate) filter_glossy: Option<f32>,
     /// Path tracer: lamps much smaller on screen than their blur (and sub-pixel ones) are seen
     /// through the lens by tracing light from them to the lens, so their bokeh discs come out
-    /// clean instead of speckled, and adaptive sites cannot miss them; point and spot lights'
-    /// highlights on polished surfaces out of focus are traced from the lamp too. Unbiased
+    /// clean instead of speckled, and adaptive sites cannot miss them; lamps' (point and spot
+    /// lights', emitters') highlights on polished surfaces out of focus are traced from the
+    /// lamp too. Unbiased
     /// either way; `off` leaves them to camera rays alone (for comparisons) [default: the
     /// scene's, else on].
     #[arg(long, value_name = "on|off")]

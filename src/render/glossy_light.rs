@@ -1,6 +1,6 @@
-//! Point and spot lights seen in glossy surfaces, traced from the light as well as from the
-//! camera: light tracing through one reflection, combined with the camera's next-event
-//! estimation by multiple importance sampling.
+//! Lamps seen in glossy surfaces (point and spot lights, and emissive triangles and spheres),
+//! traced from the light as well as from the camera: light tracing through one reflection,
+//! combined with the camera's strategies by multiple importance sampling.
 //!
 //! **Why.** A lamp's highlight on a polished surface (brass, chrome, lacquer) is, out of focus,
 //! a bokeh disc of the lamp's mirror image. A camera sample there finds it only when its lens
@@ -17,46 +17,59 @@
 //! The thin lens says where on the film each landed path belongs ([`crate::camera::Lens::film_point`])
 //! and it is splatted there, as [`super::light_trace`] does for small lamps.
 //!
-//! **Weights.** The camera's strategy (a film point and a lens point, then the lamp by
-//! next-event estimation) and the two light strategies sample the same paths (lamp, surface
-//! point x, lens point u). Their densities, counted per steradian at u and per unit lens area,
-//! with `N` light paths, `n` camera samples per pixel (`spp`), `A` the aperture's area:
-//! - camera: `n per_sr / A` (`per_sr`: film area per steradian at u, [`crate::camera::Landing`]);
-//! - t = 1: `N p_u / A`, with `p_u` the light path's density of x converted to the solid angle
-//!   at u: `p_w cos_l / d_l^2 * d_u^2 / cos_u` (p_w the lamp's direction density, cos and d the
-//!   angles to x's geometric normal and the distances to the lamp and to u);
-//! - t = 0: `N p_u p_b cos_a / d_u^2`, p_b the BSDF's density of the direction towards u given
-//!   the lamp's, cos_a that direction's angle to the view axis.
+//! **Weights.** The camera's strategies (a film point and a lens point, then the lamp by
+//! next-event estimation or, for an emitter, by a BSDF sample) and the two light strategies
+//! sample the same paths (lamp point y, surface point x, lens point u). Their densities,
+//! counted per steradian at u, per unit lens area and per steradian of y seen from x, with `N`
+//! light paths, `n` camera samples per pixel (`spp`), `A` the aperture's area:
+//! - camera, light sample: `n per_sr / A * p_l` (`per_sr`: film area per steradian at u,
+//!   [`crate::camera::Landing`]; `p_l` the light sample's density of y, 1 for a punctual
+//!   light);
+//! - camera, BSDF sample (emitters only): `n per_sr / A * p_f`, p_f the BSDF's density of the
+//!   direction towards y;
+//! - t = 1: `N p_u p_y / A`, with `p_u` the light path's density of x converted to the solid
+//!   angle at u: `p_w cos_l / d_l^2 * d_u^2 / cos_u` (p_w the lamp's direction density, cos and
+//!   d the angles to x's geometric normal and the distances to the lamp and to u), and `p_y`
+//!   its density of the lamp's point (1 for a punctual light; `Source::position_density`);
+//! - t = 0: `N p_u p_y p_b cos_a / d_u^2`, p_b the BSDF's density of the direction towards u
+//!   given the lamp's, cos_a that direction's angle to the view axis.
 //!
 //! Each takes the power heuristic's share of the path; the shares sum to one whatever the
-//! surface, so the sum of the three estimators is unbiased. Both sides compute them from the
-//! same quantities (`GlossyPaths::densities`); where the lamp's direction sampling cannot
-//! reach a point (outside every cone below) the camera's share is 1.
+//! surface, so the sum of the estimators is unbiased. Both sides compute them from the same
+//! quantities (`GlossyPaths::densities`); where the lamp's direction sampling cannot reach a
+//! point (outside every cone below) the camera's strategies share it as they would alone.
 //!
 //! **Which paths.** The first surface a lamp's ray meets, when its BSDF is glossy
 //! ([`eligible`]: no rougher than [`MAX_ROUGHNESS`], opaque, not a perfect mirror) and it is
 //! out of focus (a CoC of at least [`MIN_COC_PX`]: a sharp highlight is found as well by the
 //! camera's stratified samples), seen directly through a thin lens with an aperture, in the
-//! path tracer with light tracing on. Suns and area lights stay with the camera (an area
-//! light's reflection is found by BSDF sampling too, and a sun has no position to trace from).
+//! path tracer with light tracing on. The lamps: every point and spot light sampled at every
+//! vertex, and (with multiple importance sampling and room for a bounce, which the camera's
+//! BSDF strategy needs) the [`MAX_PRIMITIVE_LAMPS`] most powerful emissive triangles and
+//! spheres; a triangle's paths start uniformly over its area, a sphere's uniformly over the
+//! disc it shows the path's direction. Suns and the world stay with the camera (they have no
+//! position to trace from), as do emitters beyond that count.
 //!
 //! **Where the lamp's paths go.** Directions are drawn within cones around the bounds of the
 //! geometry whose materials can be glossy, each cone's directions on a [`GRID`] x [`GRID`] grid.
 //! Only a small patch of a curved mirror sends a lamp's light into the lens, so a pilot of
 //! [`PILOT`] paths drawn evenly measures how much light each cell lands, and the render's paths
 //! draw cells in proportion to it ([`DEFENSIVE`] of them evenly, so nothing the pilot missed
-//! loses its density). A lamp whose pilot lands nothing is left to the camera entirely. The
-//! paths number a quarter of a dense render's camera samples, shared by the lamps. A light
+//! loses its density). Point and spot lights take [`PILOT`] pilot paths each, emitters share
+//! [`EMITTER_PILOTS`] times that. A lamp whose pilot lands nothing is left to the camera
+//! entirely. The paths number a quarter of a dense render's camera samples, shared by the
+//! lamps in proportion to the light their pilots landed ([`SHARED`] of them evenly). A light
 //! path's direction density is its cell's, as drawn; the camera's side measures the cell from
 //! the direction, which within float rounding of a cell's edge may give its neighbour's: the
 //! weights there need not sum to one, the only (bounded, negligible) departure from an
-//! unbiased estimate ([`Lamp::pdf`]).
+//! unbiased estimate (`Lamp::pdf`).
 //!
 //! **Deterministic.** Paths are numbered per lamp (Owen-scrambled Sobol points keyed by it),
 //! traced in fixed blocks and splatted in block order: the image is the same for any thread
 //! count, and a region gets exactly the splats the full frame gives it (every region traces
 //! every path: a reflection may land anywhere).
 
+use std::collections::HashMap;
 use std::f32::consts::{PI, TAU};
 
 use glam::{Vec2, Vec3};
@@ -71,9 +84,11 @@ use crate::embree::{GeometryId, LANES, Ray, RayHint, RayPacket16, ShadowPacket16
 use crate::limits::{MemoryError, try_with_capacity};
 use crate::sampler::{path_numbers, sample_key};
 use crate::scene::World;
-use crate::scene::emitters::punctual_sample;
-use crate::settings::{Integrator, Mode, RenderSettings};
-use crate::shade::{Bsdf, Light, Material, SurfacePoints16, basis};
+use crate::scene::emitters::{
+    primitive_bounds, primitive_point, punctual_sample, sphere_point_facing,
+};
+use crate::settings::{Integrator, Mode, RenderSettings, Strategy};
+use crate::shade::{Bsdf, Light, Material, SurfacePoint, SurfacePoints16, basis, luminance};
 
 /// Surfaces at most this rough (perceptual roughness, GGX alpha = its square) take light paths.
 /// Rougher lobes are wide enough that the camera's lens samples find the lamp's reflection
@@ -93,8 +108,21 @@ const PATHS_PER_SAMPLE: f64 = 0.25;
 const MAX_CONES: usize = 64;
 /// Cells per side of a cone's grid of directions, which the pilot paths weigh.
 pub const GRID: usize = 16;
-/// Pilot paths per lamp: where the lamp's light lands, to draw the render's paths there.
+/// Pilot paths per lamp: where the lamp's light lands, to draw the render's paths there (and
+/// how many of them each lamp gets).
 pub const PILOT: u32 = 65536;
+/// Emissive primitives share [`PILOT`] times this many pilot paths (at most [`PILOT`] and at
+/// least [`MIN_PILOT`] each): a scene may have dozens of small lamps, most of whose
+/// reflections the camera finds well.
+pub const EMITTER_PILOTS: usize = 2;
+/// The fewest pilot paths a lamp takes.
+pub const MIN_PILOT: u32 = 4096;
+/// The share of the light paths split evenly between the lamps; the rest go to each in
+/// proportion to the light its pilot landed.
+pub const SHARED: f64 = 0.1;
+/// The most emissive primitives that take light paths (the most powerful; the others stay
+/// with the camera).
+pub const MAX_PRIMITIVE_LAMPS: usize = 32;
 /// The share of each lamp's paths drawn evenly over its cones whatever the pilot found (so
 /// every direction keeps a density and what the pilot missed is still found).
 pub const DEFENSIVE: f32 = 0.25;
@@ -181,12 +209,100 @@ impl Cone {
     }
 }
 
+/// Where a lamp's light paths start.
+#[derive(Debug, Clone, Copy)]
+enum Source {
+    /// Light `light` of [`crate::scene::emitters::Emitters::always`]: a point or spot light.
+    Punctual { light: usize, position: Vec3 },
+    /// An emissive triangle, its points drawn uniformly by area.
+    Triangle {
+        geometry: u32,
+        prim: u32,
+        /// Unit normal of its front face.
+        normal: Vec3,
+        inv_area: f32,
+    },
+    /// An emissive sphere, its points drawn uniformly over the disc it shows the path's
+    /// direction (the half that faces it, by the cosine).
+    Sphere {
+        geometry: u32,
+        prim: u32,
+        center: Vec3,
+        radius: f32,
+        /// 1 / (pi radius^2).
+        inv_disc: f32,
+    },
+}
+
+/// How a camera path found a lamp.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Found {
+    /// By next-event estimation from its first surface.
+    LightSample,
+    /// By a BSDF sample from its first surface that hit an emitter.
+    BsdfSample,
+}
+
+/// Which lamp a camera-side light sample, or an emitter a camera path found, belongs to.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum LampKey {
+    /// Light `i` of [`crate::scene::emitters::Emitters::always`].
+    Punctual(usize),
+    /// Emissive primitive (geometry, primitive).
+    Primitive(u32, u32),
+}
+
+impl Source {
+    /// Keys its light paths' sample stream (punctual lights by their index, as before
+    /// emissive primitives took light paths too).
+    fn stream(&self) -> u64 {
+        match *self {
+            Self::Punctual { light, .. } => light as u64,
+            Self::Triangle { geometry, prim, .. } | Self::Sphere { geometry, prim, .. } => {
+                (1 << 63) | u64::from(geometry) << 32 | u64::from(prim)
+            }
+        }
+    }
+
+    /// The density, per steradian seen from the surface point `x`, with which its light paths
+    /// start at the lamp's point `d_light` from `x` along unit `to_light` (1 for a punctual
+    /// light, which has one point).
+    fn position_density(&self, x: Vec3, to_light: Vec3, d_light: f32) -> f32 {
+        let (cos, inv_area) = match *self {
+            Self::Punctual { .. } => return 1.0,
+            Self::Triangle {
+                normal, inv_area, ..
+            } => (normal.dot(to_light).abs(), inv_area),
+            Self::Sphere {
+                center,
+                radius,
+                inv_disc,
+                ..
+            } => {
+                // Uniform over the disc the sphere shows the path's direction: a point at
+                // cosine cos has density cos / (pi r^2) per area, d^2 / (pi r^2) per
+                // steradian; none on the half facing away.
+                let n = (x + to_light * d_light - center) / radius;
+                let facing = -n.dot(to_light) > 0.0;
+                return if facing {
+                    inv_disc * d_light * d_light
+                } else {
+                    0.0
+                };
+            }
+        };
+        if cos > 0.0 {
+            inv_area * d_light * d_light / cos
+        } else {
+            0.0
+        }
+    }
+}
+
 /// One lamp's light paths.
 #[derive(Debug, Clone)]
 struct Lamp {
-    /// Its index in [`crate::scene::emitters::Emitters::always`].
-    light: usize,
-    position: Vec3,
+    source: Source,
     /// Light paths to trace.
     paths: u32,
     cones: Vec<Cone>,
@@ -197,12 +313,11 @@ struct Lamp {
 }
 
 impl Lamp {
-    /// A lamp at `position` drawing directions in `cones`, each cell alike.
-    fn new(light: usize, position: Vec3, paths: u32, cones: Vec<Cone>) -> Self {
+    /// A lamp drawing directions in `cones`, each cell alike.
+    fn new(source: Source, paths: u32, cones: Vec<Cone>) -> Self {
         let n = cones.len() * GRID * GRID;
         let mut lamp = Self {
-            light,
-            position,
+            source,
             paths,
             cones,
             cells: Vec::new(),
@@ -266,27 +381,27 @@ impl Lamp {
     }
 }
 
-/// The densities of one path under the three strategies (module documentation).
+/// The densities of one path under the strategies (module documentation).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Densities {
+    /// The camera's, finding the lamp by a light sample.
     camera: f32,
+    /// The camera's, finding an emissive primitive by a BSDF sample (0 for punctual lights).
+    bsdf: f32,
     t1: f32,
     t0: f32,
 }
 
 impl Densities {
     fn sum_sq(&self) -> f32 {
-        self.camera * self.camera + self.t1 * self.t1 + self.t0 * self.t0
+        self.camera * self.camera + self.t1 * self.t1 + self.t0 * self.t0 + self.bsdf * self.bsdf
     }
 
-    /// The camera's power-heuristic weight.
-    pub(super) fn camera_weight(&self) -> f32 {
+    /// The power-heuristic weight of the strategy of density `own`; `None` where the sum is
+    /// not usable.
+    fn weight(&self, own: f32) -> Option<f32> {
         let s = self.sum_sq();
-        if s > 0.0 && s.is_finite() {
-            self.camera * self.camera / s
-        } else {
-            1.0
-        }
+        (s > 0.0 && s.is_finite()).then(|| own * own / s)
     }
 }
 
@@ -297,6 +412,8 @@ pub struct GlossyPaths {
     lamps: Vec<Lamp>,
     /// For each light of [`crate::scene::emitters::Emitters::always`], its lamp.
     by_light: Vec<Option<usize>>,
+    /// The lamp of each emissive primitive that has one, by (geometry, primitive).
+    by_prim: HashMap<(u32, u32), usize>,
     eye: Vec3,
     forward: Vec3,
     right: Vec3,
@@ -342,29 +459,23 @@ impl GlossyPaths {
         if spheres.is_empty() {
             return None;
         }
-        let positions: Vec<(usize, Vec3)> = (world.emitters.always.iter().enumerate())
-            .filter_map(|(i, l)| match *l {
-                Light::Point { position, .. } | Light::Spot { position, .. } => Some((i, position)),
-                Light::Directional { .. } => None,
-            })
-            .collect();
-        if positions.is_empty() {
+        let sources = lamp_sources(world, settings);
+        if sources.is_empty() {
             return None;
         }
         let (w, h) = (camera.width as f64, camera.height as f64);
         let total = PATHS_PER_SAMPLE * w * h * f64::from(settings.spp);
-        let paths = (total / positions.len() as f64)
+        let paths = (total / sources.len() as f64)
             .ceil()
             .clamp(1.0, f64::from(u32::MAX)) as u32;
         let mut lamps = Vec::new();
-        for (light, position) in positions {
+        for (source, at, size) in sources {
             let cones: Vec<Cone> = (spheres.iter())
-                .filter_map(|&(c, r)| Cone::towards(position, c, r))
+                .filter_map(|&(c, r)| Cone::towards(at, c, r + size))
                 .collect();
-            if cones.is_empty() {
-                continue;
+            if !cones.is_empty() {
+                lamps.push(Lamp::new(source, paths, cones));
             }
-            lamps.push(Lamp::new(light, position, paths, cones));
         }
         if lamps.is_empty() {
             return None;
@@ -373,6 +484,7 @@ impl GlossyPaths {
         let mut g = Self {
             lamps,
             by_light: Vec::new(),
+            by_prim: HashMap::new(),
             eye: camera.eye,
             forward: camera.forward,
             right: camera.right,
@@ -394,7 +506,12 @@ impl GlossyPaths {
         g.lamps.retain(|l| l.paths > 0);
         g.by_light = vec![None; world.emitters.always.len()];
         for (i, l) in g.lamps.iter().enumerate() {
-            g.by_light[l.light] = Some(i);
+            match l.source {
+                Source::Punctual { light, .. } => g.by_light[light] = Some(i),
+                Source::Triangle { geometry, prim, .. } | Source::Sphere { geometry, prim, .. } => {
+                    g.by_prim.insert((geometry, prim), i);
+                }
+            }
         }
         (!g.lamps.is_empty()).then_some(g)
     }
@@ -406,9 +523,24 @@ impl GlossyPaths {
     /// in order. (A pilot that fails for memory leaves the even draw, which is as unbiased.)
     fn guide(&mut self, world: &World, camera: &Camera, settings: &RenderSettings) {
         let seed = settings.seed ^ SALT ^ 0x0070_696c_6f74;
-        for i in 0..self.lamps.len() {
+        let count = self.lamps.len();
+        let emitters = (self.lamps.iter())
+            .filter(|l| !matches!(l.source, Source::Punctual { .. }))
+            .count();
+        // Emissive primitives share a pilot budget of [`EMITTER_PILOTS`] lamps' worth.
+        let shared = (PILOT as usize * EMITTER_PILOTS / emitters.max(1)) as u32;
+        let shared = shared.clamp(MIN_PILOT, PILOT);
+        let budget: f64 = self.lamps.iter().map(|l| f64::from(l.paths)).sum();
+        // The light each lamp's pilot landed per path (None: its pilot failed, keep its even
+        // share).
+        let mut landed = vec![None; count];
+        for (i, out) in landed.iter_mut().enumerate() {
             let lamp = &self.lamps[i];
-            let Ok((splats, _)) = self.trace_block(world, camera, settings, lamp, seed, 0..PILOT)
+            let pilot = match lamp.source {
+                Source::Punctual { .. } => PILOT,
+                _ => shared,
+            };
+            let Ok((splats, _)) = self.trace_block(world, camera, settings, lamp, seed, 0..pilot)
             else {
                 continue;
             };
@@ -418,12 +550,8 @@ impl GlossyPaths {
                 score[*cell] += s.value.max_element();
             }
             let total: f32 = score.iter().sum();
-            if total == 0.0 {
-                // Nothing it sends through a glossy reflection lands: the camera keeps it all.
-                self.lamps[i].paths = 0;
-                continue;
-            }
-            if !total.is_finite() {
+            *out = Some(total / pilot as f32);
+            if !(total > 0.0 && total.is_finite()) {
                 continue;
             }
             let even = DEFENSIVE / n as f32;
@@ -433,6 +561,27 @@ impl GlossyPaths {
                 .collect();
             self.lamps[i].set_cells(cells);
         }
+        // Paths go to the lamps in proportion to the light their pilots landed ([`DEFENSIVE`]
+        // of them evenly); a lamp whose pilot landed nothing gets none: nothing it sends
+        // through a glossy reflection lands, so the camera keeps it all.
+        let live = (landed.iter())
+            .filter(|t| t.is_none_or(|t| t != 0.0))
+            .count();
+        let usable = |t: &Option<f32>| t.filter(|t| t.is_finite()).map_or(0.0, f64::from);
+        let sum: f64 = landed.iter().map(usable).sum();
+        for (lamp, t) in self.lamps.iter_mut().zip(&landed) {
+            if *t == Some(0.0) {
+                lamp.paths = 0;
+                continue;
+            }
+            let part = if sum > 0.0 {
+                usable(t) / sum
+            } else {
+                1.0 / live as f64
+            };
+            let share = SHARED / live as f64 + (1.0 - SHARED) * part;
+            lamp.paths = (budget * share).ceil().clamp(1.0, f64::from(u32::MAX)) as u32;
+        }
     }
 
     /// The light paths a render traces.
@@ -440,18 +589,48 @@ impl GlossyPaths {
         self.lamps.iter().map(|l| u64::from(l.paths)).sum()
     }
 
-    /// The camera's share of the light that light `light` of
-    /// [`crate::scene::emitters::Emitters::always`] sends to the eye by one reflection at a
-    /// camera ray's first surface `at`, seen along unit `to_lens` (back along the camera ray)
-    /// from `d_lens` away.
-    pub(super) fn camera_weight(&self, light: usize, at: &Lit, to_lens: Vec3, d_lens: f32) -> f32 {
-        let Some(&Some(lamp)) = self.by_light.get(light) else {
-            return 1.0;
+    /// The camera's share, by the strategy that `found` the lamp, of the light lamp `key`
+    /// sends to the eye by one reflection at a camera ray's first surface `at`, seen along unit
+    /// `to_lens` (back along the camera ray) from `d_lens` away; `None` where light paths do
+    /// not share it (the lamp has none, or the surface takes none).
+    pub(super) fn camera_weight(
+        &self,
+        found: Found,
+        key: LampKey,
+        at: &Lit,
+        to_lens: Vec3,
+        d_lens: f32,
+    ) -> Option<f32> {
+        let d = self.shared(key, at, to_lens, d_lens)?;
+        d.weight(match found {
+            Found::LightSample => d.camera,
+            Found::BsdfSample => d.bsdf,
+        })
+    }
+
+    /// The densities of a path from lamp `key` through `at` into the lens, where light paths
+    /// share it.
+    fn shared(&self, key: LampKey, at: &Lit, to_lens: Vec3, d_lens: f32) -> Option<Densities> {
+        let lamp = match key {
+            LampKey::Punctual(light) => (*self.by_light.get(light)?)?,
+            LampKey::Primitive(g, p) => *self.by_prim.get(&(g, p))?,
         };
-        if !(eligible(&at.b) && self.blurred(d_lens * -to_lens.dot(self.forward))) {
-            return 1.0;
+        if !self.applies(&at.b, to_lens, d_lens) {
+            return None;
         }
-        (self.densities(&self.lamps[lamp], at, to_lens, d_lens)).map_or(1.0, |d| d.camera_weight())
+        self.densities(&self.lamps[lamp], at, to_lens, d_lens)
+    }
+
+    /// Whether some emissive primitive takes light paths (so the camera's BSDF samples that
+    /// find one are weighed against them).
+    pub(super) fn shares_emitters(&self) -> bool {
+        !self.by_prim.is_empty()
+    }
+
+    /// Whether light paths share the light reflected at a camera ray's first surface of BSDF
+    /// `b`, seen along unit `to_lens` from `d_lens` away ([`eligible`] and blurred).
+    pub(super) fn applies(&self, b: &Bsdf, to_lens: Vec3, d_lens: f32) -> bool {
+        eligible(b) && self.blurred(d_lens * -to_lens.dot(self.forward))
     }
 
     /// Whether a surface at `depth` along the view axis is blurred enough to take light paths
@@ -467,8 +646,10 @@ impl GlossyPaths {
             ref b,
             n,
             ng,
+            x,
             to_light,
             d_light,
+            nee,
             ..
         } = *at;
         let ng = ng.normalize_or(Vec3::Z);
@@ -479,24 +660,33 @@ impl GlossyPaths {
         }
         let per_sr = 1.0 / (c * c * c * self.pixel * self.pixel);
         let camera = self.spp * per_sr / self.area;
+        // A BSDF sample finds an emissive primitive (not a punctual light).
+        let bsdf = match lamp.source {
+            Source::Punctual { .. } => 0.0,
+            _ => camera * b.pdf(n, to_lens, to_light),
+        };
+        let camera = camera * nee;
         let p_w = lamp.pdf(-to_light, at.drawn);
-        if p_w <= 0.0 {
+        let pos = lamp.source.position_density(x, to_light, d_light);
+        if !(p_w > 0.0 && pos > 0.0) {
             return Some(Densities {
                 camera,
+                bsdf,
                 t1: 0.0,
                 t0: 0.0,
             });
         }
         let cos_l = ng.dot(to_light).abs();
-        let p_u = p_w * cos_l / (d_light * d_light) * (d_lens * d_lens) / cos_u;
+        let p_u = p_w * cos_l / (d_light * d_light) * (d_lens * d_lens) / cos_u * pos;
         let count = lamp.paths as f32;
         let p_b = b.pdf(n, to_light, to_lens);
         let d = Densities {
             camera,
+            bsdf,
             t1: count * p_u / self.area,
             t0: count * p_u * p_b * c / (d_lens * d_lens),
         };
-        (d.t1.is_finite() && d.t0.is_finite()).then_some(d)
+        (d.t1.is_finite() && d.t0.is_finite() && d.bsdf.is_finite()).then_some(d)
     }
 
     /// The lens position (unit aperture coordinates, as [`Lens::lens_point`] gives them)
@@ -566,7 +756,6 @@ impl GlossyPaths {
         let mut tally = Tally::new(settings.record_rays);
         let (first, end) = (range.start, range.end);
         let mut splats = try_with_capacity(2 * (end - first) as usize, "the light paths' splats")?;
-        let light = &world.emitters.always[lamp.light];
         let view = View {
             camera,
             share: settings.exposure.exp2() / self.lens_weight_mean,
@@ -580,14 +769,20 @@ impl GlossyPaths {
             let count = (end - start).min(LANES as u32);
             let numbers: [[f32; 10]; LANES] = std::array::from_fn(|l| {
                 let j = start + (l as u32).min(count - 1);
-                path_numbers(sample_key(seed, lamp.light as u64, j), 0)
+                path_numbers(sample_key(seed, lamp.source.stream(), j), 0)
             });
             packet.clear();
             let mut cells = [0usize; LANES];
+            let mut starts = [None; LANES];
             for (lane, u) in numbers.iter().enumerate().take(count as usize) {
                 let (dir, cell) = lamp.sample([u[0], u[1], u[2]]);
+                let Some(start) = Start::new(world, &lamp.source, dir, Vec2::new(u[6], u[7]))
+                else {
+                    continue;
+                };
                 cells[lane] = cell;
-                packet.set(lane, &Ray::new(lamp.position, dir));
+                starts[lane] = Some(start);
+                packet.set(lane, &Ray::new(start.origin, dir));
             }
             let (kind, hint) = (RayKind::Secondary, RayHint::Incoherent);
             let hits = trace_depth(world, &mut packet, kind, hint, &mut t_hit, &mut tally);
@@ -598,7 +793,9 @@ impl GlossyPaths {
             let mut connections = Connections::default();
             let dirs = packet.dirs();
             for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
-                let hit = packet.hit(lane).expect("lanes in `hits` hit");
+                let (Some(hit), Some(start)) = (packet.hit(lane), starts[lane]) else {
+                    continue;
+                };
                 let sp = points.get(lane);
                 let d = Vec3::new(dirs[0][lane], dirs[1][lane], dirs[2][lane]);
                 let b = world.material(&hit).bsdf(sp.uv, hit.is_front(d));
@@ -606,15 +803,9 @@ impl GlossyPaths {
                 if !(eligible(&b) && self.blurred((x - self.eye).dot(self.forward))) {
                     continue;
                 }
-                let es = punctual_sample(light, x);
-                let at = Lit {
-                    b,
-                    n: sp.normal,
-                    ng: hit.ng,
-                    to_light: es.dir,
-                    d_light: es.distance,
-                    irradiance: es.radiance,
-                    drawn: Some(cells[lane]),
+                let Some(at) = start.lights(world, &lamp.source, cells[lane], b, &sp, hit.ng)
+                else {
+                    continue;
                 };
                 let u = &numbers[lane];
                 // t = 1: a uniform point of the aperture.
@@ -688,14 +879,112 @@ pub(super) struct Lit {
     /// Geometric normal, any length (as Embree reports it: [`GlossyPaths::densities`]
     /// normalises it, so paths the weights never reach pay nothing for it).
     pub(super) ng: Vec3,
-    /// Unit direction and distance to the lamp.
+    /// The point.
+    pub(super) x: Vec3,
+    /// Unit direction and distance to the lamp (to the point of it the path reaches).
     pub(super) to_light: Vec3,
     pub(super) d_light: f32,
-    /// The irradiance the lamp sends (normal to its direction).
+    /// What arrives from the lamp: a punctual light's irradiance (normal to its direction),
+    /// an emitter's radiance.
     pub(super) irradiance: Vec3,
+    /// The density, per steradian, with which the camera's light sample there draws the
+    /// lamp's point (1 for a punctual light, which every light sample takes).
+    pub(super) nee: f32,
     /// The cell of the lamp's directions a light path was drawn in (`None` on the camera's
-    /// side; [`Lamp::pdf`]).
+    /// side; `Lamp::pdf`).
     pub(super) drawn: Option<usize>,
+}
+
+/// Where one light path leaves its lamp.
+#[derive(Debug, Clone, Copy)]
+struct Start {
+    /// The ray's origin (off an emitter's surface, on the side the path leaves by).
+    origin: Vec3,
+    /// The lamp's point (a punctual light's position).
+    point: Vec3,
+    /// The radiance an emitter sends along the path (unused for punctual lights).
+    radiance: Vec3,
+}
+
+impl Start {
+    /// The start of a path leaving `source` along unit `dir`, at the point `u` draws on an
+    /// emitter; `None` when the emitter sends nothing that way (its back, a sphere's inside).
+    fn new(world: &World, source: &Source, dir: Vec3, u: Vec2) -> Option<Self> {
+        let (geometry, prim) = match *source {
+            Source::Punctual { position, .. } => {
+                return Some(Self {
+                    origin: position,
+                    point: position,
+                    radiance: Vec3::ZERO,
+                });
+            }
+            Source::Triangle { geometry, prim, .. } | Source::Sphere { geometry, prim, .. } => {
+                (geometry, prim)
+            }
+        };
+        let p = match *source {
+            Source::Sphere { center, radius, .. } => sphere_point_facing(center, radius, dir, u),
+            _ => primitive_point(world, geometry, prim, u)?,
+        };
+        let cos = p.normal.dot(dir);
+        if cos == 0.0 {
+            return None;
+        }
+        let material = world.material_of(GeometryId(geometry), prim);
+        let radiance = material.emitted_towards(p.uv, cos > 0.0);
+        if radiance.max_element() <= 0.0 {
+            return None;
+        }
+        // Off the surface by a little more than its position's rounding, so the ray cannot
+        // find the primitive it leaves.
+        let lift = 1e-4 * (1.0 + p.position.abs().max_element());
+        Some(Self {
+            origin: p.position + p.normal * lift.copysign(cos),
+            point: p.position,
+            radiance,
+        })
+    }
+
+    /// The surface point `sp` (geometric normal `ng`, BSDF `b`) as this start, drawn in cell
+    /// `cell` of its lamp's directions, lights it.
+    fn lights(
+        &self,
+        world: &World,
+        source: &Source,
+        cell: usize,
+        b: Bsdf,
+        sp: &SurfacePoint,
+        ng: Vec3,
+    ) -> Option<Lit> {
+        let x = sp.position;
+        let (to_light, d_light, irradiance, nee) = match *source {
+            Source::Punctual { light, .. } => {
+                let es = punctual_sample(&world.emitters.always[light], x);
+                (es.dir, es.distance, es.radiance, 1.0)
+            }
+            Source::Triangle { geometry, prim, .. } | Source::Sphere { geometry, prim, .. } => {
+                let v = self.point - x;
+                let d = v.length();
+                if d <= 0.0 || d.is_nan() {
+                    return None;
+                }
+                let to = v / d;
+                let nee = (world.emitters).pdf_primitive(world, geometry, prim, x, self.point, to);
+                (to, d, self.radiance, nee)
+            }
+        };
+        Some(Lit {
+            b,
+            n: sp.normal,
+            ng,
+            x,
+            to_light,
+            d_light,
+            irradiance,
+            nee,
+            drawn: Some(cell),
+        })
+    }
 }
 
 /// One packet's connections from surface points to the lens, by strategy (0: t = 1, 1: t = 0):
@@ -747,6 +1036,70 @@ impl Connections {
             }
         }
     }
+}
+
+/// The lamps whose light paths a render may trace, each with the centre and radius of a
+/// sphere that holds it: the point and spot lights, then (with multiple importance sampling
+/// and room for a bounce, which the camera's BSDF strategy needs) the [`MAX_PRIMITIVE_LAMPS`]
+/// most powerful emissive triangles and spheres.
+fn lamp_sources(world: &World, settings: &RenderSettings) -> Vec<(Source, Vec3, f32)> {
+    let mut sources: Vec<(Source, Vec3, f32)> = (world.emitters.always.iter().enumerate())
+        .filter_map(|(light, l)| match *l {
+            Light::Point { position, .. } | Light::Spot { position, .. } => {
+                Some((Source::Punctual { light, position }, position, 0.0))
+            }
+            Light::Directional { .. } => None,
+        })
+        .collect();
+    let limits = &settings.path;
+    let bounce = [limits.total, limits.diffuse, limits.glossy]
+        .iter()
+        .all(|&n| n >= 1);
+    if !(bounce && limits.strategy == Strategy::Mis) {
+        return sources;
+    }
+    let mut emitters: Vec<(f32, Source, Vec3, f32)> = Vec::new();
+    for (geometry, prim) in world.emitters.primitives() {
+        let material = world.material_of(GeometryId(geometry), prim);
+        let (lo, hi) = primitive_bounds(world, geometry, prim);
+        let (centre, size) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
+        let source = match world.scene.geometry(GeometryId(geometry)) {
+            crate::embree::Geometry::Mesh(m) => {
+                let n = m.face_normal(prim);
+                let area = 0.5 * n.length();
+                Source::Triangle {
+                    geometry,
+                    prim,
+                    normal: n.normalize_or_zero(),
+                    inv_area: 1.0 / area,
+                }
+            }
+            crate::embree::Geometry::Spheres(s) => {
+                let (center, radius) = (s.center(prim), s.radius(prim));
+                Source::Sphere {
+                    geometry,
+                    prim,
+                    center,
+                    radius,
+                    inv_disc: 1.0 / (PI * radius * radius),
+                }
+            }
+        };
+        let area = match source {
+            Source::Triangle { inv_area, .. } => 1.0 / inv_area,
+            Source::Sphere { inv_disc, .. } => 4.0 / inv_disc,
+            Source::Punctual { .. } => continue,
+        };
+        let power = luminance(material.emission) * area;
+        if power > 0.0 && power.is_finite() && size.is_finite() {
+            emitters.push((power, source, centre, size));
+        }
+    }
+    // The most powerful first; ties keep the scene's order (a stable sort).
+    emitters.sort_by(|a, b| b.0.total_cmp(&a.0));
+    emitters.truncate(MAX_PRIMITIVE_LAMPS);
+    sources.extend(emitters.into_iter().map(|(_, s, c, r)| (s, c, r)));
+    sources
 }
 
 /// Bounding spheres (centre, radius) of the glossy geometry of `world`: one per mesh and one
@@ -840,7 +1193,11 @@ mod tests {
     #[test]
     fn a_light_paths_density_is_its_drawn_cells() {
         let cone = Cone::towards(Vec3::ZERO, Vec3::new(0.0, 0.0, 10.0), 0.05).unwrap();
-        let mut lamp = Lamp::new(0, Vec3::ZERO, 1, vec![cone]);
+        let source = Source::Punctual {
+            light: 0,
+            position: Vec3::ZERO,
+        };
+        let mut lamp = Lamp::new(source, 1, vec![cone]);
         // One cell holds nearly everything, its neighbours almost nothing.
         let mut cells = vec![1e-6f32; GRID * GRID];
         cells[5 * GRID + 7] = 1.0;

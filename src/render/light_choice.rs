@@ -59,7 +59,8 @@ pub struct LightTraced {
     set: HashSet<(u32, u32)>,
     /// Mean lens weight over the aperture under the render's lens filter (1 for the box).
     pub(super) lens_weight_mean: f32,
-    /// Point and spot lights whose glossy reflections are traced from the light too.
+    /// Lamps (point and spot lights, emitters) whose glossy reflections are traced from the
+    /// light too.
     pub(super) glossy: Option<GlossyPaths>,
 }
 

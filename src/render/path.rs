@@ -6,7 +6,7 @@
 
 use glam::{Vec2, Vec3};
 
-use super::glossy_light::{GlossyPaths, Lit};
+use super::glossy_light::{Found, GlossyPaths, LampKey, Lit};
 use super::light_choice::LightTraced;
 use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
@@ -109,6 +109,63 @@ struct Vertices {
     t: [f32; LANES],
 }
 
+/// A camera ray's first surface where light paths share the light reflected there
+/// ([`GlossyPaths::applies`]): what weighing an emitter its BSDF sample finds takes.
+#[derive(Clone, Copy)]
+struct SharedVertex {
+    b: Bsdf,
+    n: Vec3,
+    ng: Vec3,
+    x: Vec3,
+    /// Unit direction and distance back to the lens.
+    to_lens: Vec3,
+    d_lens: f32,
+}
+
+impl SharedVertex {
+    /// The lanes of `hits` whose first surface (`v`, seen along `wo`) light paths share.
+    fn note(
+        g: &GlossyPaths,
+        hits: u32,
+        v: &Vertices,
+        wo: &[Vec3; LANES],
+        points: &SurfacePoints16,
+    ) -> [Option<Self>; LANES] {
+        std::array::from_fn(|l| {
+            let applies = hits & (1 << l) != 0 && g.applies(&v.bsdf[l], wo[l], v.t[l]);
+            applies.then(|| {
+                let p = points.get(l);
+                Self {
+                    b: v.bsdf[l],
+                    n: p.normal,
+                    ng: v.ng[l],
+                    x: p.position,
+                    to_lens: wo[l],
+                    d_lens: v.t[l],
+                }
+            })
+        })
+    }
+
+    /// This surface as an emitter's point `y` lights it, which a light sample draws with
+    /// density `nee`.
+    fn lit(&self, y: Vec3, nee: f32) -> Option<Lit> {
+        let v = y - self.x;
+        let d = v.length();
+        (d > 0.0).then(|| Lit {
+            b: self.b,
+            n: self.n,
+            ng: self.ng,
+            x: self.x,
+            to_light: v / d,
+            d_light: d,
+            irradiance: Vec3::ZERO,
+            nee,
+            drawn: None,
+        })
+    }
+}
+
 /// What each camera ray of a packet hit first.
 #[derive(Debug, Clone, Copy)]
 pub struct FirstHits {
@@ -170,6 +227,7 @@ pub fn trace_path(
         }
     }
     let mut t = [f32::INFINITY; LANES];
+    let mut shared = [None; LANES];
     let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
     for bounce in 0..=limits.total {
         tally.bounce = bounce;
@@ -200,8 +258,10 @@ pub fn trace_path(
         }
         // The emitters light tracing sees through the lens send nothing to camera rays.
         let unseen = (bounce == 0).then_some(light_traced);
+        let glossy = light_traced.glossy.as_ref();
+        let found = glossy.filter(|_| bounce == 1).map(|g| (g, &shared));
         let mut v = vertices(
-            world, packet, hits, &lanes, weigh, unseen, scratch, radiance,
+            world, packet, hits, &lanes, weigh, unseen, found, scratch, radiance,
         );
         filter_glossy(&mut v.bsdf, hits, &lanes, limits.filter_glossy);
         if bounce == 0 {
@@ -213,6 +273,11 @@ pub fn trace_path(
         let numbers = hit_numbers(keys, hits, bounce);
         let dir = packet.dirs();
         let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
+        if bounce == 0
+            && let Some(g) = glossy.filter(|g| g.shares_emitters())
+        {
+            shared = SharedVertex::note(g, hits, &v, &wo, &scratch.points);
+        }
         let at = Shading {
             hits,
             strategy: limits.strategy,
@@ -292,6 +357,7 @@ fn vertices(
     lanes: &[Lane; LANES],
     (clamp, strategy): (f32, Strategy),
     unseen: Option<&LightTraced>,
+    found: Option<(&GlossyPaths, &[Option<SharedVertex>; LANES])>,
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
 ) -> Vertices {
@@ -316,7 +382,14 @@ fn vertices(
                 1.0
             } else {
                 let pdf_light = world.emitters.pdf_hit(world, &hit, s.from, sp.position, d);
-                bsdf_weight(strategy, s.pdf, pdf_light)
+                // Where light paths share the emitter's reflection, the weight counts them.
+                let shared = found.and_then(|(g, first)| {
+                    let at = first[lane]?.lit(sp.position, pdf_light)?;
+                    let f = first[lane]?;
+                    let key = LampKey::Primitive(hit.geometry.0, hit.prim);
+                    g.camera_weight(Found::BsdfSample, key, &at, f.to_lens, f.d_lens)
+                });
+                shared.unwrap_or_else(|| bsdf_weight(strategy, s.pdf, pdf_light))
             };
             radiance[lane] += clamped(s.throughput * le * w, clamp);
         }
@@ -447,21 +520,30 @@ fn shadow_packet(
         if f == Vec3::ZERO {
             continue;
         }
-        let w = match (es.delta, glossy, punctual) {
-            (true, Some(g), Some(light)) => {
-                let at = Lit {
-                    b: v.bsdf[lane],
-                    n,
-                    ng: v.ng[lane],
-                    to_light: es.dir,
-                    d_light: es.distance,
-                    irradiance: es.radiance,
-                    drawn: None,
-                };
-                g.camera_weight(light, &at, wo[lane], v.t[lane])
-            }
-            (true, ..) => 1.0,
-            (false, ..) => light_weight(strategy, es.pdf, bsdf_pdf),
+        // Where light paths share the lamp's reflection here, the weight counts them too.
+        let key = match (es.delta, punctual, es.primitive) {
+            (true, Some(light), _) => Some(LampKey::Punctual(light)),
+            (false, _, Some((g, p))) => Some(LampKey::Primitive(g, p)),
+            _ => None,
+        };
+        let shared = glossy.zip(key).and_then(|(g, key)| {
+            let at = Lit {
+                b: v.bsdf[lane],
+                n,
+                ng: v.ng[lane],
+                x: points.get(lane).position,
+                to_light: es.dir,
+                d_light: es.distance,
+                irradiance: es.radiance,
+                nee: if es.delta { 1.0 } else { es.pdf },
+                drawn: None,
+            };
+            g.camera_weight(Found::LightSample, key, &at, wo[lane], v.t[lane])
+        });
+        let w = match (shared, es.delta) {
+            (Some(w), _) => w,
+            (None, true) => 1.0,
+            (None, false) => light_weight(strategy, es.pdf, bsdf_pdf),
         };
         let c = lanes[lane].throughput * f * es.radiance * (w / es.pdf);
         if !(c.max_element() > 0.0 && c.is_finite()) {

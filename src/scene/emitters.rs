@@ -47,6 +47,9 @@ pub struct EmitterSample {
     pub pdf: f32,
     /// A punctual light: no BSDF sample can find it.
     pub delta: bool,
+    /// The emissive primitive drawn, as (geometry, primitive); `None` for punctual lights and
+    /// the world.
+    pub primitive: Option<(u32, u32)>,
 }
 
 /// The sample of punctual `light` seen from `p`: its one direction, with the irradiance it
@@ -59,6 +62,7 @@ pub fn punctual_sample(light: &Light, p: Vec3) -> EmitterSample {
         radiance: ls.irradiance,
         pdf: 1.0,
         delta: true,
+        primitive: None,
     }
 }
 
@@ -237,6 +241,7 @@ impl Emitters {
                     radiance: s.radiance,
                     pdf: s.pdf,
                     delta: false,
+                    primitive: None,
                 }
             }
             None => {
@@ -247,6 +252,7 @@ impl Emitters {
                     radiance: world.background.radiance(dir),
                     pdf: 1.0 / (4.0 * PI),
                     delta: false,
+                    primitive: None,
                 }
             }
         };
@@ -256,13 +262,27 @@ impl Emitters {
     /// The density [`Emitters::sample`] draws direction `dir` from point `from` with, for a ray
     /// that found emissive primitive `hit` at `at` (zero if it is not an emitter).
     pub fn pdf_hit(&self, world: &World, hit: &Hit, from: Vec3, at: Vec3, dir: Vec3) -> f32 {
-        let Some(&i) = self.by_prim.get(&(hit.geometry.0, hit.prim)) else {
+        self.pdf_primitive(world, hit.geometry.0, hit.prim, from, at, dir)
+    }
+
+    /// The density [`Emitters::sample`] draws direction `dir` from point `from` with, towards
+    /// point `at` of primitive `prim` of geometry `geometry` (zero if it is not an emitter).
+    pub fn pdf_primitive(
+        &self,
+        world: &World,
+        geometry: u32,
+        prim: u32,
+        from: Vec3,
+        at: Vec3,
+        dir: Vec3,
+    ) -> f32 {
+        let Some(&i) = self.by_prim.get(&(geometry, prim)) else {
             return 0.0;
         };
         let pick = self.prob[i as usize];
-        match world.scene.geometry(hit.geometry) {
+        match world.scene.geometry(GeometryId(geometry)) {
             Geometry::Mesh(m) => {
-                let n = m.face_normal(hit.prim);
+                let n = m.face_normal(prim);
                 let area = 0.5 * n.length();
                 let cos = n.normalize_or_zero().dot(dir).abs();
                 let d2 = (at - from).length_squared();
@@ -273,7 +293,7 @@ impl Emitters {
                 }
             }
             Geometry::Spheres(s) => {
-                pick * sphere_pdf(s.center(hit.prim), s.radius(hit.prim), from, at, dir)
+                pick * sphere_pdf(s.center(prim), s.radius(prim), from, at, dir)
             }
         }
     }
@@ -324,6 +344,70 @@ pub fn primitive_bounds(world: &World, geometry: u32, prim: u32) -> (Vec3, Vec3)
             let (center, r) = (s.center(prim), s.radius(prim));
             (center - Vec3::splat(r), center + Vec3::splat(r))
         }
+    }
+}
+
+/// A point of a primitive, drawn uniformly by area.
+#[derive(Debug, Clone, Copy)]
+pub struct PrimitivePoint {
+    /// The point.
+    pub position: Vec3,
+    /// Unit normal: a triangle's front face (its winding's), a sphere's outward one.
+    pub normal: Vec3,
+    /// Texture coordinates there (as surface points compute them).
+    pub uv: Vec2,
+    /// The primitive's area (its uniform density is the inverse).
+    pub area: f32,
+}
+
+/// A point drawn uniformly by area on primitive `prim` of geometry `geometry` with `u` (the
+/// draws [`Emitters::sample`] makes on a triangle, or uniformly over a sphere); `None` for a
+/// degenerate primitive.
+pub fn primitive_point(world: &World, geometry: u32, prim: u32, u: Vec2) -> Option<PrimitivePoint> {
+    let p = match world.scene.geometry(GeometryId(geometry)) {
+        Geometry::Mesh(m) => {
+            let [a, b, c] =
+                m.indices()[prim as usize].map(|v| Vec3::from(m.positions()[v as usize]));
+            let s = u.x.sqrt();
+            let (bu, bv) = (s * (1.0 - u.y), s * u.y);
+            let q = a * (1.0 - bu - bv) + b * bu + c * bv;
+            let n = (b - a).cross(c - a);
+            PrimitivePoint {
+                position: q,
+                normal: n.normalize_or_zero(),
+                uv: m.uv(prim, bu, bv).unwrap_or(Vec2::new(q.x, q.z)),
+                area: 0.5 * n.length(),
+            }
+        }
+        Geometry::Spheres(s) => {
+            let (center, r) = (s.center(prim), s.radius(prim));
+            let n = uniform_sphere(u);
+            PrimitivePoint {
+                position: center + n * r,
+                normal: n,
+                uv: sphere_uv(n),
+                area: 4.0 * PI * r * r,
+            }
+        }
+    };
+    (p.area > 0.0 && p.area.is_finite() && p.normal != Vec3::ZERO).then_some(p)
+}
+
+/// A point of the sphere at `center` of `radius`, drawn with `u` uniformly over the disc it
+/// shows unit direction `dir`, on the half that faces `dir` (density cos / (pi r^2) per area,
+/// cos the angle between its normal and `dir`): where a path leaving the sphere along `dir`
+/// starts, by the light it sends that way.
+pub fn sphere_point_facing(center: Vec3, radius: f32, dir: Vec3, u: Vec2) -> PrimitivePoint {
+    let rho2 = u.x;
+    let (s, c) = (2.0 * PI * u.y).sin_cos();
+    let (t, b) = crate::shade::basis(dir);
+    let r = rho2.sqrt();
+    let normal = (t * (r * c) + b * (r * s) + dir * (1.0 - rho2).max(0.0).sqrt()).normalize();
+    PrimitivePoint {
+        position: center + normal * radius,
+        normal,
+        uv: sphere_uv(normal),
+        area: 4.0 * PI * radius * radius,
     }
 }
 
@@ -385,6 +469,7 @@ fn sample_triangle(world: &World, g: u32, prim: u32, p: Vec3, u: Vec2) -> Option
         radiance: material.emitted(uv),
         pdf: d2 / (cos.abs() * area),
         delta: false,
+        primitive: Some((g, prim)),
     })
 }
 
@@ -433,6 +518,7 @@ fn sample_sphere(world: &World, g: u32, prim: u32, p: Vec3, u: Vec2) -> Option<E
             radiance: material.emitted(sphere_uv(n)),
             pdf,
             delta: false,
+            primitive: Some((g, prim)),
         });
     }
     // Uniform in the cone of directions the sphere fills, drawn by 1 - cos theta: for a
@@ -458,6 +544,7 @@ fn sample_sphere(world: &World, g: u32, prim: u32, p: Vec3, u: Vec2) -> Option<E
         radiance: material.emitted(sphere_uv(n)),
         pdf: 1.0 / (2.0 * PI * cone).max(1e-30),
         delta: false,
+        primitive: Some((g, prim)),
     })
 }
 
