@@ -268,11 +268,15 @@ impl Source {
     /// start at the lamp's point `d_light` from `x` along unit `to_light` (1 for a punctual
     /// light, which has one point).
     fn position_density(&self, x: Vec3, to_light: Vec3, d_light: f32) -> f32 {
-        let (cos, inv_area) = match *self {
-            Self::Punctual { .. } => return 1.0,
+        let d2 = d_light * d_light;
+        match *self {
+            Self::Punctual { .. } => 1.0,
             Self::Triangle {
                 normal, inv_area, ..
-            } => (normal.dot(to_light).abs(), inv_area),
+            } => {
+                let cos = normal.dot(to_light).abs();
+                if cos > 0.0 { inv_area * d2 / cos } else { 0.0 }
+            }
             Self::Sphere {
                 center,
                 radius,
@@ -283,18 +287,12 @@ impl Source {
                 // cosine cos has density cos / (pi r^2) per area, d^2 / (pi r^2) per
                 // steradian; none on the half facing away.
                 let n = (x + to_light * d_light - center) / radius;
-                let facing = -n.dot(to_light) > 0.0;
-                return if facing {
-                    inv_disc * d_light * d_light
+                if -n.dot(to_light) > 0.0 {
+                    inv_disc * d2
                 } else {
                     0.0
-                };
+                }
             }
-        };
-        if cos > 0.0 {
-            inv_area * d_light * d_light / cos
-        } else {
-            0.0
         }
     }
 }
@@ -561,8 +559,8 @@ impl GlossyPaths {
                 .collect();
             self.lamps[i].set_cells(cells);
         }
-        // Paths go to the lamps in proportion to the light their pilots landed ([`DEFENSIVE`]
-        // of them evenly); a lamp whose pilot landed nothing gets none: nothing it sends
+        // Paths go to the lamps in proportion to the light their pilots landed ([`SHARED`] of
+        // them evenly); a lamp whose pilot landed nothing gets none: nothing it sends
         // through a glossy reflection lands, so the camera keeps it all.
         let live = (landed.iter())
             .filter(|t| t.is_none_or(|t| t != 0.0))
@@ -910,7 +908,7 @@ impl Start {
     /// The start of a path leaving `source` along unit `dir`, at the point `u` draws on an
     /// emitter; `None` when the emitter sends nothing that way (its back, a sphere's inside).
     fn new(world: &World, source: &Source, dir: Vec3, u: Vec2) -> Option<Self> {
-        let (geometry, prim) = match *source {
+        let (geometry, prim, p) = match *source {
             Source::Punctual { position, .. } => {
                 return Some(Self {
                     origin: position,
@@ -918,13 +916,16 @@ impl Start {
                     radiance: Vec3::ZERO,
                 });
             }
-            Source::Triangle { geometry, prim, .. } | Source::Sphere { geometry, prim, .. } => {
-                (geometry, prim)
+            Source::Triangle { geometry, prim, .. } => {
+                (geometry, prim, primitive_point(world, geometry, prim, u)?)
             }
-        };
-        let p = match *source {
-            Source::Sphere { center, radius, .. } => sphere_point_facing(center, radius, dir, u),
-            _ => primitive_point(world, geometry, prim, u)?,
+            Source::Sphere {
+                geometry,
+                prim,
+                center,
+                radius,
+                ..
+            } => (geometry, prim, sphere_point_facing(center, radius, dir, u)),
         };
         let cos = p.normal.dot(dir);
         if cos == 0.0 {
@@ -1063,32 +1064,31 @@ fn lamp_sources(world: &World, settings: &RenderSettings) -> Vec<(Source, Vec3, 
         let material = world.material_of(GeometryId(geometry), prim);
         let (lo, hi) = primitive_bounds(world, geometry, prim);
         let (centre, size) = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
-        let source = match world.scene.geometry(GeometryId(geometry)) {
+        let (source, area) = match world.scene.geometry(GeometryId(geometry)) {
             crate::embree::Geometry::Mesh(m) => {
                 let n = m.face_normal(prim);
-                let area = 0.5 * n.length();
-                Source::Triangle {
+                let normal = n.normalize_or_zero();
+                let inv_area = 1.0 / (0.5 * n.length());
+                let triangle = Source::Triangle {
                     geometry,
                     prim,
-                    normal: n.normalize_or_zero(),
-                    inv_area: 1.0 / area,
-                }
+                    normal,
+                    inv_area,
+                };
+                (triangle, 1.0 / inv_area)
             }
             crate::embree::Geometry::Spheres(s) => {
                 let (center, radius) = (s.center(prim), s.radius(prim));
-                Source::Sphere {
+                let inv_disc = 1.0 / (PI * radius * radius);
+                let sphere = Source::Sphere {
                     geometry,
                     prim,
                     center,
                     radius,
-                    inv_disc: 1.0 / (PI * radius * radius),
-                }
+                    inv_disc,
+                };
+                (sphere, 4.0 / inv_disc)
             }
-        };
-        let area = match source {
-            Source::Triangle { inv_area, .. } => 1.0 / inv_area,
-            Source::Sphere { inv_disc, .. } => 4.0 / inv_disc,
-            Source::Punctual { .. } => continue,
         };
         let power = luminance(material.emission) * area;
         if power > 0.0 && power.is_finite() && size.is_finite() {

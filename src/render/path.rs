@@ -384,8 +384,8 @@ fn vertices(
                 let pdf_light = world.emitters.pdf_hit(world, &hit, s.from, sp.position, d);
                 // Where light paths share the emitter's reflection, the weight counts them.
                 let shared = found.and_then(|(g, first)| {
-                    let at = first[lane]?.lit(sp.position, pdf_light)?;
                     let f = first[lane]?;
+                    let at = f.lit(sp.position, pdf_light)?;
                     let key = LampKey::Primitive(hit.geometry.0, hit.prim);
                     g.camera_weight(Found::BsdfSample, key, &at, f.to_lens, f.d_lens)
                 });
