@@ -371,6 +371,60 @@ fn a_rect_light_in_watts_lights_a_plane_as_cycles_would() {
     assert_eq!(mean(&render_path(&desc, 16, 1)).x, 0.0);
 }
 
+/// Area lights are lights as Cycles has them, not walls: a 1 m square light between a sunlit
+/// white plane and a camera looking straight down casts no shadow, camera rays pass through it
+/// when it hides from the camera (as Blender's lights do by default) and through its back
+/// always, and the camera sees its radiance P / (pi A) when it is visible.
+#[test]
+fn area_lights_cast_no_shadow_and_hide_as_blender_lights_do() {
+    let dir = std::env::temp_dir().join(format!("dofray-light-object-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (e, p) = (2.0f32, 30.0f32);
+    let render_light = |facing: &str, p: f32, extra: &str| {
+        let toml = format!(
+            "[image]\nwidth = 16\nheight = 16\n[camera]\neye = [0, 3, 0]\nlook_at = [0, 0, 0]\n\
+             up = [0, 0, -1]\nvfov = 5\n[world]\ncolor = 0\n[[lights]]\ntype = \"directional\"\n\
+             direction = [0, -1, 0]\nirradiance = {e}\n[[lights]]\ntype = \"rect\"\n\
+             position = [0, 1, 0]\ndirection = {facing}\nsize = 1\npower = {p}\n{extra}\n\
+             [[materials]]\nname = \"white\"\ndiffuse = 1\nior = 1\n[[objects]]\ntype = \"quad\"\n\
+             size = [100, 100]\nmaterial = \"white\"\n"
+        );
+        std::fs::write(dir.join("scene.toml"), toml).unwrap();
+        let desc = dofray::scene::load(dir.join("scene.toml").to_str().unwrap()).unwrap();
+        mean(&render_path(&desc, 16, 1)).x
+    };
+    // Facing the camera, hidden from it: the sunlit plane, unshadowed (the light faces away
+    // from it).
+    let hidden = render_light("[0, 1, 0]", p, "visible_to_camera = false");
+    assert_close(hidden, e / PI, 1e-3, "a hidden light's plane");
+    // Visible: its own radiance.
+    let seen = render_light("[0, 1, 0]", p, "");
+    assert_close(seen, p / PI, 1e-3, "a visible light's radiance");
+    // Its back, dark (power 0): the camera sees through it to the sunlit plane.
+    let back = render_light("[0, -1, 0]", 0.0, "");
+    assert_close(back, e / PI, 1e-3, "seen through a light's back");
+    // A dark sphere light hidden from the camera: neither seen nor casting a shadow.
+    let sphere = render_sphere_light(&dir, e);
+    assert_close(sphere, e / PI, 1e-3, "through a hidden sphere light");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The mean of the plane of `area_lights_cast_no_shadow_and_hide_as_blender_lights_do` under a
+/// dark sphere light hidden from the camera.
+fn render_sphere_light(dir: &std::path::Path, e: f32) -> f32 {
+    let toml = format!(
+        "[image]\nwidth = 16\nheight = 16\n[camera]\neye = [0, 3, 0]\nlook_at = [0, 0, 0]\n\
+         up = [0, 0, -1]\nvfov = 5\n[world]\ncolor = 0\n[[lights]]\ntype = \"directional\"\n\
+         direction = [0, -1, 0]\nirradiance = {e}\n[[lights]]\ntype = \"sphere\"\n\
+         position = [0, 1, 0]\nradius = 0.5\npower = 0\nvisible_to_camera = false\n\
+         [[materials]]\nname = \"white\"\ndiffuse = 1\nior = 1\n[[objects]]\ntype = \"quad\"\n\
+         size = [100, 100]\nmaterial = \"white\"\n"
+    );
+    std::fs::write(dir.join("sphere.toml"), toml).unwrap();
+    let desc = dofray::scene::load(dir.join("sphere.toml").to_str().unwrap()).unwrap();
+    mean(&render_path(&desc, 16, 1)).x
+}
+
 /// Multiple importance sampling is unbiased: light samples alone, BSDF samples alone and both
 /// weighted by the power heuristic agree (within their noise) on a glossy and a diffuse
 /// surface lit by a sphere light, an emissive quad and a sky.

@@ -478,6 +478,7 @@ def area_light(obj, matrix, warnings):
         "direction": blender_to_gltf(normal),
         "power": float(d.energy),
         "color": [float(c) for c in d.color],
+        "visible_to_camera": bool(getattr(obj, "visible_camera", True)),
     }
     shape = d.shape
     if shape in ("SQUARE", "RECTANGLE"):
@@ -505,11 +506,34 @@ def area_light(obj, matrix, warnings):
     return rec
 
 
+def sphere_light(obj, matrix):
+    """A Blender point light with a radius -> a dofray sphere light: the same power (Blender's
+    watts, radiance P / (4 pi^2 r^2) as Cycles' sphere light), soft shadows and a disc in
+    glossy reflections. Cycles' default Soft Falloff makes it a disc facing each shading point
+    instead of a sphere, which lights a point at distance d by d^2 / (d^2 + r^2) as much: 1%
+    less at ten radii. Blender does not scale a point light's radius with its object."""
+    d = obj.data
+    return {
+        "type": "sphere",
+        "position": blender_to_gltf(matrix.translation),
+        "radius": float(d.shadow_soft_size),
+        "power": float(d.energy),
+        "color": [float(c) for c in d.color],
+        "visible_to_camera": bool(getattr(obj, "visible_camera", True)),
+    }
+
+
+def is_sphere_light(obj):
+    """Whether the add-on exports `obj` as a sphere light (a point light with a radius)
+    instead of leaving it to the glTF."""
+    return obj.type == "LIGHT" and obj.data.type == "POINT" and obj.data.shadow_soft_size > 0.0
+
+
 def punctual_light_warnings(obj, warnings):
     d = obj.data
-    if d.type in ("POINT", "SPOT") and d.shadow_soft_size > 0.0:
+    if d.type == "SPOT" and d.shadow_soft_size > 0.0:
         warnings.add(f"light '{obj.name}': radius {d.shadow_soft_size:g} m is not carried "
-                     "(glTF point and spot lights are points: hard shadows)")
+                     "(dofray's spot lights are points: hard shadows)")
     if d.type == "SUN" and d.angle > 1e-6:
         warnings.add(f"light '{obj.name}': sun angle {math.degrees(d.angle):.2f} degrees is "
                      "not carried (glTF suns are parallel: hard shadows)")
@@ -882,13 +906,31 @@ def carry_ior(doc):
     return changed
 
 
+def drop_sphere_lights(doc):
+    """Point lights with a radius go into the scene file as sphere lights (`sphere_light`):
+    their glTF nodes lose the light, so it is not there twice. Returns whether `doc`
+    changed."""
+    changed = False
+    for n in doc.get("nodes", []):
+        ext = n.get("extensions", {})
+        obj = bpy.data.objects.get(n.get("name", ""))
+        if "KHR_lights_punctual" in ext and obj is not None and is_sphere_light(obj):
+            del ext["KHR_lights_punctual"]
+            if not ext:
+                del n["extensions"]
+            changed = True
+    return changed
+
+
 def patch_glb(glb_path, cam_obj):
     """What the add-on changes in the exporter's .glb: the active camera only
-    (keep_only_camera) and the IOR of opaque dielectrics (carry_ior). Rewritten only when
-    something changed. Returns the glTF document."""
+    (keep_only_camera), the IOR of opaque dielectrics (carry_ior) and no point lights with a
+    radius (drop_sphere_lights). Rewritten only when something changed. Returns the glTF
+    document."""
     doc, rest = read_glb(glb_path)
     changed = keep_only_camera(doc, cam_obj)
     changed = carry_ior(doc) or changed
+    changed = drop_sphere_lights(doc) or changed
     if changed:
         write_glb(glb_path, doc, rest)
     return doc
@@ -944,13 +986,15 @@ def collect(context, toml_path, visible_only=True, renderable_only=False, animat
             continue
         if not light_common_warnings(orig, warnings):
             continue
+        if inst.is_instance and (orig.data.type == "AREA" or is_sphere_light(orig)):
+            warnings.add(f"light '{orig.name}': instanced area and sphere lights are exported "
+                         "where they are instanced")
         if orig.data.type == "AREA":
-            if inst.is_instance:
-                warnings.add(f"light '{orig.name}': instanced area lights are exported where "
-                             "they are instanced")
             rec = area_light(orig, inst.matrix_world.copy(), warnings)
             if rec is not None:
                 lights.append(rec)
+        elif is_sphere_light(orig):
+            lights.append(sphere_light(orig, inst.matrix_world.copy()))
         else:
             punctual_light_warnings(orig, warnings)
     data["lights"] = lights
@@ -979,7 +1023,8 @@ def export_scene(context, toml_path, visible_only=True, renderable_only=False, a
     export_glb(context, glb_path, visible_only, renderable_only)
     patch_glb(glb_path, cam_obj)
     comment = (f"dofray scene exported from Blender {bpy.app.version_string} by the dofray "
-               f"add-on.\nMeshes, materials, the camera's view and point/spot/sun lights: "
+               f"add-on.\nMeshes, materials, the camera's view and point (without a radius), "
+               f"spot and sun lights: "
                f"{os.path.basename(glb_path)}.")
     if warnings:
         comment += "\nNot carried:\n" + "\n".join("  " + w for w in warnings)

@@ -453,6 +453,40 @@ class AddonTest(unittest.TestCase):
         finally:
             area.hide_set(False)
 
+    def test_07d_point_light_with_radius(self):
+        """A point light with a radius is a sphere light of the same watts in the scene file,
+        hidden from the camera as Blender's lights are, and not also in the glTF; area lights
+        say whether the camera sees them."""
+        d = bpy.data.lights.new("Bulb", type="POINT")
+        d.energy, d.shadow_soft_size, d.color = 40.0, 0.2, (1.0, 0.8, 0.6)
+        o = bpy.data.objects.new("Bulb", d)
+        o.location = (0.5, 2.0, 1.5)
+        bpy.context.scene.collection.objects.link(o)
+        bpy.context.view_layer.update()
+        try:
+            path = os.path.join(OUT, "bulb", "bulb.toml")
+            info = dofray_blender.export_scene(bpy.context, path, animation=False)
+            with open(path, "rb") as f:
+                lights = tomllib.load(f)["lights"]
+            spheres = [l for l in lights if l["type"] == "sphere"]
+            self.assertEqual(len(spheres), 1, lights)
+            b = spheres[0]
+            self.close(b["radius"], 0.2, 1e-6, "radius")
+            self.close(b["power"], 40.0, 1e-6, "watts")
+            self.vclose(b["position"], gltf(o.matrix_world.translation), 1e-5, "position")
+            self.vclose(b["color"], [1.0, 0.8, 0.6], 1e-6, "colour")
+            self.assertFalse(b["visible_to_camera"], "Blender's lights hide from the camera")
+            rect = [l for l in lights if l["type"] == "rect"][0]
+            self.assertFalse(rect["visible_to_camera"])
+            self.assertFalse(any("Bulb" in w for w in info["warnings"]), info["warnings"])
+            doc, _ = dexport.read_glb(os.path.join(OUT, "bulb", "bulb.glb"))
+            lit = [n["name"] for n in doc["nodes"]
+                   if "KHR_lights_punctual" in n.get("extensions", {})]
+            self.assertEqual(lit, ["Point"], "the sphere light is not in the glTF too")
+        finally:
+            bpy.data.objects.remove(o)
+            bpy.data.lights.remove(d)
+
     def test_08_glb(self):
         doc, _ = dexport.read_glb(self.info["glb"])
         cams = [n["name"] for n in doc["nodes"] if "camera" in n]

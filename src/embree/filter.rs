@@ -31,6 +31,8 @@ pub struct CandidateHit {
     pub v: f32,
     /// True for an occlusion (shadow) query, false for a nearest-hit query.
     pub shadow: bool,
+    /// True for a camera ray ([`RayPacket16::set_camera`](super::RayPacket16::set_camera)).
+    pub camera: bool,
 }
 
 /// Decides whether candidate hits count. Called by Embree during traversal, from any thread
@@ -99,14 +101,16 @@ unsafe fn run_filter(args: *const sys::RTCFilterFunctionNArguments, shadow: bool
     let valid = unsafe { std::slice::from_raw_parts_mut(args.valid, n) };
     let ray = args.ray as *const f32;
     let hit = args.hit as *const f32;
-    // RTCRayN: org_x, org_y, org_z, tnear, dir_x, dir_y, dir_z, ... each N floats (SoA);
+    // RTCRayN: org_x, org_y, org_z, tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, ... each
+    // N 4-byte values (SoA);
     // RTCHitN: Ng_x, Ng_y, Ng_z, u, v, primID, ... likewise (RTCRayN_* / RTCHitN_* helpers
     // of rtcore_ray.h in both Embree 3 and 4).
     if ray.is_null() || hit.is_null() {
         return;
     }
     let ray_at = |row: usize, i: usize| {
-        // SAFETY: Embree's ray packets hold at least 7 rows of N floats (i < N, row < 7).
+        // SAFETY: Embree's ray packets hold 11 rows of N 4-byte values (org, tnear, dir, time,
+        // tfar, mask, id; i < N, row < 11); id is read as the bits of an f32.
         unsafe { *ray.add(row * n + i) }
     };
     let hit_at = |row: usize, i: usize| {
@@ -125,6 +129,7 @@ unsafe fn run_filter(args: *const sys::RTCFilterFunctionNArguments, shadow: bool
             u: hit_at(3, i),
             v: hit_at(4, i),
             shadow,
+            camera: ray_at(10, i).to_bits() & super::packet::CAMERA_RAY != 0,
         };
         let accept = catch_unwind(AssertUnwindSafe(|| filter.accept(&candidate))).unwrap_or(true);
         if !accept {

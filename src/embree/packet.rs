@@ -429,7 +429,24 @@ lane_methods!(
     "The ray in `lane` (after tracing, `tfar` is the hit distance when it hit)."
 );
 
+/// The bit of Embree's ray `id` that marks a camera ray for hit filters (the low bits hold the
+/// lane, which nothing reads back).
+pub(super) const CAMERA_RAY: u32 = 1 << 31;
+
 impl RayPacket16 {
+    /// Marks every lane's ray as a camera ray, or not: hit filters see the mark
+    /// ([`CandidateHit::camera`](super::CandidateHit::camera)), so a surface hidden from the
+    /// camera can let camera rays through. [`RayPacket16::set`] clears it.
+    pub fn set_camera(&mut self, camera: bool) {
+        for id in self.rayhit.ray.id.iter_mut() {
+            *id = if camera {
+                *id | CAMERA_RAY
+            } else {
+                *id & !CAMERA_RAY
+            };
+        }
+    }
+
     /// Activates `lane` with `ray` and no hit, and returns true; a ray Embree cannot trace
     /// (non-finite, or beyond its range: see [`Ray::is_traceable`]) leaves the lane inactive
     /// and returns false, so no input can abort Embree.

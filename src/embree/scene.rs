@@ -162,6 +162,24 @@ impl SceneBuilder {
 
     /// Adds a set of analytic spheres (Embree's sphere point geometry).
     pub fn add_spheres(&mut self, spheres: Spheres) -> Result<GeometryId> {
+        self.add_spheres_with(spheres, None)
+    }
+
+    /// Adds a set of analytic spheres whose candidate hits `filter` accepts or rejects, as
+    /// [`SceneBuilder::add_mesh_filtered`] does for a mesh.
+    pub fn add_spheres_filtered(
+        &mut self,
+        spheres: Spheres,
+        filter: Arc<dyn HitFilter>,
+    ) -> Result<GeometryId> {
+        self.add_spheres_with(spheres, Some(filter))
+    }
+
+    fn add_spheres_with(
+        &mut self,
+        spheres: Spheres,
+        filter: Option<Arc<dyn HitFilter>>,
+    ) -> Result<GeometryId> {
         let (data, count) = spheres.raw_buffer();
         // float4 items are 16 bytes: Embree's loads stay in bounds without padding.
         let buffer = SharedBuffer {
@@ -172,7 +190,7 @@ impl SceneBuilder {
             count,
         };
         let kind = sys::RTC_GEOMETRY_TYPE_SPHERE_POINT;
-        self.attach(Geometry::Spheres(spheres), kind, None, &[buffer])
+        self.attach(Geometry::Spheres(spheres), kind, filter, &[buffer])
     }
 
     /// Creates a geometry of `kind`, shares `buffers` (which point into `geometry`) with
@@ -701,6 +719,64 @@ mod tests {
                     let single = scene.intersect1(&lane_ray(lane)).unwrap();
                     assert!((lane_ray(lane).at(single.t).z - e).abs() < 1e-3);
                 }
+            }
+        }
+    }
+
+    /// Rejects camera rays only (a surface hidden from the camera).
+    struct CameraFilter;
+
+    impl HitFilter for CameraFilter {
+        fn accept(&self, hit: &crate::embree::CandidateHit) -> bool {
+            !hit.camera
+        }
+    }
+
+    /// Filters see which rays are camera rays on every kernel path and packet width: a packet
+    /// marked as camera rays passes through a surface that hides from the camera, the same
+    /// rays unmarked (and single rays) hit it.
+    #[test]
+    fn hit_filters_see_camera_rays() {
+        let mut devices = vec![Device::with_config("").unwrap()];
+        for isa in crate::embree::limited_isas() {
+            devices.push(Device::with_config(&format!("isa={isa}")).unwrap());
+        }
+        let quad = |z: f32| {
+            TriangleMesh::new(
+                vec![
+                    [-10.0, -10.0, z],
+                    [10.0, -10.0, z],
+                    [10.0, 10.0, z],
+                    [-10.0, 10.0, z],
+                ],
+                vec![[0, 1, 2], [0, 2, 3]],
+            )
+            .unwrap()
+        };
+        for device in &devices {
+            let mut b = SceneBuilder::new(device).unwrap();
+            b.add_mesh_filtered(quad(2.0), Arc::new(CameraFilter))
+                .unwrap();
+            b.add_mesh(quad(4.0)).unwrap();
+            let mut scene = b.commit().unwrap();
+            for width in [PacketWidth::X16, PacketWidth::X8, PacketWidth::X4] {
+                scene.set_packet_width(width);
+                for camera in [true, false] {
+                    let mut packet = RayPacket16::new();
+                    for lane in 0..LANES {
+                        packet.set(lane, &lane_ray(lane));
+                    }
+                    packet.set_camera(camera);
+                    scene.intersect16(&mut packet, RayHint::Coherent);
+                    let expected = if camera { 4.0 } else { 2.0 };
+                    for lane in 0..LANES {
+                        let hit = packet.hit(lane).expect("every lane hits a quad");
+                        let z = lane_ray(lane).at(hit.t).z;
+                        assert!((z - expected).abs() < 1e-3, "{width:?} {camera}: z {z}");
+                    }
+                }
+                let single = scene.intersect1(&lane_ray(0)).unwrap();
+                assert!((lane_ray(0).at(single.t).z - 2.0).abs() < 1e-3);
             }
         }
     }

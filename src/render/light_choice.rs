@@ -22,6 +22,7 @@ use glam::Vec3;
 
 use super::glossy_light::GlossyPaths;
 use crate::camera::{BoxImage, Camera, Lens, LensFilter};
+use crate::embree::GeometryId;
 use crate::sampler::PixelSampler;
 use crate::scene::World;
 use crate::scene::emitters::primitive_bounds;
@@ -88,6 +89,11 @@ impl LightTraced {
         let (w, h) = (camera.width as f32, camera.height as f32);
         let mut candidates = Vec::new();
         for (geometry, prim) in world.emitters.primitives() {
+            // A light hidden from the camera sends nothing straight into the lens.
+            let material = world.material_of(GeometryId(geometry), prim);
+            if material.light.is_some_and(|l| !l.camera) {
+                continue;
+            }
             let (lo, hi) = primitive_bounds(world, geometry, prim);
             let Some((image, reach)) = footprint(camera, lo, hi, filter_reach, pinhole) else {
                 continue;

@@ -607,6 +607,8 @@ pub fn trace_depth(
 ) -> u32 {
     tally.count(kind, packet.active_count());
     tally.record(kind, hint, |l| packet.is_active(l).then(|| packet.ray(l)));
+    // Surfaces hidden from the camera (lights, by default Blender's) let camera rays through.
+    packet.set_camera(kind == RayKind::Primary);
     world.scene.intersect16(packet, hint);
     let hits = packet.hit_mask();
     let tfar = packet.tfars();

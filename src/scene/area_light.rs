@@ -10,7 +10,7 @@ use glam::{Vec2, Vec3};
 
 use super::Object;
 use crate::embree::{EmbreeError, TriangleMesh};
-use crate::shade::Material;
+use crate::shade::{LightObject, Material};
 
 /// Segments of the polygon a disk light is made of (its radiance is set from the polygon's
 /// own area, so the power is exact).
@@ -50,6 +50,9 @@ pub struct AreaLight {
     pub up: Vec3,
     /// Radiant power (W) per colour channel: Blender's colour times its power.
     pub power: Vec3,
+    /// Camera rays see it (Blender's lights hide from them by default; every other ray sees a
+    /// light, and none is shadowed by one: [`LightObject`]).
+    pub visible_to_camera: bool,
 }
 
 impl AreaLight {
@@ -72,11 +75,14 @@ impl AreaLight {
     }
 
     /// The emissive material: black, emitting [`AreaLight::radiance`], one-sided unless a
-    /// sphere.
+    /// sphere, and a light object (no shadow, a back rays pass through).
     pub fn material(&self) -> Material {
         Material {
             emission: self.radiance(),
             one_sided: !matches!(self.shape, AreaShape::Sphere { .. }),
+            light: Some(LightObject {
+                camera: self.visible_to_camera,
+            }),
             ..Material::diffuse(Vec3::ZERO)
         }
     }
@@ -148,6 +154,7 @@ mod tests {
             direction: Vec3::NEG_Y,
             up: Vec3::Z,
             power: Vec3::splat(100.0),
+            visible_to_camera: true,
         };
         assert!((rect.radiance().x - 100.0 / PI).abs() < 1e-4);
         let sphere = AreaLight {
@@ -169,6 +176,7 @@ mod tests {
             direction: Vec3::NEG_Y,
             up: Vec3::Z,
             power: Vec3::ONE,
+            visible_to_camera: true,
         };
         let Object::Mesh { mesh, .. } = light.object(0).unwrap() else {
             panic!("a rect is a mesh")
@@ -196,6 +204,7 @@ mod tests {
             direction: Vec3::X,
             up: Vec3::Y,
             power: Vec3::ONE,
+            visible_to_camera: true,
         };
         let Object::Mesh { mesh, .. } = light.object(0).unwrap() else {
             panic!("a disk is a mesh")

@@ -1319,6 +1319,7 @@ impl Loader<'_> {
                 emission_texture,
                 one_sided: false,
                 maps,
+                light: None,
             },
         ));
         let i = self.materials.len() - 1;

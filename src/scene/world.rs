@@ -13,7 +13,9 @@ use crate::embree::{
 };
 use crate::error_kind::{ErrorKind, HasKind};
 use crate::limits::MAX_COORDINATE;
-use crate::shade::{Alpha, AlphaMode, Light, Material, SurfacePoint, SurfacePoints16, Texture};
+use crate::shade::{
+    Alpha, AlphaMode, Light, LightObject, Material, SurfacePoint, SurfacePoints16, Texture,
+};
 
 /// Why a scene could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -71,14 +73,40 @@ impl GeometryMaterials {
     }
 }
 
-/// Embree's hit filter for meshes with alpha: rejects hits where the material is transparent
-/// (MASK: alpha below the cutoff; BLEND: with probability 1 - alpha, by [`blend_coin`]), so
-/// camera, mirror and shadow rays all pass through holes.
-struct AlphaFilter {
-    mesh: TriangleMesh,
+/// Embree's hit filter for surfaces some rays pass through: alpha (MASK: alpha below the
+/// cutoff; BLEND: with probability 1 - alpha, by [`blend_coin`]), which camera, mirror and shadow
+/// rays all pass, and light objects ([`LightObject`]), which shadow rays pass, camera rays pass
+/// unless they are visible to the camera, and every ray passes from behind when one-sided.
+struct SurfaceFilter {
+    /// The mesh (`None` for the spheres, which are opaque and have no back).
+    mesh: Option<TriangleMesh>,
     materials: GeometryMaterials,
-    /// Every material's alpha, by material index.
-    alphas: Arc<[Option<Alpha>]>,
+    /// What every material lets through, by material index.
+    rules: Arc<[PassRule]>,
+}
+
+/// What one material lets through.
+#[derive(Clone)]
+struct PassRule {
+    alpha: Option<Alpha>,
+    light: Option<LightObject>,
+    one_sided: bool,
+}
+
+impl PassRule {
+    fn of(m: &Material) -> Self {
+        Self {
+            alpha: m.maps.alpha.clone(),
+            light: m.light,
+            one_sided: m.one_sided,
+        }
+    }
+
+    /// Whether any ray may pass through a surface of this material on a mesh (alpha or a
+    /// light object) or on a sphere (a light object only: spheres stay opaque to alpha).
+    fn passes(&self, mesh: bool) -> bool {
+        self.light.is_some() || (mesh && self.alpha.is_some())
+    }
 }
 
 /// A number in [0, 1) fixed by a ray (origin, direction) and the primitive it meets: BLEND's
@@ -92,22 +120,28 @@ fn blend_coin(hit: &CandidateHit) -> f32 {
     (x >> 40) as f32 / (1u64 << 24) as f32
 }
 
-impl HitFilter for AlphaFilter {
+impl HitFilter for SurfaceFilter {
     fn accept(&self, hit: &CandidateHit) -> bool {
-        let alpha = self
-            .materials
-            .of(hit.prim)
-            .and_then(|m| self.alphas.get(m)?.as_ref());
-        let Some(alpha) = alpha else {
+        let Some(rule) = self.materials.of(hit.prim).and_then(|m| self.rules.get(m)) else {
             return true;
         };
-        if hit.prim as usize >= self.mesh.triangle_count() {
-            return true;
+        let mesh = self
+            .mesh
+            .as_ref()
+            .filter(|mesh| (hit.prim as usize) < mesh.triangle_count());
+        if let Some(light) = rule.light {
+            let from_behind = || mesh.is_some_and(|m| m.face_normal(hit.prim).dot(hit.dir) > 0.0);
+            if hit.shadow || (hit.camera && !light.camera) || (rule.one_sided && from_behind()) {
+                return false;
+            }
         }
+        let (Some(alpha), Some(mesh)) = (&rule.alpha, mesh) else {
+            return true;
+        };
         // As shading does: the mesh's UVs, else the hit's world (x, z).
-        let uv = self.mesh.uv(hit.prim, hit.u, hit.v).unwrap_or_else(|| {
-            let [a, b, c] = self.mesh.indices()[hit.prim as usize]
-                .map(|i| Vec3::from(self.mesh.positions()[i as usize]));
+        let uv = mesh.uv(hit.prim, hit.u, hit.v).unwrap_or_else(|| {
+            let [a, b, c] =
+                mesh.indices()[hit.prim as usize].map(|i| Vec3::from(mesh.positions()[i as usize]));
             let p = a * (1.0 - hit.u - hit.v) + b * hit.u + c * hit.v;
             Vec2::new(p.x, p.z)
         });
@@ -119,6 +153,30 @@ impl HitFilter for AlphaFilter {
             }
         }
     }
+}
+
+/// Adds every sphere of the scene as one geometry (filtered when a light object is among them)
+/// and returns its material lookup.
+fn add_spheres(
+    builder: &mut SceneBuilder,
+    spheres: Vec<(Vec3, f32)>,
+    materials: Vec<u32>,
+    rules: &Arc<[PassRule]>,
+) -> Result<GeometryMaterials, EmbreeError> {
+    let spheres = Spheres::new(spheres)?;
+    let passes = materials.iter().any(|&m| rules[m as usize].passes(false));
+    let lookup = GeometryMaterials::PerPrimitive(materials);
+    if passes {
+        let filter = SurfaceFilter {
+            mesh: None,
+            materials: lookup.clone(),
+            rules: rules.clone(),
+        };
+        builder.add_spheres_filtered(spheres, Arc::new(filter))?;
+    } else {
+        builder.add_spheres(spheres)?;
+    }
+    Ok(lookup)
 }
 
 /// A scene ready to trace: the committed Embree scene and everything needed to shade hits.
@@ -352,11 +410,7 @@ impl World {
 
         let mut builder = SceneBuilder::new(device)?;
         let mut geometry_materials = Vec::new();
-        let alphas: Arc<[Option<Alpha>]> = desc
-            .materials
-            .iter()
-            .map(|m| m.maps.alpha.clone())
-            .collect();
+        let rules: Arc<[PassRule]> = desc.materials.iter().map(PassRule::of).collect();
         let mut spheres = Vec::new();
         let mut sphere_materials = Vec::new();
         for (i, object) in desc.objects.iter().enumerate() {
@@ -389,17 +443,17 @@ impl World {
                             GeometryMaterials::PerPrimitive(ids.clone())
                         }
                     };
-                    let transparent = match &lookup {
-                        GeometryMaterials::One(m) => alphas[*m].is_some(),
+                    let passes = match &lookup {
+                        GeometryMaterials::One(m) => rules[*m].passes(true),
                         GeometryMaterials::PerPrimitive(ids) => {
-                            ids.iter().any(|&m| alphas[m as usize].is_some())
+                            ids.iter().any(|&m| rules[m as usize].passes(true))
                         }
                     };
-                    if transparent {
-                        let filter = AlphaFilter {
-                            mesh: mesh.clone(),
+                    if passes {
+                        let filter = SurfaceFilter {
+                            mesh: Some(mesh.clone()),
                             materials: lookup.clone(),
-                            alphas: alphas.clone(),
+                            rules: rules.clone(),
                         };
                         builder.add_mesh_filtered(mesh.clone(), Arc::new(filter))?;
                     } else {
@@ -410,8 +464,8 @@ impl World {
             }
         }
         if !spheres.is_empty() {
-            builder.add_spheres(Spheres::new(spheres)?)?;
-            geometry_materials.push(GeometryMaterials::PerPrimitive(sphere_materials));
+            let lookup = add_spheres(&mut builder, spheres, sphere_materials, &rules)?;
+            geometry_materials.push(lookup);
         }
         let mut world = World {
             scene: builder.commit()?,

@@ -37,6 +37,21 @@ pub struct Material {
     pub one_sided: bool,
     /// Alpha, a metallic-roughness texture and a normal map (glTF materials); none by default.
     pub maps: MaterialMaps,
+    /// `Some` for the surface of a light object (an area light of a scene file's `[[lights]]`),
+    /// which rays treat as Cycles treats its lights; `None` for every other surface.
+    pub light: Option<LightObject>,
+}
+
+/// How rays treat a light object's surface, as Cycles treats a Blender light: it casts no
+/// shadow (shadow rays pass through it), the back of a one-sided one lets every ray through,
+/// and camera rays pass through it unless it is visible to the camera. Its front still ends
+/// the paths that hit it (it absorbs what lies behind it; Cycles adds that too, usually far
+/// dimmer than the light).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LightObject {
+    /// Camera rays see it (Blender's Object > Visibility > Ray Visibility > Camera, off for
+    /// Blender's lights by default).
+    pub camera: bool,
 }
 
 /// How a material's alpha makes it transparent.
@@ -170,6 +185,7 @@ impl Material {
             emission_texture: None,
             one_sided: false,
             maps: MaterialMaps::default(),
+            light: None,
         }
     }
 

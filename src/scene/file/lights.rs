@@ -148,6 +148,7 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<FileLight, LoadErr
         ("radius", l.radius.is_some()),
         ("power", l.power.is_some()),
         ("up", l.up.is_some()),
+        ("visible_to_camera", l.visible_to_camera.is_some()),
     ];
     let area_only = "belongs to area lights (type \"rect\", \"disk\" or \"sphere\")";
     refuse(ctx, &span, &key, &area_keys, area_only)?;
@@ -168,7 +169,8 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<FileLight, LoadErr
 }
 
 /// A `rect`, `disk` or `sphere` light: `position`, `power` (watts, as Blender's) times
-/// `color`, `size` or `radius`, and for flat ones the `direction` they face and `up`.
+/// `color`, `size` or `radius`, for flat ones the `direction` they face and `up`, and whether
+/// camera rays see it.
 fn area(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<AreaLight, LoadError> {
     let punctual = [
         ("intensity", l.intensity.is_some()),
@@ -229,6 +231,7 @@ fn area(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<AreaLig
         direction,
         up: l.up.map_or(Vec3::Y, v3),
         power: l.color.map_or(Vec3::ONE, |c| c.0) * power,
+        visible_to_camera: l.visible_to_camera.unwrap_or(true),
     })
 }
 

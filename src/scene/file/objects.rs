@@ -227,6 +227,7 @@ fn material(
             alpha,
             ..Default::default()
         },
+        light: None,
     })
 }
 

@@ -470,6 +470,7 @@ pub(super) struct RawLight {
     pub(super) power: Option<Spanned<NonNeg>>,
     pub(super) color: Option<Color>,
     pub(super) up: Option<V3>,
+    pub(super) visible_to_camera: Option<bool>,
 }
 
 #[derive(Deserialize)]
