@@ -31,6 +31,7 @@ use crate::shade::Light;
 ///     lights: vec![Light::Directional {
 ///         direction: Vec3::new(-1.0, -2.0, 1.0).normalize(),
 ///         irradiance: Vec3::splat(3.0),
+///         angle: 0.0,
 ///     }],
 ///     ..Default::default()
 /// };

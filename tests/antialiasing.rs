@@ -286,6 +286,7 @@ fn an_unseen_defocused_sphere_keeps_its_energy_on_any_background() {
                 desc.lights = vec![Light::Directional {
                     direction: Vec3::Z,
                     irradiance: Vec3::splat(irradiance),
+                    angle: 0.0,
                 }];
                 let camera = desc.camera.build(|_| None).unwrap();
                 assert!((camera.coc_px(depth) - 10.0).abs() < 0.01);

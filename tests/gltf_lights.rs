@@ -95,6 +95,7 @@ fn check_blender_lights(desc: &SceneDesc) {
         intensity,
         inner_angle,
         outer_angle,
+        ..
     } = spots[0]
     else {
         unreachable!()
@@ -118,6 +119,7 @@ fn check_blender_lights(desc: &SceneDesc) {
     let Light::Directional {
         direction,
         irradiance,
+        ..
     } = suns[0]
     else {
         unreachable!()
@@ -183,7 +185,7 @@ fn photometric_units_convert_with_683_lumens_per_watt() {
     assert!(matches!(points[0], Light::Point { intensity, .. }
         if near(intensity, Vec3::new(1.0, 0.5, 0.25), 1e-6)));
     assert!(
-        matches!(suns[0], Light::Directional { irradiance, direction }
+        matches!(suns[0], Light::Directional { irradiance, direction, .. }
         if near(irradiance, Vec3::splat(2.0), 1e-6) && near(direction, Vec3::NEG_Z, 1e-6))
     );
     // Spot defaults: inner 0; shining down the node's -Z.
@@ -410,6 +412,7 @@ fn spot_falloff_is_full_inside_zero_outside_and_smooth_between() {
         intensity: Vec3::splat(8.0),
         inner_angle: inner,
         outer_angle: outer,
+        radius: 0.0,
     };
     // A point on the ground at angle `deg` from the axis.
     let at = |deg: f32| Vec3::new(2.0 * deg.to_radians().tan(), 0.0, 0.0);

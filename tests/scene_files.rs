@@ -738,7 +738,8 @@ fn every_camera_key_is_read() {
         d.lights,
         vec![Light::Directional {
             direction: Vec3::NEG_Y,
-            irradiance: Vec3::new(1.0, 2.0, 3.0)
+            irradiance: Vec3::new(1.0, 2.0, 3.0),
+            angle: 0.0,
         }]
     );
     let d = load_files(

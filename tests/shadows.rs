@@ -315,6 +315,7 @@ fn low_poly_smooth_sphere_has_no_faceted_terminator() {
         desc.lights = vec![Light::Directional {
             direction: Vec3::new(-1.0, 0.2, 0.3).normalize(),
             irradiance: Vec3::ONE,
+            angle: 0.0,
         }];
         render_film(&desc, Mode::Pinhole)
     };

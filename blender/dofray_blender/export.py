@@ -523,20 +523,36 @@ def sphere_light(obj, matrix):
     }
 
 
-def is_sphere_light(obj):
-    """Whether the add-on exports `obj` as a sphere light (a point light with a radius)
-    instead of leaving it to the glTF."""
-    return obj.type == "LIGHT" and obj.data.type == "POINT" and obj.data.shadow_soft_size > 0.0
-
-
-def punctual_light_warnings(obj, warnings):
+def spot_or_sun(obj, matrix):
+    """A Blender spot light with a radius or sun with an angle -> a dofray [[lights]] entry
+    that keeps it: the spot's disc (`radius`; as Cycles' spot with its default Soft Falloff)
+    or the sun's angular size (`angle`, degrees), which glTF cannot carry. Blender's units:
+    a spot of P watts has intensity P / (4 pi) W/sr; a sun's strength is its irradiance."""
     d = obj.data
-    if d.type == "SPOT" and d.shadow_soft_size > 0.0:
-        warnings.add(f"light '{obj.name}': radius {d.shadow_soft_size:g} m is not carried "
-                     "(dofray's spot lights are points: hard shadows)")
-    if d.type == "SUN" and d.angle > 1e-6:
-        warnings.add(f"light '{obj.name}': sun angle {math.degrees(d.angle):.2f} degrees is "
-                     "not carried (glTF suns are parallel: hard shadows)")
+    axis = (matrix.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    color = [float(c) for c in d.color]
+    if d.type == "SUN":
+        return {"type": "directional", "direction": blender_to_gltf(axis),
+                "irradiance": [float(d.energy) * c for c in color],
+                "angle": math.degrees(d.angle)}
+    outer = math.degrees(d.spot_size) / 2.0  # Blender's spot size is at most 180 degrees
+    return {"type": "spot", "position": blender_to_gltf(matrix.translation),
+            "direction": blender_to_gltf(axis),
+            "intensity": [float(d.energy) / (4.0 * math.pi) * c for c in color],
+            "outer_angle": outer, "inner_angle": outer * (1.0 - float(d.spot_blend)),
+            "radius": float(d.shadow_soft_size)}
+
+
+def in_scene_file(obj):
+    """Whether the add-on writes light `obj` into the scene file instead of leaving it to the
+    glTF (which has points and parallel suns only): point and spot lights with a radius, and
+    suns with an angle."""
+    if obj.type != "LIGHT":
+        return False
+    d = obj.data
+    if d.type in ("POINT", "SPOT"):
+        return d.shadow_soft_size > 0.0
+    return d.type == "SUN" and d.angle > 0.0
 
 
 def light_common_warnings(obj, warnings):
@@ -906,15 +922,15 @@ def carry_ior(doc):
     return changed
 
 
-def drop_sphere_lights(doc):
-    """Point lights with a radius go into the scene file as sphere lights (`sphere_light`):
-    their glTF nodes lose the light, so it is not there twice. Returns whether `doc`
+def drop_file_lights(doc):
+    """Lights the scene file carries (`in_scene_file`: point and spot lights with a radius,
+    suns with an angle) lose their glTF light, so none is there twice. Returns whether `doc`
     changed."""
     changed = False
     for n in doc.get("nodes", []):
         ext = n.get("extensions", {})
         obj = bpy.data.objects.get(n.get("name", ""))
-        if "KHR_lights_punctual" in ext and obj is not None and is_sphere_light(obj):
+        if "KHR_lights_punctual" in ext and obj is not None and in_scene_file(obj):
             del ext["KHR_lights_punctual"]
             if not ext:
                 del n["extensions"]
@@ -924,13 +940,13 @@ def drop_sphere_lights(doc):
 
 def patch_glb(glb_path, cam_obj):
     """What the add-on changes in the exporter's .glb: the active camera only
-    (keep_only_camera), the IOR of opaque dielectrics (carry_ior) and no point lights with a
-    radius (drop_sphere_lights). Rewritten only when something changed. Returns the glTF
+    (keep_only_camera), the IOR of opaque dielectrics (carry_ior) and none of the lights the
+    scene file carries (drop_file_lights). Rewritten only when something changed. Returns the glTF
     document."""
     doc, rest = read_glb(glb_path)
     changed = keep_only_camera(doc, cam_obj)
     changed = carry_ior(doc) or changed
-    changed = drop_sphere_lights(doc) or changed
+    changed = drop_file_lights(doc) or changed
     if changed:
         write_glb(glb_path, doc, rest)
     return doc
@@ -986,17 +1002,17 @@ def collect(context, toml_path, visible_only=True, renderable_only=False, animat
             continue
         if not light_common_warnings(orig, warnings):
             continue
-        if inst.is_instance and (orig.data.type == "AREA" or is_sphere_light(orig)):
-            warnings.add(f"light '{orig.name}': instanced area and sphere lights are exported "
-                         "where they are instanced")
+        if inst.is_instance and (orig.data.type == "AREA" or in_scene_file(orig)):
+            warnings.add(f"light '{orig.name}': instanced lights the scene file carries are "
+                         "exported where they are instanced")
+        matrix = inst.matrix_world.copy()
         if orig.data.type == "AREA":
-            rec = area_light(orig, inst.matrix_world.copy(), warnings)
+            rec = area_light(orig, matrix, warnings)
             if rec is not None:
                 lights.append(rec)
-        elif is_sphere_light(orig):
-            lights.append(sphere_light(orig, inst.matrix_world.copy()))
-        else:
-            punctual_light_warnings(orig, warnings)
+        elif in_scene_file(orig):
+            point = orig.data.type == "POINT"
+            lights.append(sphere_light(orig, matrix) if point else spot_or_sun(orig, matrix))
     data["lights"] = lights
     data["objects"] = [{"type": "mesh", "file": stem + ".glb", "camera": True}]
     data["animation"] = animation_table(scene, cam_obj, data["camera"], warnings) \
@@ -1023,8 +1039,8 @@ def export_scene(context, toml_path, visible_only=True, renderable_only=False, a
     export_glb(context, glb_path, visible_only, renderable_only)
     patch_glb(glb_path, cam_obj)
     comment = (f"dofray scene exported from Blender {bpy.app.version_string} by the dofray "
-               f"add-on.\nMeshes, materials, the camera's view and point (without a radius), "
-               f"spot and sun lights: "
+               f"add-on.\nMeshes, materials, the camera's view and point and spot lights without a "
+               f"radius and suns without an angle: "
                f"{os.path.basename(glb_path)}.")
     if warnings:
         comment += "\nNot carried:\n" + "\n".join("  " + w for w in warnings)

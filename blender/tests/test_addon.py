@@ -453,39 +453,65 @@ class AddonTest(unittest.TestCase):
         finally:
             area.hide_set(False)
 
-    def test_07d_point_light_with_radius(self):
-        """A point light with a radius is a sphere light of the same watts in the scene file,
-        hidden from the camera as Blender's lights are, and not also in the glTF; area lights
-        say whether the camera sees them."""
-        d = bpy.data.lights.new("Bulb", type="POINT")
-        d.energy, d.shadow_soft_size, d.color = 40.0, 0.2, (1.0, 0.8, 0.6)
-        o = bpy.data.objects.new("Bulb", d)
-        o.location = (0.5, 2.0, 1.5)
-        bpy.context.scene.collection.objects.link(o)
+    def test_07d_soft_lights(self):
+        """Point and spot lights with a radius and suns with an angle go into the scene file in
+        Blender's units (a point light as a sphere light, hidden from the camera as Blender's
+        lights are) and leave the glTF; area lights say whether the camera sees them."""
+        made = []
+
+        def light(name, kind, location, **props):
+            d = bpy.data.lights.new(name, type=kind)
+            for k, v in props.items():
+                setattr(d, k, v)
+            o = bpy.data.objects.new(name, d)
+            o.location = location
+            o.rotation_euler = (math.radians(20), 0.0, 0.0)
+            bpy.context.scene.collection.objects.link(o)
+            made.append((o, d))
+            return o
+
+        bulb = light("Bulb", "POINT", (0.5, 2.0, 1.5), energy=40.0, shadow_soft_size=0.2,
+                     color=(1.0, 0.8, 0.6))
+        spot = light("SoftSpot", "SPOT", (-1.0, 1.0, 2.0), energy=100.0,
+                     shadow_soft_size=0.1, spot_size=math.radians(60.0), spot_blend=0.2)
+        sun = light("SoftSun", "SUN", (0.0, 0.0, 5.0), energy=3.0, angle=math.radians(5.0))
         bpy.context.view_layer.update()
         try:
-            path = os.path.join(OUT, "bulb", "bulb.toml")
+            path = os.path.join(OUT, "soft", "soft.toml")
             info = dofray_blender.export_scene(bpy.context, path, animation=False)
             with open(path, "rb") as f:
                 lights = tomllib.load(f)["lights"]
-            spheres = [l for l in lights if l["type"] == "sphere"]
-            self.assertEqual(len(spheres), 1, lights)
-            b = spheres[0]
+            by_type = {l["type"]: l for l in lights}
+            self.assertEqual(sorted(by_type), ["directional", "rect", "sphere", "spot"], lights)
+            b = by_type["sphere"]
             self.close(b["radius"], 0.2, 1e-6, "radius")
             self.close(b["power"], 40.0, 1e-6, "watts")
-            self.vclose(b["position"], gltf(o.matrix_world.translation), 1e-5, "position")
+            self.vclose(b["position"], gltf(bulb.matrix_world.translation), 1e-5, "position")
             self.vclose(b["color"], [1.0, 0.8, 0.6], 1e-6, "colour")
             self.assertFalse(b["visible_to_camera"], "Blender's lights hide from the camera")
-            rect = [l for l in lights if l["type"] == "rect"][0]
-            self.assertFalse(rect["visible_to_camera"])
-            self.assertFalse(any("Bulb" in w for w in info["warnings"]), info["warnings"])
-            doc, _ = dexport.read_glb(os.path.join(OUT, "bulb", "bulb.glb"))
+            self.assertFalse(by_type["rect"]["visible_to_camera"])
+            axis = lambda o: gltf((o.matrix_world.to_3x3() @ Vector((0, 0, -1))).normalized())
+            sp = by_type["spot"]
+            self.close(sp["radius"], 0.1, 1e-6, "spot radius")
+            self.vclose(sp["intensity"], [100.0 / (4 * math.pi)] * 3, 1e-4, "W/sr")
+            self.close(sp["outer_angle"], 30.0, 1e-4, "half the spot size")
+            self.close(sp["inner_angle"], 24.0, 1e-4, "blend 0.2")
+            self.vclose(sp["direction"], axis(spot), 1e-5, "spot axis")
+            self.vclose(sp["position"], gltf(spot.matrix_world.translation), 1e-5, "spot")
+            su = by_type["directional"]
+            self.close(su["angle"], 5.0, 1e-4, "sun angle")
+            self.vclose(su["irradiance"], [3.0] * 3, 1e-6, "sun strength")
+            self.vclose(su["direction"], axis(sun), 1e-5, "sun direction")
+            self.assertFalse([w for w in info["warnings"] if "Soft" in w or "Bulb" in w],
+                             info["warnings"])
+            doc, _ = dexport.read_glb(os.path.join(OUT, "soft", "soft.glb"))
             lit = [n["name"] for n in doc["nodes"]
                    if "KHR_lights_punctual" in n.get("extensions", {})]
-            self.assertEqual(lit, ["Point"], "the sphere light is not in the glTF too")
+            self.assertEqual(lit, ["Point"], "the scene file's lights are not in the glTF too")
         finally:
-            bpy.data.objects.remove(o)
-            bpy.data.lights.remove(d)
+            for o, d in made:
+                bpy.data.objects.remove(o)
+                bpy.data.lights.remove(d)
 
     def test_08_glb(self):
         doc, _ = dexport.read_glb(self.info["glb"])

@@ -520,6 +520,7 @@ pub(crate) fn parse_spot(s: &str) -> Result<Light, String> {
         intensity: Vec3::splat(intensity),
         inner_angle: inner.to_radians(),
         outer_angle: outer.to_radians(),
+        radius: 0.0,
     })
 }
 
@@ -569,6 +570,7 @@ pub(crate) fn parse_light(s: &str) -> Result<Light, String> {
             Ok(Light::Directional {
                 direction: p.normalize(),
                 irradiance: Vec3::splat(power.unwrap_or(2.0)),
+                angle: 0.0,
             })
         }
         other => Err(format!(

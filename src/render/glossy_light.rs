@@ -960,7 +960,8 @@ impl Start {
         let x = sp.position;
         let (to_light, d_light, irradiance, nee) = match *source {
             Source::Punctual { light, .. } => {
-                let es = punctual_sample(&world.emitters.always[light], x);
+                // Lamps are never extended lights (`lamp_sources`): no numbers needed.
+                let es = punctual_sample(&world.emitters.always[light], x, Vec2::ZERO);
                 (es.dir, es.distance, es.radiance, 1.0)
             }
             Source::Triangle { geometry, prim, .. } | Source::Sphere { geometry, prim, .. } => {
@@ -1045,6 +1046,9 @@ impl Connections {
 /// most powerful emissive triangles and spheres.
 fn lamp_sources(world: &World, settings: &RenderSettings) -> Vec<(Source, Vec3, f32)> {
     let mut sources: Vec<(Source, Vec3, f32)> = (world.emitters.always.iter().enumerate())
+        // A spot with a radius shines from a disc facing what it lights, which paths leaving
+        // one point do not follow: the camera's light samples alone estimate it.
+        .filter(|(_, l)| !l.is_extended())
         .filter_map(|(light, l)| match *l {
             Light::Point { position, .. } | Light::Spot { position, .. } => {
                 Some((Source::Punctual { light, position }, position, 0.0))

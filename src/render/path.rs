@@ -466,7 +466,7 @@ fn next_event(
 ) {
     let emitters = &world.emitters;
     for (i, light) in emitters.always.iter().enumerate() {
-        let sample = |p: Vec3, _: &Numbers| Some(punctual_sample(light, p));
+        let sample = |p: Vec3, u: &Numbers| Some(punctual_sample(light, p, Vec2::new(u[1], u[2])));
         shadow_packet(world, at, clamp, sample, Some(i), scratch, radiance, tally);
     }
     if emitters.samples_world() {

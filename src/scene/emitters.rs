@@ -52,10 +52,12 @@ pub struct EmitterSample {
     pub primitive: Option<(u32, u32)>,
 }
 
-/// The sample of punctual `light` seen from `p`: its one direction, with the irradiance it
-/// sends there as the radiance and a density of 1 (a delta).
-pub fn punctual_sample(light: &Light, p: Vec3) -> EmitterSample {
-    let ls = light.sample(p);
+/// The sample of punctual `light` seen from `p`: its one direction (for a spot with a radius or
+/// a sun with an angle, one drawn with `u`: [`Light::sample_area`]), with the irradiance it
+/// sends there as the radiance and a density of 1 (no BSDF sample can find it, so its light
+/// sample alone estimates its light).
+pub fn punctual_sample(light: &Light, p: Vec3, u: Vec2) -> EmitterSample {
+    let ls = light.sample_area(p, u);
     EmitterSample {
         dir: ls.dir,
         distance: ls.distance,
@@ -203,7 +205,7 @@ impl Emitters {
         }
         let u = Vec2::new(u[1], u[2]);
         let s = match self.list[i] {
-            Emitter::Punctual(light) => usable(punctual_sample(&light, p))?,
+            Emitter::Punctual(light) => usable(punctual_sample(&light, p, u))?,
             Emitter::Triangle { geometry, prim } | Emitter::Sphere { geometry, prim } => {
                 sample_primitive(world, geometry, prim, p, u)?
             }

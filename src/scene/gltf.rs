@@ -1015,6 +1015,7 @@ impl Loader<'_> {
             Kind::Directional => Light::Directional {
                 direction,
                 irradiance: power,
+                angle: 0.0,
             },
             Kind::Spot {
                 inner_cone_angle,
@@ -1039,6 +1040,7 @@ impl Loader<'_> {
                     intensity: power,
                     inner_angle: inner_cone_angle,
                     outer_angle: outer_cone_angle,
+                    radius: 0.0,
                 }
             }
         });

@@ -256,6 +256,7 @@ pub fn default_light(forward: Vec3) -> Light {
     Light::Directional {
         direction,
         irradiance: Vec3::splat(3.0),
+        angle: 0.0,
     }
 }
 

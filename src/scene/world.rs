@@ -338,6 +338,9 @@ pub(crate) fn check_material(i: usize, m: &Material) -> Result<(), SceneError> {
     Ok(())
 }
 
+/// The largest spot light radius accepted (scene units).
+const MAX_LIGHT_RADIUS: f32 = 1e6;
+
 /// [`check_ranges`] of light `i` (also run by the scene file's loader on each `[[lights]]`
 /// table, to place the error).
 pub(crate) fn check_light(i: usize, light: &Light) -> Result<(), SceneError> {
@@ -350,14 +353,28 @@ pub(crate) fn check_light(i: usize, light: &Light) -> Result<(), SceneError> {
         Light::Directional {
             direction,
             irradiance,
-        } => (direction, irradiance, direction_ok(direction)),
+            angle,
+        } => {
+            check_value(
+                || format!("light {i}'s sun angle ({angle} radians)"),
+                (0.0..=std::f32::consts::PI).contains(&angle),
+                "from 0 to pi",
+            )?;
+            (direction, irradiance, direction_ok(direction))
+        }
         Light::Spot {
             position,
             direction,
             intensity,
             inner_angle,
             outer_angle,
+            radius,
         } => {
+            check_value(
+                || format!("light {i}'s radius ({radius})"),
+                (0.0..=MAX_LIGHT_RADIUS).contains(&radius),
+                "from 0 to 1e6",
+            )?;
             check_value(
                 || format!("light {i}'s cone angles ({inner_angle}, {outer_angle} radians)"),
                 (0.0..=std::f32::consts::FRAC_PI_2).contains(&outer_angle)

@@ -1,8 +1,11 @@
 //! Lights: where they are, how much they send, and how a point sees them.
 
-use glam::Vec3;
+use std::f32::consts::TAU;
 
-/// A light that casts hard shadows.
+use glam::{Vec2, Vec3};
+
+/// A light with no surface of its own: a point, a spot (which may shine from a small disc) or
+/// the sun (which may have an angular size).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Light {
     /// Radiant intensity `intensity` at `position`, falling off as 1 / distance^2.
@@ -18,6 +21,9 @@ pub enum Light {
         direction: Vec3,
         /// Irradiance on a surface facing the light (linear RGB, W/m^2).
         irradiance: Vec3,
+        /// Angular diameter of the sun's disc, radians (Blender's sun angle; 0: parallel light
+        /// and hard shadows). Its light comes uniformly from that cone, so shadows soften.
+        angle: f32,
     },
     /// A point light limited to a cone around `direction` (the way it shines, unit length):
     /// radiant intensity `intensity` near the axis, none outside the outer cone, and Blender's
@@ -35,6 +41,10 @@ pub enum Light {
         inner_angle: f32,
         /// Half-angle of the outer cone, beyond which there is no light, radians.
         outer_angle: f32,
+        /// Radius of the disc it shines from, scene units (Blender's spot radius; 0: a point
+        /// and hard shadows). As Cycles' spot with Soft Falloff: a disc facing each point it
+        /// lights, of radiant intensity `intensity` times the cone's falloff along each ray.
+        radius: f32,
     },
 }
 
@@ -153,6 +163,7 @@ impl Light {
                 intensity,
                 inner_angle,
                 outer_angle,
+                ..
             } => Some(Positional {
                 position,
                 intensity,
@@ -166,7 +177,71 @@ impl Light {
         }
     }
 
-    /// Direction, distance and irradiance of this light as seen from point `p`.
+    /// Whether its light comes from more than one point or direction (a spot with a radius, a
+    /// sun with an angle): [`Light::sample_area`] then needs random numbers, and its shadows
+    /// are soft.
+    pub fn is_extended(&self) -> bool {
+        match *self {
+            Self::Point { .. } => false,
+            Self::Spot { radius, .. } => radius > 0.0,
+            Self::Directional { angle, .. } => angle > 0.0,
+        }
+    }
+
+    /// Direction, distance and irradiance of this light as seen from point `p`, drawn with
+    /// `u` over the spot's disc or the sun's cone: on average over `u`, what the light sends
+    /// `p` (the cosine term is the caller's). A light that is not extended gives
+    /// [`Light::sample`].
+    pub fn sample_area(&self, p: Vec3, u: Vec2) -> LightSample {
+        match *self {
+            Self::Spot { radius, .. } if radius > 0.0 => {
+                let centre = self.sample(p);
+                // A disc facing p: its normal points from the light towards p.
+                let n = -centre.dir;
+                let (t, b) = crate::shade::basis(n);
+                let (r, phi) = (radius * u.x.sqrt(), TAU * u.y);
+                let q = (p + centre.dir * centre.distance) + (t * phi.cos() + b * phi.sin()) * r;
+                let d = q - p;
+                let dist2 = d.length_squared().max(1e-12);
+                let distance = dist2.sqrt();
+                let dir = d / distance;
+                // A Lambertian disc (the cosine at it over the squared distance) of the spot's
+                // intensity times its falloff along this ray, as Cycles evaluates it: the disc
+                // blurs the cone's edge too.
+                let cos_light = n.dot(-dir).max(0.0);
+                let positional = self.positional().expect("a spot has a position");
+                LightSample {
+                    dir,
+                    distance,
+                    irradiance: positional.irradiance(dir, dist2) * cos_light,
+                }
+            }
+            Self::Directional {
+                direction,
+                irradiance,
+                angle,
+            } if angle > 0.0 => {
+                // Uniform over the cone of half-angle angle / 2, scaled so a surface facing
+                // the sun receives `irradiance`: the cone's mean cosine is (1 + cos) / 2.
+                let cos_max = (0.5 * angle.min(std::f32::consts::PI)).cos();
+                let cos_t = 1.0 - u.x * (1.0 - cos_max);
+                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+                let axis = -direction.normalize();
+                let (t, b) = crate::shade::basis(axis);
+                let phi = TAU * u.y;
+                let dir = (axis * cos_t + (t * phi.cos() + b * phi.sin()) * sin_t).normalize();
+                LightSample {
+                    dir,
+                    distance: f32::INFINITY,
+                    irradiance: irradiance * (2.0 / (1.0 + cos_max)),
+                }
+            }
+            _ => self.sample(p),
+        }
+    }
+
+    /// Direction, distance and irradiance of this light's centre as seen from point `p` (for
+    /// an extended light, the point light or parallel sun it shrinks to).
     pub fn sample(&self, p: Vec3) -> LightSample {
         if let Some(light) = self.positional() {
             let d = light.position - p;
@@ -182,6 +257,7 @@ impl Light {
         let Self::Directional {
             direction,
             irradiance,
+            ..
         } = *self
         else {
             unreachable!("every light but a directional one has a position")

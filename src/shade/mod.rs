@@ -112,6 +112,7 @@ mod tests {
         let slanted = Light::Directional {
             direction: Vec3::new(1.0, -1.0, 0.0),
             irradiance: Vec3::ONE,
+            angle: 0.0,
         };
         let c = direct(
             &m.surface(Vec2::ZERO),

@@ -145,12 +145,12 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<FileLight, LoadErr
     }
     let area_keys = [
         ("size", l.size.is_some()),
-        ("radius", l.radius.is_some()),
+        ("radius", l.radius.is_some() && l.kind != LightKind::Spot),
         ("power", l.power.is_some()),
         ("up", l.up.is_some()),
         ("visible_to_camera", l.visible_to_camera.is_some()),
     ];
-    let area_only = "belongs to area lights (type \"rect\", \"disk\" or \"sphere\")";
+    let area_only = "belongs to area lights (type \"rect\", \"disk\" or \"sphere\"; `radius` to spot lights too)";
     refuse(ctx, &span, &key, &area_keys, area_only)?;
     if l.kind != LightKind::Spot {
         let cone = [
@@ -158,6 +158,16 @@ fn light(ctx: &Ctx, i: usize, l: Spanned<RawLight>) -> Result<FileLight, LoadErr
             ("outer_angle", l.outer_angle.is_some()),
         ];
         refuse(ctx, &span, &key, &cone, "belongs to spot lights")?;
+    }
+    if l.kind != LightKind::Directional {
+        let sun = [("angle", l.angle.is_some())];
+        refuse(
+            ctx,
+            &span,
+            &key,
+            &sun,
+            "belongs to directional lights (the sun's angle)",
+        )?;
     }
     let color = l.color.map_or(Vec3::ONE, |c| c.0);
     let light = match l.kind {
@@ -177,6 +187,7 @@ fn area(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<AreaLig
         ("irradiance", l.irradiance.is_some()),
         ("inner_angle", l.inner_angle.is_some()),
         ("outer_angle", l.outer_angle.is_some()),
+        ("angle", l.angle.is_some()),
     ];
     let not_area =
         "belongs to point, spot and directional lights; an area light takes `power` (watts)";
@@ -237,7 +248,7 @@ fn area(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<AreaLig
 
 fn spot(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light, LoadError> {
     if l.irradiance.is_some() {
-        return Err(ctx.invalid(span, format!("{key}.irradiance"), "`irradiance` belongs to directional lights; a spot light takes `position`, `direction`, `intensity`, `inner_angle` and `outer_angle`"));
+        return Err(ctx.invalid(span, format!("{key}.irradiance"), "`irradiance` belongs to directional lights; a spot light takes `position`, `direction`, `intensity`, `inner_angle`, `outer_angle` and `radius`"));
     }
     let position = l
         .position
@@ -286,6 +297,7 @@ fn spot(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<Light, 
         intensity: l.intensity.map_or(Vec3::splat(100.0), |c| c.0),
         inner_angle: inner.to_radians(),
         outer_angle: outer.to_radians(),
+        radius: l.radius.map_or(0.0, |r| r.0),
     })
 }
 
@@ -333,9 +345,21 @@ fn directional(ctx: &Ctx, key: &str, span: Range<usize>, l: RawLight) -> Result<
             "the direction must not be zero",
         ));
     }
+    let angle = match l.angle {
+        Some(a) if !(0.0..=180.0).contains(&a.get_ref().0) => {
+            return Err(ctx.invalid(
+                a.span(),
+                format!("{key}.angle"),
+                "the sun's angle (its angular diameter, degrees) must be from 0 to 180",
+            ));
+        }
+        Some(a) => a.get_ref().0.to_radians(),
+        None => 0.0,
+    };
     Ok(Light::Directional {
         direction: d,
         irradiance: l.irradiance.map_or(Vec3::ONE, |c| c.0),
+        angle,
     })
 }
 

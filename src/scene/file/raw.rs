@@ -471,6 +471,7 @@ pub(super) struct RawLight {
     pub(super) color: Option<Color>,
     pub(super) up: Option<V3>,
     pub(super) visible_to_camera: Option<bool>,
+    pub(super) angle: Option<Spanned<Finite>>,
 }
 
 #[derive(Deserialize)]
