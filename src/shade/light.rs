@@ -195,12 +195,16 @@ impl Light {
     pub fn sample_area(&self, p: Vec3, u: Vec2) -> LightSample {
         match *self {
             Self::Spot { radius, .. } if radius > 0.0 => {
-                let centre = self.sample(p);
-                // A disc facing p: its normal points from the light towards p.
-                let n = -centre.dir;
+                let Some(light) = self.positional() else {
+                    return self.sample(p);
+                };
+                // A disc facing p: its normal points from the light's centre towards p.
+                let to_centre = light.position - p;
+                let centre_distance = to_centre.length_squared().max(1e-12).sqrt();
+                let n = -(to_centre / centre_distance);
                 let (t, b) = crate::shade::basis(n);
                 let (r, phi) = (radius * u.x.sqrt(), TAU * u.y);
-                let q = (p + centre.dir * centre.distance) + (t * phi.cos() + b * phi.sin()) * r;
+                let q = (p - n * centre_distance) + (t * phi.cos() + b * phi.sin()) * r;
                 let d = q - p;
                 let dist2 = d.length_squared().max(1e-12);
                 let distance = dist2.sqrt();
@@ -209,11 +213,10 @@ impl Light {
                 // intensity times its falloff along this ray, as Cycles evaluates it: the disc
                 // blurs the cone's edge too.
                 let cos_light = n.dot(-dir).max(0.0);
-                let positional = self.positional().expect("a spot has a position");
                 LightSample {
                     dir,
                     distance,
-                    irradiance: positional.irradiance(dir, dist2) * cos_light,
+                    irradiance: light.irradiance(dir, dist2) * cos_light,
                 }
             }
             Self::Directional {
@@ -223,7 +226,8 @@ impl Light {
             } if angle > 0.0 => {
                 // Uniform over the cone of half-angle angle / 2, scaled so a surface facing
                 // the sun receives `irradiance`: the cone's mean cosine is (1 + cos) / 2.
-                let cos_max = (0.5 * angle.min(std::f32::consts::PI)).cos();
+                // `angle` is at most pi (World::build checks it).
+                let cos_max = (0.5 * angle).cos();
                 let cos_t = 1.0 - u.x * (1.0 - cos_max);
                 let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
                 let axis = -direction.normalize();
