@@ -16,8 +16,8 @@
 #                   dofray.pc still says PREFIX. ldconfig runs only without DESTDIR (and as
 #                   root): installing to the real root.
 #   DOFRAY_PROFILE  the cargo profile to build and install (default release; debug = dev).
-#                   The tests use their own (test) build, already made, instead of a release
-#                   build.
+#                   capi/tests/c_api.rs passes the profile `cargo test` built the library
+#                   with (dev, or release under --release), so nothing is built again.
 #   CARGO           the cargo to run (default cargo); CARGO_TARGET_DIR as cargo reads it.
 # Runs `cargo build -p dofray-capi --lib --profile PROFILE` (nothing to do when up to date)
 # and takes the library's paths and the pkg-config template (written by capi/build.rs) from

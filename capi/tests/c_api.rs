@@ -5,7 +5,7 @@
 //! `scripts/install-capi.sh` and links the example through the installed `dofray.pc`.
 //!
 //! `cargo test` does not build the cdylib and staticlib for integration tests: the test
-//! runs `cargo build -p dofray-capi --lib` first (see [`lib_dir`]).
+//! runs `cargo build -p dofray -p dofray-capi --lib --examples` first (see [`lib_dir`]).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -19,7 +19,8 @@ fn root() -> PathBuf {
 /// The directory of this profile's artifacts (`target/debug`), with libdofray.so and
 /// libdofray.a built up to date: `cargo test` builds only the test harnesses, not the
 /// library's cdylib and staticlib, so this builds them (once per test process) with the same
-/// cargo, target directory and profile (`test`, whose dependencies `cargo test` just built).
+/// cargo, target directory and the profile `cargo test` built the library and its
+/// dependencies with (see [`profile`]), so nothing but the C library itself is compiled.
 fn lib_dir() -> PathBuf {
     static BUILT: OnceLock<PathBuf> = OnceLock::new();
     BUILT.get_or_init(build_lib).clone()
@@ -36,11 +37,18 @@ fn build_lib() -> PathBuf {
     let target_dir = dir.parent().expect("the target directory");
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let status = Command::new(cargo)
+        // `-p dofray --examples` as well: examples take dev-dependencies, so features resolve
+        // as for `cargo test` (both default members, dev-dependencies on) and every
+        // dependency it built is reused; `-p dofray-capi --lib` alone resolves some of them
+        // (serde, libc, image, ...) with other features and compiles them again.
         .args([
             "build",
             "-p",
+            "dofray",
+            "-p",
             "dofray-capi",
             "--lib",
+            "--examples",
             "--profile",
             profile(&dir),
         ])
@@ -49,7 +57,10 @@ fn build_lib() -> PathBuf {
         .current_dir(root())
         .status()
         .expect("cargo runs");
-    assert!(status.success(), "cargo build -p dofray-capi --lib failed");
+    assert!(
+        status.success(),
+        "cargo build -p dofray -p dofray-capi --lib --examples failed"
+    );
     for lib in ["libdofray.so", "libdofray.a"] {
         assert!(dir.join(lib).is_file(), "no {lib} in {}", dir.display());
     }
@@ -63,13 +74,14 @@ fn build_lib() -> PathBuf {
     dir
 }
 
-/// The cargo profile of this test's build directory: `cargo test` builds with the test
-/// profile into target/debug, `cargo test --release` with the bench profile into
-/// target/release.
+/// The cargo profile of this test's build directory. `cargo test` builds only the test
+/// harnesses with the `test` profile; the library and every dependency are built with `dev`
+/// into target/debug (`release` into target/release with `--release`). Building with `test`
+/// or `bench` here compiled every dependency a second time (4 minutes of a clean `cargo test`).
 fn profile(dir: &Path) -> &'static str {
     match dir.file_name().and_then(|n| n.to_str()) {
-        Some("release") => "bench",
-        _ => "test",
+        Some("release") => "release",
+        _ => "dev",
     }
 }
 
@@ -336,6 +348,8 @@ fn install_script_and_pkg_config() {
         .arg(prefix)
         .arg("--target-dir")
         .arg(lib_dir.parent().expect("the target directory"))
+        // Resolve features as `cargo test` did, so its build is reused (see `build_lib`).
+        .args(["-p", "dofray", "--examples"])
         .env("DESTDIR", &destdir)
         .env("DOFRAY_PROFILE", profile(&lib_dir))
         .env("PATH", &path)
