@@ -494,6 +494,95 @@ fn soft_spots_and_suns_have_the_closed_form_light() {
     );
 }
 
+/// A sun with an angle is a disc in the sky that reflected and refracted rays find, as in
+/// Cycles: a mirror facing it shows the disc at E / (pi sin^2(angle / 2)), the camera does not
+/// see it directly (Blender's lights are hidden from camera rays), and on a rough glossy and a
+/// diffuse surface its light samples, BSDF samples that find the disc, and both weighed by the
+/// power heuristic agree.
+#[test]
+fn a_suns_disc_shows_in_mirrors_and_its_samples_agree_with_bsdf_samples() {
+    let (e, angle) = (3.0f32, 20f32.to_radians());
+    // Travelling down and towards +z: its disc is 45 degrees up, towards -z.
+    let sun = Light::Directional {
+        direction: Vec3::new(0.0, -1.0, 1.0),
+        irradiance: Vec3::splat(e),
+        angle,
+    };
+    let mirror = Material {
+        metallic: 1.0,
+        roughness: 0.0,
+        ..Material::diffuse(Vec3::ONE)
+    };
+    let scene = |eye: Vec3, look_at: Vec3, floor: Material| SceneDesc {
+        camera: camera(eye, look_at, 8.0),
+        materials: vec![floor],
+        objects: vec![Object::Mesh {
+            mesh: ground(50.0),
+            materials: MeshMaterials::One(0),
+        }],
+        lights: vec![sun],
+        ambient: Vec3::ZERO,
+        background: Background::uniform(Vec3::ZERO),
+        ..Default::default()
+    };
+    // Every pixel's reflection lies within 6 degrees of the disc's centre (radius 10).
+    let seen = render_path(
+        &scene(Vec3::Y, Vec3::new(0.0, 0.0, -1.0), mirror.clone()),
+        4,
+        2,
+    );
+    let disc = e / (PI * (0.5 * angle).sin().powi(2));
+    for c in &seen.color {
+        assert_close(c.x, disc, 1e-3, "the sun's disc in a mirror");
+    }
+    // Looking straight at the disc: nothing (a parallel sun shows nothing either way).
+    let sky = render_path(&scene(Vec3::Y, Vec3::new(0.0, 2.0, -1.0), mirror), 4, 2);
+    assert_eq!(mean(&sky), Vec3::ZERO, "the camera does not see the sun");
+
+    let surface = |roughness: f32, metallic: f32| Material {
+        roughness,
+        metallic,
+        ..Material::diffuse(Vec3::new(0.8, 0.6, 0.4))
+    };
+    for (name, floor) in [
+        ("glossy", surface(0.3, 1.0)),
+        ("diffuse", surface(1.0, 0.0)),
+    ] {
+        let desc = scene(Vec3::new(0.0, 1.0, 0.2), Vec3::new(0.0, 0.0, -0.8), floor);
+        let mis = assert_strategies_agree(&desc, 1, name);
+        assert!(mis.x > 0.0, "{name}: lit");
+    }
+}
+
+/// Renders `desc` (paths up to `bounces` long, 1024 samples per pixel) with light samples
+/// alone, BSDF samples alone and both weighed by the power heuristic, checks that the three
+/// agree within 2% in every channel, and returns the last's mean.
+fn assert_strategies_agree(desc: &SceneDesc, bounces: u32, what: &str) -> Vec3 {
+    let with = |strategy| {
+        let settings = RenderSettings {
+            mode: Mode::Pinhole,
+            aa: 1024,
+            path: PathLimits {
+                strategy,
+                total: bounces,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        mean(&render_with(desc, &settings))
+    };
+    let mis = with(Strategy::Mis);
+    for (how, other) in [
+        ("light only", with(Strategy::LightOnly)),
+        ("BSDF only", with(Strategy::BsdfOnly)),
+    ] {
+        for (a, b) in other.to_array().into_iter().zip(mis.to_array()) {
+            assert_close(a, b, 0.02, &format!("{what}, {how}"));
+        }
+    }
+    mis
+}
+
 /// Multiple importance sampling is unbiased: light samples alone, BSDF samples alone and both
 /// weighted by the power heuristic agree (within their noise) on a glossy and a diffuse
 /// surface lit by a sphere light, an emissive quad and a sky.
@@ -551,30 +640,11 @@ fn light_bsdf_and_mis_estimates_agree() {
         },
         ..Default::default()
     };
-    let device = Device::new().unwrap();
-    let world = World::build(&desc, &device).unwrap();
-    let cam = desc.camera.build(|_| None).unwrap();
-    let with = |strategy| {
-        let settings = RenderSettings {
-            mode: Mode::Pinhole,
-            aa: 1024,
-            path: PathLimits {
-                strategy,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
-        mean(&render(&world, &cam, &settings, &NoProgress).unwrap().0)
-    };
-    let mis = with(Strategy::Mis);
-    for (name, other) in [
-        ("light only", with(Strategy::LightOnly)),
-        ("BSDF only", with(Strategy::BsdfOnly)),
-    ] {
-        for (a, b) in other.to_array().into_iter().zip(mis.to_array()) {
-            assert_close(a, b, 0.02, name);
-        }
-    }
+    assert_strategies_agree(
+        &desc,
+        PathLimits::default().total,
+        "a glossy and a diffuse floor",
+    );
 }
 
 /// A near-mirror ball (GGX alpha 0.0025) over a grey floor under a point light: the floor

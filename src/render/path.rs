@@ -241,18 +241,17 @@ pub fn trace_path(
         if bounce == 0 {
             first.note_distances(active, &t);
         }
-        // Light that reaches the camera after at most one scattering is direct; the rest is
-        // indirect, what the clamp limits (Cycles' "Indirect Light" clamp). An emitter found
-        // at this bounce has scattered `bounce` times, a light sample taken here once more.
-        let clamp_after = |scatterings: u32| {
-            if scatterings <= 1 {
-                f32::INFINITY
-            } else {
-                limits.clamp_indirect
-            }
-        };
-        let weigh = (clamp_after(bounce), limits.strategy);
-        add_world(world, packet, active & !hits, &lanes, weigh, radiance);
+        // An emitter found at this bounce has scattered `bounce` times, a light sample taken
+        // here once more.
+        let weigh = (clamp_after(limits, bounce), limits.strategy);
+        add_world(
+            world,
+            packet,
+            (active & !hits, bounce),
+            &lanes,
+            weigh,
+            radiance,
+        );
         if hits == 0 {
             break;
         }
@@ -290,7 +289,7 @@ pub fn trace_path(
         next_event(
             world,
             &at,
-            clamp_after(bounce + 1),
+            clamp_after(limits, bounce + 1),
             scratch,
             radiance,
             tally,
@@ -309,6 +308,16 @@ pub fn trace_path(
     tally.bounce = 0;
 }
 
+/// The clamp on light that reaches the camera after `scatterings` scatterings: light after at
+/// most one is direct; the rest is indirect, what Cycles' "Indirect Light" clamp limits.
+fn clamp_after(limits: &PathLimits, scatterings: u32) -> f32 {
+    if scatterings <= 1 {
+        f32::INFINITY
+    } else {
+        limits.clamp_indirect
+    }
+}
+
 /// The random numbers of bounce `bounce` for the lanes in `hits` (the only ones that make
 /// decisions there; the others get zeros).
 fn hit_numbers(keys: &[SampleKey; LANES], hits: u32, bounce: u32) -> [Numbers; LANES] {
@@ -321,11 +330,13 @@ fn hit_numbers(keys: &[SampleKey; LANES], hits: u32, bounce: u32) -> [Numbers; L
     })
 }
 
-/// Adds the world's radiance to lanes in `missed` (their rays left the scene).
+/// Adds the world's radiance to lanes in `missed` (their rays left the scene), and after a
+/// bounce (`bounce` > 0) that of the suns' discs they see: Blender's lights are hidden from
+/// camera rays, and glossy and refracted rays find them (a sun's glint in a mirror or glass).
 fn add_world(
     world: &World,
     packet: &RayPacket16,
-    missed: u32,
+    (missed, bounce): (u32, u32),
     lanes: &[Lane; LANES],
     (clamp, strategy): (f32, Strategy),
     radiance: &mut [Vec3; LANES],
@@ -334,16 +345,25 @@ fn add_world(
         return;
     }
     let dir = packet.dirs();
+    let emitters = &world.emitters;
+    let weight = |s: &Lane, light_pdf: f32| {
+        if s.delta {
+            1.0
+        } else {
+            bsdf_weight(strategy, s.pdf, light_pdf)
+        }
+    };
     for lane in (0..LANES).filter(|&l| missed & (1 << l) != 0) {
         let s = &lanes[lane];
         let d = lane_vec(dir, lane);
         let le = world.background.radiance(d);
-        let w = if s.delta {
-            1.0
-        } else {
-            bsdf_weight(strategy, s.pdf, world.emitters.pdf_world(world, d))
-        };
+        let w = weight(s, emitters.pdf_world(world, d));
         radiance[lane] += clamped(s.throughput * le * w, clamp);
+        if bounce > 0 {
+            for (le, light_pdf) in emitters.suns_seen(d) {
+                radiance[lane] += clamped(s.throughput * le * weight(s, light_pdf), clamp);
+            }
+        }
     }
 }
 

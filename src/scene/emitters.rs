@@ -55,15 +55,21 @@ pub struct EmitterSample {
 /// The sample of punctual `light` seen from `p`: its one direction (for a spot with a radius or
 /// a sun with an angle, one drawn with `u`: [`Light::sample_area`]), with the irradiance it
 /// sends there as the radiance and a density of 1 (no BSDF sample can find it, so its light
-/// sample alone estimates its light).
+/// sample alone estimates its light). A sun with an angle is the exception: rays that leave
+/// the scene find its disc ([`Emitters::suns_seen`]), so its sample is an ordinary one, the
+/// disc's radiance with its solid-angle density, to be weighed against BSDF sampling.
 pub fn punctual_sample(light: &Light, p: Vec3, u: Vec2) -> EmitterSample {
     let ls = light.sample_area(p, u);
+    let (radiance, pdf, delta) = match light.sun_disc() {
+        Some(disc) => (disc.radiance, disc.pdf, false),
+        None => (ls.irradiance, 1.0, true),
+    };
     EmitterSample {
         dir: ls.dir,
         distance: ls.distance,
-        radiance: ls.irradiance,
-        pdf: 1.0,
-        delta: true,
+        radiance,
+        pdf,
+        delta,
         primitive: None,
     }
 }
@@ -298,6 +304,22 @@ impl Emitters {
                 pick * sphere_pdf(s.center(prim), s.radius(prim), from, at, dir)
             }
         }
+    }
+
+    /// The discs of suns with an angle that unit direction `dir` (a ray leaving the scene)
+    /// sees: for each, its radiance and the density this light's samples (from
+    /// [`Emitters::always`] or [`Emitters::sample`], its picking included) draw `dir` with.
+    pub fn suns_seen(&self, dir: Vec3) -> impl Iterator<Item = (Vec3, f32)> + '_ {
+        let always = self.always.iter().map(|l| (l, 1.0));
+        let picked = (self.list.iter().zip(&self.prob)).filter_map(|(e, &pick)| match e {
+            Emitter::Punctual(l) => Some((l, pick)),
+            _ => None,
+        });
+        always.chain(picked).filter_map(move |(light, pick)| {
+            let disc = light.sun_disc()?;
+            disc.contains(dir)
+                .then_some((disc.radiance, disc.pdf * pick))
+        })
     }
 
     /// The density [`Emitters::sample_world`] draws world direction `dir` with (zero when the

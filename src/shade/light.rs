@@ -1,6 +1,6 @@
 //! Lights: where they are, how much they send, and how a point sees them.
 
-use std::f32::consts::TAU;
+use std::f32::consts::{PI, TAU};
 
 use glam::{Vec2, Vec3};
 
@@ -125,6 +125,30 @@ impl Positional {
     }
 }
 
+/// The disc of a sun with an angular size, as rays that leave the scene see it: uniform
+/// radiance over a cone of directions around `axis` (Cycles' sun: a distant light that glossy
+/// and refracted rays can hit).
+#[derive(Debug, Clone, Copy)]
+pub struct SunDisc {
+    /// Unit direction towards the sun's centre.
+    pub axis: Vec3,
+    /// Cosine of the disc's angular radius.
+    pub cos_max: f32,
+    /// Radiance of every direction in the disc: a surface facing the sun receives its
+    /// irradiance E, so L = E / (pi sin^2), as Cycles normalises it.
+    pub radiance: Vec3,
+    /// Solid-angle density of a direction drawn uniformly over the disc: 1 / (2 pi (1 - cos)).
+    pub pdf: f32,
+}
+
+impl SunDisc {
+    /// Whether unit direction `dir` sees the disc.
+    #[inline]
+    pub fn contains(&self, dir: Vec3) -> bool {
+        dir.dot(self.axis) >= self.cos_max
+    }
+}
+
 /// What a shadow ray needs to know about a light as seen from a point.
 #[derive(Debug, Clone, Copy)]
 pub struct LightSample {
@@ -188,6 +212,30 @@ impl Light {
         }
     }
 
+    /// The disc of a sun with an angle, which rays leaving the scene may find; `None` for
+    /// every other light (a point, a spot, a parallel sun: no ray finds them).
+    pub fn sun_disc(&self) -> Option<SunDisc> {
+        let Self::Directional {
+            direction,
+            irradiance,
+            angle,
+        } = *self
+        else {
+            return None;
+        };
+        // `angle` is at most pi (World::build checks it). The solid angle is written with
+        // sin^2 / (1 + cos) instead of 1 - cos: no cancellation for a sun of half a degree.
+        let half = 0.5 * angle;
+        let (sin, cos_max) = half.sin_cos();
+        let sin2 = sin * sin;
+        (sin2 > 0.0).then(|| SunDisc {
+            axis: -direction.normalize(),
+            cos_max,
+            radiance: irradiance / (PI * sin2),
+            pdf: (1.0 + cos_max) / (TAU * sin2),
+        })
+    }
+
     /// Direction, distance and irradiance of this light as seen from point `p`, drawn with
     /// `u` over the spot's disc or the sun's cone: on average over `u`, what the light sends
     /// `p` (the cosine term is the caller's). A light that is not extended gives
@@ -219,25 +267,22 @@ impl Light {
                     irradiance: light.irradiance(dir, dist2) * cos_light,
                 }
             }
-            Self::Directional {
-                direction,
-                irradiance,
-                angle,
-            } if angle > 0.0 => {
-                // Uniform over the cone of half-angle angle / 2, scaled so a surface facing
-                // the sun receives `irradiance`: the cone's mean cosine is (1 + cos) / 2.
-                // `angle` is at most pi (World::build checks it).
-                let cos_max = (0.5 * angle).cos();
-                let cos_t = 1.0 - u.x * (1.0 - cos_max);
+            Self::Directional { .. } if self.is_extended() => {
+                let Some(disc) = self.sun_disc() else {
+                    return self.sample(p);
+                };
+                // Uniform over the disc's cone: its radiance over its density, so a surface
+                // facing the sun receives its irradiance (the cone's mean cosine is
+                // (1 + cos) / 2). 1 - cos is 1 / (2 pi pdf), without cancellation.
+                let cos_t = 1.0 - u.x / (TAU * disc.pdf);
                 let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-                let axis = -direction.normalize();
-                let (t, b) = crate::shade::basis(axis);
+                let (t, b) = crate::shade::basis(disc.axis);
                 let phi = TAU * u.y;
-                let dir = (axis * cos_t + (t * phi.cos() + b * phi.sin()) * sin_t).normalize();
+                let dir = (disc.axis * cos_t + (t * phi.cos() + b * phi.sin()) * sin_t).normalize();
                 LightSample {
                     dir,
                     distance: f32::INFINITY,
-                    irradiance: irradiance * (2.0 / (1.0 + cos_max)),
+                    irradiance: disc.radiance / disc.pdf,
                 }
             }
             _ => self.sample(p),
