@@ -228,11 +228,14 @@ impl Light {
         let half = 0.5 * angle;
         let (sin, cos_max) = half.sin_cos();
         let sin2 = sin * sin;
-        (sin2 > 0.0).then(|| SunDisc {
+        let radiance = irradiance / (PI * sin2);
+        let pdf = (1.0 + cos_max) / (TAU * sin2);
+        // An angle so small that the disc's radiance overflows is a parallel sun.
+        (pdf.is_finite() && radiance.is_finite()).then(|| SunDisc {
             axis: -direction.normalize(),
             cos_max,
-            radiance: irradiance / (PI * sin2),
-            pdf: (1.0 + cos_max) / (TAU * sin2),
+            radiance,
+            pdf,
         })
     }
 
@@ -316,5 +319,51 @@ impl Light {
             distance: f32::INFINITY,
             irradiance,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sun(angle: f32) -> Light {
+        Light::Directional {
+            direction: Vec3::new(0.0, -2.0, 0.0),
+            irradiance: Vec3::splat(3.0),
+            angle,
+        }
+    }
+
+    #[test]
+    fn a_suns_disc_gives_a_facing_surface_its_irradiance() {
+        for degrees in [0.5f32, 10.0, 90.0, 180.0] {
+            let disc = sun(degrees.to_radians()).sun_disc().unwrap();
+            // Irradiance on a surface facing the sun: L pi sin^2 of the angular radius.
+            let sin = (0.5 * degrees.to_radians()).sin();
+            let e = disc.radiance.x * PI * sin * sin;
+            assert!((e - 3.0).abs() < 3e-3 * 3.0, "{degrees} degrees: {e}");
+            // The density is uniform over the cone's solid angle 2 pi (1 - cos).
+            let solid = TAU * (1.0 - disc.cos_max);
+            assert!((disc.pdf * solid - 1.0).abs() < 0.02, "{degrees} degrees");
+            assert!(disc.contains(Vec3::Y), "{degrees} degrees: the centre");
+            let low = Vec3::new(1.0, 0.01, 0.0).normalize();
+            let what = format!("{degrees} degrees: near the horizon");
+            assert_eq!(disc.contains(low), degrees == 180.0, "{what}");
+            assert!(
+                !disc.contains(-Vec3::Y),
+                "{degrees} degrees: away from the sun"
+            );
+        }
+    }
+
+    #[test]
+    fn a_sun_too_small_for_its_radiance_is_a_parallel_sun() {
+        // sin^2 of the angular radius is a subnormal 2.5e-41: E / (pi sin^2) overflows.
+        let light = sun(1e-20);
+        assert!(light.sun_disc().is_none());
+        let s = light.sample_area(Vec3::ZERO, Vec2::new(0.3, 0.7));
+        assert_eq!(s.dir, Vec3::Y);
+        assert_eq!(s.irradiance, Vec3::splat(3.0));
+        assert!(sun(0.0).sun_disc().is_none());
     }
 }
