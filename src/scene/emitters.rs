@@ -18,7 +18,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 use crate::embree::{Geometry, GeometryId, Hit};
-use crate::shade::{Light, luminance};
+use crate::shade::{Light, SunDisc, luminance};
 
 use super::World;
 
@@ -59,17 +59,23 @@ pub struct EmitterSample {
 /// the scene find its disc ([`Emitters::suns_seen`]), so its sample is an ordinary one, the
 /// disc's radiance with its solid-angle density, to be weighed against BSDF sampling.
 pub fn punctual_sample(light: &Light, p: Vec3, u: Vec2) -> EmitterSample {
+    if let Some(disc) = light.sun_disc() {
+        return EmitterSample {
+            dir: disc.sample(u),
+            distance: f32::INFINITY,
+            radiance: disc.radiance,
+            pdf: disc.pdf,
+            delta: false,
+            primitive: None,
+        };
+    }
     let ls = light.sample_area(p, u);
-    let (radiance, pdf, delta) = match light.sun_disc() {
-        Some(disc) => (disc.radiance, disc.pdf, false),
-        None => (ls.irradiance, 1.0, true),
-    };
     EmitterSample {
         dir: ls.dir,
         distance: ls.distance,
-        radiance,
-        pdf,
-        delta,
+        radiance: ls.irradiance,
+        pdf: 1.0,
+        delta: true,
         primitive: None,
     }
 }
@@ -90,6 +96,10 @@ pub struct Emitters {
     by_prim: HashMap<(u32, u32), u32>,
     /// Whether the world emits and can be sampled ([`Emitters::sample_world`]).
     world: bool,
+    /// The discs of suns with an angle, each with the probability its light samples are
+    /// taken with (1 in [`Emitters::always`], else its picking): what
+    /// [`Emitters::suns_seen`] looks through for every ray that leaves the scene.
+    suns: Vec<(SunDisc, f32)>,
 }
 
 impl Emitters {
@@ -169,6 +179,14 @@ impl Emitters {
                 sum as f32
             })
             .collect();
+        let always_suns = always.iter().map(|l| (l, 1.0));
+        let picked_suns = (list.iter().zip(&prob)).filter_map(|(e, &pick)| match e {
+            Emitter::Punctual(l) => Some((l, pick)),
+            _ => None,
+        });
+        let suns = (always_suns.chain(picked_suns))
+            .filter_map(|(light, pick)| Some((light.sun_disc()?, pick)))
+            .collect();
         Self {
             always,
             list,
@@ -176,6 +194,7 @@ impl Emitters {
             cdf,
             by_prim,
             world: world_emits,
+            suns,
         }
     }
 
@@ -310,16 +329,9 @@ impl Emitters {
     /// sees: for each, its radiance and the density this light's samples (from
     /// [`Emitters::always`] or [`Emitters::sample`], its picking included) draw `dir` with.
     pub fn suns_seen(&self, dir: Vec3) -> impl Iterator<Item = (Vec3, f32)> + '_ {
-        let always = self.always.iter().map(|l| (l, 1.0));
-        let picked = (self.list.iter().zip(&self.prob)).filter_map(|(e, &pick)| match e {
-            Emitter::Punctual(l) => Some((l, pick)),
-            _ => None,
-        });
-        always.chain(picked).filter_map(move |(light, pick)| {
-            let disc = light.sun_disc()?;
-            disc.contains(dir)
-                .then_some((disc.radiance, disc.pdf * pick))
-        })
+        (self.suns.iter())
+            .filter(move |(disc, _)| disc.contains(dir))
+            .map(|&(disc, pick)| (disc.radiance, disc.pdf * pick))
     }
 
     /// The density [`Emitters::sample_world`] draws world direction `dir` with (zero when the

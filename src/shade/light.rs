@@ -147,6 +147,16 @@ impl SunDisc {
     pub fn contains(&self, dir: Vec3) -> bool {
         dir.dot(self.axis) >= self.cos_max
     }
+
+    /// A direction drawn with `u` uniformly over the disc (density [`SunDisc::pdf`]).
+    pub fn sample(&self, u: Vec2) -> Vec3 {
+        // 1 - cos is 1 / (2 pi pdf), without cancellation.
+        let cos_t = 1.0 - u.x / (TAU * self.pdf);
+        let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+        let (t, b) = crate::shade::basis(self.axis);
+        let phi = TAU * u.y;
+        (self.axis * cos_t + (t * phi.cos() + b * phi.sin()) * sin_t).normalize()
+    }
 }
 
 /// What a shadow ray needs to know about a light as seen from a point.
@@ -223,6 +233,9 @@ impl Light {
         else {
             return None;
         };
+        if angle <= 0.0 {
+            return None; // a parallel sun (a NaN angle gives no finite disc below)
+        }
         // `angle` is at most pi (World::build checks it). The solid angle is written with
         // sin^2 / (1 + cos) instead of 1 - cos: no cancellation for a sun of half a degree.
         let half = 0.5 * angle;
@@ -244,6 +257,15 @@ impl Light {
     /// `p` (the cosine term is the caller's). A light that is not extended gives
     /// [`Light::sample`].
     pub fn sample_area(&self, p: Vec3, u: Vec2) -> LightSample {
+        if let Some(disc) = self.sun_disc() {
+            // Its radiance over its density, so a surface facing the sun receives its
+            // irradiance (the cone's mean cosine is (1 + cos) / 2).
+            return LightSample {
+                dir: disc.sample(u),
+                distance: f32::INFINITY,
+                irradiance: disc.radiance / disc.pdf,
+            };
+        }
         match *self {
             Self::Spot { radius, .. } if radius > 0.0 => {
                 let Some(light) = self.positional() else {
@@ -268,24 +290,6 @@ impl Light {
                     dir,
                     distance,
                     irradiance: light.irradiance(dir, dist2) * cos_light,
-                }
-            }
-            Self::Directional { .. } if self.is_extended() => {
-                let Some(disc) = self.sun_disc() else {
-                    return self.sample(p);
-                };
-                // Uniform over the disc's cone: its radiance over its density, so a surface
-                // facing the sun receives its irradiance (the cone's mean cosine is
-                // (1 + cos) / 2). 1 - cos is 1 / (2 pi pdf), without cancellation.
-                let cos_t = 1.0 - u.x / (TAU * disc.pdf);
-                let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-                let (t, b) = crate::shade::basis(disc.axis);
-                let phi = TAU * u.y;
-                let dir = (disc.axis * cos_t + (t * phi.cos() + b * phi.sin()) * sin_t).normalize();
-                LightSample {
-                    dir,
-                    distance: f32::INFINITY,
-                    irradiance: disc.radiance / disc.pdf,
                 }
             }
             _ => self.sample(p),
