@@ -172,9 +172,9 @@ pub(crate) struct RenderArgs {
     pub(crate) spp: Option<u32>,
     /// Anti-aliasing: samples per in-focus sample site, and per pixel in pinhole mode, each a
     /// point in pixel x lens, 1 to 65536. With the path tracer, adaptive mode's in-focus sites
-    /// start there and grow to --spp while noisy [default: the scene's, else --spp with the
-    /// path tracer (its light is as noisy in focus as in the blur), 4 with --integrator
-    /// direct].
+    /// take 16 to the larger of --aa and --spp, more where their neighbours are noisier
+    /// [default: the scene's, else --spp with the path tracer (its light is as noisy in focus
+    /// as in the blur), 4 with --integrator direct].
     #[arg(long)]
     pub(crate) aa: Option<u32>,
     /// The pixel filter that sample positions are drawn from: blackman-harris (smooth and

@@ -92,6 +92,16 @@ impl Estimate {
         }
     }
 
+    /// How many equally weighted samples the weighted mean is worth: (sum w)^2 / sum w^2
+    /// (0 before any sample).
+    pub fn effective_samples(&self) -> f32 {
+        if self.w2 > 0.0 {
+            self.w * self.w / self.w2
+        } else {
+            0.0
+        }
+    }
+
     /// The weighted fraction of samples that hit geometry (0 when nothing was added).
     pub fn coverage(&self) -> f32 {
         let seen = self.w - self.blocked_w;

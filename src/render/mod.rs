@@ -20,6 +20,7 @@
 //! pixel) only moves effort: every site's expected value is the filtered, lens-integrated
 //! radiance that dense converges to, and adaptive's one approximation is the interpolation.
 
+pub mod allocation;
 pub mod estimate;
 pub mod film;
 pub mod glossy_light;

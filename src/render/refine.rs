@@ -22,9 +22,13 @@
 //!    converged: a few samples that all land on one side of an edge look noise-free. Nor
 //!    are samples that agree while a much brighter sample was seen within the CoC's reach
 //!    (a small highlight behind the blur that this site's samples happened to miss): the
-//!    site keeps sampling while one such sample more would move it beyond the limit. With
-//!    the path tracer an in-focus site carries light noise too: it starts with `max(aa, 16)`
-//!    (at most `spp`) and grows the same way up to `spp` (the default `aa` there is `spp`).
+//!    site keeps sampling while one such sample more would move it beyond the limit.
+//! 4. **Samples in proportion to noise where nothing is interpolated.** With the path
+//!    tracer a site whose start interval is 1 (in focus, or barely blurred) is its pixel's
+//!    only estimate, and its error is its light noise: it starts with 16 samples (at most
+//!    `spp`) and grows the same way up to at most the larger of `spp` and `aa`, a most set
+//!    by its neighbours' noise against a frame-wide scale ([`allocation`]): quiet pixels stop
+//!    early, noisy ones take it all, at the image error of that many samples everywhere.
 //!
 //! With [`super::RenderSettings::transparent`] the coverage (alpha) takes part in both
 //! checks like a colour channel, 255 code values from empty to opaque, its noise from the
@@ -38,6 +42,7 @@
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
+use super::allocation::{self, FocusBudget};
 use super::estimate::{Estimate, code3};
 use super::maps;
 use super::reuse::{self, Kernel, SiteRecords};
@@ -500,6 +505,9 @@ struct Maps<'a> {
     reach: Vec<u8>,
     /// With sample reuse, its kernel for the render's pixel filter.
     kernel: Option<Kernel>,
+    /// With paths, how many samples the sites of one pixel's interval take by their noise
+    /// ([`allocation`]).
+    focus: Option<FocusBudget>,
 }
 
 /// Renders with the error-controlled rule at `tolerance`, given the blur that reaches each pixel,
@@ -519,18 +527,21 @@ pub fn refine(
 ) -> Result<Refined, super::RenderError> {
     let s = shader.settings;
     let (width, height) = (shader.camera.width as usize, shader.camera.height as usize);
+    let start = maps::start_intervals(
+        &blur.sharpest,
+        width,
+        height,
+        start_k(tolerance),
+        s.max_interval,
+    )?;
+    let focus = focus_budget(shader, blur, &start, tally);
     let maps = Maps {
         tolerance,
         blur,
-        start: maps::start_intervals(
-            &blur.sharpest,
-            width,
-            height,
-            start_k(tolerance),
-            s.max_interval,
-        )?,
+        start,
         reach: reach_levels(&blur.widest, s.max_interval)?,
         kernel: reuses(shader).then(|| Kernel::new(&s.pixel_filter.density())),
+        focus,
     };
     let size = s.max_interval as usize;
     let buckets: Vec<Bucket> = (0..height)
@@ -574,6 +585,38 @@ pub fn refine(
     Ok(out)
 }
 
+/// Whether the site at a pixel of start interval `start` takes samples by its noise
+/// ([`allocation`]): it is its pixel's only estimate (interval 1: nothing is interpolated
+/// from it) and no unseen highlight may hide behind its samples ([`maps::Blur::unseen`]).
+fn by_noise(start: u32, unseen: bool) -> bool {
+    start == 1 && !unseen
+}
+
+/// With paths, the budget of the sites that take samples by their noise, from the frame's
+/// pilot ([`allocation::pilot`]); None when in-focus sites take a fixed count (the direct
+/// integrator's `aa`).
+fn focus_budget(
+    shader: &SiteShader,
+    blur: &maps::Blur,
+    start: &[u32],
+    tally: &mut Tally,
+) -> Option<FocusBudget> {
+    let budget = Budget::new(shader.settings);
+    if !budget.by_noise {
+        return None;
+    }
+    let mask: Vec<bool> = (start.iter().zip(&blur.unseen))
+        .map(|(&i, &u)| by_noise(i, u))
+        .collect();
+    allocation::pilot(
+        shader,
+        &mask,
+        budget.first_by_noise(),
+        budget.in_focus,
+        tally,
+    )
+}
+
 /// Whether adaptive sites lend samples ([`reuse`]): asked for, with paths (which say how
 /// rough a surface is), the box lens filter, and a lens whose images move rigidly.
 fn reuses(shader: &SiteShader) -> bool {
@@ -599,11 +642,7 @@ fn refine_bucket(
     let (width, height) = (b.w, b.h);
     let tolerance = maps.tolerance;
     let blurred = b.slice(&maps.blur.blurred, full_width);
-    let unseen = b.slice(&maps.blur.unseen, full_width);
-    let budget = Budget::new(s);
-    let target = |p: usize| budget.target(blurred[p]);
-    let first = |p: usize| budget.first(blurred[p], unseen[p]);
-    let mut interval = b.slice(&maps.start, full_width);
+    let (mut allot, mut interval) = allotment(s, maps, b, full_width);
     let reach = b.slice(&maps.reach, full_width);
     let top_reach = reach.iter().copied().max().unwrap_or(1);
     let mut traced = Traced::new(&blurred, maps.kernel.is_some());
@@ -621,6 +660,8 @@ fn refine_bucket(
         }
         pending.sort_unstable();
         pending.dedup();
+        allot.settle(&pending, &traced.est);
+        let (first, target) = (|p: usize| allot.first[p], |p: usize| allot.most[p]);
         let limit = SAMPLING_SHARE * tolerance;
         // A site that looks converged by its variance must also not be missing a highlight
         // seen nearby; the peaks map is only built when some site is in that position.
@@ -670,6 +711,7 @@ fn refine_bucket(
             }
             dirty.extend(cells_around(p, &interval, b));
         }
+        allot.record(&work, &traced.est);
         dirty.sort_unstable();
         dirty.dedup();
         let mut failed = failed_cells(&traced, &dirty, width, tolerance, s.transparent);
@@ -688,25 +730,54 @@ fn refine_bucket(
     }))
 }
 
+/// Each site's first and most samples in bucket `b` of a frame `full_width` wide, and its
+/// start intervals; where a site takes samples by its noise, its most is lowered by its
+/// neighbours' noise once they are known ([`allocation`]).
+fn allotment(
+    s: &super::RenderSettings,
+    maps: &Maps,
+    b: &Bucket,
+    full_width: usize,
+) -> (allocation::Allotment, Vec<u32>) {
+    let budget = Budget::new(s);
+    let blurred = b.slice(&maps.blur.blurred, full_width);
+    let unseen = b.slice(&maps.blur.unseen, full_width);
+    let start = b.slice(&maps.start, full_width);
+    let n = b.w * b.h;
+    let allot = allocation::Allotment::new(
+        (0..n)
+            .map(|p| budget.first(blurred[p], unseen[p]))
+            .collect(),
+        blurred.iter().map(|&b| budget.target(b)).collect(),
+        (0..n).map(|p| by_noise(start[p], unseen[p])).collect(),
+        budget.first_by_noise(),
+        maps.focus,
+        s.transparent,
+        (b.w, b.h),
+    );
+    (allot, start)
+}
+
 /// How many samples a site starts with and may grow to, blurred or in focus.
 struct Budget {
     spp: u32,
     aa: u32,
     /// The most an in-focus site takes. The direct integrator needs only anti-aliasing there;
-    /// paths carry light noise in focus too, so an in-focus site grows to `spp` while noisy.
+    /// paths carry light noise in focus too, so an in-focus site takes up to the larger of
+    /// `spp` and `aa`, as many as its noise asks for ([`allocation`]).
     in_focus: u32,
+    /// Whether in-focus sites start at [`MIN_TRUSTED`] and take samples by their noise.
+    by_noise: bool,
 }
 
 impl Budget {
     fn new(s: &super::RenderSettings) -> Self {
-        let in_focus = match s.integrator {
-            super::Integrator::Path => s.spp.max(s.aa),
-            super::Integrator::Direct => s.aa,
-        };
+        let by_noise = s.integrator == super::Integrator::Path;
         Self {
             spp: s.spp,
             aa: s.aa,
-            in_focus,
+            in_focus: if by_noise { s.spp.max(s.aa) } else { s.aa },
+            by_noise,
         }
     }
 
@@ -720,12 +791,14 @@ impl Budget {
             self.target(blurred)
         } else if blurred {
             (self.spp / 4).max(self.aa).max(MIN_TRUSTED).min(self.spp)
-        } else if self.in_focus > self.aa {
-            // Growing by noise: as for blurred sites, too few samples are never trusted.
-            self.aa.max(MIN_TRUSTED).min(self.in_focus)
         } else {
             self.aa
         }
+    }
+
+    /// The first samples of a site that takes them by its noise: too few are never trusted.
+    fn first_by_noise(&self) -> u32 {
+        MIN_TRUSTED.min(self.spp)
     }
 }
 
