@@ -121,7 +121,7 @@ impl FocusBudget {
         // Past `hi` every site keeps its first samples; the error grows with sigma_ref.
         let (mut lo, mut hi) = (0.0f32, top * most as f32 / first.max(1) as f32);
         let allowed = dense * (1.0 + ERROR_ALLOWANCE);
-        if !(hi > 0.0) || squared_error(&at(hi)) <= allowed {
+        if hi.is_nan() || hi <= 0.0 || squared_error(&at(hi)) <= allowed {
             return Some(at(hi.max(0.0)));
         }
         for _ in 0..40 {
@@ -141,7 +141,7 @@ impl FocusBudget {
         let Some(sigma) = sigma else {
             return self.spp;
         };
-        if !(self.sigma_ref > 0.0) {
+        if self.sigma_ref.is_nan() || self.sigma_ref <= 0.0 {
             return first.min(self.spp);
         }
         let n = (self.spp as f32 * sigma / self.sigma_ref).ceil();
