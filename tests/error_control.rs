@@ -329,14 +329,21 @@ fn path_traced_in_focus_sites_take_samples_by_their_neighbours_noise() {
     let (few, all) = (count(&|n| n == 16), count(&|n| n == spp));
     let between = film.samples.len() - few - all;
     eprintln!("16: {few}, {spp}: {all}, between: {between} pixels");
-    assert!(few > 0 && all > 0 && between > 0, "{few} / {between} / {all}");
+    assert!(
+        few > 0 && all > 0 && between > 0,
+        "{few} / {between} / {all}"
+    );
     // The empty background (depth infinite) has no noise: it keeps its first samples.
     let background: Vec<u32> = (film.depth.iter().zip(&film.samples))
         .filter(|&(&d, _)| !d.is_finite())
         .map(|(_, &n)| n)
         .collect();
     let at_16 = background.iter().filter(|&&n| n == 16).count();
-    assert!(at_16 * 10 >= background.len() * 9, "{at_16} of {}", background.len());
+    assert!(
+        at_16 * 10 >= background.len() * 9,
+        "{at_16} of {}",
+        background.len()
+    );
     // Fewer samples, the same error as dense (within 0.5 dB) against the converged image.
     let truth = reference(&world, &camera, 512);
     let q = |f: &Film| psnr(&f.rgb(), &truth, 100, 75, Space::Srgb).unwrap();
@@ -347,6 +354,9 @@ fn path_traced_in_focus_sites_take_samples_by_their_neighbours_noise() {
         stats.rays.total(),
         dense_stats.rays.total()
     );
-    assert!(samples * 10 < 100 * 75 * u64::from(spp) * 8, "{samples} samples");
+    assert!(
+        samples * 10 < 100 * 75 * u64::from(spp) * 8,
+        "{samples} samples"
+    );
     assert!(qa > qd - 0.5, "adaptive {qa:.2} dB, dense {qd:.2} dB");
 }
