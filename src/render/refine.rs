@@ -26,9 +26,10 @@
 //! 4. **Samples in proportion to noise where nothing is interpolated.** With the path
 //!    tracer a site whose start interval is 1 (in focus, or barely blurred) is its pixel's
 //!    only estimate, and its error is its light noise: it starts with 16 samples (at most
-//!    `spp`) and grows the same way up to at most the larger of `spp` and `aa`, a most set
-//!    by its neighbours' noise against a frame-wide scale ([`allocation`]): quiet pixels stop
-//!    early, noisy ones take it all, at the image error of that many samples everywhere.
+//!    `spp`) and grows the same way up to a most set by its neighbours' noise against a
+//!    frame-wide scale ([`allocation`]), at most the larger of `spp` and `aa` in focus and
+//!    `spp` in the blur: quiet pixels stop early, noisy ones take it all, for about the image
+//!    error of that many samples everywhere.
 //!
 //! With [`super::RenderSettings::transparent`] the coverage (alpha) takes part in both
 //! checks like a colour channel, 255 code values from empty to opaque, its noise from the
