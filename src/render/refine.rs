@@ -603,7 +603,8 @@ fn focus_budget(
     tally: &mut Tally,
 ) -> Option<FocusBudget> {
     let budget = Budget::new(shader.settings);
-    if !budget.by_noise {
+    // Nothing to allot when the first samples are already the most (16 spp or fewer).
+    if !budget.by_noise || budget.first_by_noise() >= budget.in_focus {
         return None;
     }
     let mask: Vec<bool> = (start.iter().zip(&blur.unseen))
