@@ -240,13 +240,14 @@ fn pilot_points(width: usize, height: usize) -> Vec<(usize, usize)> {
         .collect()
 }
 
-/// Traces the pilot: for every grid point whose 3 x 3 square is in focus (`in_focus`, frame
-/// wide), its eight neighbours' first `first` samples, and returns the budget of at most
-/// `most` samples from their pooled noise (None when no point is in focus). The samples are those the sites take
-/// first, so the pilot repeats work rather than changing any pixel's samples.
+/// Traces the pilot: for every grid point whose 3 x 3 square takes samples by noise
+/// (`by_noise`, frame wide), its eight neighbours' first `first` samples, and returns the
+/// budget of at most `most` samples from their pooled noise (None without such a point). The
+/// samples are those the sites take first, so the pilot repeats work rather than changing any
+/// pixel's samples.
 pub fn pilot(
     shader: &SiteShader,
-    in_focus: &[bool],
+    by_noise: &[bool],
     first: u32,
     most: u32,
     tally: &mut Tally,
@@ -257,7 +258,7 @@ pub fn pilot(
         .into_iter()
         .filter(|&(x, y)| {
             (y - 1..=y + 1).all(|qy| {
-                in_focus[qy * width + x - 1..=qy * width + x + 1]
+                by_noise[qy * width + x - 1..=qy * width + x + 1]
                     .iter()
                     .all(|&f| f)
             })
