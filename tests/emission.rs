@@ -4,7 +4,7 @@
 //! and in a mirror, without lighting anything else under the direct integrator (the path tracer
 //! samples emitters as lights: tests/light_transport.rs).
 
-mod scene_assets;
+use crate::scene_assets;
 
 use dofray::render::Integrator;
 use std::path::{Path, PathBuf};

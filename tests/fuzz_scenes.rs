@@ -5,9 +5,9 @@
 //! SIGABRT), panic, hang past a time limit, or write a NaN pixel.
 //!
 //! The number of cases is bounded (`FUZZ_CASES`, default 64) so the suite stays fast; raise it
-//! to search longer: `FUZZ_CASES=2000 cargo test --release --test fuzz_scenes`.
+//! to search longer: `FUZZ_CASES=2000 cargo test --release --test integration fuzz_scenes`.
 
-mod scene_assets; // for its base64 encoder
+use crate::scene_assets; // for its base64 encoder
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};

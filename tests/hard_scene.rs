@@ -6,7 +6,7 @@
 #[path = "../examples/make_hard_scene.rs"]
 mod make_hard_scene;
 
-mod scene_assets;
+use crate::scene_assets;
 
 use std::path::PathBuf;
 

@@ -6,7 +6,7 @@
 #[path = "../examples/make_interior.rs"]
 mod make_interior;
 
-mod scene_assets;
+use crate::scene_assets;
 
 use std::path::PathBuf;
 

@@ -3,7 +3,7 @@
 //! any thread count and packet width), metallic-roughness textures and normal maps. Scenes are
 //! TOML files around small glTF quads written by the tests.
 
-mod scene_assets; // for its base64 encoder
+use crate::scene_assets; // for its base64 encoder
 
 use dofray::render::Integrator;
 use std::io::Cursor;

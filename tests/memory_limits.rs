@@ -130,7 +130,7 @@ fn a_render_whose_film_cannot_be_allocated_returns_a_memory_error() {
     let out = Command::new("sh")
         .arg("-c")
         // 1.4 GiB: room for Embree and the scene, not for the 2.2 GiB colour buffer.
-        .arg("ulimit -v 1500000 && exec \"$@\" --exact child_render_beyond_the_address_space --ignored --nocapture")
+        .arg("ulimit -v 1500000 && exec \"$@\" --exact memory_limits::child_render_beyond_the_address_space --ignored --nocapture")
         .arg("sh")
         .args(this_test_binary())
         .env(CHILD, "1")

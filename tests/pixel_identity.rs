@@ -15,7 +15,7 @@
 //! a notice.
 //!
 //! A change that is meant to change pixels re-blesses the table, and says so in its commit:
-//! `DOFRAY_BLESS=1 cargo test --test pixel_identity` rewrites this platform's section; in the
+//! `DOFRAY_BLESS=1 cargo test --test integration pixel_identity` rewrites this platform's section; in the
 //! other sections, every case whose pixels changed here (or that is new) becomes `unknown`,
 //! which the test skips with a notice until someone blesses on that platform, and the cases
 //! that did not change keep guarding there.

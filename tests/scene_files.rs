@@ -1,7 +1,7 @@
 //! Scenes from files: the TOML format, OBJ and glTF loading, transforms, and a clear error (file,
 //! line or key, what was expected) for every kind of bad input, never a panic.
 
-mod scene_assets;
+use crate::scene_assets;
 
 use std::path::{Path, PathBuf};
 

@@ -2,7 +2,7 @@
 //! repository has a source here (nothing is copied from elsewhere). Regenerate them with
 //!
 //! ```text
-//! cargo test --test scene_files -- --ignored regenerate_scene_assets
+//! cargo test --test integration -- --ignored regenerate_scene_assets
 //! ```
 //!
 //! - `tiles.png`: 64x64 terracotta floor tiles with grout lines (4x4 tiles).
