@@ -5,7 +5,9 @@
 //!   it (so there is no import circle between them);
 //! - the binary is thin: `src/main.rs` is a page, and the command line's code (src/cli/) is
 //!   not part of the library;
-//! - no product function (library, binary, C ABI, Python module) is longer than 100 lines.
+//! - no product function (library, binary, C ABI, Python module) is longer than 100 lines;
+//! - every file of `tests/` is a module of the one test binary, `tests/main.rs` (cargo's
+//!   automatic test targets are off), so none is silently left out.
 //!
 //! The checks read the source as text (comments and string literals removed), which is all
 //! they need: `crate::module` paths and `fn` bodies.
@@ -394,6 +396,37 @@ fn no_product_function_is_longer_than_100_lines() {
         "functions over 100 lines:\n{}",
         long.join("\n")
     );
+}
+
+#[test]
+fn every_test_file_is_in_the_test_binary() {
+    let dir = root().join("tests");
+    let main = std::fs::read_to_string(dir.join("main.rs")).expect("tests/main.rs");
+    let declared: Vec<&str> = (main.lines())
+        .filter_map(|l| l.trim().strip_prefix("mod ")?.strip_suffix(';'))
+        .collect();
+    let mut missing = Vec::new();
+    for entry in std::fs::read_dir(&dir).expect("tests/") {
+        let path = entry.expect("a directory entry").path();
+        let name = if path.is_dir() && path.join("mod.rs").is_file() {
+            path.file_name()
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            path.file_stem()
+        } else {
+            None
+        };
+        let Some(name) = name.and_then(|n| n.to_str()) else {
+            continue;
+        };
+        if name != "main" && !declared.contains(&name) {
+            missing.push(name.to_owned());
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "tests/ files that tests/main.rs does not declare (they would never run): {missing:?}"
+    );
+    assert!(declared.len() >= 30, "{declared:?}");
 }
 
 #[test]
