@@ -392,6 +392,25 @@ impl Reprojection {
         self.scale * (self.inv_focus_distance - 1.0 / depth.max(1e-6))
     }
 
+    /// How the shift changes across the film, pixels per pixel of centre, on the plane
+    /// through the point `offset` from the eye with normal `normal` (world space; zero for
+    /// a point at infinity, which gives zero). On a plane `1 / z` is linear in the film
+    /// position, `(n.right u + n.up v + n.forward) / (n . offset)` at `(u, v) =`
+    /// (centre - image centre) `/ k` with film y down, and the shift is linear in `1 / z`.
+    /// Infinite for a plane seen edge-on.
+    pub fn gradient(&self, camera: &Camera, offset: Vec3, normal: Vec3) -> Vec2 {
+        if normal == Vec3::ZERO {
+            return Vec2::ZERO;
+        }
+        let per_px = self.scale / (camera.pixels_per_unit() * normal.dot(offset));
+        let g = Vec2::new(-normal.dot(camera.right), normal.dot(camera.up)) * per_px;
+        if g.is_finite() {
+            g
+        } else {
+            Vec2::splat(f32::INFINITY)
+        }
+    }
+
     /// Where the point that film position `film` saw from lens position `lens` at depth
     /// shift `shift` lands through the lens centre.
     #[inline]

@@ -175,6 +175,8 @@ pub struct FirstHits {
     /// viewpoint (infinite for misses: the world looks the same along parallel rays; 0
     /// where the integrator does not say).
     pub view_alpha: [f32; LANES],
+    /// The geometric normal there, world space, not normalised (zero for misses).
+    pub normal: [Vec3; LANES],
 }
 
 impl FirstHits {
@@ -184,13 +186,15 @@ impl FirstHits {
         for lane in (0..LANES).filter(|&l| active & (1 << l) != 0) {
             self.t[lane] = t[lane];
             self.view_alpha[lane] = f32::INFINITY;
+            self.normal[lane] = Vec3::ZERO;
         }
     }
 
-    /// Notes the BSDFs the lanes in `hits` found.
-    fn note_surfaces(&mut self, hits: u32, bsdf: &[Bsdf; LANES]) {
+    /// Notes the BSDFs and geometric normals of the surfaces the lanes in `hits` found.
+    fn note_surfaces(&mut self, hits: u32, bsdf: &[Bsdf; LANES], ng: &[Vec3; LANES]) {
         for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
             self.view_alpha[lane] = bsdf[lane].view_alpha();
+            self.normal[lane] = ng[lane];
         }
     }
 }
@@ -200,6 +204,7 @@ impl Default for FirstHits {
         Self {
             t: [f32::INFINITY; LANES],
             view_alpha: [0.0; LANES],
+            normal: [Vec3::ZERO; LANES],
         }
     }
 }
@@ -264,7 +269,7 @@ pub fn trace_path(
         );
         filter_glossy(&mut v.bsdf, hits, &lanes, limits.filter_glossy);
         if bounce == 0 {
-            first.note_surfaces(hits, &v.bsdf);
+            first.note_surfaces(hits, &v.bsdf, &v.ng);
         }
         if bounce == limits.total {
             break;

@@ -62,6 +62,11 @@ pub const VIEW_MARGIN: f32 = 4.0;
 /// Samples blurred less than this (CoC radius, pixels) are not lent: their trajectories
 /// barely move, and in-focus sites need their own anti-aliasing samples anyway.
 pub const MIN_SHIFT: f32 = 0.5;
+/// A sample whose shift changes by more than this per pixel of film across its surface does
+/// not lend: a surface seen nearly edge-on (whose images through opposite sides of the lens
+/// stretch and fold over at 1) or curving away. The tilted kernel is exact on a plane below
+/// it.
+pub const MAX_TILT: f32 = 0.5;
 /// A site records at most this many samples for lending; one that takes more (it is noisy
 /// enough to need them) keeps its own mean.
 pub const MAX_RECORDS: usize = 256;
@@ -73,6 +78,10 @@ pub struct Record {
     pub centre: Vec2,
     /// Its film motion per unit lens position ([`Reprojection::shift`]).
     pub shift: f32,
+    /// How `shift` changes across its surface per pixel of centre
+    /// ([`Reprojection::gradient`]): a slanted surface's images through different lens
+    /// positions are stretched by `1 + gradient . (l.x, -l.y)`, which its kernel weighs.
+    pub gradient: Vec2,
     /// Its radiance (exposure applied).
     pub radiance: Vec3,
     /// Whether its camera ray hit geometry (coverage).
@@ -83,14 +92,15 @@ pub struct Record {
 
 impl Record {
     /// The record of a sample at `film` through lens position `lens` whose ray met a point at
-    /// `depth` along the view axis, `distance` from the lens, where what it saw may change
-    /// over `view_alpha` radians; the aperture's radius is `aperture_radius`.
+    /// `depth` along the view axis, `distance` from the lens, on a surface whose shift
+    /// changes by `gradient` per pixel, where what it saw may change over `view_alpha`
+    /// radians; the aperture's radius is `aperture_radius`.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         reprojection: &Reprojection,
         aperture_radius: f32,
         (film, lens): (Vec2, Vec2),
-        (depth, distance): (f32, f32),
+        (depth, distance, gradient): (f32, f32, Vec2),
         view_alpha: f32,
         radiance: Vec3,
         hit: bool,
@@ -100,10 +110,12 @@ impl Record {
         Self {
             centre: Reprojection::centre(film, lens, shift),
             shift,
+            gradient,
             radiance,
             hit,
             lends: shift.abs() >= MIN_SHIFT
                 && view_alpha >= VIEW_MARGIN * aperture_angle
+                && gradient.length() <= MAX_TILT
                 && radiance.is_finite()
                 && shift.is_finite(),
         }
@@ -142,13 +154,16 @@ impl SiteRecords {
     }
 }
 
-/// `K(d; s)`: the density of the centres of a site's samples at offset `d` from the site, for
-/// points of shift `s` (see the module documentation), tabulated over `|d| / (|s| + reach)`
-/// and `log2 |s|`.
+/// `K(d; s, g)`: the density of the centres of a site's samples at offset `d` from the site,
+/// for points of shift `s` on a surface whose shift changes by `g` per pixel of centre (see
+/// the module documentation). Tabulated over `|d| / (|s| + reach)` and `log2 |s|`: the
+/// kernel of a surface parallel to the film, `K0(|d|)`, and the first moment `m(|d|)` of the
+/// lens position along `d` under it, which a tilt adds to first order.
 #[derive(Debug, Clone)]
 pub struct Kernel {
     reach: f32,
-    table: Vec<f32>,
+    /// `[K0, m]` per (shift row, distance bin).
+    table: Vec<[f32; 2]>,
 }
 
 /// Shift bins per doubling, and doublings from [`MIN_SHIFT`].
@@ -192,32 +207,36 @@ impl Kernel {
             let area = std::f32::consts::PI * s * s;
             for t in 0..=RADIAL {
                 let r = t as f32 / RADIAL as f32 * (s + reach);
-                let mass: f32 = dirs
-                    .iter()
-                    .map(|&dir| {
-                        let d = dir * r;
-                        points
-                            .iter()
-                            .filter(|(p, _)| (*p - d).length_squared() <= s * s)
-                            .map(|(_, w)| w)
-                            .sum::<f32>()
-                    })
-                    .sum();
-                table.push(mass / (dirs.len() as f32 * area));
+                // The mass of the filter inside the disc of radius s around d, and its first
+                // moment towards d (over s: the lens position's component along d).
+                let (mass, moment) = dirs.iter().fold((0.0f32, 0.0f32), |acc, &dir| {
+                    let d = dir * r;
+                    points
+                        .iter()
+                        .filter(|(p, _)| (*p - d).length_squared() <= s * s)
+                        .fold(acc, |(m0, m1), &(p, w)| {
+                            (m0 + w, m1 + w * (d - p).dot(dir) / s)
+                        })
+                });
+                let n = dirs.len() as f32 * area;
+                table.push([mass / n, moment / n]);
             }
         }
         Self { reach, table }
     }
 
-    /// `K` at squared distance `d2` (pixels) for shift magnitude `s` (at least
-    /// [`MIN_SHIFT`]); 0 beyond `s + reach`.
-    pub fn at(&self, d2: f32, s: f32) -> f32 {
-        self.for_shift(s).at(d2)
+    /// `K` at offset `d` (pixels) from the site for a sample of signed shift `shift` (at
+    /// least [`MIN_SHIFT`] in magnitude) and shift gradient `gradient`; 0 beyond
+    /// `|shift| + reach`.
+    pub fn at(&self, d: Vec2, shift: f32, gradient: Vec2) -> f32 {
+        self.for_sample(shift, gradient).at(d)
     }
 
-    /// `K` for one shift magnitude `s` (at least [`MIN_SHIFT`]): the interpolation between
-    /// the table's shift rows worked out once, for the many distances a sample is lent over.
-    pub fn for_shift(&self, s: f32) -> ShiftKernel<'_> {
+    /// `K` for one sample's signed shift and shift gradient ([`Record::gradient`]): the
+    /// interpolation between the table's shift rows worked out once, for the many sites a
+    /// sample is lent to.
+    pub fn for_sample(&self, shift: f32, gradient: Vec2) -> ShiftKernel<'_> {
+        let s = shift.abs();
         let top = (OCTAVES * PER_OCTAVE) as f32;
         let ks = ((s / MIN_SHIFT).log2() * PER_OCTAVE as f32).clamp(0.0, top);
         let k0 = ks.floor() as usize;
@@ -233,6 +252,7 @@ impl Kernel {
             } else {
                 1.0
             },
+            tilt: gradient * shift.signum(),
         }
     }
 
@@ -242,32 +262,39 @@ impl Kernel {
     }
 }
 
-/// [`Kernel`] at one shift, from [`Kernel::for_shift`].
+/// [`Kernel`] for one sample, from [`Kernel::for_sample`].
 #[derive(Debug, Clone, Copy)]
 pub struct ShiftKernel<'a> {
-    table: &'a [f32],
+    table: &'a [[f32; 2]],
     /// `s + reach`: the kernel is 0 beyond.
     extent: f32,
     /// The two shift rows of the table around `s`, and the weight of the second.
     rows: (usize, usize),
     fk: f32,
     scale: f32,
+    /// The shift gradient times the shift's sign: `K = K0 - (tilt . d / |d|) m`.
+    tilt: Vec2,
 }
 
 impl ShiftKernel<'_> {
-    /// `K` at squared distance `d2` (pixels).
-    pub fn at(&self, d2: f32) -> f32 {
+    /// `K` at offset `d` (pixels) from the site: the centre minus the site's pixel centre.
+    pub fn at(&self, d: Vec2) -> f32 {
+        let d2 = d.length_squared();
         if d2 >= self.extent * self.extent {
             return 0.0;
         }
-        let kt = d2.sqrt() / self.extent * RADIAL as f32;
+        let r = d2.sqrt();
+        let kt = r / self.extent * RADIAL as f32;
         let t0 = (kt.floor() as usize).min(RADIAL - 1);
         let ft = kt - t0 as f32;
-        let row = |k: usize| {
+        let row = |k: usize, i: usize| {
             let base = k * (RADIAL + 1);
-            self.table[base + t0] * (1.0 - ft) + self.table[base + t0 + 1] * ft
+            self.table[base + t0][i] * (1.0 - ft) + self.table[base + t0 + 1][i] * ft
         };
-        (row(self.rows.0) * (1.0 - self.fk) + row(self.rows.1) * self.fk) * self.scale
+        let value =
+            |i: usize| row(self.rows.0, i) * (1.0 - self.fk) + row(self.rows.1, i) * self.fk;
+        let along = if r > 0.0 { self.tilt.dot(d) / r } else { 0.0 };
+        ((value(0) - along * value(1)) * self.scale).max(0.0)
     }
 }
 
@@ -281,9 +308,13 @@ struct Member {
     at: Vec2,
     /// How many samples it lends (all it took).
     n: f32,
-    /// Its cluster of shifts, widened by [`GAP`].
+    /// Its cluster of shifts at its own pixel centre (each sample's shift carried along its
+    /// surface's gradient to there), widened by [`GAP`].
     lo: f32,
     hi: f32,
+    /// The mean shift gradient of its samples: its surface's shift at a point `c` is about
+    /// `lo..hi + gradient . (c - at)`.
+    gradient: Vec2,
     /// Its own estimate is noisier than wanted: it borrows.
     needy: bool,
 }
@@ -296,7 +327,8 @@ struct Grid {
     rows: usize,
     cells: Vec<Vec<u32>>,
     /// The greatest [`Member::lo`] of each cell's members (minus infinity when it has none):
-    /// a sample at a shift at least this is nearer than none of them.
+    /// a sample at a shift at least this plus the most a surface's tilt adds over its
+    /// reach is nearer than none of them.
     lo: Vec<f32>,
     /// The window's size, and the member at each of its pixels (`u32::MAX`: none).
     size: (usize, usize),
@@ -399,13 +431,14 @@ fn lend_one(
 ) {
     let s = r.shift.abs();
     let extent = s + kernel.reach();
-    let k_at = kernel.for_shift(s);
+    let k_at = kernel.for_sample(r.shift, r.gradient);
     let me = &members[m];
     let g = spacing(s);
     let lends = |q: &Member| q.pixel.0 % g == 0 && q.pixel.1 % g == 0;
     let takes = |q: u32| {
         let other = &members[q as usize];
-        !covered[q as usize] && r.shift >= other.lo && r.shift <= other.hi
+        let at_q = other.carried(r);
+        !covered[q as usize] && at_q >= other.lo && at_q <= other.hi
     };
     let mut lenders = 0.0;
     near.clear();
@@ -414,7 +447,7 @@ fn lend_one(
         for cell in grid.cells_near(r.centre, extent) {
             for &q in grid.cells[cell].iter().filter(|&&q| takes(q)) {
                 let other = &members[q as usize];
-                let k = k_at.at((r.centre - other.at).length_squared());
+                let k = k_at.at(r.centre - other.at);
                 if k > 0.0 {
                     if lends(other) {
                         lenders += other.n * k;
@@ -431,9 +464,9 @@ fn lend_one(
         }
         for q in grid.on_lattice(r.centre, extent, g).filter(|&q| takes(q)) {
             let other = &members[q as usize];
-            lenders += other.n * k_at.at((r.centre - other.at).length_squared());
+            lenders += other.n * k_at.at(r.centre - other.at);
         }
-        let k = k_at.at((r.centre - me.at).length_squared());
+        let k = k_at.at(r.centre - me.at);
         near.push((k, m as u32));
     }
     let density = |q: &Member, k: f32| lenders + if lends(q) { 0.0 } else { q.n * k };
@@ -445,12 +478,31 @@ fn lend_one(
     }
 }
 
-/// The cluster of a site's shifts, widened by [`GAP`], if its samples all lend and form one.
-fn cluster(records: &SiteRecords) -> Option<(f32, f32)> {
+impl Member {
+    /// The shift of sample `r`'s point carried along this member's surface to its pixel
+    /// centre: comparable with [`Member::lo`] and [`Member::hi`] on a slanted surface too.
+    fn carried(&self, r: &Record) -> f32 {
+        r.shift - self.gradient.dot(r.centre - self.at)
+    }
+}
+
+/// The mean shift gradient of a site's samples.
+fn mean_gradient(records: &SiteRecords) -> Vec2 {
+    let n = records.list.len().max(1) as f32;
+    records.list.iter().map(|r| r.gradient).sum::<Vec2>() / n
+}
+
+/// The cluster of a site's shifts carried to its pixel centre `at` along their surfaces'
+/// gradient `gradient`, widened by [`GAP`], if its samples all lend and form one.
+fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)> {
     if records.overflow || records.list.is_empty() || !records.list.iter().all(|r| r.lends) {
         return None;
     }
-    let mut shifts: Vec<f32> = records.list.iter().map(|r| r.shift).collect();
+    let mut shifts: Vec<f32> = records
+        .list
+        .iter()
+        .map(|r| r.shift - gradient.dot(r.centre - at))
+        .collect();
     shifts.sort_unstable_by(f32::total_cmp);
     let one = shifts.windows(2).all(|w| w[1] - w[0] <= GAP);
     one.then(|| (shifts[0] - GAP, shifts[shifts.len() - 1] + GAP))
@@ -472,9 +524,10 @@ pub fn lend(
 ) -> Result<Vec<Estimate>, MemoryError> {
     let mut members: Vec<Member> = Vec::new();
     for (p, r) in records.iter().enumerate() {
-        if let Some((lo, hi)) = cluster(r) {
-            let (x, y) = (x0 + p % width, y0 + p / width);
-            let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+        let (x, y) = (x0 + p % width, y0 + p / width);
+        let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+        let gradient = mean_gradient(r);
+        if let Some((lo, hi)) = cluster(r, at, gradient) {
             let n = r.list.len() as f32;
             let needy = needy[p];
             members.push(Member {
@@ -484,6 +537,7 @@ pub fn lend(
                 n,
                 lo,
                 hi,
+                gradient,
                 needy,
             });
         }
@@ -502,13 +556,16 @@ pub fn lend(
     for r in records.iter().flat_map(|r| &r.list) {
         let s = r.shift.abs().max(MIN_SHIFT);
         let extent = (s + reach) * (s + reach);
+        // Members' gradients are at most MAX_TILT (all their samples lend).
+        let tilt = MAX_TILT * (s + reach);
         for cell in grid.cells_near(r.centre, s + reach) {
-            if r.shift >= grid.lo[cell] {
+            if r.shift - tilt >= grid.lo[cell] {
                 continue;
             }
             for &m in &grid.cells[cell] {
                 let member = &members[m as usize];
-                if r.shift < member.lo && (r.centre - member.at).length_squared() < extent {
+                let near = (r.centre - member.at).length_squared() < extent;
+                if near && member.carried(r) < member.lo {
                     covered[m as usize] = true;
                 }
             }
@@ -568,7 +625,7 @@ mod tests {
                 let mass: f32 = (0..steps)
                     .map(|i| {
                         let r = (i as f32 + 0.5) * dr;
-                        k.at(r * r, s) * std::f32::consts::TAU * r * dr
+                        k.at(Vec2::new(r, 0.0), s, Vec2::ZERO) * std::f32::consts::TAU * r * dr
                     })
                     .sum();
                 assert!((mass - 1.0).abs() < 0.03, "{kind:?}, s = {s}: {mass}");
@@ -576,9 +633,9 @@ mod tests {
             // Wide blur: the disc's uniform density inside, nothing beyond its rim.
             let s = 50.0;
             let inside = 1.0 / (std::f32::consts::PI * s * s);
-            assert!((k.at(0.0, s) / inside - 1.0).abs() < 0.02);
-            assert!((k.at(30.0 * 30.0, s) / inside - 1.0).abs() < 0.02);
-            assert_eq!(k.at(52.0 * 52.0, s), 0.0);
+            assert!((k.at(Vec2::ZERO, s, Vec2::ZERO) / inside - 1.0).abs() < 0.02);
+            assert!((k.at(Vec2::new(0.0, 30.0), s, Vec2::ZERO) / inside - 1.0).abs() < 0.02);
+            assert_eq!(k.at(Vec2::new(52.0, 0.0), s, Vec2::ZERO), 0.0);
         }
     }
 
@@ -593,6 +650,32 @@ mod tests {
         field: impl Fn(Vec2) -> f32,
         seed: u64,
     ) -> (Vec<SiteRecords>, Vec<Estimate>) {
+        let plane = Plane {
+            shift,
+            gradient: Vec2::ZERO,
+            seen: Vec2::ZERO,
+        };
+        slanted(size, interval, n, plane, field, seed)
+    }
+
+    /// A plane whose shift at centre c is `shift + gradient . c`, its records' gradient
+    /// `seen` (the true one, or a wrong one to show what it costs).
+    #[derive(Clone, Copy)]
+    struct Plane {
+        shift: f32,
+        gradient: Vec2,
+        seen: Vec2,
+    }
+
+    /// [`lattice`] on a slanted plane: each sample's centre solves `x = c + s(c) R(l)`.
+    fn slanted(
+        size: usize,
+        interval: usize,
+        n: usize,
+        plane: Plane,
+        field: impl Fn(Vec2) -> f32,
+        seed: u64,
+    ) -> (Vec<SiteRecords>, Vec<Estimate>) {
         let mut records = vec![SiteRecords::default(); size * size];
         let mut own = vec![Estimate::default(); size * size];
         for y in (0..size).step_by(interval) {
@@ -602,11 +685,16 @@ mod tests {
                     let key = seed ^ ((p as u64) << 20) ^ ((i as u64) << 4);
                     let film = Vec2::new(x as f32 + uniform(key), y as f32 + uniform(key + 1));
                     let lens = concentric_disc(Vec2::new(uniform(key + 2), uniform(key + 3)));
-                    let centre = Reprojection::centre(film, lens, shift);
+                    let r = Vec2::new(lens.x, -lens.y);
+                    // (I + r g^T) c = film - s0 r, by Sherman-Morrison.
+                    let y0 = film - plane.shift * r;
+                    let centre = y0 - r * plane.gradient.dot(y0) / (1.0 + plane.gradient.dot(r));
+                    let shift = plane.shift + plane.gradient.dot(centre);
                     let radiance = Vec3::splat(field(centre));
                     records[p].push(Record {
                         centre,
                         shift,
+                        gradient: plane.seen,
                         radiance,
                         hit: true,
                         lends: true,
@@ -616,6 +704,36 @@ mod tests {
             }
         }
         (records, own)
+    }
+
+    /// Over many trials: the mean of site `site`'s own estimate and of its lent one, and
+    /// the standard error of their difference.
+    fn own_and_lent(
+        trials: u64,
+        site: usize,
+        render: impl Fn(u64) -> (Vec<SiteRecords>, Vec<Estimate>),
+    ) -> ((f64, f64), (f64, f64)) {
+        let k = kernel(PixelFilterKind::Box);
+        let (mut own_sum, mut own_sq, mut lent_sum, mut lent_sq) = (0.0, 0.0, 0.0, 0.0);
+        for t in 0..trials {
+            let (records, own) = render(t);
+            let needy = vec![true; own.len()];
+            let size = (own.len() as f64).sqrt() as usize;
+            let lent = lend(&k, (0, 0), (size, size), &records, &own, &needy).unwrap();
+            let (a, b) = (
+                f64::from(own[site].mean().x),
+                f64::from(lent[site].mean().x),
+            );
+            own_sum += a;
+            own_sq += a * a;
+            lent_sum += b;
+            lent_sq += b * b;
+        }
+        let n = trials as f64;
+        let (own_mean, lent_mean) = (own_sum / n, lent_sum / n);
+        let own_var = own_sq / n - own_mean * own_mean;
+        let lent_var = lent_sq / n - lent_mean * lent_mean;
+        ((own_mean, own_var), (lent_mean, lent_var))
     }
 
     #[test]
@@ -638,29 +756,12 @@ mod tests {
     /// the kernel is symmetric), and its variance is several times smaller.
     #[test]
     fn lending_is_unbiased_and_cuts_the_variance() {
-        let k = kernel(PixelFilterKind::Box);
         let field = |c: Vec2| 0.2 + 0.05 * c.x + 0.5 * (0.7 * c.y).sin().abs();
-        let (site, trials) = (12 * 32 + 16, 400);
-        let (mut own_sum, mut own_sq, mut lent_sum, mut lent_sq) = (0.0, 0.0, 0.0, 0.0);
-        for t in 0..trials {
-            let (records, own) = lattice(32, 4, 16, 5.0, field, 1000 + t);
-            let needy = vec![true; 32 * 32];
-            let lent = lend(&k, (0, 0), (32, 32), &records, &own, &needy).unwrap();
-            let (a, b) = (
-                f64::from(own[site].mean().x),
-                f64::from(lent[site].mean().x),
-            );
-            own_sum += a;
-            own_sq += a * a;
-            lent_sum += b;
-            lent_sq += b * b;
-        }
-        let n = trials as f64;
-        let (own_mean, lent_mean) = (own_sum / n, lent_sum / n);
-        let own_var = own_sq / n - own_mean * own_mean;
-        let lent_var = lent_sq / n - lent_mean * lent_mean;
+        let site = 12 * 32 + 16;
+        let render = |t| lattice(32, 4, 16, 5.0, field, 1000 + t);
+        let ((own_mean, own_var), (lent_mean, lent_var)) = own_and_lent(400, site, render);
         // Both estimate the same value: within 4 standard errors of their difference.
-        let se = ((own_var + lent_var) / n).sqrt();
+        let se = ((own_var + lent_var) / 400.0).sqrt();
         assert!(
             (own_mean - lent_mean).abs() < 4.0 * se,
             "{own_mean} vs {lent_mean} (se {se})"
@@ -668,6 +769,46 @@ mod tests {
         assert!(
             lent_var < own_var / 3.0,
             "variance {lent_var} vs own {own_var}"
+        );
+    }
+
+    /// On a plane receding through the blur (its shift grows 0.1 px per px downwards, as a
+    /// floor's does) with bands across it, the kernel of a plane parallel to the film
+    /// (ignoring the tilt) moves the blurred bands: the lent estimate is biased, by 8
+    /// standard errors of 200 trials here. The tilted kernel weighs the images' stretch and
+    /// removes most of it. What remains (3.7 standard errors; 0.4 of the flat kernel's at 64
+    /// and at 128 samples a site alike, so not the self-normalised estimate's bias of order
+    /// 1 / samples) is not explained; the kernel's tabulation over shift is a suspect.
+    #[test]
+    fn lending_on_a_slanted_plane_is_unbiased() {
+        let field = |c: Vec2| {
+            if (c.y / 6.0).floor() as i32 % 2 == 0 {
+                1.0
+            } else {
+                0.1
+            }
+        };
+        let gradient = Vec2::new(0.0, 0.1);
+        // The site 16 rows down (a shift of about 4.6 px), 1.5 px from a band's edge.
+        let (size, site, trials) = (32, 16 * 32 + 16, 200);
+        let bias = |seen: Vec2| {
+            let plane = Plane {
+                shift: 3.0,
+                gradient,
+                seen,
+            };
+            let render = |t| slanted(size, 2, 64, plane, field, 5000 + t);
+            let ((own_mean, own_var), (lent_mean, lent_var)) = own_and_lent(trials, site, render);
+            assert!(lent_var < own_var / 2.0, "{lent_var} vs {own_var}");
+            let se = ((own_var + lent_var) / trials as f64).sqrt();
+            (lent_mean - own_mean) / se
+        };
+        let tilted = bias(gradient);
+        let flat = bias(Vec2::ZERO);
+        assert!(flat.abs() > 6.0, "flat kernel: {flat} standard errors");
+        assert!(
+            tilted.abs() < 0.5 * flat.abs(),
+            "tilted kernel: {tilted} standard errors, flat {flat}"
         );
     }
 
@@ -699,14 +840,26 @@ mod tests {
         };
         let at = (Vec2::new(10.0, 10.0), Vec2::new(0.3, -0.2));
         // 4 m away, a 0.05 radius aperture subtends 0.025 rad: alpha 0.2 lends, 0.05 does not.
-        let rough = Record::new(&re, 0.05, at, (4.0, 4.0), 0.2, Vec3::ONE, true);
-        let glossy = Record::new(&re, 0.05, at, (4.0, 4.0), 0.05, Vec3::ONE, true);
+        let rough = Record::new(&re, 0.05, at, (4.0, 4.0, Vec2::ZERO), 0.2, Vec3::ONE, true);
+        let glossy = Record::new(&re, 0.05, at, (4.0, 4.0, Vec2::ZERO), 0.05, Vec3::ONE, true);
+        // Seen nearly edge-on, its images stretch too much across the lens to lend.
+        let steep = Vec2::new(0.0, MAX_TILT * 1.1);
+        let edge_on = Record::new(&re, 0.05, at, (4.0, 4.0, steep), 0.2, Vec3::ONE, true);
+        assert!(!edge_on.lends);
         assert!(rough.lends && !glossy.lends);
         assert!((rough.shift - 25.0).abs() < 1e-4);
         // Its centre is where the lens centre sees it: film - shift (l.x, -l.y).
         assert!((rough.centre - Vec2::new(10.0 - 7.5, 10.0 - 5.0)).length() < 1e-4);
         // In focus (shift under MIN_SHIFT): kept to itself.
-        let sharp = Record::new(&re, 0.05, at, (2.0, 2.0), f32::INFINITY, Vec3::ONE, true);
+        let sharp = Record::new(
+            &re,
+            0.05,
+            at,
+            (2.0, 2.0, Vec2::ZERO),
+            f32::INFINITY,
+            Vec3::ONE,
+            true,
+        );
         assert!(sharp.shift.abs() < MIN_SHIFT && !sharp.lends);
     }
 }

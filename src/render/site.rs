@@ -301,7 +301,11 @@ impl SiteShader<'_> {
                 let l = radiance[lane] * scale;
                 let hit = t.is_finite();
                 let alpha = first.view_alpha[lane];
-                let record = Record::new(&re, r, (film, lens), (depth, t), alpha, l, hit);
+                let o = Vec3::new(origin[0][lane], origin[1][lane], origin[2][lane]);
+                let point = o + d * t - self.camera.eye;
+                let gradient = re.gradient(self.camera, point, first.normal[lane]);
+                let at = (depth, t, gradient);
+                let record = Record::new(&re, r, (film, lens), at, alpha, l, hit);
                 records[b.pixel[lane]].push(record);
             }
         }
