@@ -354,6 +354,12 @@ fn bench_reports_every_mode_and_caches_the_reference() {
         "second run reuses the reference"
     );
     assert_eq!(report["integrator"], "path");
+    // Reuse changes adaptive's renders only: dense and the reference are the same, so the
+    // cached reference serves it.
+    let reuse_args: Vec<&str> = args.iter().copied().chain(["--reuse", "on"]).collect();
+    let reuse: serde_json::Value = serde_json::from_slice(&dofray(&reuse_args).stdout).unwrap();
+    assert_eq!(reuse["reference_cached"], true, "--reuse on shares it");
+    assert_eq!(reuse["rows"][1]["rays"], report["rows"][1]["rays"]);
     // The other integrator renders (and caches) its own reference: a reference is never
     // shared between integrators, whose images differ.
     let direct_args: Vec<&str> = args

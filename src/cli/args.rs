@@ -247,10 +247,11 @@ pub(crate) struct RenderArgs {
     /// Path tracer, adaptive: a blurred site still noisy after its own samples also takes the
     /// samples of the sites around it whose apertures saw the same surface points (rough
     /// surfaces only, never across a depth edge), combined by multiple importance sampling.
-    /// `on` cuts noise where blurred diffuse surfaces carry it (walls behind a sharp subject:
-    /// twice as fast to the same error) for 5-25% more time; glossy and specular light gains
-    /// nothing, and its small bias (a self-normalised estimate) can show near 40 dB and above
-    /// (round thin lens and box lens filter only) [default: the scene's, else off].
+    /// `on` cuts noise where blurred diffuse surfaces carry it (walls behind a sharp subject,
+    /// receding floors: 1 to 4 dB at the same samples) for 5-25% more time where paths are
+    /// costly (up to 70% where wide blur meets cheap paths); glossy and specular light gains
+    /// nothing; its small bias is a self-normalised estimate's (round thin lens and box lens
+    /// filter only) [default: the scene's, else off].
     #[arg(long, value_name = "on|off")]
     pub(crate) reuse: Option<Switch>,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
@@ -400,6 +401,11 @@ pub(crate) struct BenchArgs {
     /// too [default: the scene's, else path].
     #[arg(long, value_enum)]
     pub(crate) integrator: Option<dofray::render::Integrator>,
+    /// Sample reuse in the adaptive renders (as `dofray render --reuse`; dense and the
+    /// reference are the same either way, so one cached reference serves both) [default: the
+    /// scene's, else off].
+    #[arg(long, value_name = "on|off")]
+    pub(crate) reuse: Option<Switch>,
     /// Timed repeats of each mode (or rung); medians are reported.
     #[arg(long, default_value_t = 3)]
     pub(crate) repeat: usize,

@@ -8,7 +8,7 @@ use dofray::camera::Camera;
 use dofray::output;
 use dofray::render::{RenderSettings, SettingsPatch};
 
-use super::args::BenchArgs;
+use super::args::{BenchArgs, Switch};
 use super::report::{print_equal_error, print_table, versioned_json};
 use super::{Bar, Prepared, cli_error, prepare};
 
@@ -36,6 +36,7 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
         spp: a.spp,
         aa: a.aa,
         integrator: a.integrator,
+        reuse: a.reuse.map(|s| s == Switch::On),
         ..Default::default()
     };
     let settings = p.renderer.settings(&samples).map_err(cli_error)?;
@@ -118,6 +119,7 @@ pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> R
         .renderer
         .settings(&SettingsPatch {
             integrator: a.integrator,
+            reuse: a.reuse.map(|s| s == Switch::On),
             ..Default::default()
         })
         .map_err(cli_error)?;
