@@ -460,8 +460,7 @@ fn lend_one(
     let lends = |q: &Member| q.pixel.0 % g == 0 && q.pixel.1 % g == 0;
     let takes = |q: u32| {
         let other = &members[q as usize];
-        let at_q = other.carried(r);
-        !covered[q as usize] && at_q >= other.lo && at_q <= other.hi
+        !covered[q as usize] && (other.lo..=other.hi).contains(&other.carried(r))
     };
     let mut lenders = 0.0;
     near.clear();
@@ -473,8 +472,11 @@ fn lend_one(
                 // Only lenders (their density) and needy members (receivers) within reach
                 // count; the cells are a square around the kernel's disc.
                 let d = r.centre - other.at;
+                if d.length_squared() >= extent * extent {
+                    continue;
+                }
                 let lender = lends(other);
-                if d.length_squared() >= extent * extent || !(lender || other.needy) || !takes(q) {
+                if !(lender || other.needy) || !takes(q) {
                     continue;
                 }
                 let k = k_at.at(d);
@@ -508,11 +510,18 @@ fn lend_one(
     }
 }
 
+/// The shift of sample `r`'s point carried to `at` along a surface whose shift changes by
+/// `gradient` per pixel: on a slanted surface, shifts of one surface seen at different
+/// centres compare equal.
+fn carried(r: &Record, at: Vec2, gradient: Vec2) -> f32 {
+    r.shift - gradient.dot(r.centre - at)
+}
+
 impl Member {
-    /// The shift of sample `r`'s point carried along this member's surface to its pixel
-    /// centre: comparable with [`Member::lo`] and [`Member::hi`] on a slanted surface too.
+    /// Sample `r`'s shift carried along this member's surface to its pixel centre:
+    /// comparable with [`Member::lo`] and [`Member::hi`].
     fn carried(&self, r: &Record) -> f32 {
-        r.shift - self.gradient.dot(r.centre - self.at)
+        carried(r, self.at, self.gradient)
     }
 }
 
@@ -531,7 +540,7 @@ fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)
     let mut shifts: Vec<f32> = records
         .list
         .iter()
-        .map(|r| r.shift - gradient.dot(r.centre - at))
+        .map(|r| carried(r, at, gradient))
         .collect();
     shifts.sort_unstable_by(f32::total_cmp);
     let one = shifts.windows(2).all(|w| w[1] - w[0] <= GAP);
@@ -736,11 +745,11 @@ mod tests {
         (records, own)
     }
 
-    /// Over many trials: the mean of site `site`'s own estimate and of its lent one, and
-    /// the standard error of their difference.
+    /// Over many trials of a `size` x `size` window: the mean and variance of site `site`'s
+    /// own estimate, and of its lent one.
     fn own_and_lent(
+        (size, site): (usize, usize),
         trials: u64,
-        site: usize,
         render: impl Fn(u64) -> (Vec<SiteRecords>, Vec<Estimate>),
     ) -> ((f64, f64), (f64, f64)) {
         let k = kernel(PixelFilterKind::Box);
@@ -748,7 +757,6 @@ mod tests {
         for t in 0..trials {
             let (records, own) = render(t);
             let needy = vec![true; own.len()];
-            let size = (own.len() as f64).sqrt() as usize;
             let lent = lend(&k, (0, 0), (size, size), &records, &own, &needy).unwrap();
             let (a, b) = (
                 f64::from(own[site].mean().x),
@@ -789,7 +797,7 @@ mod tests {
         let field = |c: Vec2| 0.2 + 0.05 * c.x + 0.5 * (0.7 * c.y).sin().abs();
         let site = 12 * 32 + 16;
         let render = |t| lattice(32, 4, 16, 5.0, field, 1000 + t);
-        let ((own_mean, own_var), (lent_mean, lent_var)) = own_and_lent(400, site, render);
+        let ((own_mean, own_var), (lent_mean, lent_var)) = own_and_lent((32, site), 400, render);
         // Both estimate the same value: within 4 standard errors of their difference.
         let se = ((own_var + lent_var) / 400.0).sqrt();
         assert!(
@@ -828,7 +836,8 @@ mod tests {
                 seen,
             };
             let render = |t| slanted(size, 2, 64, plane, field, 5000 + t);
-            let ((own_mean, own_var), (lent_mean, lent_var)) = own_and_lent(trials, site, render);
+            let ((own_mean, own_var), (lent_mean, lent_var)) =
+                own_and_lent((size, site), trials, render);
             assert!(lent_var < own_var / 2.0, "{lent_var} vs {own_var}");
             let se = ((own_var + lent_var) / trials as f64).sqrt();
             (lent_mean - own_mean) / se
