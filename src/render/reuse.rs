@@ -168,20 +168,20 @@ impl SiteRecords {
 
 /// `K(d; s, g)`: the density of the centres of a site's samples at offset `d` from the site,
 /// for points of shift `s` on a surface whose shift changes by `g` per pixel of centre (see
-/// the module documentation). Tabulated over `|d| / (|s| + reach)` and `log2 |s|`: the
+/// the module documentation). Tabulated over `|d|^2 / (|s| + reach)^2` and `log2 |s|`: the
 /// kernel of a surface parallel to the film, `K0(|d|)`, and the first moment `m(|d|)` of the
-/// lens position along `d` under it, which a tilt adds to first order.
+/// lens position along `d` under it (over `|d|`), which a tilt adds to first order.
 #[derive(Debug, Clone)]
 pub struct Kernel {
     reach: f32,
-    /// `[K0, m]` per (shift row, distance bin).
+    /// `[K0, m / |d|]` per (shift row, squared-distance bin).
     table: Vec<[f32; 2]>,
 }
 
 /// Shift bins per doubling, and doublings from [`MIN_SHIFT`].
 const PER_OCTAVE: usize = 8;
 const OCTAVES: usize = 12;
-/// Distance bins from 0 to `|s| + reach`.
+/// Squared-distance bins from 0 to `(|s| + reach)^2`.
 const RADIAL: usize = 64;
 /// The filter's support is integrated on this grid.
 const GRID: usize = 48;
@@ -218,7 +218,11 @@ impl Kernel {
             let s = MIN_SHIFT * (k as f32 / PER_OCTAVE as f32).exp2();
             let area = std::f32::consts::PI * s * s;
             for t in 0..=RADIAL {
-                let r = t as f32 / RADIAL as f32 * (s + reach);
+                // Bins even in the squared distance (no square root to look one up), the
+                // first moment over the distance (it grows linearly from the centre: at the
+                // centre, from half a bin out).
+                let u = (t as f32).max(0.5) / RADIAL as f32;
+                let r = u.sqrt() * (s + reach);
                 // The mass of the filter inside the disc of radius s around d, and its first
                 // moment towards d (over s: the lens position's component along d).
                 let (mass, moment) = dirs.iter().fold((0.0f32, 0.0f32), |acc, &dir| {
@@ -231,7 +235,7 @@ impl Kernel {
                         })
                 });
                 let n = dirs.len() as f32 * area;
-                table.push([mass / n, moment / n]);
+                table.push([mass / n, moment / (n * r)]);
             }
         }
         Self { reach, table }
@@ -257,6 +261,7 @@ impl Kernel {
         ShiftKernel {
             table: &self.table,
             extent: s + self.reach,
+            bins_per_d2: RADIAL as f32 / ((s + self.reach) * (s + self.reach)),
             rows: (k0, (k0 + 1).min(OCTAVES * PER_OCTAVE)),
             fk: ks - k0 as f32,
             scale: if s > widest {
@@ -280,11 +285,13 @@ pub struct ShiftKernel<'a> {
     table: &'a [[f32; 2]],
     /// `s + reach`: the kernel is 0 beyond.
     extent: f32,
+    /// Table bins per square pixel of `|d|^2`.
+    bins_per_d2: f32,
     /// The two shift rows of the table around `s`, and the weight of the second.
     rows: (usize, usize),
     fk: f32,
     scale: f32,
-    /// The shift gradient times the shift's sign: `K = K0 - (tilt . d / |d|) m`.
+    /// The shift gradient times the shift's sign: `K = K0 - tilt . d (m / |d|)`.
     tilt: Vec2,
 }
 
@@ -295,8 +302,7 @@ impl ShiftKernel<'_> {
         if d2 >= self.extent * self.extent {
             return 0.0;
         }
-        let r = d2.sqrt();
-        let kt = r / self.extent * RADIAL as f32;
+        let kt = d2 * self.bins_per_d2;
         let t0 = (kt.floor() as usize).min(RADIAL - 1);
         let ft = kt - t0 as f32;
         let row = |k: usize, i: usize| {
@@ -305,8 +311,7 @@ impl ShiftKernel<'_> {
         };
         let value =
             |i: usize| row(self.rows.0, i) * (1.0 - self.fk) + row(self.rows.1, i) * self.fk;
-        let along = if r > 0.0 { self.tilt.dot(d) / r } else { 0.0 };
-        ((value(0) - along * value(1)) * self.scale).max(0.0)
+        ((value(0) - self.tilt.dot(d) * value(1)) * self.scale).max(0.0)
     }
 }
 
@@ -338,12 +343,10 @@ struct Grid {
     cols: usize,
     rows: usize,
     cells: Vec<Vec<u32>>,
-    /// The greatest [`Member::lo`] of each cell's members (minus infinity when it has none):
-    /// a sample at a shift at least this plus what the steepest member's tilt
-    /// ([`Grid::tilt`]) adds over its reach is nearer than none of them.
-    lo: Vec<f32>,
-    /// The largest shift gradient of each cell's members (0 when it has none).
-    tilt: Vec<f32>,
+    /// Each cell's members' surfaces as one plane: their mean shift gradient, the greatest
+    /// [`Member::lo`] carried along it to the cell's centre (minus infinity when it has no
+    /// members), and how far their gradients stray from the mean ([`Grid::nearer_than_none`]).
+    plane: Vec<(Vec2, f32, f32)>,
     /// The window's size, and the member at each of its pixels (`u32::MAX`: none).
     size: (usize, usize),
     index: Vec<u32>,
@@ -356,28 +359,58 @@ impl Grid {
         let cols = width.div_ceil(CELL as usize).max(1);
         let rows = height.div_ceil(CELL as usize).max(1);
         let mut cells = vec![Vec::new(); cols * rows];
-        let mut lo = vec![f32::NEG_INFINITY; cols * rows];
-        let mut tilt = vec![0.0f32; cols * rows];
         let mut index = vec![u32::MAX; width * height];
         for (i, m) in members.iter().enumerate() {
             let local = m.at - origin;
             let (cx, cy) = ((local.x / CELL) as usize, (local.y / CELL) as usize);
             let cell = cy.min(rows - 1) * cols + cx.min(cols - 1);
             cells[cell].push(i as u32);
-            lo[cell] = lo[cell].max(m.lo);
-            tilt[cell] = tilt[cell].max(m.gradient.length());
             index[m.p] = i as u32;
         }
-        Self {
+        let mut grid = Self {
             origin,
             cols,
             rows,
             cells,
-            lo,
-            tilt,
+            plane: Vec::new(),
             size: (width, height),
             index,
+        };
+        grid.plane = (0..cols * rows)
+            .map(|cell| {
+                let ms = || grid.cells[cell].iter().map(|&i| &members[i as usize]);
+                let n = grid.cells[cell].len().max(1) as f32;
+                let gradient = ms().map(|m| m.gradient).sum::<Vec2>() / n;
+                let centre = grid.centre(cell);
+                let lo = ms()
+                    .map(|m| m.lo + gradient.dot(centre - m.at))
+                    .fold(f32::NEG_INFINITY, f32::max);
+                let spread = ms()
+                    .map(|m| (m.gradient - gradient).length())
+                    .fold(0.0, f32::max);
+                (gradient, lo, spread)
+            })
+            .collect();
+        grid
+    }
+
+    /// Whether a sample of shift `shift` at centre `c` is certainly nearer than none of
+    /// `cell`'s members within `extent` of `c`: for each such member m,
+    /// `shift - m.gradient . (c - m.at) >= m.lo`. With the cell's plane (mean gradient G,
+    /// carried `lo` L, spread D) that holds when `shift - G . (c - centre) - L` is at least
+    /// `D` times the distance to the farthest member, which is at most `extent` and at most
+    /// the distance to the cell's centre plus half its diagonal (tested without a square
+    /// root). Exact on a plane, so only cells where another surface may lie nearer fail.
+    fn nearer_than_none(&self, cell: usize, shift: f32, c: Vec2, extent: f32) -> bool {
+        let (gradient, lo, spread) = self.plane[cell];
+        if lo == f32::NEG_INFINITY {
+            return true;
         }
+        let v = c - self.centre(cell);
+        let margin = shift - gradient.dot(v) - lo;
+        let room = margin - spread * 0.5 * SQRT_2 * CELL;
+        margin >= spread * extent
+            || (room >= 0.0 && spread * spread * v.length_squared() <= room * room)
     }
 
     /// The members within `radius` of `c` at pixels whose coordinates in the image are
@@ -596,9 +629,7 @@ pub fn lend(
         let s = r.shift.abs().max(MIN_SHIFT);
         let extent = (s + reach) * (s + reach);
         for cell in grid.cells_near(r.centre, s + reach) {
-            // Its members lie within half a cell's diagonal of the cell's centre.
-            let far = (r.centre - grid.centre(cell)).length() + 0.5 * SQRT_2 * CELL;
-            if r.shift - grid.tilt[cell] * far.min(s + reach) >= grid.lo[cell] {
+            if grid.nearer_than_none(cell, r.shift, r.centre, s + reach) {
                 continue;
             }
             for &m in &grid.cells[cell] {
