@@ -205,6 +205,10 @@ impl Kernel {
                 }
             }
         }
+        // Where the disc holds the whole filter, its mass and first moment are the filter's.
+        let total: f32 = points.iter().map(|&(_, w)| w).sum();
+        let first: Vec2 = points.iter().map(|&(p, w)| p * w).sum();
+        let corner = SQRT_2 * reach;
         let shifts = OCTAVES * PER_OCTAVE + 1;
         let mut table = Vec::with_capacity(shifts * (RADIAL + 1));
         // Averaged over directions across one octant (the filter's symmetry).
@@ -227,6 +231,12 @@ impl Kernel {
                 // moment towards d (over s: the lens position's component along d).
                 let (mass, moment) = dirs.iter().fold((0.0f32, 0.0f32), |acc, &dir| {
                     let d = dir * r;
+                    if r + corner <= s {
+                        return (acc.0 + total, acc.1 + (total * r - first.dot(dir)) / s);
+                    }
+                    if r - corner > s {
+                        return acc;
+                    }
                     points
                         .iter()
                         .filter(|(p, _)| (*p - d).length_squared() <= s * s)
