@@ -17,6 +17,11 @@ const HEIGHT: u32 = 64;
 /// (blurred to about 6 px) lit by a sun and a sky, and a diffuse sphere at 0.5 m (about
 /// 18 px) across the view.
 fn scene() -> SceneDesc {
+    scene_with_wall("")
+}
+
+/// [`scene`] with more of the wall's material parameters (`extra`, TOML lines).
+fn scene_with_wall(extra: &str) -> SceneDesc {
     let src = format!(
         r#"
 name = "reuse"
@@ -52,6 +57,7 @@ scale = 4
 [[materials]]
 name = "wall"
 texture = "checker"
+{extra}
 
 [[materials]]
 name = "grey"
@@ -170,6 +176,27 @@ fn lending_brings_a_blurred_wall_closer_to_the_reference_and_keeps_depth_edges()
         }
     }
     assert!(edge_tiles >= 3, "the scene has depth edges: {edge_tiles}");
+}
+
+/// The wall glossy (a dielectric of roughness 0.1: its reflection of the sky and the sun
+/// changes over 0.01 rad, less than the aperture subtends from it): its diffuse light is
+/// still lent, its reflection stays with each site, and the image comes closer to the
+/// reference without moving its mean.
+#[test]
+fn a_glossy_wall_lends_its_diffuse_light_and_keeps_its_reflection() {
+    let desc = scene_with_wall("roughness = 0.1");
+    let reference = render(&desc, &settings(Mode::Dense, 1024, false));
+    let own = render(&desc, &settings(Mode::Adaptive, 16, false));
+    let lent = render(&desc, &settings(Mode::Adaptive, 16, true));
+    let mse = |f: &Film| mean(squared_errors(f, &reference).into_iter());
+    let (mse_own, mse_lent) = (mse(&own), mse(&lent));
+    assert!(
+        mse_lent < 0.8 * mse_own,
+        "lending the diffuse part should cut the error: {mse_lent:e} vs {mse_own:e} without"
+    );
+    let brightness = |f: &Film| mean(f.color.iter().map(|c| f64::from(c.x + c.y + c.z) / 3.0));
+    let (b_ref, b_lent) = (brightness(&reference), brightness(&lent));
+    assert!((b_lent / b_ref - 1.0).abs() < 0.01, "{b_lent} vs {b_ref}");
 }
 
 #[test]

@@ -23,6 +23,8 @@ pub struct Estimate {
     wy2: f64,
     /// The brightest sample's luminance.
     peak: f32,
+    /// The variance of a part of the mean estimated apart ([`Estimate::plus`]), luminance.
+    apart: f64,
 }
 
 pub use crate::shade::luminance;
@@ -63,6 +65,24 @@ impl Estimate {
         self.w += w;
         self.w2 += w * w;
         self.blocked_w += w;
+    }
+
+    /// This estimate plus an independent one of mean `mean` whose luminance has variance
+    /// `variance` (of that mean): every sample's value moves by `mean`, so the spread of the
+    /// samples is unchanged, and the standard error counts `variance` too. Nothing changes
+    /// before any weight was added.
+    pub fn plus(mut self, mean: Vec3, variance: f64) -> Self {
+        if self.w <= 0.0 {
+            return self;
+        }
+        let w = f64::from(self.w);
+        let y = f64::from(luminance(mean));
+        self.sum += mean * self.w;
+        self.wy2 += 2.0 * y * self.wy + y * y * w;
+        self.wy += y * w;
+        self.peak += y as f32;
+        self.apart += variance;
+        self
     }
 
     /// The brightest sample's luminance (0 before any sample).
@@ -146,7 +166,12 @@ impl Estimate {
         }
         let w = f64::from(self.w);
         let mean = self.wy / w;
-        self.error_of_mean((self.wy2 / w - mean * mean).max(0.0)) as f32
+        let spread = self.error_of_mean((self.wy2 / w - mean * mean).max(0.0));
+        if self.apart > 0.0 {
+            (spread * spread + self.apart).sqrt() as f32
+        } else {
+            spread as f32
+        }
     }
 
     /// [`Estimate::std_error`] in code values: how far one standard error above the mean

@@ -25,6 +25,9 @@ type Numbers = [f32; PATH_DIMENSIONS];
 pub struct PathScratch {
     shadow: ShadowPacket16,
     points: SurfacePoints16,
+    /// While the first surfaces' light samples are taken for [`FirstHits::view_dependent`]:
+    /// the part of their light the specular lobes carry.
+    view_dependent: Option<[Vec3; LANES]>,
 }
 
 /// One path's state between bounces.
@@ -177,6 +180,10 @@ pub struct FirstHits {
     pub view_alpha: [f32; LANES],
     /// The geometric normal there, world space, not normalised (zero for misses).
     pub normal: [Vec3; LANES],
+    /// When asked for (`Some` before tracing), the part of each lane's radiance that the
+    /// first surface's specular lobes carry ([`Bsdf::eval_diffuse`] says what the rest is):
+    /// what may change across the aperture faster than [`FirstHits::view_alpha`] allows.
+    pub view_dependent: Option<[Vec3; LANES]>,
 }
 
 impl FirstHits {
@@ -205,6 +212,7 @@ impl Default for FirstHits {
             t: [f32::INFINITY; LANES],
             view_alpha: [0.0; LANES],
             normal: [Vec3::ZERO; LANES],
+            view_dependent: None,
         }
     }
 }
@@ -233,6 +241,11 @@ pub fn trace_path(
     }
     let mut t = [f32::INFINITY; LANES];
     let mut shared = [None; LANES];
+    // For the view-dependent split: the radiance once the first surfaces' light samples are
+    // in, and the specular share of what each path carries from there on.
+    let split = first.view_dependent.is_some();
+    let mut after_first: Option<[Vec3; LANES]> = None;
+    let mut specular_share = [Vec3::ZERO; LANES];
     let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
     for bounce in 0..=limits.total {
         tally.bounce = bounce;
@@ -291,6 +304,10 @@ pub fn trace_path(
             lanes: &lanes,
             glossy: light_traced.glossy.as_ref().filter(|_| bounce == 0),
         };
+        let first_split = split && bounce == 0;
+        if first_split {
+            scratch.view_dependent = Some([Vec3::ZERO; LANES]);
+        }
         next_event(
             world,
             &at,
@@ -299,11 +316,19 @@ pub fn trace_path(
             radiance,
             tally,
         );
+        if first_split {
+            first.view_dependent = scratch.view_dependent.take();
+            after_first = Some(*radiance);
+        }
         packet.clear();
         for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
             let n = scratch.points.get(lane).normal;
             let u = &numbers[lane];
             if let Some(ray) = scatter(&v, lane, n, wo[lane], u, limits, bounce, &mut lanes[lane]) {
+                if first_split {
+                    specular_share[lane] =
+                        specular_share_of(&v.bsdf[lane], n, wo[lane], &ray, &lanes[lane]);
+                }
                 packet.set(lane, &ray);
             }
         }
@@ -311,6 +336,34 @@ pub fn trace_path(
         hint = RayHint::Incoherent;
     }
     tally.bounce = 0;
+    // What the paths gathered after their first scattering divides as that scattering did.
+    if let (Some(vd), Some(after)) = (first.view_dependent.as_mut(), after_first) {
+        for lane in 0..LANES {
+            vd[lane] += (radiance[lane] - after[lane]) * specular_share[lane];
+        }
+    }
+}
+
+/// The share, per channel, of a first scattering's weight that the specular lobes carry: 1
+/// from a delta lobe, else `1 - eval_diffuse / (pdf weight)` at the direction drawn.
+fn specular_share_of(b: &Bsdf, n: Vec3, wo: Vec3, ray: &Ray, s: &Lane) -> Vec3 {
+    if s.delta {
+        return Vec3::ONE;
+    }
+    let total = s.throughput * s.pdf;
+    let diffuse = b.eval_diffuse(n, wo, ray.dir);
+    let share = |d: f32, t: f32| {
+        if t > 0.0 {
+            (1.0 - d / t).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    Vec3::new(
+        share(diffuse.x, total.x),
+        share(diffuse.y, total.y),
+        share(diffuse.z, total.z),
+    )
 }
 
 /// The clamp on light that reaches the camera after `scatterings` scatterings: light after at
@@ -523,6 +576,9 @@ fn shadow_packet(
     let mut to_light = [[0.0f32; LANES]; 3];
     let mut seg_end = [0.0f32; LANES];
     let mut contribution = [Vec3::ZERO; LANES];
+    // Its specular lobes' part, when the first surfaces' light is split.
+    let split = scratch.view_dependent.is_some();
+    let mut specular = [Vec3::ZERO; LANES];
     let mut lit = 0u32;
     let Shading {
         hits,
@@ -575,6 +631,22 @@ fn shadow_packet(
             continue;
         }
         contribution[lane] = clamped(c, clamp);
+        if split {
+            let diffuse = v.bsdf[lane].eval_diffuse(n, wo[lane], es.dir);
+            let share = |d: f32, t: f32| {
+                if t > 0.0 {
+                    (1.0 - d / t).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                }
+            };
+            let s = Vec3::new(
+                share(diffuse.x, f.x),
+                share(diffuse.y, f.y),
+                share(diffuse.z, f.z),
+            );
+            specular[lane] = contribution[lane] * s;
+        }
         let o = v.origins.at(lane, es.dir.dot(n) >= 0.0);
         for k in 0..3 {
             origin[k][lane] = o[k];
@@ -598,6 +670,9 @@ fn shadow_packet(
     for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
         if shadow.is_active(lane) && !shadow.occluded(lane) {
             radiance[lane] += contribution[lane];
+            if let Some(vd) = scratch.view_dependent.as_mut() {
+                vd[lane] += specular[lane];
+            }
         }
     }
 }

@@ -11,8 +11,8 @@
 //! found a point at depth z, which lens position l' images at `c + s(z) (l'.x, -l'.y)`
 //! ([`Reprojection`]): a *trajectory* through pixel x lens space, `c` its centre. Where the
 //! point is seen from the whole aperture and looks the same from all of it (a rough surface,
-//! [`crate::shade::Bsdf::view_alpha`]), the sample's radiance is the radiance of every pair
-//! (x', l') on its trajectory. Written over centres, pixel p's value (the filter- and
+//! [`crate::shade::Bsdf::view_alpha`], or a glossy one's diffuse light), the sample's
+//! radiance is the radiance of every pair (x', l') on its trajectory. Written over centres, pixel p's value (the filter- and
 //! lens-averaged radiance) is `I(p) = ∫ L(c) K_p(c) dc` with
 //! `K_p(c) = (1 / π) ∫_disc f(c + s l - p) dl`, and `K_q` is exactly the density of the
 //! centres of site q's own samples. So the samples of all sites near p are samples of `I(p)`
@@ -34,8 +34,14 @@
 //!   wider than [`GAP`] between them; two surfaces at different depths make a gap), and no
 //!   sample of any site crosses its footprint from nearer than that cluster (a foreground
 //!   edge its own samples missed). A sample goes only to sites of its cluster.
-//! - View dependence: a sample lends only where its surface's [`view_alpha`] is at least
-//!   [`VIEW_MARGIN`] times the angle the aperture subtends from it.
+//! - View dependence: where its surface's [`view_alpha`] is under [`VIEW_MARGIN`] times the
+//!   angle the aperture subtends from it, a sample lends only the light its diffuse layer
+//!   sent ([`crate::shade::Bsdf::eval_diffuse`]; the path tracer splits each sample's
+//!   radiance by its first scattering's lobes). The rest, [`Record::own`], stays with its
+//!   site: a receiver's value is the lent estimate of the diffuse light plus the mean of its
+//!   own samples' view-dependent parts, whose variance its standard error counts. The
+//!   diffuse layer's light changes with the viewer only through the specular layer's
+//!   albedo above it (`1 - E(wo)`), slowly except at grazing angles: a small bias left.
 //! - Sharp samples (`|s|` under [`MIN_SHIFT`]) and lenses other than a round thin lens with
 //!   the box lens filter ([`crate::camera::Lens::reprojection`]).
 //!
@@ -60,7 +66,7 @@ use std::f32::consts::SQRT_2;
 
 use glam::{Vec2, Vec3};
 
-use super::estimate::Estimate;
+use super::estimate::{Estimate, luminance};
 use crate::camera::Reprojection;
 use crate::filter::FilterDensity;
 use crate::limits::{MemoryError, try_vec};
@@ -96,6 +102,10 @@ pub struct Record {
     pub gradient: Vec2,
     /// Its radiance (exposure applied).
     pub radiance: Vec3,
+    /// The part of `radiance` that stays with its own site: what its surface's specular
+    /// lobes sent where they are too narrow for the aperture (see the module documentation);
+    /// zero where all of it holds along its trajectory.
+    pub own: Vec3,
     /// Whether its camera ray hit geometry (coverage).
     pub hit: bool,
     /// Whether its radiance holds for its whole trajectory (see the module documentation).
@@ -105,32 +115,43 @@ pub struct Record {
 impl Record {
     /// The record of a sample at `film` through lens position `lens` whose ray met a point at
     /// `depth` along the view axis, `distance` from the lens, on a surface whose shift
-    /// changes by `gradient` per pixel, where what it saw may change over `view_alpha`
-    /// radians; the aperture's radius is `aperture_radius`.
+    /// changes by `gradient` per pixel, where the part `view_dependent` of its radiance may
+    /// change over `view_alpha` radians; the aperture's radius is `aperture_radius`.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         reprojection: &Reprojection,
         aperture_radius: f32,
         (film, lens): (Vec2, Vec2),
         (depth, distance, gradient): (f32, f32, Vec2),
-        view_alpha: f32,
+        (view_alpha, view_dependent): (f32, Vec3),
         radiance: Vec3,
         hit: bool,
     ) -> Self {
         let shift = reprojection.shift(depth);
         let aperture_angle = 2.0 * aperture_radius / distance;
+        let own = if view_alpha >= VIEW_MARGIN * aperture_angle {
+            Vec3::ZERO
+        } else {
+            view_dependent
+        };
         Self {
             centre: Reprojection::centre(film, lens, shift),
             shift,
             gradient,
             radiance,
+            own,
             hit,
             lends: shift.abs() >= MIN_SHIFT
-                && view_alpha >= VIEW_MARGIN * aperture_angle
                 && gradient.length() <= MAX_TILT
                 && radiance.is_finite()
+                && own.is_finite()
                 && shift.is_finite(),
         }
+    }
+
+    /// The part of its radiance that holds along its whole trajectory: what it lends.
+    fn lent(&self) -> Vec3 {
+        self.radiance - self.own
     }
 }
 
@@ -548,7 +569,7 @@ fn lend_one(
     for &(k, q) in near.iter() {
         let other = &members[q as usize];
         if other.needy && k > 0.0 {
-            pooled[q as usize].add(r.radiance, k / density(other, k), r.hit);
+            pooled[q as usize].add(r.lent(), k / density(other, k), r.hit);
         }
     }
 }
@@ -566,6 +587,24 @@ impl Member {
     fn carried(&self, r: &Record) -> f32 {
         carried(r, self.at, self.gradient)
     }
+}
+
+/// The mean of the parts of a site's samples that stay with it ([`Record::own`]) and the
+/// variance of that mean's luminance; `None` when they are all zero.
+fn own_part(records: &SiteRecords) -> Option<(Vec3, f64)> {
+    let list = &records.list;
+    if list.iter().all(|r| r.own == Vec3::ZERO) {
+        return None;
+    }
+    let n = list.len() as f64;
+    let mean = list.iter().map(|r| r.own).sum::<Vec3>() / list.len() as f32;
+    let y = f64::from(luminance(mean));
+    let spread: f64 = list
+        .iter()
+        .map(|r| (f64::from(luminance(r.own)) - y).powi(2))
+        .sum();
+    let variance = if n > 1.0 { spread / (n - 1.0) / n } else { 0.0 };
+    Some((mean, variance))
 }
 
 /// The mean shift gradient of a site's samples.
@@ -670,9 +709,12 @@ pub fn lend(
         }
     }
     for (m, member) in members.iter().enumerate() {
-        let lent = &pooled[m];
+        let lent = pooled[m];
         if member.needy && !covered[m] && lent.n > 0 && lent.mean().is_finite() {
-            out[member.p] = *lent;
+            out[member.p] = match own_part(&records[member.p]) {
+                Some((mean, variance)) => lent.plus(mean, variance),
+                None => lent,
+            };
         }
     }
     Ok(out)
@@ -776,6 +818,7 @@ mod tests {
                         shift,
                         gradient: plane.seen,
                         radiance,
+                        own: Vec3::ZERO,
                         hit: true,
                         lends: true,
                     });
@@ -913,20 +956,80 @@ mod tests {
     }
 
     #[test]
-    fn glossy_and_sharp_samples_do_not_lend() {
+    fn a_view_dependent_part_stays_with_its_site() {
+        let k = kernel(PixelFilterKind::Box);
+        let field = |c: Vec2| 0.2 + 0.5 * (0.7 * c.y).sin().abs();
+        let (records, own) = lattice(32, 4, 16, 5.0, field, 77);
+        let needy = [true; 32 * 32];
+        let plain = lend(&k, (0, 0), (32, 32), &records, &own, &needy).unwrap();
+        // Every sample gains a glossy part of its own site's (one site's much brighter and
+        // noisy), which may not travel to other lens positions.
+        let bright = 16 * 32 + 16;
+        let mut glossy = records.clone();
+        let mut own_glossy = vec![Estimate::default(); own.len()];
+        for (p, site) in glossy.iter_mut().enumerate() {
+            for (i, r) in site.list.iter_mut().enumerate() {
+                let part = if p == bright {
+                    Vec3::splat(2.0 + uniform(i as u64))
+                } else {
+                    Vec3::splat(0.1 * (p % 3) as f32)
+                };
+                r.radiance += part;
+                r.own = part;
+                own_glossy[p].add(r.radiance, 1.0, r.hit);
+            }
+        }
+        let lent = lend(&k, (0, 0), (32, 32), &glossy, &own_glossy, &needy).unwrap();
+        let mut borrowed = 0;
+        for p in (0..own.len()).filter(|&p| plain[p] != own[p]) {
+            borrowed += 1;
+            // The lent part is as before; the site's own glossy mean is added to it.
+            let list = &glossy[p].list;
+            let mean = list.iter().map(|r| r.own).sum::<Vec3>() / list.len() as f32;
+            let want = plain[p].mean() + mean;
+            assert!(
+                (lent[p].mean() - want).abs().max_element() < 1e-5,
+                "site {p}"
+            );
+            // Its noise counts in the site's standard error.
+            assert!(
+                lent[p].std_error() >= plain[p].std_error() * 0.999,
+                "site {p}"
+            );
+        }
+        assert!(borrowed > 20, "{borrowed} sites borrowed");
+        // The bright site's glossy noise (uniform: variance 1/12 over 16 samples).
+        let extra = lent[bright].std_error().powi(2) - plain[bright].std_error().powi(2);
+        assert!((extra - 1.0 / 12.0 / 16.0).abs() < 0.003, "{extra}");
+    }
+
+    #[test]
+    fn glossy_samples_lend_only_their_diffuse_part_and_sharp_ones_nothing() {
         let re = Reprojection {
             scale: 100.0,
             inv_focus_distance: 0.5,
         };
         let at = (Vec2::new(10.0, 10.0), Vec2::new(0.3, -0.2));
-        // 4 m away, a 0.05 radius aperture subtends 0.025 rad: alpha 0.2 lends, 0.05 does not.
-        let rough = Record::new(&re, 0.05, at, (4.0, 4.0, Vec2::ZERO), 0.2, Vec3::ONE, true);
-        let glossy = Record::new(&re, 0.05, at, (4.0, 4.0, Vec2::ZERO), 0.05, Vec3::ONE, true);
+        // 4 m away, a 0.05 radius aperture subtends 0.025 rad: alpha 0.2 lends all of the
+        // sample, 0.05 keeps its specular part (0.3 of it) to itself.
+        let spec = Vec3::splat(0.3);
+        let flat = (4.0, 4.0, Vec2::ZERO);
+        let rough = Record::new(&re, 0.05, at, flat, (0.2, spec), Vec3::ONE, true);
+        let glossy = Record::new(&re, 0.05, at, flat, (0.05, spec), Vec3::ONE, true);
         // Seen nearly edge-on, its images stretch too much across the lens to lend.
         let steep = Vec2::new(0.0, MAX_TILT * 1.1);
-        let edge_on = Record::new(&re, 0.05, at, (4.0, 4.0, steep), 0.2, Vec3::ONE, true);
+        let edge_on = Record::new(
+            &re,
+            0.05,
+            at,
+            (4.0, 4.0, steep),
+            (0.2, spec),
+            Vec3::ONE,
+            true,
+        );
         assert!(!edge_on.lends);
-        assert!(rough.lends && !glossy.lends);
+        assert!(rough.lends && rough.own == Vec3::ZERO && rough.lent() == Vec3::ONE);
+        assert!(glossy.lends && glossy.own == spec && glossy.lent() == Vec3::splat(0.7));
         assert!((rough.shift - 25.0).abs() < 1e-4);
         // Its centre is where the lens centre sees it: film - shift (l.x, -l.y).
         assert!((rough.centre - Vec2::new(10.0 - 7.5, 10.0 - 5.0)).length() < 1e-4);
@@ -936,7 +1039,7 @@ mod tests {
             0.05,
             at,
             (2.0, 2.0, Vec2::ZERO),
-            f32::INFINITY,
+            (f32::INFINITY, Vec3::ZERO),
             Vec3::ONE,
             true,
         );

@@ -243,6 +243,10 @@ impl SiteShader<'_> {
         packet.set_lanes_masked(wanted, &origin, &dir);
         let mut radiance = [Vec3::ZERO; LANES];
         let mut first = path::FirstHits::default();
+        if records.is_some() {
+            // Reuse lends the part of each sample that holds across the aperture.
+            first.view_dependent = Some([Vec3::ZERO; LANES]);
+        }
         match self.settings.integrator {
             Integrator::Path => path::trace_path(
                 self.world,
@@ -300,7 +304,9 @@ impl SiteShader<'_> {
                 let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
                 let l = radiance[lane] * scale;
                 let hit = t.is_finite();
-                let alpha = first.view_alpha[lane];
+                // Without the split, all of it may depend on the view.
+                let view = first.view_dependent.map_or(l, |vd| vd[lane] * scale);
+                let alpha = (first.view_alpha[lane], view);
                 let o = Vec3::new(origin[0][lane], origin[1][lane], origin[2][lane]);
                 let point = o + d * t - self.camera.eye;
                 let gradient = re.gradient(self.camera, point, first.normal[lane]);

@@ -223,6 +223,17 @@ impl Setup {
         (dv, d * 0.5 / (self.cos_o + self.s_o))
     }
 
+    /// The diffuse layer's `f |cos_i|` at `wi` (a part of [`Setup::eval_pdf`]'s).
+    fn eval_diffuse(&self, n: Vec3, wi: Vec3) -> Vec3 {
+        let cos_i = n.dot(wi);
+        if cos_i > 0.0 {
+            let lambert = cos_i * FRAC_1_PI;
+            self.base * (self.w_diffuse * (1.0 - self.fo) * lambert)
+        } else {
+            Vec3::ZERO
+        }
+    }
+
     /// `f |cos_i|` and the non-delta sampling density at `wi`.
     fn eval_pdf(&self, n: Vec3, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
         let cos_i = n.dot(wi);
@@ -236,7 +247,7 @@ impl Setup {
             // times the light it receives at grazing angles; `1 - F(n . wo)` would lose up to
             // 70% of a rough one's light there.
             let _ = fd;
-            let mut f = self.base * (self.w_diffuse * (1.0 - self.fo) * lambert);
+            let mut f = self.eval_diffuse(n, wi);
             let mut pdf = (1.0 - self.p_micro) * lambert;
             if !self.delta {
                 let (dv, density) = self.reflection_terms(n, h, cos_i);
@@ -321,6 +332,14 @@ impl Bsdf {
     /// `f(wo, wi) |n . wi|`, without the delta lobes.
     pub fn eval(&self, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
         self.eval_pdf(n, wo, wi).0
+    }
+
+    /// The part of [`Bsdf::eval`] the diffuse layer sends (the rest, the specular
+    /// reflection and transmission, is what changes quickly with the viewer: what
+    /// [`Bsdf::view_alpha`] measures). The viewer's direction changes it only through the
+    /// specular layer's albedo above it, slowly except at grazing angles.
+    pub fn eval_diffuse(&self, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
+        Setup::new(self, n, wo).map_or(Vec3::ZERO, |s| s.eval_diffuse(n, wi))
     }
 
     /// The solid-angle density with which [`Bsdf::sample`] draws `wi` (zero for delta lobes).
