@@ -245,7 +245,7 @@ pub fn trace_path(
     // in, and the specular share of what each path carries from there on.
     let split = first.view_dependent.is_some();
     let mut after_first: Option<[Vec3; LANES]> = None;
-    let mut specular_share = [Vec3::ZERO; LANES];
+    let mut specular_shares = [Vec3::ZERO; LANES];
     let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
     for bounce in 0..=limits.total {
         tally.bounce = bounce;
@@ -326,8 +326,8 @@ pub fn trace_path(
             let u = &numbers[lane];
             if let Some(ray) = scatter(&v, lane, n, wo[lane], u, limits, bounce, &mut lanes[lane]) {
                 if first_split {
-                    specular_share[lane] =
-                        specular_share_of(&v.bsdf[lane], n, wo[lane], &ray, &lanes[lane]);
+                    specular_shares[lane] =
+                        first_specular_share(&v.bsdf[lane], n, wo[lane], &ray, &lanes[lane]);
                 }
                 packet.set(lane, &ray);
             }
@@ -339,20 +339,25 @@ pub fn trace_path(
     // What the paths gathered after their first scattering divides as that scattering did.
     if let (Some(vd), Some(after)) = (first.view_dependent.as_mut(), after_first) {
         for lane in 0..LANES {
-            vd[lane] += (radiance[lane] - after[lane]) * specular_share[lane];
+            vd[lane] += (radiance[lane] - after[lane]) * specular_shares[lane];
         }
     }
 }
 
 /// The share, per channel, of a first scattering's weight that the specular lobes carry: 1
 /// from a delta lobe, else `1 - eval_diffuse / (pdf weight)` at the direction drawn.
-fn specular_share_of(b: &Bsdf, n: Vec3, wo: Vec3, ray: &Ray, s: &Lane) -> Vec3 {
+fn first_specular_share(b: &Bsdf, n: Vec3, wo: Vec3, ray: &Ray, s: &Lane) -> Vec3 {
     if s.delta {
         return Vec3::ONE;
     }
-    let total = s.throughput * s.pdf;
-    let diffuse = b.eval_diffuse(n, wo, ray.dir);
-    let share = |d: f32, t: f32| {
+    // At the first bounce the throughput is the weight, `f |cos| / pdf`.
+    specular_share(s.throughput * s.pdf, b.eval_diffuse(n, wo, ray.dir))
+}
+
+/// Per channel, the share of a BSDF value `total` (`f |cos|`) that its diffuse part
+/// `diffuse` is not (0 where `total` is).
+fn specular_share(total: Vec3, diffuse: Vec3) -> Vec3 {
+    let share = |t: f32, d: f32| {
         if t > 0.0 {
             (1.0 - d / t).clamp(0.0, 1.0)
         } else {
@@ -360,9 +365,9 @@ fn specular_share_of(b: &Bsdf, n: Vec3, wo: Vec3, ray: &Ray, s: &Lane) -> Vec3 {
         }
     };
     Vec3::new(
-        share(diffuse.x, total.x),
-        share(diffuse.y, total.y),
-        share(diffuse.z, total.z),
+        share(total.x, diffuse.x),
+        share(total.y, diffuse.y),
+        share(total.z, diffuse.z),
     )
 }
 
@@ -633,19 +638,7 @@ fn shadow_packet(
         contribution[lane] = clamped(c, clamp);
         if split {
             let diffuse = v.bsdf[lane].eval_diffuse(n, wo[lane], es.dir);
-            let share = |d: f32, t: f32| {
-                if t > 0.0 {
-                    (1.0 - d / t).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                }
-            };
-            let s = Vec3::new(
-                share(diffuse.x, f.x),
-                share(diffuse.y, f.y),
-                share(diffuse.z, f.z),
-            );
-            specular[lane] = contribution[lane] * s;
+            specular[lane] = contribution[lane] * specular_share(f, diffuse);
         }
         let o = v.origins.at(lane, es.dir.dot(n) >= 0.0);
         for k in 0..3 {
