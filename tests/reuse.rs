@@ -115,6 +115,13 @@ fn squared_errors(film: &Film, reference: &Film) -> Vec<f64> {
         .collect()
 }
 
+/// Unbiased: the image's mean brightness stays the reference's (within 1%).
+fn assert_keeps_brightness(film: &Film, reference: &Film) {
+    let brightness = |f: &Film| mean(f.color.iter().map(|c| f64::from(c.x + c.y + c.z) / 3.0));
+    let (b_ref, b) = (brightness(reference), brightness(film));
+    assert!((b / b_ref - 1.0).abs() < 0.01, "{b} vs {b_ref}");
+}
+
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let (sum, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
     sum / n as f64
@@ -139,10 +146,7 @@ fn lending_brings_a_blurred_wall_closer_to_the_reference_and_keeps_depth_edges()
         "lending should cut the error: {mse_lent:e} vs {mse_own:e} without"
     );
 
-    // Unbiased: the image's mean brightness stays the reference's.
-    let brightness = |f: &Film| mean(f.color.iter().map(|c| f64::from(c.x + c.y + c.z) / 3.0));
-    let (b_ref, b_lent) = (brightness(&reference), brightness(&lent));
-    assert!((b_lent / b_ref - 1.0).abs() < 0.01, "{b_lent} vs {b_ref}");
+    assert_keeps_brightness(&lent, &reference);
 
     // Near the depth edges (pixels whose CoC differs from a neighbour's within 4 px by more
     // than 4 px: the foreground sphere's blurred rim over the wall), no 8 x 8 tile is worse.
@@ -194,9 +198,7 @@ fn a_glossy_wall_lends_its_diffuse_light_and_keeps_its_reflection() {
         mse_lent < 0.8 * mse_own,
         "lending the diffuse part should cut the error: {mse_lent:e} vs {mse_own:e} without"
     );
-    let brightness = |f: &Film| mean(f.color.iter().map(|c| f64::from(c.x + c.y + c.z) / 3.0));
-    let (b_ref, b_lent) = (brightness(&reference), brightness(&lent));
-    assert!((b_lent / b_ref - 1.0).abs() < 0.01, "{b_lent} vs {b_ref}");
+    assert_keeps_brightness(&lent, &reference);
 }
 
 #[test]
