@@ -232,20 +232,10 @@ pub fn trace_path(
     scratch: &mut PathScratch,
     tally: &mut Tally,
 ) {
-    let mut lanes = [Lane::CAMERA; LANES];
-    for lane in 0..LANES {
-        if packet.is_active(lane) {
-            radiance[lane] = Vec3::ZERO;
-            lanes[lane].from = packet.ray(lane).origin;
-        }
-    }
+    let mut lanes = camera_lanes(packet, radiance);
     let mut t = [f32::INFINITY; LANES];
     let mut shared = [None; LANES];
-    // For the view-dependent split: the radiance once the first surfaces' light samples are
-    // in, and the specular share of what each path carries from there on.
-    let split = first.view_dependent.is_some();
-    let mut after_first: Option<[Vec3; LANES]> = None;
-    let mut specular_shares = [Vec3::ZERO; LANES];
+    let mut split = first.view_dependent.is_some().then(ViewSplit::default);
     let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
     for bounce in 0..=limits.total {
         tally.bounce = bounce;
@@ -304,29 +294,20 @@ pub fn trace_path(
             lanes: &lanes,
             glossy: light_traced.glossy.as_ref().filter(|_| bounce == 0),
         };
-        let first_split = split && bounce == 0;
-        if first_split {
-            scratch.view_dependent = Some([Vec3::ZERO; LANES]);
-        }
-        next_event(
-            world,
-            &at,
-            clamp_after(limits, bounce + 1),
-            scratch,
-            radiance,
-            tally,
-        );
-        if first_split {
-            first.view_dependent = scratch.view_dependent.take();
-            after_first = Some(*radiance);
+        let clamp = clamp_after(limits, bounce + 1);
+        let mut split_here = split.as_mut().filter(|_| bounce == 0);
+        if let Some(s) = split_here.as_deref_mut() {
+            s.light(first, world, &at, clamp, scratch, radiance, tally);
+        } else {
+            next_event(world, &at, clamp, scratch, radiance, tally);
         }
         packet.clear();
         for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
             let n = scratch.points.get(lane).normal;
             let u = &numbers[lane];
             if let Some(ray) = scatter(&v, lane, n, wo[lane], u, limits, bounce, &mut lanes[lane]) {
-                if first_split {
-                    specular_shares[lane] =
+                if let Some(s) = split_here.as_deref_mut() {
+                    s.shares[lane] =
                         first_specular_share(&v.bsdf[lane], n, wo[lane], &ray, &lanes[lane]);
                 }
                 packet.set(lane, &ray);
@@ -336,10 +317,47 @@ pub fn trace_path(
         hint = RayHint::Incoherent;
     }
     tally.bounce = 0;
-    // What the paths gathered after their first scattering divides as that scattering did.
-    if let (Some(vd), Some(after)) = (first.view_dependent.as_mut(), after_first) {
-        for lane in 0..LANES {
-            vd[lane] += (radiance[lane] - after[lane]) * specular_shares[lane];
+    if let Some(s) = split {
+        s.finish(first, radiance);
+    }
+}
+
+/// [`FirstHits::view_dependent`] while the paths are traced.
+#[derive(Default)]
+struct ViewSplit {
+    /// The radiance once the first surfaces' light samples are in (none: no path got there).
+    after_first: Option<[Vec3; LANES]>,
+    /// Per lane, the specular share of what the path carries after its first scattering.
+    shares: [Vec3; LANES],
+}
+
+impl ViewSplit {
+    /// [`next_event`] at the first surfaces, noting the part of the light their specular
+    /// lobes reflect.
+    #[allow(clippy::too_many_arguments)]
+    fn light(
+        &mut self,
+        first: &mut FirstHits,
+        world: &World,
+        at: &Shading,
+        clamp: f32,
+        scratch: &mut PathScratch,
+        radiance: &mut [Vec3; LANES],
+        tally: &mut Tally,
+    ) {
+        scratch.view_dependent = Some([Vec3::ZERO; LANES]);
+        next_event(world, at, clamp, scratch, radiance, tally);
+        first.view_dependent = scratch.view_dependent.take();
+        self.after_first = Some(*radiance);
+    }
+
+    /// Adds to the view-dependent part what the paths gathered after their first
+    /// scattering, divided as that scattering divided its weight.
+    fn finish(self, first: &mut FirstHits, radiance: &[Vec3; LANES]) {
+        if let (Some(vd), Some(after)) = (first.view_dependent.as_mut(), self.after_first) {
+            for lane in 0..LANES {
+                vd[lane] += (radiance[lane] - after[lane]) * self.shares[lane];
+            }
         }
     }
 }
@@ -369,6 +387,16 @@ fn specular_share(total: Vec3, diffuse: Vec3) -> Vec3 {
         share(total.y, diffuse.y),
         share(total.z, diffuse.z),
     )
+}
+
+/// The state of the camera rays of `packet`'s active lanes, whose radiance is cleared.
+fn camera_lanes(packet: &RayPacket16, radiance: &mut [Vec3; LANES]) -> [Lane; LANES] {
+    let mut lanes = [Lane::CAMERA; LANES];
+    for lane in (0..LANES).filter(|&l| packet.is_active(l)) {
+        radiance[lane] = Vec3::ZERO;
+        lanes[lane].from = packet.ray(lane).origin;
+    }
+    lanes
 }
 
 /// The clamp on light that reaches the camera after `scatterings` scatterings: light after at
