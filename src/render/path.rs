@@ -609,9 +609,8 @@ fn shadow_packet(
     let mut to_light = [[0.0f32; LANES]; 3];
     let mut seg_end = [0.0f32; LANES];
     let mut contribution = [Vec3::ZERO; LANES];
-    // Its specular lobes' part, when the first surfaces' light is split.
-    let split = scratch.view_dependent.is_some();
-    let mut specular = [Vec3::ZERO; LANES];
+    // The specular lobes' part of each contribution, when the first surfaces' light is split.
+    let mut specular = scratch.view_dependent.map(|_| [Vec3::ZERO; LANES]);
     let mut lit = 0u32;
     let Shading {
         hits,
@@ -664,9 +663,9 @@ fn shadow_packet(
             continue;
         }
         contribution[lane] = clamped(c, clamp);
-        if split {
+        if let Some(sp) = specular.as_mut() {
             let diffuse = v.bsdf[lane].eval_diffuse(n, wo[lane], es.dir);
-            specular[lane] = contribution[lane] * specular_share(f, diffuse);
+            sp[lane] = contribution[lane] * specular_share(f, diffuse);
         }
         let o = v.origins.at(lane, es.dir.dot(n) >= 0.0);
         for k in 0..3 {
@@ -691,8 +690,8 @@ fn shadow_packet(
     for lane in (0..LANES).filter(|&l| lit & (1 << l) != 0) {
         if shadow.is_active(lane) && !shadow.occluded(lane) {
             radiance[lane] += contribution[lane];
-            if let Some(vd) = scratch.view_dependent.as_mut() {
-                vd[lane] += specular[lane];
+            if let (Some(vd), Some(sp)) = (scratch.view_dependent.as_mut(), &specular) {
+                vd[lane] += sp[lane];
             }
         }
     }

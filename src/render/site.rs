@@ -294,26 +294,43 @@ impl SiteShader<'_> {
             }
             estimates[b.pixel[lane]].add(radiance[lane] * (scale * lens_weight[lane]), w, hit);
         }
-        if let (Some(records), Some(re)) = (records, self.camera.reprojection()) {
-            let r = self.camera.aperture_radius();
-            for lane in 0..b.len {
-                let d = Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
-                let t = first.t[lane];
-                let depth = t * d.dot(self.camera.forward);
-                let film = Vec2::new(b.film_x[lane], b.film_y[lane]);
-                let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
-                let l = radiance[lane] * scale;
-                let hit = t.is_finite();
-                // Without the split, all of it may depend on the view.
-                let view = first.view_dependent.map_or(l, |vd| vd[lane] * scale);
-                let alpha = (first.view_alpha[lane], view);
-                let o = Vec3::new(origin[0][lane], origin[1][lane], origin[2][lane]);
-                let point = o + d * t - self.camera.eye;
-                let gradient = re.gradient(self.camera, point, first.normal[lane]);
-                let at = (depth, t, gradient);
-                let record = Record::new(&re, r, (film, lens), at, alpha, l, hit);
-                records[b.pixel[lane]].push(record);
-            }
+        if let Some(records) = records {
+            self.record(b, (&origin, &dir), &radiance, &first, records);
+        }
+    }
+
+    /// Keeps each sample of batch `b` (camera rays `rays`, radiance `radiance`, what they
+    /// hit first `first`) in its pixel's records for lending ([`crate::render::reuse`]).
+    fn record(
+        &self,
+        b: &Batch,
+        (origin, dir): (&[[f32; LANES]; 3], &[[f32; LANES]; 3]),
+        radiance: &[Vec3; LANES],
+        first: &path::FirstHits,
+        records: &mut [SiteRecords],
+    ) {
+        let Some(re) = self.camera.reprojection() else {
+            return;
+        };
+        let scale = self.settings.exposure.exp2();
+        let r = self.camera.aperture_radius();
+        for lane in 0..b.len {
+            let d = Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
+            let t = first.t[lane];
+            let depth = t * d.dot(self.camera.forward);
+            let film = Vec2::new(b.film_x[lane], b.film_y[lane]);
+            let lens = Vec2::new(b.lens_x[lane], b.lens_y[lane]);
+            let l = radiance[lane] * scale;
+            let hit = t.is_finite();
+            // Without the split, all of it may depend on the view.
+            let view = first.view_dependent.map_or(l, |vd| vd[lane] * scale);
+            let alpha = (first.view_alpha[lane], view);
+            let o = Vec3::new(origin[0][lane], origin[1][lane], origin[2][lane]);
+            let point = o + d * t - self.camera.eye;
+            let gradient = re.gradient(self.camera, point, first.normal[lane]);
+            let at = (depth, t, gradient);
+            let record = Record::new(&re, r, (film, lens), at, alpha, l, hit);
+            records[b.pixel[lane]].push(record);
         }
     }
 }
