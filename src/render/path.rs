@@ -614,12 +614,11 @@ fn shadow_packet(
     let mut lit = 0u32;
     let Shading {
         hits,
-        strategy,
         v,
         wo,
         numbers,
         lanes,
-        glossy,
+        ..
     } = *at;
     // A vertex whose BSDF is all deltas (a smooth mirror or clear glass) takes no light sample.
     let sampled = (0..LANES).filter(|&l| hits & (1 << l) != 0 && !v.bsdf[l].is_delta());
@@ -633,31 +632,14 @@ fn shadow_packet(
         if f == Vec3::ZERO {
             continue;
         }
-        // Where light paths share the lamp's reflection here, the weight counts them too.
-        let key = match (es.delta, punctual, es.primitive) {
-            (true, Some(light), _) => Some(LampKey::Punctual(light)),
-            (false, _, Some((g, p))) => Some(LampKey::Primitive(g, p)),
-            _ => None,
-        };
-        let shared = glossy.zip(key).and_then(|(g, key)| {
-            let at = Lit {
-                b: v.bsdf[lane],
-                n,
-                ng: v.ng[lane],
-                x: points.get(lane).position,
-                to_light: es.dir,
-                d_light: es.distance,
-                irradiance: es.radiance,
-                nee: if es.delta { 1.0 } else { es.pdf },
-                drawn: None,
-            };
-            g.camera_weight(Found::LightSample, key, &at, wo[lane], v.t[lane])
-        });
-        let w = match (shared, es.delta) {
-            (Some(w), _) => w,
-            (None, true) => 1.0,
-            (None, false) => light_weight(strategy, es.pdf, bsdf_pdf),
-        };
+        let w = light_sample_weight(
+            at,
+            lane,
+            (n, points.get(lane).position),
+            &es,
+            punctual,
+            bsdf_pdf,
+        );
         let c = lanes[lane].throughput * f * es.radiance * (w / es.pdf);
         if !(c.max_element() > 0.0 && c.is_finite()) {
             continue;
@@ -694,6 +676,44 @@ fn shadow_packet(
                 vd[lane] += sp[lane];
             }
         }
+    }
+}
+
+/// The multiple-importance weight of light sample `es` (drawn with density `es.pdf`,
+/// which the BSDF would draw with `bsdf_pdf`) at lane `lane`'s vertex (shading normal and
+/// position); `punctual` is the index of the punctual light it sampled.
+fn light_sample_weight(
+    at: &Shading,
+    lane: usize,
+    (n, position): (Vec3, Vec3),
+    es: &EmitterSample,
+    punctual: Option<usize>,
+    bsdf_pdf: f32,
+) -> f32 {
+    // Where light paths share the lamp's reflection here, the weight counts them too.
+    let key = match (es.delta, punctual, es.primitive) {
+        (true, Some(light), _) => Some(LampKey::Punctual(light)),
+        (false, _, Some((g, p))) => Some(LampKey::Primitive(g, p)),
+        _ => None,
+    };
+    let shared = at.glossy.zip(key).and_then(|(g, key)| {
+        let lit = Lit {
+            b: at.v.bsdf[lane],
+            n,
+            ng: at.v.ng[lane],
+            x: position,
+            to_light: es.dir,
+            d_light: es.distance,
+            irradiance: es.radiance,
+            nee: if es.delta { 1.0 } else { es.pdf },
+            drawn: None,
+        };
+        g.camera_weight(Found::LightSample, key, &lit, at.wo[lane], at.v.t[lane])
+    });
+    match (shared, es.delta) {
+        (Some(w), _) => w,
+        (None, true) => 1.0,
+        (None, false) => light_weight(at.strategy, es.pdf, bsdf_pdf),
     }
 }
 
