@@ -245,13 +245,13 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "on|off")]
     pub(crate) light_tracing: Option<Switch>,
     /// Path tracer, adaptive: a blurred site still noisy after its own samples also takes the
-    /// samples of the sites around it whose apertures saw the same surface points (rough
-    /// surfaces only, never across a depth edge), combined by multiple importance sampling.
-    /// `on` cuts noise where blurred diffuse surfaces carry it (walls behind a sharp subject,
-    /// receding floors: 1 to 4 dB at the same samples) for 5-25% more time where paths are
-    /// costly (up to 70% where wide blur meets cheap paths); glossy and specular light gains
-    /// nothing; its small bias is a self-normalised estimate's (round thin lens and box lens
-    /// filter only) [default: the scene's, else off].
+    /// samples of the sites around it whose apertures saw the same surface points (never
+    /// across a depth edge), combined by multiple importance sampling; of a glossy surface
+    /// only the diffuse light is lent, its reflection stays with each site. `on` cuts noise
+    /// where blurred matte or glossy surfaces carry it (walls behind a sharp subject,
+    /// receding floors: 1 to 4 dB at the same samples) for 20-60% more time; mirrors and
+    /// glass gain nothing; its small bias is a self-normalised estimate's (round thin lens
+    /// and box lens filter only) [default: the scene's, else off].
     #[arg(long, value_name = "on|off")]
     pub(crate) reuse: Option<Switch>,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
