@@ -299,8 +299,9 @@ impl SiteShader<'_> {
         }
     }
 
-    /// Keeps each sample of batch `b` (camera rays `rays`, radiance `radiance`, what they
-    /// hit first `first`) in its pixel's records for lending ([`crate::render::reuse`]).
+    /// Keeps each sample of batch `b` (its camera ray from `origin` along `dir`, per axis and
+    /// lane; its radiance; what it hit first) in its pixel's records for lending
+    /// ([`crate::render::reuse`]).
     fn record(
         &self,
         b: &Batch,
