@@ -407,18 +407,18 @@ pub(crate) fn reference(
     }
     // Every pixel converges: in-focus ones take as many samples as defocused ones.
     // Reuse is adaptive mode's alone: cleared, so one reference serves it on and off.
-    let settings = |spp: u32, salt: u64| {
-        let mut s = RenderSettings {
-            mode: Mode::Dense,
-            spp,
-            aa: spp,
-            rule: SamplingRule::ErrorControlled { tolerance: None },
-            seed: crate::sampler::hash64(crate::sampler::hash64(seed ^ 0x5eed_5eed) ^ salt),
-            record_rays: false,
-            ..measure.base.clone()
-        };
-        s.path.reuse = false;
-        s
+    let settings = |spp: u32, salt: u64| RenderSettings {
+        mode: Mode::Dense,
+        spp,
+        aa: spp,
+        rule: SamplingRule::ErrorControlled { tolerance: None },
+        seed: crate::sampler::hash64(crate::sampler::hash64(seed ^ 0x5eed_5eed) ^ salt),
+        record_rays: false,
+        path: crate::settings::PathLimits {
+            reuse: false,
+            ..measure.base.path
+        },
+        ..measure.base.clone()
     };
     let (w, h) = (camera.width as usize, camera.height as usize);
     let key = reference_key(desc, camera, &settings(reference_spp, 0));

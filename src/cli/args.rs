@@ -594,3 +594,10 @@ pub(crate) enum Switch {
     /// Disabled.
     Off,
 }
+
+impl Switch {
+    /// The flag an optional switch sets: `None` when it was not given.
+    pub(crate) fn flag(switch: Option<Self>) -> Option<bool> {
+        switch.map(|s| s == Self::On)
+    }
+}

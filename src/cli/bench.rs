@@ -36,7 +36,7 @@ pub(crate) fn run_bench(a: &BenchArgs) -> Result<()> {
         spp: a.spp,
         aa: a.aa,
         integrator: a.integrator,
-        reuse: a.reuse.map(|s| s == Switch::On),
+        reuse: Switch::flag(a.reuse),
         ..Default::default()
     };
     let settings = p.renderer.settings(&samples).map_err(cli_error)?;
@@ -119,7 +119,7 @@ pub(crate) fn run_equal_error(a: &BenchArgs, p: &Prepared, camera: &Camera) -> R
         .renderer
         .settings(&SettingsPatch {
             integrator: a.integrator,
-            reuse: a.reuse.map(|s| s == Switch::On),
+            reuse: Switch::flag(a.reuse),
             ..Default::default()
         })
         .map_err(cli_error)?;

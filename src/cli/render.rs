@@ -48,8 +48,8 @@ pub(crate) fn render_settings(a: &RenderArgs, desc: &SceneDesc) -> Result<Render
         transmission_bounces: a.transmission_bounces,
         clamp_indirect: a.clamp_indirect,
         filter_glossy: a.filter_glossy,
-        light_tracing: a.light_tracing.map(|s| s == Switch::On),
-        reuse: a.reuse.map(|s| s == Switch::On),
+        light_tracing: Switch::flag(a.light_tracing),
+        reuse: Switch::flag(a.reuse),
     };
     Ok(flags
         .over(&desc.settings)

@@ -235,7 +235,7 @@ pub fn trace_path(
     let mut lanes = camera_lanes(packet, radiance);
     let mut t = [f32::INFINITY; LANES];
     let mut shared = [None; LANES];
-    let mut split = first.view_dependent.is_some().then(ViewSplit::default);
+    let mut split = ViewSplit::begin(first, scratch);
     let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
     for bounce in 0..=limits.total {
         tally.bounce = bounce;
@@ -295,11 +295,10 @@ pub fn trace_path(
             glossy: light_traced.glossy.as_ref().filter(|_| bounce == 0),
         };
         let clamp = clamp_after(limits, bounce + 1);
+        next_event(world, &at, clamp, scratch, radiance, tally);
         let mut split_here = split.as_mut().filter(|_| bounce == 0);
         if let Some(s) = split_here.as_deref_mut() {
-            s.light(first, world, &at, clamp, scratch, radiance, tally);
-        } else {
-            next_event(world, &at, clamp, scratch, radiance, tally);
+            s.lit(first, scratch, radiance);
         }
         packet.clear();
         for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
@@ -318,7 +317,7 @@ pub fn trace_path(
     }
     tally.bounce = 0;
     if let Some(s) = split {
-        s.finish(first, radiance);
+        s.finish(first, scratch, radiance);
     }
 }
 
@@ -332,28 +331,28 @@ struct ViewSplit {
 }
 
 impl ViewSplit {
-    /// [`next_event`] at the first surfaces, noting the part of the light their specular
-    /// lobes reflect.
-    #[allow(clippy::too_many_arguments)]
-    fn light(
-        &mut self,
-        first: &mut FirstHits,
-        world: &World,
-        at: &Shading,
-        clamp: f32,
-        scratch: &mut PathScratch,
-        radiance: &mut [Vec3; LANES],
-        tally: &mut Tally,
-    ) {
-        scratch.view_dependent = Some([Vec3::ZERO; LANES]);
-        next_event(world, at, clamp, scratch, radiance, tally);
+    /// Before the paths start, when `first` asks for the split: the first light samples
+    /// taken ([`next_event`] at the first surfaces) note the part of their light the
+    /// specular lobes reflect in `scratch`.
+    fn begin(first: &FirstHits, scratch: &mut PathScratch) -> Option<Self> {
+        first.view_dependent.is_some().then(|| {
+            scratch.view_dependent = Some([Vec3::ZERO; LANES]);
+            Self::default()
+        })
+    }
+
+    /// Once the first surfaces' light samples are in: their specular part is the first
+    /// surfaces', and later light samples are not split.
+    fn lit(&mut self, first: &mut FirstHits, scratch: &mut PathScratch, radiance: &[Vec3; LANES]) {
         first.view_dependent = scratch.view_dependent.take();
         self.after_first = Some(*radiance);
     }
 
     /// Adds to the view-dependent part what the paths gathered after their first
-    /// scattering, divided as that scattering divided its weight.
-    fn finish(self, first: &mut FirstHits, radiance: &[Vec3; LANES]) {
+    /// scattering, divided as that scattering divided its weight (and stops the split of
+    /// light samples if no path reached a surface).
+    fn finish(self, first: &mut FirstHits, scratch: &mut PathScratch, radiance: &[Vec3; LANES]) {
+        scratch.view_dependent = None;
         if let (Some(vd), Some(after)) = (first.view_dependent.as_mut(), self.after_first) {
             for lane in 0..LANES {
                 vd[lane] += (radiance[lane] - after[lane]) * self.shares[lane];
@@ -628,7 +627,13 @@ fn shadow_packet(
         let Some(es) = sample(p, &numbers[lane]) else {
             continue;
         };
-        let (f, bsdf_pdf) = v.bsdf[lane].eval_pdf(n, wo[lane], es.dir);
+        // With the split, the diffuse layer's part too (from the same setup).
+        let (f, bsdf_pdf, diffuse) = if specular.is_some() {
+            v.bsdf[lane].eval_pdf_diffuse(n, wo[lane], es.dir)
+        } else {
+            let (f, pdf) = v.bsdf[lane].eval_pdf(n, wo[lane], es.dir);
+            (f, pdf, Vec3::ZERO)
+        };
         if f == Vec3::ZERO {
             continue;
         }
@@ -646,7 +651,6 @@ fn shadow_packet(
         }
         contribution[lane] = clamped(c, clamp);
         if let Some(sp) = specular.as_mut() {
-            let diffuse = v.bsdf[lane].eval_diffuse(n, wo[lane], es.dir);
             sp[lane] = contribution[lane] * specular_share(f, diffuse);
         }
         let o = v.origins.at(lane, es.dir.dot(n) >= 0.0);

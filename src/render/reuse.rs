@@ -12,8 +12,8 @@
 //! ([`Reprojection`]): a *trajectory* through pixel x lens space, `c` its centre. Where the
 //! point is seen from the whole aperture and looks the same from all of it (a rough surface,
 //! [`crate::shade::Bsdf::view_alpha`], or a glossy one's diffuse light), the sample's
-//! radiance is the radiance of every pair (x', l') on its trajectory. Written over centres, pixel p's value (the filter- and
-//! lens-averaged radiance) is `I(p) = ∫ L(c) K_p(c) dc` with
+//! radiance is the radiance of every pair (x', l') on its trajectory. Written over centres,
+//! pixel p's value (the filter- and lens-averaged radiance) is `I(p) = ∫ L(c) K_p(c) dc` with
 //! `K_p(c) = (1 / π) ∫_disc f(c + s l - p) dl`, and `K_q` is exactly the density of the
 //! centres of site q's own samples. So the samples of all sites near p are samples of `I(p)`
 //! from the mixture `Σ_q N_q K_q`, and Veach's balance heuristic (one technique a site)
@@ -66,7 +66,7 @@ use std::f32::consts::SQRT_2;
 
 use glam::{Vec2, Vec3};
 
-use super::estimate::{Estimate, luminance};
+use super::estimate::Estimate;
 use crate::camera::Reprojection;
 use crate::filter::FilterDensity;
 use crate::limits::{MemoryError, try_vec};
@@ -596,15 +596,13 @@ fn own_part(records: &SiteRecords) -> Option<(Vec3, f64)> {
     if list.iter().all(|r| r.own == Vec3::ZERO) {
         return None;
     }
-    let n = list.len() as f64;
-    let mean = list.iter().map(|r| r.own).sum::<Vec3>() / list.len() as f32;
-    let y = f64::from(luminance(mean));
-    let spread: f64 = list
-        .iter()
-        .map(|r| (f64::from(luminance(r.own)) - y).powi(2))
-        .sum();
-    let variance = if n > 1.0 { spread / (n - 1.0) / n } else { 0.0 };
-    Some((mean, variance))
+    let mut own = Estimate::default();
+    for r in list {
+        own.add(r.own, 1.0, r.hit);
+    }
+    // Unknown from one sample: counted as none, as the site's own estimate would be.
+    let se = f64::from(own.std_error());
+    Some((own.mean(), if se.is_finite() { se * se } else { 0.0 }))
 }
 
 /// The mean shift gradient of a site's samples.

@@ -342,6 +342,14 @@ impl Bsdf {
         Setup::new(self, n, wo).map_or(Vec3::ZERO, |s| s.eval_diffuse(n, wi))
     }
 
+    /// [`Bsdf::eval_pdf`] and [`Bsdf::eval_diffuse`] at once.
+    pub fn eval_pdf_diffuse(&self, n: Vec3, wo: Vec3, wi: Vec3) -> (Vec3, f32, Vec3) {
+        Setup::new(self, n, wo).map_or((Vec3::ZERO, 0.0, Vec3::ZERO), |s| {
+            let (f, pdf) = s.eval_pdf(n, wo, wi);
+            (f, pdf, s.eval_diffuse(n, wi))
+        })
+    }
+
     /// The solid-angle density with which [`Bsdf::sample`] draws `wi` (zero for delta lobes).
     pub fn pdf(&self, n: Vec3, wo: Vec3, wi: Vec3) -> f32 {
         self.eval_pdf(n, wo, wi).1
