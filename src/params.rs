@@ -208,7 +208,7 @@ impl Param {
             Self::ClampIndirect => row("clamp_indirect", Some("--clamp-indirect"), Some("render.clamp_indirect"), None, None),
             Self::FilterGlossy => row("filter_glossy", Some("--filter-glossy"), Some("render.filter_glossy"), None, None),
             Self::LightTracing => row("light_tracing", Some("--light-tracing"), Some("render.light_tracing"), Some("light_tracing"), None),
-            Self::Reuse => row("reuse", Some("--reuse"), Some("render.reuse"), None, None),
+            Self::Reuse => row("reuse", Some("--reuse"), Some("render.reuse"), Some("reuse"), None),
         }
     }
 

@@ -121,9 +121,10 @@ pub struct PathLimits {
     /// Whether adaptive sites lend their lens samples to the sites around them that see the
     /// same surface points ([`crate::render::reuse`]; the error-controlled rule, a round thin
     /// lens and the box lens filter only): a blurred site still noisy after its samples
-    /// takes its neighbours' too, which cuts noise in blurred diffuse regions at some cost in
-    /// time. Off by default: it pays where blurred rough surfaces carry the noise (a room's
-    /// walls behind a sharp subject), not where glossy or specular light does.
+    /// takes its neighbours' too, which cuts noise where blurred matte or glossy surfaces
+    /// carry it (1 to 4 dB at the same samples) for 20-90% more time; mirrors and glass gain
+    /// nothing. On by default: at equal error it is faster on every blurred scene measured
+    /// (README, "Sample reuse"); off gives the images of the sites' own samples alone.
     pub reuse: bool,
 }
 
@@ -138,7 +139,7 @@ impl Default for PathLimits {
             filter_glossy: 0.0,
             strategy: Strategy::Mis,
             light_tracing: true,
-            reuse: false,
+            reuse: true,
         }
     }
 }
@@ -530,7 +531,7 @@ pub struct SettingsPatch {
     pub filter_glossy: Option<f32>,
     /// Light tracing of small emitters ([`PathLimits::light_tracing`]). Default: on.
     pub light_tracing: Option<bool>,
-    /// Sample reuse across sites ([`PathLimits::reuse`]). Default: off.
+    /// Sample reuse across sites ([`PathLimits::reuse`]). Default: on.
     pub reuse: Option<bool>,
 }
 

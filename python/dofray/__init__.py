@@ -68,6 +68,7 @@ def render(
     transparent: bool = False,
     integrator: Optional[str] = None,
     light_tracing: Optional[bool] = None,
+    reuse: Optional[bool] = None,
     frame: Optional[int] = None,
     threads: Optional[int] = None,
     progress: Optional[ProgressCallback] = None,
@@ -96,7 +97,9 @@ def render(
       (the seed's quick direct shading); ``light_tracing``: ``False`` leaves lamps much
       smaller on screen than their blur, and lamps' highlights on glossy surfaces out of
       focus, to camera rays alone (default ``True``: traced from the light too, clean bokeh
-      discs; unbiased either way);
+      discs; unbiased either way); ``reuse``: ``False`` keeps each adaptive site to its
+      own samples (default ``True``: blurred sites still noisy borrow their neighbours'
+      samples of the same surface points; less noise in blurred matte and glossy surfaces);
     - ``frame``: the frame of an animated scene (default: its first);
     - ``threads``: worker threads, 1 to 1024 (default: all cores); the image is the same
       for any number;
@@ -129,6 +132,7 @@ def render(
         transparent=transparent,
         integrator=integrator,
         light_tracing=light_tracing,
+        reuse=reuse,
         frame=frame,
         threads=threads,
         progress=progress,

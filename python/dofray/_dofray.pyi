@@ -51,6 +51,7 @@ def render(
     transparent: bool = ...,
     integrator: Optional[str] = ...,
     light_tracing: Optional[bool] = ...,
+    reuse: Optional[bool] = ...,
     frame: Optional[int] = ...,
     threads: Optional[int] = ...,
     progress: Optional[Callable[[str, int, int], object]] = ...,

@@ -34,6 +34,7 @@ pub(crate) struct SceneKeywords {
     pub(crate) transparent: bool,
     pub(crate) integrator: Option<String>,
     pub(crate) light_tracing: Option<bool>,
+    pub(crate) reuse: Option<bool>,
 }
 
 /// `value` as keyword `name` takes it, or a `TypeError` naming the keyword.
@@ -74,6 +75,7 @@ impl SceneKeywords {
                 "transparent" => k.transparent = item(&name, v)?,
                 "integrator" => k.integrator = item(&name, v)?,
                 "light_tracing" => k.light_tracing = item(&name, v)?,
+                "reuse" => k.reuse = item(&name, v)?,
                 _ => {
                     return Err(PyTypeError::new_err(format!(
                         "render_jobs() got an unexpected keyword argument '{name}'"
@@ -122,6 +124,7 @@ impl SceneKeywords {
             transparent: self.transparent,
             integrator: to_integrator(self.integrator.as_deref())?,
             light_tracing: self.light_tracing,
+            reuse: self.reuse,
             ..Default::default()
         };
         Ok((overrides, settings))

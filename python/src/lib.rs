@@ -445,7 +445,7 @@ impl Render {
     scene, *, width=None, height=None, f_number=None, focal_length=None, sensor_width=None,
     focus_distance=None, autofocus=None, aperture_radius=None, blades=None, lens=None, spp=None, aa=None,
     mode=None, tolerance=None, seed=None, exposure=None, transparent=false, integrator=None,
-    light_tracing=None, frame=None, threads=None, progress=None
+    light_tracing=None, reuse=None, frame=None, threads=None, progress=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn render(
@@ -470,6 +470,7 @@ fn render(
     transparent: bool,
     integrator: Option<&str>,
     light_tracing: Option<bool>,
+    reuse: Option<bool>,
     frame: Option<i64>,
     threads: Option<i64>,
     progress: Option<Py<PyAny>>,
@@ -501,6 +502,7 @@ fn render(
         transparent,
         integrator: integrator.map(str::to_owned),
         light_tracing,
+        reuse,
     };
     let job = (|| -> Result<Job, Failure> {
         let (overrides, settings) = keywords.parts()?;

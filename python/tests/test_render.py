@@ -343,6 +343,19 @@ def test_light_tracing(tmp_path):
     assert energy(on) > 2 * energy(off)
 
 
+def test_reuse():
+    # Sample reuse is on by default; off keeps every site to its own samples: the same
+    # sites and samples (reuse only changes how they are combined), a different image.
+    on = dofray.render("paper", width=96, height=72, spp=16)
+    off = dofray.render("paper", width=96, height=72, spp=16, reuse=False)
+    assert on.stats["rays"] == off.stats["rays"]
+    assert on.stats["sample_sites"] == off.stats["sample_sites"]
+    assert not np.array_equal(on.rgba, off.rgba)
+    assert np.isfinite(on.rgba).all()
+    with pytest.raises(TypeError):
+        dofray.render("paper", width=8, height=8, reuse="yes")
+
+
 LENSES = os.path.join(os.path.dirname(__file__), "..", "..", "lenses")
 
 

@@ -247,11 +247,13 @@ pub(crate) struct RenderArgs {
     /// Path tracer, adaptive: a blurred site still noisy after its own samples also takes the
     /// samples of the sites around it whose apertures saw the same surface points (never
     /// across a depth edge), combined by multiple importance sampling; of a glossy surface
-    /// only the diffuse light is lent, its reflection stays with each site. `on` cuts noise
+    /// only the diffuse light is lent, its reflection stays with each site. It cuts noise
     /// where blurred matte or glossy surfaces carry it (walls behind a sharp subject,
-    /// receding floors: 1 to 4 dB at the same samples) for 20-60% more time; mirrors and
-    /// glass gain nothing; its small bias is a self-normalised estimate's (round thin lens
-    /// and box lens filter only) [default: the scene's, else off].
+    /// receding floors: 1 to 4 dB at the same samples) for 20-90% more time, less than the
+    /// samples it saves; mirrors and glass gain nothing; its small bias is a self-normalised
+    /// estimate's (round thin lens and box lens filter only). `off` shows the sites' own
+    /// samples alone (for comparisons, or a shot whose blur is all mirrors and glass)
+    /// [default: the scene's, else on].
     #[arg(long, value_name = "on|off")]
     pub(crate) reuse: Option<Switch>,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample
@@ -403,7 +405,7 @@ pub(crate) struct BenchArgs {
     pub(crate) integrator: Option<dofray::render::Integrator>,
     /// Sample reuse in the adaptive renders (as `dofray render --reuse`; dense and the
     /// reference are the same either way, so one cached reference serves both) [default: the
-    /// scene's, else off].
+    /// scene's, else on].
     #[arg(long, value_name = "on|off")]
     pub(crate) reuse: Option<Switch>,
     /// Timed repeats of each mode (or rung); medians are reported.
