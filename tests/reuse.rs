@@ -1,8 +1,9 @@
 //! Sample reuse across adaptive sites (`render::reuse`, `--reuse on`): on a shot whose noise is
 //! in a blurred diffuse wall behind a sharp subject, with a blurred foreground sphere across
-//! the wall's edge (a depth edge reuse must not lend across), lending brings the adaptive image
-//! closer to a dense reference than the same render without it, keeps its mean (unbiased), and
-//! is no worse anywhere near the depth edge. Settings it cannot serve leave the image as it was.
+//! the wall's edge (a depth edge: only the sphere's samples may be lent across it), lending
+//! brings the adaptive image closer to a dense reference than the same render without it, keeps
+//! its mean (unbiased), is no worse anywhere near the depth edge and better there overall.
+//! Settings it cannot serve leave the image as it was.
 
 use std::path::Path;
 
@@ -149,7 +150,11 @@ fn lending_brings_a_blurred_wall_closer_to_the_reference_and_keeps_depth_edges()
     assert_keeps_brightness(&lent, &reference);
 
     // Near the depth edges (pixels whose CoC differs from a neighbour's within 4 px by more
-    // than 4 px: the foreground sphere's blurred rim over the wall), no 8 x 8 tile is worse.
+    // than 4 px: the foreground sphere's blurred rim over the wall), no 8 x 8 tile is worse,
+    // and together they are better. Sites there lend and borrow the sphere's samples and
+    // weigh the wall's of their own in, so their noise changes: one render's tile can come
+    // out worse by chance (up to 2.3x in one of six seeds), so each tile's error is
+    // averaged over eight seeds (the worst tile then measured 1.00x).
     let (w, h) = (WIDTH as usize, HEIGHT as usize);
     let edge = |x: usize, y: usize| {
         let c = reference.coc[y * w + x];
@@ -157,7 +162,26 @@ fn lending_brings_a_blurred_wall_closer_to_the_reference_and_keeps_depth_edges()
             .flat_map(|v| (x.saturating_sub(4)..(x + 5).min(w)).map(move |u| (u, v)))
             .any(|(u, v)| (reference.coc[v * w + u] - c).abs() > 4.0)
     };
+    let seeds = [1u64, 2, 3, 4, 5, 6, 7, 8];
+    let errors = |reuse: bool| {
+        let mut sum = vec![0.0; w * h];
+        for seed in seeds {
+            let s = RenderSettings {
+                seed,
+                ..settings(Mode::Adaptive, 16, reuse)
+            };
+            for (a, e) in sum
+                .iter_mut()
+                .zip(squared_errors(&render(&desc, &s), &reference))
+            {
+                *a += e / seeds.len() as f64;
+            }
+        }
+        sum
+    };
+    let (e_own, e_lent) = (errors(false), errors(true));
     let mut edge_tiles = 0;
+    let (mut at_edges_own, mut at_edges_lent) = (0.0, 0.0);
     for ty in (0..h).step_by(8) {
         for tx in (0..w).step_by(8) {
             let pixels: Vec<usize> = (ty..ty + 8)
@@ -174,12 +198,19 @@ fn lending_brings_a_blurred_wall_closer_to_the_reference_and_keeps_depth_edges()
                 mean(pixels.iter().map(|&p| e_lent[p])),
             );
             assert!(
-                b <= 1.25 * a + 1e-5,
+                b <= 1.1 * a + 1e-5,
                 "tile ({tx}, {ty}) at a depth edge: {b:e} with lending vs {a:e}"
             );
+            at_edges_own += a;
+            at_edges_lent += b;
         }
     }
     assert!(edge_tiles >= 3, "the scene has depth edges: {edge_tiles}");
+    // Measured 0.79x (0.86x when a site that saw two surfaces kept its own mean).
+    assert!(
+        at_edges_lent < 0.83 * at_edges_own,
+        "at the depth edges: {at_edges_lent:e} with lending vs {at_edges_own:e}"
+    );
 }
 
 /// The wall glossy (a dielectric of roughness 0.1: its reflection of the sky and the sun

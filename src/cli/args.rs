@@ -245,8 +245,9 @@ pub(crate) struct RenderArgs {
     #[arg(long, value_name = "on|off")]
     pub(crate) light_tracing: Option<Switch>,
     /// Path tracer, adaptive: a blurred site still noisy after its own samples also takes the
-    /// samples of the sites around it whose apertures saw the same surface points (never
-    /// across a depth edge), combined by multiple importance sampling; of a glossy surface
+    /// samples of the sites around it whose apertures saw the same surface points (at a
+    /// depth edge only the nearer surface's: what lies behind its rim stays with each site),
+    /// combined by multiple importance sampling; of a glossy surface
     /// only the diffuse light is lent, its reflection stays with each site. It cuts noise
     /// where blurred matte or glossy surfaces carry it (walls behind a sharp subject,
     /// receding floors: 1 to 4 dB at the same samples) for 20-90% more time, less than the

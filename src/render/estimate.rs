@@ -85,6 +85,44 @@ impl Estimate {
         self
     }
 
+    /// This estimate's mean weighted by `alpha` (within 0 and 1) and `other`'s by `1 -
+    /// alpha`: the estimate of a pixel whose share `alpha` one estimator covers and the rest
+    /// another (colour and coverage alike). Its standard error is that of the mixture of
+    /// both sets of samples, an approximation. `other` alone when this one has no weight.
+    pub fn blend(self, alpha: f32, other: Self) -> Self {
+        if self.w <= 0.0 {
+            return other;
+        }
+        let alpha = alpha.clamp(0.0, 1.0);
+        let (a, b) = (
+            alpha / self.w,
+            if other.w > 0.0 {
+                (1.0 - alpha) / other.w
+            } else {
+                0.0
+            },
+        );
+        let (a64, b64) = (f64::from(a), f64::from(b));
+        Self {
+            n: self.n + other.n,
+            sum: self.sum * a + other.sum * b,
+            hit_w: self.hit_w * a + other.hit_w * b,
+            blocked_w: self.blocked_w * a + other.blocked_w * b,
+            w: self.w * a + other.w * b,
+            w2: self.w2 * a * a + other.w2 * b * b,
+            wy: self.wy * a64 + other.wy * b64,
+            wy2: self.wy2 * a64 + other.wy2 * b64,
+            peak: self.peak.max(other.peak),
+            apart: self.apart * f64::from(alpha * alpha)
+                + other.apart * f64::from((1.0 - alpha) * (1.0 - alpha)),
+        }
+    }
+
+    /// The sum of the weights of the samples added (their weighted count).
+    pub fn weight(&self) -> f32 {
+        self.w
+    }
+
     /// The brightest sample's luminance (0 before any sample).
     pub fn peak(&self) -> f32 {
         self.peak

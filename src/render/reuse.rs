@@ -30,10 +30,18 @@
 //!
 //! **Where it does not hold, nothing is lent** (the site keeps its own mean, as without
 //! reuse):
-//! - Occlusion: a site takes part only if its own samples' shifts form one cluster (no gap
-//!   wider than [`GAP`] between them; two surfaces at different depths make a gap), and no
-//!   sample of any site crosses its footprint from nearer than that cluster (a foreground
-//!   edge its own samples missed). A sample goes only to sites of its cluster.
+//! - Occlusion: a site lends and borrows only the samples of the nearest cluster of its own
+//!   samples' shifts (no gap wider than [`GAP`] within it; two surfaces at different depths
+//!   make a gap), and only if no sample of any site crosses its footprint from nearer than
+//!   that cluster (a foreground edge its own samples missed). A sample goes only to sites
+//!   of its cluster. The nearest surface is seen wherever its points' trajectories cross the
+//!   site (nothing nearer hides them), so its samples are valid anywhere on them; a farther
+//!   one's, seen past the nearer's rim, are not, and stay with their site. Such a site (at a
+//!   depth edge) takes its value as `W L_near + (1 - W) L_rest`: `L_near` the lent estimate
+//!   of the nearest surface, `W` the sum of the balance-heuristic weights it received (in
+//!   expectation the share of its pixel's pixel x lens samples that see that surface, from
+//!   all its neighbours' samples rather than its own few), `L_rest` the mean of its own
+//!   other samples. Samples that do not lend (below) count with the rest the same way.
 //! - View dependence: where its surface's [`view_alpha`] is under [`VIEW_MARGIN`] times the
 //!   angle the aperture subtends from it, a sample lends only the light its diffuse layer
 //!   sent ([`crate::shade::Bsdf::eval_diffuse`]; the path tracer splits each sample's
@@ -43,7 +51,8 @@
 //!   diffuse layer's light changes with the viewer only through the specular layer's
 //!   albedo above it (`1 - E(wo)`), slowly except at grazing angles: a small bias left.
 //! - Sharp samples (`|s|` under [`MIN_SHIFT`]) and lenses other than a round thin lens with
-//!   the box lens filter ([`crate::camera::Lens::reprojection`]).
+//!   the box lens filter ([`crate::camera::Lens::reprojection`]); a site none of whose
+//!   nearest surface's samples lend, or with a sample that is not finite, keeps its own mean.
 //!
 //! **Slanted surfaces.** Across a surface that recedes (a floor) `s` changes with the centre,
 //! by `g` per pixel ([`Record::gradient`], from the hit's geometric normal): through lens
@@ -58,7 +67,8 @@
 //! Bias that remains, all small: `K` is tabulated radially (the filter is separable, not
 //! round) on a 48 x 48 grid of the filter; a curved surface's `g` holds only near the
 //! sample; the cluster gap lets two surfaces within [`GAP`] pixels of parallax of each other
-//! pass for one.
+//! pass for one; at a depth edge `W` and `L_rest` are estimated from the same render as what
+//! they weigh (a ratio estimate's bias of order 1 / samples, like the self-normalisation).
 //!
 //! [`view_alpha`]: crate::shade::Bsdf::view_alpha
 
@@ -365,6 +375,9 @@ struct Member {
     gradient: Vec2,
     /// Its own estimate is noisier than wanted: it borrows.
     needy: bool,
+    /// Some of its samples lie outside its cluster (a farther surface, partly hidden by the
+    /// nearest) or do not lend: they stay with it ([`rest`]).
+    split: bool,
 }
 
 /// The sites of a `width` x `height` window whose top left is `origin` by 4 px cells, to find
@@ -526,6 +539,15 @@ fn lend_one(
         let other = &members[q as usize];
         !covered[q as usize] && (other.lo..=other.hi).contains(&other.carried(r))
     };
+    // A site counts among the techniques that could have drawn `r` where it takes it, and
+    // where `r` lies nearer than all it saw (then it covers the site, which cannot take
+    // it, but nothing hides `r`'s surface from it there: its density is whole). Leaving
+    // those out would make the techniques depend on whether each site's own samples
+    // happened to find the nearer surface, which weighs that surface too much.
+    let counts = |q: u32| {
+        let other = &members[q as usize];
+        takes(q) || (covered[q as usize] && other.carried(r) < other.lo)
+    };
     let mut lenders = 0.0;
     near.clear();
     if lends(me) {
@@ -539,16 +561,19 @@ fn lend_one(
                 if d.length_squared() >= extent * extent {
                     continue;
                 }
-                let lender = lends(other);
-                if !(lender || other.needy) || !takes(q) {
+                let technique = lends(other) && counts(q);
+                let receiver = other.needy && takes(q);
+                if !(technique || receiver) {
                     continue;
                 }
                 let k = k_at.at(d);
                 if k > 0.0 {
-                    if lender {
+                    if technique {
                         lenders += other.n * k;
                     }
-                    near.push((k, q));
+                    if receiver {
+                        near.push((k, q));
+                    }
                 }
             }
         }
@@ -558,7 +583,7 @@ fn lend_one(
         if !me.needy {
             return;
         }
-        for q in grid.on_lattice(r.centre, extent, g).filter(|&q| takes(q)) {
+        for q in grid.on_lattice(r.centre, extent, g).filter(|&q| counts(q)) {
             let other = &members[q as usize];
             lenders += other.n * k_at.at(r.centre - other.at);
         }
@@ -587,12 +612,18 @@ impl Member {
     fn carried(&self, r: &Record) -> f32 {
         carried(r, self.at, self.gradient)
     }
+
+    /// Whether its own sample `r` is one it lends (and pools with what it borrows): of its
+    /// cluster, and lending.
+    fn lends(&self, r: &Record) -> bool {
+        r.lends && (self.lo..=self.hi).contains(&self.carried(r))
+    }
 }
 
-/// The mean of the parts of a site's samples that stay with it ([`Record::own`]) and the
-/// variance of that mean's luminance; `None` when they are all zero.
-fn own_part(records: &SiteRecords) -> Option<(Vec3, f64)> {
-    let list = &records.list;
+/// The mean of the view-dependent parts ([`Record::own`]) of the samples `member` lends and
+/// the variance of that mean's luminance; `None` when they are all zero.
+fn own_part(records: &SiteRecords, member: &Member) -> Option<(Vec3, f64)> {
+    let list: Vec<&Record> = records.list.iter().filter(|r| member.lends(r)).collect();
     if list.iter().all(|r| r.own == Vec3::ZERO) {
         return None;
     }
@@ -605,16 +636,32 @@ fn own_part(records: &SiteRecords) -> Option<(Vec3, f64)> {
     Some((own.mean(), if se.is_finite() { se * se } else { 0.0 }))
 }
 
+/// The estimate of the share of a site's pixel its lent samples do not cover, from the
+/// samples it does not lend: its own, each weighed alike.
+fn rest(records: &SiteRecords, member: &Member) -> Estimate {
+    let mut rest = Estimate::default();
+    for r in records.list.iter().filter(|r| !member.lends(r)) {
+        rest.add(r.radiance, 1.0, r.hit);
+    }
+    rest
+}
+
 /// The mean shift gradient of a site's samples.
 fn mean_gradient(records: &SiteRecords) -> Vec2 {
     let n = records.list.len().max(1) as f32;
     records.list.iter().map(|r| r.gradient).sum::<Vec2>() / n
 }
 
-/// The cluster of a site's shifts carried to its pixel centre `at` along their surfaces'
-/// gradient `gradient`, widened by [`GAP`], if its samples all lend and form one.
-fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)> {
-    if records.overflow || records.list.is_empty() || !records.list.iter().all(|r| r.lends) {
+/// The nearest cluster of a site's shifts carried to its pixel centre `at` along their
+/// surfaces' gradient `gradient`, widened by [`GAP`], if some of its samples there lend; and
+/// whether any sample lies outside what it lends (a farther surface seen past the nearest's
+/// rim, or a sample that does not lend).
+fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32, bool)> {
+    if records.overflow || records.list.is_empty() {
+        return None;
+    }
+    // A sample the site cannot average (not finite) keeps the whole site to itself.
+    if !records.list.iter().all(|r| r.radiance.is_finite()) {
         return None;
     }
     let mut shifts: Vec<f32> = records
@@ -623,8 +670,12 @@ fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)
         .map(|r| carried(r, at, gradient))
         .collect();
     shifts.sort_unstable_by(f32::total_cmp);
-    let one = shifts.windows(2).all(|w| w[1] - w[0] <= GAP);
-    one.then(|| (shifts[0] - GAP, shifts[shifts.len() - 1] + GAP))
+    let end = shifts.windows(2).position(|w| w[1] - w[0] > GAP);
+    let last = end.map_or(shifts[shifts.len() - 1], |i| shifts[i]);
+    let (lo, hi) = (shifts[0] - GAP, last + GAP);
+    let within = |r: &Record| r.lends && (lo..=hi).contains(&carried(r, at, gradient));
+    let lent = records.list.iter().filter(|r| within(r)).count();
+    (lent > 0).then_some((lo, hi, lent < records.list.len()))
 }
 
 /// The estimates of a window's sites with their neighbours' samples lent to them: for every
@@ -646,7 +697,7 @@ pub fn lend(
         let (x, y) = (x0 + p % width, y0 + p / width);
         let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
         let gradient = mean_gradient(r);
-        if let Some((lo, hi)) = cluster(r, at, gradient) {
+        if let Some((lo, hi, split)) = cluster(r, at, gradient) {
             let n = r.list.len() as f32;
             let needy = needy[p];
             members.push(Member {
@@ -658,6 +709,7 @@ pub fn lend(
                 hi,
                 gradient,
                 needy,
+                split,
             });
         }
     }
@@ -694,7 +746,7 @@ pub fn lend(
         if covered[m] {
             continue;
         }
-        for r in &records[member.p].list {
+        for r in records[member.p].list.iter().filter(|r| member.lends(r)) {
             lend_one(
                 kernel,
                 &grid,
@@ -709,9 +761,17 @@ pub fn lend(
     for (m, member) in members.iter().enumerate() {
         let lent = pooled[m];
         if member.needy && !covered[m] && lent.n > 0 && lent.mean().is_finite() {
-            out[member.p] = match own_part(&records[member.p]) {
+            let site = &records[member.p];
+            let value = match own_part(site, member) {
                 Some((mean, variance)) => lent.plus(mean, variance),
                 None => lent,
+            };
+            // What it lends covers the share of its pixel the lent weights add up to (in
+            // expectation); the rest is its own samples' (see the module documentation).
+            out[member.p] = if member.split {
+                value.blend(lent.weight(), rest(site, member))
+            } else {
+                value
             };
         }
     }
@@ -787,14 +847,14 @@ mod tests {
         seen: Vec2,
     }
 
-    /// [`lattice`] on a slanted plane: each sample's centre solves `x = c + s(c) R(l)`.
-    fn slanted(
-        size: usize,
-        interval: usize,
-        n: usize,
-        plane: Plane,
-        field: impl Fn(Vec2) -> f32,
+    /// Sites every `interval` px of a `size` window, `n` samples each: box-filter film
+    /// positions and uniform lens positions drawn from `seed`, and `see(film, r)` the record
+    /// of what a sample through film position `film` with lens offset `r = (l.x, -l.y)`
+    /// meets; with each site's own estimate.
+    fn sample_sites(
+        (size, interval, n): (usize, usize, usize),
         seed: u64,
+        see: impl Fn(Vec2, Vec2) -> Record,
     ) -> (Vec<SiteRecords>, Vec<Estimate>) {
         let mut records = vec![SiteRecords::default(); size * size];
         let mut own = vec![Estimate::default(); size * size];
@@ -805,26 +865,45 @@ mod tests {
                     let key = seed ^ ((p as u64) << 20) ^ ((i as u64) << 4);
                     let film = Vec2::new(x as f32 + uniform(key), y as f32 + uniform(key + 1));
                     let lens = concentric_disc(Vec2::new(uniform(key + 2), uniform(key + 3)));
-                    let r = Vec2::new(lens.x, -lens.y);
-                    // (I + r g^T) c = film - s0 r, by Sherman-Morrison.
-                    let y0 = film - plane.shift * r;
-                    let centre = y0 - r * plane.gradient.dot(y0) / (1.0 + plane.gradient.dot(r));
-                    let shift = plane.shift + plane.gradient.dot(centre);
-                    let radiance = Vec3::splat(field(centre));
-                    records[p].push(Record {
-                        centre,
-                        shift,
-                        gradient: plane.seen,
-                        radiance,
-                        own: Vec3::ZERO,
-                        hit: true,
-                        lends: true,
-                    });
-                    own[p].add(radiance, 1.0, true);
+                    let record = see(film, Vec2::new(lens.x, -lens.y));
+                    own[p].add(record.radiance, 1.0, record.hit);
+                    records[p].push(record);
                 }
             }
         }
         (records, own)
+    }
+
+    /// A matte sample of radiance `radiance` whose point has centre `centre` and shift
+    /// `shift` on a surface whose shift changes by `gradient` per pixel.
+    fn matte(centre: Vec2, shift: f32, gradient: Vec2, radiance: f32) -> Record {
+        Record {
+            centre,
+            shift,
+            gradient,
+            radiance: Vec3::splat(radiance),
+            own: Vec3::ZERO,
+            hit: true,
+            lends: true,
+        }
+    }
+
+    /// [`lattice`] on a slanted plane: each sample's centre solves `x = c + s(c) R(l)`.
+    fn slanted(
+        size: usize,
+        interval: usize,
+        n: usize,
+        plane: Plane,
+        field: impl Fn(Vec2) -> f32,
+        seed: u64,
+    ) -> (Vec<SiteRecords>, Vec<Estimate>) {
+        sample_sites((size, interval, n), seed, |film, r| {
+            // (I + r g^T) c = film - s0 r, by Sherman-Morrison.
+            let y0 = film - plane.shift * r;
+            let centre = y0 - r * plane.gradient.dot(y0) / (1.0 + plane.gradient.dot(r));
+            let shift = plane.shift + plane.gradient.dot(centre);
+            matte(centre, shift, plane.seen, field(centre))
+        })
     }
 
     /// Over many trials of a `size` x `size` window: the mean and variance of site `site`'s
@@ -934,23 +1013,97 @@ mod tests {
     }
 
     #[test]
-    fn depth_edges_lend_nothing() {
+    fn a_depth_edge_lends_only_its_nearest_surface() {
         let k = kernel(PixelFilterKind::Box);
         let (mut records, own) = lattice(32, 4, 16, 6.0, |_| 0.3, 7);
-        // A site that saw two surfaces (shifts 6 and 2) keeps its own mean...
+        // A site that saw two surfaces (shifts 6 and 2) lends and borrows the nearer one's
+        // samples and weighs its own others in: in a flat field its value stays exact...
         let two = 16 * 32 + 16;
         records[two].list[0].shift = 2.0;
-        // ...and one whose footprint a nearer sample crosses keeps its own too.
+        records[two].list[0].centre = Vec2::new(16.5, 16.5);
+        // ...and one whose footprint a nearer sample crosses keeps its own mean.
         let behind = 8 * 32 + 8;
         let mut near = records[4 * 32 + 4].list[0];
         near.shift = 1.0;
         near.centre = Vec2::new(8.5, 8.5);
         records[4 * 32 + 4].list.push(near);
         let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
-        assert_eq!(lent[two], own[two]);
+        assert_ne!(lent[two], own[two]);
+        assert!((lent[two].mean() - Vec3::splat(0.3)).length() < 1e-5);
         assert_eq!(lent[behind], own[behind]);
         // The others still borrow.
         assert!(lent[24 * 32 + 24].n > own[24 * 32 + 24].n);
+    }
+
+    /// Sites every `interval` px of a `size` window, `n` samples each, looking at a
+    /// foreground plane (shift `near.0`, radiance `near.1`) whose points left of centre
+    /// x = `edge` exist, in front of a background plane (shift `far`) of radiance
+    /// `field(c)`: each sample sees the foreground where its ray meets it, else the
+    /// background, as a lens sees a blurred edge in front of a blurred wall.
+    fn occluded(
+        (size, interval, n): (usize, usize, usize),
+        (near, edge, far): ((f32, f32), f32, f32),
+        field: impl Fn(Vec2) -> f32,
+        seed: u64,
+    ) -> (Vec<SiteRecords>, Vec<Estimate>) {
+        sample_sites((size, interval, n), seed, |film, r| {
+            let front = film - near.0 * r;
+            if front.x < edge {
+                matte(front, near.0, Vec2::ZERO, near.1)
+            } else {
+                let back = film - far * r;
+                matte(back, far, Vec2::ZERO, field(back))
+            }
+        })
+    }
+
+    /// At a blurred foreground edge in front of a blurred, textured wall, a site that sees
+    /// both keeps its expected value (its own mean's) and loses variance: the share of the
+    /// foreground it sees comes from all its neighbours' samples. Measured (400 trials, own
+    /// against lent): at x = 14, 16 and 18 the variance falls by 15%, 4.1x and 18%; the means
+    /// differ by +0.6, +1.7 and -2.5 standard errors (+0.1%, +0.7%, -1.4%; the last where the
+    /// foreground lies at the rim of the site's kernel, whose radial tabulation of the box
+    /// filter is least exact).
+    #[test]
+    fn a_partly_hidden_wall_is_lent_without_bias() {
+        let field = |c: Vec2| 0.1 + 0.4 * (0.5 * c.y).sin().abs();
+        let (size, trials) = (32, 400);
+        for x in [14, 16, 18] {
+            let site = 16 * size + x;
+            let render = |t| occluded((size, 2, 32), ((3.0, 0.9), 16.0, 8.0), field, 9000 + t);
+            let (records, own) = render(0);
+            let list = &records[site].list;
+            let fronts = list.iter().filter(|r| r.shift == 3.0).count();
+            assert!(
+                fronts > 0 && fronts < list.len(),
+                "{x}: {fronts} see the edge"
+            );
+            let needy = vec![true; own.len()];
+            let lent = lend(
+                &kernel(PixelFilterKind::Box),
+                (0, 0),
+                (size, size),
+                &records,
+                &own,
+                &needy,
+            )
+            .unwrap();
+            assert!(lent[site].n > own[site].n, "{x}: it borrows");
+            let ((own_mean, own_var), (lent_mean, lent_var)) =
+                own_and_lent((size, site), trials, render);
+            let se = ((own_var + lent_var) / trials as f64).sqrt();
+            assert!(
+                (own_mean - lent_mean).abs() < 4.0 * se,
+                "{x}: {own_mean} vs {lent_mean} (se {se})"
+            );
+            // Where the edge halves the site, the share of the foreground it sees is most
+            // of its noise, and that now comes from every neighbour's samples.
+            let gain = if x == 16 { 3.0 } else { 1.1 };
+            assert!(
+                lent_var * gain < own_var,
+                "{x}: variance {lent_var} vs own {own_var}"
+            );
+        }
     }
 
     #[test]
