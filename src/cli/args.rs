@@ -247,8 +247,8 @@ pub(crate) struct RenderArgs {
     /// Path tracer, adaptive: a blurred site still noisy after its own samples also takes the
     /// samples of the sites around it whose apertures saw the same surface points (at a
     /// depth edge only the nearer surface's: what lies behind its rim stays with each site),
-    /// combined by multiple importance sampling; of a glossy surface
-    /// only the diffuse light is lent, its reflection stays with each site. It cuts noise
+    /// combined by multiple importance sampling; of a glossy surface only the diffuse light
+    /// is lent, its reflection stays with each site. It cuts noise
     /// where blurred matte or glossy surfaces carry it (walls behind a sharp subject,
     /// receding floors: 1 to 4 dB at the same samples) for 20-90% more time, less than the
     /// samples it saves; mirrors and glass gain nothing; its small bias is a self-normalised

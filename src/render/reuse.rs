@@ -375,9 +375,6 @@ struct Member {
     gradient: Vec2,
     /// Its own estimate is noisier than wanted: it borrows.
     needy: bool,
-    /// Some of its samples lie outside its cluster (a farther surface, partly hidden by the
-    /// nearest) or do not lend: they stay with it ([`rest`]).
-    split: bool,
 }
 
 /// The sites of a `width` x `height` window whose top left is `origin` by 4 px cells, to find
@@ -535,18 +532,18 @@ fn lend_one(
     let me = &members[m];
     let g = spacing(s);
     let lends = |q: &Member| q.pixel.0 % g == 0 && q.pixel.1 % g == 0;
-    let takes = |q: u32| {
+    // Whether member q takes `r` (it is of q's cluster and q is not covered), and whether q
+    // counts among the techniques that could have drawn it: where it takes it, and where
+    // `r` lies nearer than all q saw (then it covers q, which cannot take it, but nothing
+    // hides `r`'s surface from q there: its density is whole). Leaving those out would make
+    // the techniques depend on whether each site's own samples happened to find the nearer
+    // surface, which weighs that surface too much.
+    let role = |q: u32| {
         let other = &members[q as usize];
-        !covered[q as usize] && (other.lo..=other.hi).contains(&other.carried(r))
-    };
-    // A site counts among the techniques that could have drawn `r` where it takes it, and
-    // where `r` lies nearer than all it saw (then it covers the site, which cannot take
-    // it, but nothing hides `r`'s surface from it there: its density is whole). Leaving
-    // those out would make the techniques depend on whether each site's own samples
-    // happened to find the nearer surface, which weighs that surface too much.
-    let counts = |q: u32| {
-        let other = &members[q as usize];
-        takes(q) || (covered[q as usize] && other.carried(r) < other.lo)
+        let c = other.carried(r);
+        let covered = covered[q as usize];
+        let takes = !covered && (other.lo..=other.hi).contains(&c);
+        (takes, takes || (covered && c < other.lo))
     };
     let mut lenders = 0.0;
     near.clear();
@@ -561,8 +558,13 @@ fn lend_one(
                 if d.length_squared() >= extent * extent {
                     continue;
                 }
-                let technique = lends(other) && counts(q);
-                let receiver = other.needy && takes(q);
+                let lender = lends(other);
+                if !(lender || other.needy) {
+                    continue;
+                }
+                let (takes, counts) = role(q);
+                let technique = lender && counts;
+                let receiver = other.needy && takes;
                 if !(technique || receiver) {
                     continue;
                 }
@@ -583,7 +585,7 @@ fn lend_one(
         if !me.needy {
             return;
         }
-        for q in grid.on_lattice(r.centre, extent, g).filter(|&q| counts(q)) {
+        for q in grid.on_lattice(r.centre, extent, g).filter(|&q| role(q).1) {
             let other = &members[q as usize];
             lenders += other.n * k_at.at(r.centre - other.at);
         }
@@ -616,19 +618,19 @@ impl Member {
     /// Whether its own sample `r` is one it lends (and pools with what it borrows): of its
     /// cluster, and lending.
     fn lends(&self, r: &Record) -> bool {
-        r.lends && (self.lo..=self.hi).contains(&self.carried(r))
+        lends_within(r, self.at, self.gradient, (self.lo, self.hi))
     }
 }
 
 /// The mean of the view-dependent parts ([`Record::own`]) of the samples `member` lends and
 /// the variance of that mean's luminance; `None` when they are all zero.
 fn own_part(records: &SiteRecords, member: &Member) -> Option<(Vec3, f64)> {
-    let list: Vec<&Record> = records.list.iter().filter(|r| member.lends(r)).collect();
-    if list.iter().all(|r| r.own == Vec3::ZERO) {
+    let list = || records.list.iter().filter(|r| member.lends(r));
+    if list().all(|r| r.own == Vec3::ZERO) {
         return None;
     }
     let mut own = Estimate::default();
-    for r in list {
+    for r in list() {
         own.add(r.own, 1.0, r.hit);
     }
     // Unknown from one sample: counted as none, as the site's own estimate would be.
@@ -652,11 +654,17 @@ fn mean_gradient(records: &SiteRecords) -> Vec2 {
     records.list.iter().map(|r| r.gradient).sum::<Vec2>() / n
 }
 
+/// Whether sample `r` lends and its shift, carried to `at` along `gradient`, lies within the
+/// cluster `(lo, hi)`.
+fn lends_within(r: &Record, at: Vec2, gradient: Vec2, (lo, hi): (f32, f32)) -> bool {
+    r.lends && (lo..=hi).contains(&carried(r, at, gradient))
+}
+
 /// The nearest cluster of a site's shifts carried to its pixel centre `at` along their
-/// surfaces' gradient `gradient`, widened by [`GAP`], if some of its samples there lend; and
-/// whether any sample lies outside what it lends (a farther surface seen past the nearest's
-/// rim, or a sample that does not lend).
-fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32, bool)> {
+/// surfaces' gradient `gradient`, widened by [`GAP`], if some of its samples there lend (the
+/// others, a farther surface seen past the nearest's rim or samples that do not lend, stay
+/// with it: [`rest`]).
+fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)> {
     if records.overflow || records.list.is_empty() {
         return None;
     }
@@ -672,10 +680,12 @@ fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32,
     shifts.sort_unstable_by(f32::total_cmp);
     let end = shifts.windows(2).position(|w| w[1] - w[0] > GAP);
     let last = end.map_or(shifts[shifts.len() - 1], |i| shifts[i]);
-    let (lo, hi) = (shifts[0] - GAP, last + GAP);
-    let within = |r: &Record| r.lends && (lo..=hi).contains(&carried(r, at, gradient));
-    let lent = records.list.iter().filter(|r| within(r)).count();
-    (lent > 0).then_some((lo, hi, lent < records.list.len()))
+    let range = (shifts[0] - GAP, last + GAP);
+    let lends = records
+        .list
+        .iter()
+        .any(|r| lends_within(r, at, gradient, range));
+    lends.then_some(range)
 }
 
 /// The estimates of a window's sites with their neighbours' samples lent to them: for every
@@ -697,7 +707,7 @@ pub fn lend(
         let (x, y) = (x0 + p % width, y0 + p / width);
         let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
         let gradient = mean_gradient(r);
-        if let Some((lo, hi, split)) = cluster(r, at, gradient) {
+        if let Some((lo, hi)) = cluster(r, at, gradient) {
             let n = r.list.len() as f32;
             let needy = needy[p];
             members.push(Member {
@@ -709,7 +719,6 @@ pub fn lend(
                 hi,
                 gradient,
                 needy,
-                split,
             });
         }
     }
@@ -767,9 +776,11 @@ pub fn lend(
                 None => lent,
             };
             // What it lends covers the share of its pixel the lent weights add up to (in
-            // expectation); the rest is its own samples' (see the module documentation).
-            out[member.p] = if member.split {
-                value.blend(lent.weight(), rest(site, member))
+            // expectation); the rest, if it saw any, is its own samples' (see the module
+            // documentation).
+            let rest = rest(site, member);
+            out[member.p] = if rest.n > 0 {
+                value.blend(lent.weight(), rest)
             } else {
                 value
             };
