@@ -450,56 +450,15 @@ const ALBEDO_ETA: usize = 12;
 
 /// The GGX dielectric specular layer's directional albedo (exact Fresnel) at `cos_o`,
 /// `roughness` and relative index `eta >= 1`, as its ratio to the Fresnel reflectance at
-/// `cos_o`: tabulated once over `sqrt(cos_o)`, `sqrt(roughness)` and `s = (eta - 1) / (eta +
-/// 1)` (the square root of the reflectance at normal incidence) by sampling the layer itself
-/// on a stratified 16 x 16 grid, read trilinearly, then multiplied by the exact
+/// `cos_o`: tabulated over `sqrt(cos_o)`, `sqrt(roughness)` and `s = (eta - 1) / (eta + 1)`
+/// (the square root of the reflectance at normal incidence) by sampling the layer itself on a
+/// stratified 16 x 16 grid ([`tabulate_specular_albedo`], stored), read trilinearly, then multiplied by the exact
 /// `F(cos_o)`. The ratio is 1 for a smooth surface and varies slowly elsewhere, so the
 /// interpolation keeps the albedo of any index within the table's sampling error (the
 /// albedo itself is convex in the index, and interpolating it would always come out low,
 /// handing the diffuse layer light the specular layer also reflects).
 fn specular_albedo(cos_o: f32, roughness: f32, eta: f32) -> f32 {
-    let node_s = |k: usize| (k as f32 / (ALBEDO_ETA - 1) as f32).clamp(0.01, 0.998);
-    static TABLE: std::sync::OnceLock<Vec<f32>> = std::sync::OnceLock::new();
-    let table = TABLE.get_or_init(|| {
-        let mut t = Vec::with_capacity(ALBEDO_ETA * ALBEDO_COS * ALBEDO_ROUGH);
-        for k in 0..ALBEDO_ETA {
-            let s = node_s(k);
-            let eta = (1.0 + s) / (1.0 - s);
-            for j in 0..ALBEDO_ROUGH {
-                let roughness = (j as f32 / (ALBEDO_ROUGH - 1) as f32).powi(2);
-                // A black, fully transmissive dielectric: only its reflection returns light,
-                // and no diffuse layer asks for this table while it is being made.
-                let layer = Bsdf {
-                    base_color: Vec3::ZERO,
-                    metallic: 0.0,
-                    roughness,
-                    transmission: 1.0,
-                    eta,
-                    thin: false,
-                };
-                for i in 0..ALBEDO_COS {
-                    // Nodes at squares: dense at grazing angles, where the albedo changes fast.
-                    let mu = (i as f32 / (ALBEDO_COS - 1) as f32).powi(2).max(0.002);
-                    let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
-                    let mut sum = 0.0f64;
-                    for n in 0..256u32 {
-                        let u = [
-                            0.5,
-                            ((n % 16) as f32 + 0.5) / 16.0,
-                            ((n / 16) as f32 + 0.5) / 16.0,
-                        ];
-                        if let Some(s) = layer.sample(Vec3::Z, wo, u)
-                            && s.lobe == Lobe::Glossy
-                        {
-                            sum += f64::from(s.weight.x);
-                        }
-                    }
-                    t.push((sum / 256.0) as f32 / dielectric_fresnel(eta, mu));
-                }
-            }
-        }
-        t
-    });
+    let table = &super::albedo_table::SPECULAR_ALBEDO;
     let x = cos_o.clamp(0.0, 1.0).sqrt() * (ALBEDO_COS - 1) as f32;
     let y = roughness.clamp(0.0, 1.0).sqrt() * (ALBEDO_ROUGH - 1) as f32;
     let s = (eta - 1.0) / (eta + 1.0);
@@ -516,9 +475,60 @@ fn specular_albedo(cos_o: f32, roughness: f32, eta: f32) -> f32 {
         let bottom = at(i, j + 1, k) + (at(i + 1, j + 1, k) - at(i, j + 1, k)) * fx;
         top + (bottom - top) * fy
     };
-    let t = ((s - node_s(k)) / (node_s(k + 1) - node_s(k))).clamp(0.0, 1.0);
+    let t = ((s - albedo_node_s(k)) / (albedo_node_s(k + 1) - albedo_node_s(k))).clamp(0.0, 1.0);
     let ratio = plane(k) + (plane(k + 1) - plane(k)) * t;
     (ratio * dielectric_fresnel(eta, cos_o)).clamp(0.0, 1.0)
+}
+
+/// The node of the specular albedo table's index axis `k`, in `s = (eta - 1) / (eta + 1)`.
+fn albedo_node_s(k: usize) -> f32 {
+    (k as f32 / (ALBEDO_ETA - 1) as f32).clamp(0.01, 0.998)
+}
+
+/// Computes [`specular_albedo`]'s table (index, roughness, cosine; the cosine fastest) by
+/// sampling the layer itself: 2.4 million samples, half a second, which every process paid
+/// on its first shading when it was built at run time. It is stored in `albedo_table.rs`,
+/// which a test checks against this and `DOFRAY_BLESS=1` rewrites.
+#[cfg(test)]
+fn tabulate_specular_albedo() -> Vec<f32> {
+    let mut t = Vec::with_capacity(ALBEDO_ETA * ALBEDO_COS * ALBEDO_ROUGH);
+    for k in 0..ALBEDO_ETA {
+        let s = albedo_node_s(k);
+        let eta = (1.0 + s) / (1.0 - s);
+        for j in 0..ALBEDO_ROUGH {
+            let roughness = (j as f32 / (ALBEDO_ROUGH - 1) as f32).powi(2);
+            // A black, fully transmissive dielectric: only its reflection returns light, and
+            // it never asks for this table (it has no diffuse layer).
+            let layer = Bsdf {
+                base_color: Vec3::ZERO,
+                metallic: 0.0,
+                roughness,
+                transmission: 1.0,
+                eta,
+                thin: false,
+            };
+            for i in 0..ALBEDO_COS {
+                // Nodes at squares: dense at grazing angles, where the albedo changes fast.
+                let mu = (i as f32 / (ALBEDO_COS - 1) as f32).powi(2).max(0.002);
+                let wo = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
+                let mut sum = 0.0f64;
+                for n in 0..256u32 {
+                    let u = [
+                        0.5,
+                        ((n % 16) as f32 + 0.5) / 16.0,
+                        ((n / 16) as f32 + 0.5) / 16.0,
+                    ];
+                    if let Some(s) = layer.sample(Vec3::Z, wo, u)
+                        && s.lobe == Lobe::Glossy
+                    {
+                        sum += f64::from(s.weight.x);
+                    }
+                }
+                t.push((sum / 256.0) as f32 / dielectric_fresnel(eta, mu));
+            }
+        }
+    }
+    t
 }
 
 /// An orthonormal basis around unit `n` (Duff et al. 2017, branchless).
@@ -808,6 +818,40 @@ mod tests {
                 "mu {mu}: {} +- {} vs {expected}",
                 albedo.mean(),
                 albedo.error()
+            );
+        }
+    }
+
+    /// The stored specular albedo table is the one the layer's own sampling gives today: a
+    /// change to the BSDF that moves it must rewrite it (`DOFRAY_BLESS=1 cargo test
+    /// albedo_table_is_current`), or diffuse layers would be dimmed by a stale albedo.
+    #[test]
+    fn albedo_table_is_current() {
+        let fresh = tabulate_specular_albedo();
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/src/shade/albedo_table.rs");
+        if std::env::var_os("DOFRAY_BLESS").is_some() {
+            let mut text = String::from(
+                "//! The GGX dielectric specular layer's directional albedo over its Fresnel \
+                 reflectance,\n//! [`super::bsdf`]'s `specular_albedo` table. Generated by \
+                 `DOFRAY_BLESS=1 cargo test\n//! albedo_table_is_current`; do not edit.\n\n",
+            );
+            text += &format!(
+                "pub(super) static SPECULAR_ALBEDO: [f32; {}] = [\n",
+                fresh.len()
+            );
+            for row in fresh.chunks(ALBEDO_COS / 4) {
+                let row: Vec<String> = row.iter().map(|v| format!("{v:?}")).collect();
+                text += &format!("    {},\n", row.join(", "));
+            }
+            text += "];\n";
+            std::fs::write(path, text).expect("writing the albedo table");
+        }
+        let stored = &crate::shade::albedo_table::SPECULAR_ALBEDO;
+        assert_eq!(stored.len(), fresh.len());
+        for (i, (a, b)) in stored.iter().zip(&fresh).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-6,
+                "entry {i}: stored {a}, sampled {b}; rebless"
             );
         }
     }

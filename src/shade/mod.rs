@@ -1,6 +1,7 @@
 //! Materials, textures and lights: what a surface looks like once a ray has found it.
 //! All colours are linear radiance; sRGB appears only when 8-bit images are written.
 
+mod albedo_table;
 mod bsdf;
 mod environment;
 mod light;
