@@ -1,9 +1,9 @@
-//! Sample reuse across sites (`--reuse on`): once the error-controlled rule has placed its
-//! sites and their samples, a blurred site still noisier than the rule wanted borrows the
-//! samples of the sites around it whose apertures saw the same surface points, so its value
-//! rests on its neighbours' samples as well as its own (Lehtinen et al. 2011 reconstruct the
-//! same light field; here the combination is multiple importance sampling, so it stays
-//! unbiased). Where and how many samples are traced is decided on the sites' own samples
+//! Sample reuse across sites (on by default, `--reuse off` without): once the error-controlled
+//! rule has placed its sites and their samples, a blurred site still noisier than the rule
+//! wanted borrows the samples of the sites around it whose apertures saw the same surface
+//! points, so its value rests on its neighbours' samples as well as its own (Lehtinen et al.
+//! 2011 reconstruct the same light field; here the combination is multiple importance
+//! sampling, so it stays unbiased). Where and how many samples are traced is decided on the sites' own samples
 //! alone, so the error controller stays as conservative as without reuse.
 //!
 //! **Why a sample is valid elsewhere.** A sample of site q is a film position x drawn from
@@ -75,6 +75,7 @@
 use std::f32::consts::SQRT_2;
 
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 
 use super::estimate::Estimate;
 use crate::camera::Reprojection;
@@ -241,7 +242,6 @@ impl Kernel {
         let first: Vec2 = points.iter().map(|&(p, w)| p * w).sum();
         let corner = SQRT_2 * reach;
         let shifts = OCTAVES * PER_OCTAVE + 1;
-        let mut table = Vec::with_capacity(shifts * (RADIAL + 1));
         // Averaged over directions across one octant (the filter's symmetry).
         let dirs = [
             0.0f32,
@@ -249,10 +249,13 @@ impl Kernel {
             std::f32::consts::FRAC_PI_4,
         ]
         .map(|a| Vec2::new(a.cos(), a.sin()));
-        for k in 0..shifts {
+        // Rows in parallel (the narrow shifts integrate the whole filter at every distance:
+        // tens of milliseconds on one core, which every frame paid before its sites).
+        let (points, dirs) = (&points, &dirs);
+        let row = |k: usize| {
             let s = MIN_SHIFT * (k as f32 / PER_OCTAVE as f32).exp2();
             let area = std::f32::consts::PI * s * s;
-            for t in 0..=RADIAL {
+            (0..=RADIAL).map(move |t| {
                 // Bins even in the squared distance (no square root to look one up), the
                 // first moment over the distance (it grows linearly from the centre: at the
                 // centre, from half a bin out).
@@ -276,9 +279,10 @@ impl Kernel {
                         })
                 });
                 let n = dirs.len() as f32 * area;
-                table.push([mass / n, moment / (n * r)]);
-            }
-        }
+                [mass / n, moment / (n * r)]
+            })
+        };
+        let table = (0..shifts).into_par_iter().flat_map_iter(row).collect();
         Self { reach, table }
     }
 
@@ -361,8 +365,10 @@ impl ShiftKernel<'_> {
 struct Member {
     /// Its index in the window.
     p: usize,
-    /// Its pixel in the image, and that pixel's centre (kernels are centred there).
-    pixel: (usize, usize),
+    /// Its pixel's coordinates in the image or'ed together (it is on the lattice of spacing
+    /// `g`, a power of two, when `lattice & (g - 1) == 0`), and that pixel's centre (kernels
+    /// are centred there).
+    lattice: usize,
     at: Vec2,
     /// How many samples it lends (all it took).
     n: f32,
@@ -375,6 +381,8 @@ struct Member {
     gradient: Vec2,
     /// Its own estimate is noisier than wanted: it borrows.
     needy: bool,
+    /// A sample nearer than its cluster crosses its footprint: it neither lends nor borrows.
+    covered: bool,
 }
 
 /// The sites of a `width` x `height` window whose top left is `origin` by 4 px cells, to find
@@ -383,7 +391,10 @@ struct Grid {
     origin: Vec2,
     cols: usize,
     rows: usize,
-    cells: Vec<Vec<u32>>,
+    /// The members, by cell (each cell's in pixel order): cell `c`'s are
+    /// `members[starts[c]..starts[c + 1]]`, so a scan of nearby cells reads them in a row.
+    members: Vec<Member>,
+    starts: Vec<u32>,
     /// Each cell's members' surfaces as one plane: their mean shift gradient, the greatest
     /// [`Member::lo`] carried along it to the cell's centre (minus infinity when it has no
     /// members), and how far their gradients stray from the mean ([`Grid::nearer_than_none`]).
@@ -396,31 +407,42 @@ struct Grid {
 const CELL: f32 = 4.0;
 
 impl Grid {
-    fn new(origin: Vec2, (width, height): (usize, usize), members: &[Member]) -> Self {
+    /// The grid of `members`, given in pixel order.
+    fn new(origin: Vec2, (width, height): (usize, usize), mut members: Vec<Member>) -> Self {
         let cols = width.div_ceil(CELL as usize).max(1);
         let rows = height.div_ceil(CELL as usize).max(1);
-        let mut cells = vec![Vec::new(); cols * rows];
-        let mut index = vec![u32::MAX; width * height];
-        for (i, m) in members.iter().enumerate() {
+        let cell_of = |m: &Member| {
             let local = m.at - origin;
             let (cx, cy) = ((local.x / CELL) as usize, (local.y / CELL) as usize);
-            let cell = cy.min(rows - 1) * cols + cx.min(cols - 1);
-            cells[cell].push(i as u32);
+            cy.min(rows - 1) * cols + cx.min(cols - 1)
+        };
+        // A stable sort: within a cell the members stay in pixel order.
+        members.sort_by_key(cell_of);
+        let mut starts = vec![0u32; cols * rows + 1];
+        for m in &members {
+            starts[cell_of(m) + 1] += 1;
+        }
+        for c in 0..cols * rows {
+            starts[c + 1] += starts[c];
+        }
+        let mut index = vec![u32::MAX; width * height];
+        for (i, m) in members.iter().enumerate() {
             index[m.p] = i as u32;
         }
         let mut grid = Self {
             origin,
             cols,
             rows,
-            cells,
+            members,
+            starts,
             plane: Vec::new(),
             size: (width, height),
             index,
         };
         grid.plane = (0..cols * rows)
             .map(|cell| {
-                let ms = || grid.cells[cell].iter().map(|&i| &members[i as usize]);
-                let n = grid.cells[cell].len().max(1) as f32;
+                let ms = || grid.in_cell(cell).iter();
+                let n = grid.in_cell(cell).len().max(1) as f32;
                 let gradient = ms().map(|m| m.gradient).sum::<Vec2>() / n;
                 let centre = grid.centre(cell);
                 let lo = ms()
@@ -484,12 +506,23 @@ impl Grid {
         self.origin + (Vec2::new(cx as f32, cy as f32) + 0.5) * CELL
     }
 
-    /// The cells within `radius` of `c` (whole cells: a superset).
+    /// The indices of the members in cell `cell`.
+    fn cell(&self, cell: usize) -> std::ops::Range<usize> {
+        self.starts[cell] as usize..self.starts[cell + 1] as usize
+    }
+
+    /// The members in cell `cell`.
+    fn in_cell(&self, cell: usize) -> &[Member] {
+        &self.members[self.cell(cell)]
+    }
+
+    /// The cells that reach within `radius` of `c` (whole cells: a superset), row by row: in
+    /// each row only those the disc crosses.
     fn cells_near(&self, c: Vec2, radius: f32) -> impl Iterator<Item = usize> + '_ {
         let c = c - self.origin;
-        let span = |v: f32, n: usize| {
-            let lo = ((v - radius) / CELL).floor().max(0.0) as usize;
-            let hi = ((v + radius) / CELL).floor();
+        let span = |v: f32, r: f32, n: usize| {
+            let lo = ((v - r) / CELL).floor().max(0.0) as usize;
+            let hi = ((v + r) / CELL).floor();
             // Empty when the disc lies before the window (hi < 0) or after it (lo >= n).
             let end = if hi < 0.0 {
                 0
@@ -498,8 +531,13 @@ impl Grid {
             };
             lo..end.max(lo)
         };
-        let (xs, ys) = (span(c.x, self.cols), span(c.y, self.rows));
-        ys.flat_map(move |cy| xs.clone().map(move |cx| cy * self.cols + cx))
+        span(c.y, radius, self.rows).flat_map(move |cy| {
+            // The row's nearest point to c; the disc's half-width there.
+            let (top, bottom) = (cy as f32 * CELL, (cy + 1) as f32 * CELL);
+            let dy = (top - c.y).max(c.y - bottom).max(0.0);
+            let half = (radius * radius - dy * dy).max(0.0).sqrt();
+            span(c.x, half, self.cols).map(move |cx| cy * self.cols + cx)
+        })
     }
 }
 
@@ -520,8 +558,6 @@ fn spacing(s: f32) -> usize {
 fn lend_one(
     kernel: &Kernel,
     grid: &Grid,
-    members: &[Member],
-    covered: &[bool],
     (m, r): (usize, &Record),
     near: &mut Vec<(f32, u32)>,
     pooled: &mut [Estimate],
@@ -529,29 +565,30 @@ fn lend_one(
     let s = r.shift.abs();
     let extent = s + kernel.reach();
     let k_at = kernel.for_sample(r.shift, r.gradient);
+    let members = &grid.members;
     let me = &members[m];
     let g = spacing(s);
-    let lends = |q: &Member| q.pixel.0 % g == 0 && q.pixel.1 % g == 0;
+    // A power of two: a mask, not a division, in the loop over every member in reach.
+    let mask = g - 1;
+    let lends = |q: &Member| q.lattice & mask == 0;
     // Whether member q takes `r` (it is of q's cluster and q is not covered), and whether q
     // counts among the techniques that could have drawn it: where it takes it, and where
     // `r` lies nearer than all q saw (then it covers q, which cannot take it, but nothing
     // hides `r`'s surface from q there: its density is whole). Leaving those out would make
     // the techniques depend on whether each site's own samples happened to find the nearer
     // surface, which weighs that surface too much.
-    let role = |q: u32| {
-        let other = &members[q as usize];
+    let role = |other: &Member| {
         let c = other.carried(r);
-        let covered = covered[q as usize];
-        let takes = !covered && (other.lo..=other.hi).contains(&c);
-        (takes, takes || (covered && c < other.lo))
+        let takes = !other.covered && (other.lo..=other.hi).contains(&c);
+        (takes, takes || (other.covered && c < other.lo))
     };
     let mut lenders = 0.0;
     near.clear();
     if lends(me) {
         // A lender's sample goes to every needy member it reaches.
         for cell in grid.cells_near(r.centre, extent) {
-            for &q in grid.cells[cell].iter() {
-                let other = &members[q as usize];
+            for q in grid.cell(cell) {
+                let other = &members[q];
                 // Only lenders (their density) and needy members (receivers) within reach
                 // count; the cells are a square around the kernel's disc.
                 let d = r.centre - other.at;
@@ -562,7 +599,7 @@ fn lend_one(
                 if !(lender || other.needy) {
                     continue;
                 }
-                let (takes, counts) = role(q);
+                let (takes, counts) = role(other);
                 let technique = lender && counts;
                 let receiver = other.needy && takes;
                 if !(technique || receiver) {
@@ -574,7 +611,7 @@ fn lend_one(
                         lenders += other.n * k;
                     }
                     if receiver {
-                        near.push((k, q));
+                        near.push((k, q as u32));
                     }
                 }
             }
@@ -585,8 +622,11 @@ fn lend_one(
         if !me.needy {
             return;
         }
-        for q in grid.on_lattice(r.centre, extent, g).filter(|&q| role(q).1) {
+        for q in grid.on_lattice(r.centre, extent, g) {
             let other = &members[q as usize];
+            if !role(other).1 {
+                continue;
+            }
             lenders += other.n * k_at.at(r.centre - other.at);
         }
         let k = k_at.at(r.centre - me.at);
@@ -713,12 +753,13 @@ pub fn lend(
             members.push(Member {
                 p,
                 at,
-                pixel: (x, y),
+                lattice: x | y,
                 n,
                 lo,
                 hi,
                 gradient,
                 needy,
+                covered: false,
             });
         }
     }
@@ -729,10 +770,10 @@ pub fn lend(
     }
     let reach = kernel.reach();
     let origin = Vec2::new(x0 as f32, y0 as f32);
-    let grid = Grid::new(origin, (width, height), &members);
+    let mut grid = Grid::new(origin, (width, height), members);
     // A site whose footprint a nearer sample crosses is partly covered by something its own
     // samples missed: it neither lends nor borrows.
-    let mut covered = vec![false; members.len()];
+    let mut covered = vec![false; grid.members.len()];
     for r in records.iter().flat_map(|r| &r.list) {
         let s = r.shift.abs().max(MIN_SHIFT);
         let extent = (s + reach) * (s + reach);
@@ -740,36 +781,35 @@ pub fn lend(
             if grid.nearer_than_none(cell, r.shift, r.centre, s + reach) {
                 continue;
             }
-            for &m in &grid.cells[cell] {
-                let member = &members[m as usize];
+            for m in grid.cell(cell) {
+                let member = &grid.members[m];
                 let near = (r.centre - member.at).length_squared() < extent;
                 if near && member.carried(r) < member.lo {
-                    covered[m as usize] = true;
+                    covered[m] = true;
                 }
             }
         }
     }
-    let mut pooled = vec![Estimate::default(); members.len()];
+    for (member, &covered) in grid.members.iter_mut().zip(&covered) {
+        member.covered = covered;
+    }
+    let mut pooled = vec![Estimate::default(); grid.members.len()];
     let mut near: Vec<(f32, u32)> = Vec::new();
-    for (m, member) in members.iter().enumerate() {
-        if covered[m] {
+    // Lent in pixel order, so each receiver adds its samples in an order that does not
+    // depend on the grid.
+    let mut by_pixel: Vec<usize> = (0..grid.members.len()).collect();
+    by_pixel.sort_unstable_by_key(|&m| grid.members[m].p);
+    for m in by_pixel {
+        let member = &grid.members[m];
+        if member.covered {
             continue;
         }
         for r in records[member.p].list.iter().filter(|r| member.lends(r)) {
-            lend_one(
-                kernel,
-                &grid,
-                &members,
-                &covered,
-                (m, r),
-                &mut near,
-                &mut pooled,
-            );
+            lend_one(kernel, &grid, (m, r), &mut near, &mut pooled);
         }
     }
-    for (m, member) in members.iter().enumerate() {
-        let lent = pooled[m];
-        if member.needy && !covered[m] && lent.n > 0 && lent.mean().is_finite() {
+    for (member, lent) in grid.members.iter().zip(pooled) {
+        if member.needy && !member.covered && lent.n > 0 && lent.mean().is_finite() {
             let site = &records[member.p];
             let value = match own_part(site, member) {
                 Some((mean, variance)) => lent.plus(mean, variance),
