@@ -232,6 +232,32 @@ fn a_glossy_wall_lends_its_diffuse_light_and_keeps_its_reflection() {
     assert_keeps_brightness(&lent, &reference);
 }
 
+/// The render's statistics count the sites that borrowed: some of the blurred ones with
+/// reuse, none without it, and none that blur does not reach.
+#[test]
+fn the_statistics_count_the_sites_that_borrowed() {
+    let desc = scene();
+    let device = dofray::embree::Device::new().unwrap();
+    let world = World::build(&desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    let stats = |reuse: bool| {
+        let settings = settings(Mode::Adaptive, 16, reuse);
+        render::render(&world, &camera, &settings, &NoProgress)
+            .unwrap()
+            .1
+    };
+    let (on, off) = (stats(true), stats(false));
+    assert_eq!(off.borrowing_sites, 0);
+    assert!(
+        on.borrowing_sites > 0 && on.borrowing_sites <= on.defocused_sites,
+        "{} of {} defocused sites borrowed",
+        on.borrowing_sites,
+        on.defocused_sites
+    );
+    // Where and how many samples are traced does not depend on reuse.
+    assert_eq!(on.sample_sites, off.sample_sites);
+}
+
 #[test]
 fn settings_it_cannot_serve_change_nothing() {
     let desc = scene();

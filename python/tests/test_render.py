@@ -70,7 +70,8 @@ def test_coc_grows_off_the_focus_plane(paper):
 def test_stats(paper):
     stats = paper.stats
     assert isinstance(stats, dict)
-    for key in ("rays", "seconds", "mrays_per_s", "sample_sites", "defocused_sites", "rounds"):
+    keys = ("rays", "seconds", "mrays_per_s", "sample_sites", "defocused_sites")
+    for key in keys + ("borrowing_sites", "rounds"):
         assert key in stats, key
     rays = stats["rays"]
     assert rays["total"] == rays["primary"] + rays["shadow"] + rays["secondary"]

@@ -286,8 +286,12 @@ pub(crate) fn run_render(a: &RenderArgs) -> Result<ExitCode> {
 
 /// `out.png: adaptive 640x480 in 1.23 s, ...` for a rendered job.
 fn print_rendered(job: &Job, s: &JobSummary) {
+    let borrowed = match s.stats.borrowing_sites {
+        0 => String::new(),
+        n => format!(" ({n} borrowed their neighbours' samples)"),
+    };
     eprintln!(
-        "{}: {} {}x{} in {:.2} s, {} rays ({:.1} Mrays/s), {} sample sites",
+        "{}: {} {}x{} in {:.2} s, {} rays ({:.1} Mrays/s), {} sample sites{borrowed}",
         job.output.display(),
         s.mode,
         s.width,

@@ -113,6 +113,9 @@ pub struct RenderStats {
     pub sample_sites: u64,
     /// Sites that blur reaches, which took `spp` samples (the others took `aa`).
     pub defocused_sites: u64,
+    /// Sites whose value rests on their neighbours' lent samples as well as their own (sample
+    /// reuse, adaptive mode; [`RenderSettings`]'s `path.reuse`).
+    pub borrowing_sites: u64,
     /// Rounds of shading and checking of the error-controlled rule (0 for other rules).
     pub rounds: u32,
     /// Every packet traced, in a deterministic order, when `record_rays` was set.
@@ -496,6 +499,9 @@ pub fn render_region(
         // Maps, sites and interpolation interleave in rounds: timed as shading.
         let refined = refine::refine(&shader, tolerance, &blur, region, progress, &mut tally)?;
         stats.rounds = refined.rounds;
+        // Counted over the region alone, as the sites are below.
+        let borrowed = region.try_crop(&refined.borrowed, w, "the region's borrowing sites")?;
+        stats.borrowing_sites = borrowed.iter().filter(|&&b| b).count() as u64;
         film.set_rgba(&refined.color);
         film.interval = refined.interval;
         film.samples = refined.samples;

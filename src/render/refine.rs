@@ -77,6 +77,8 @@ pub struct Refined {
     pub interval: Vec<u32>,
     /// Samples traced per pixel (0: interpolated).
     pub samples: Vec<u32>,
+    /// The sites whose value rests on their neighbours' lent samples too ([`reuse`]).
+    pub borrowed: Vec<bool>,
     /// Rounds of shading and checking.
     pub rounds: u32,
 }
@@ -237,18 +239,25 @@ impl Traced {
     /// With reuse, the sites' values with their neighbours' samples lent ([`reuse::lend`]);
     /// where and how many samples were taken was decided on their own samples alone. Only
     /// blurred sites take part, and only those still noisier than the rule wanted borrow (the
-    /// others' error is already within what the tolerance allows).
-    fn lend(&mut self, maps: &Maps, b: &Bucket, transparent: bool) -> Result<(), MemoryError> {
+    /// others' error is already within what the tolerance allows). Returns the sites that
+    /// borrowed.
+    fn lend(
+        &mut self,
+        maps: &Maps,
+        b: &Bucket,
+        transparent: bool,
+    ) -> Result<Vec<bool>, MemoryError> {
         let (Some(records), Some(kernel)) = (self.records.as_ref(), maps.kernel.as_ref()) else {
-            return Ok(());
+            return try_vec(self.est.len(), false, "the sites that borrowed");
         };
         let limit = SAMPLING_SHARE * maps.tolerance;
         let needy: Vec<bool> = (0..self.est.len())
             .map(|p| self.se[p] > limit || (transparent && self.se_alpha[p] > limit))
             .collect();
         let (window, size) = ((b.x0, b.y0), (b.w, b.h));
-        self.est = reuse::lend(kernel, window, size, records, &self.est, &needy)?;
-        Ok(())
+        let lent = reuse::lend(kernel, window, size, records, &self.est, &needy)?;
+        self.est = lent.estimates;
+        Ok(lent.borrowed)
     }
 
     /// Recomputes the cached values of the pixels in `changed`.
@@ -566,6 +575,7 @@ pub fn refine(
         color: try_vec(width * height, Vec4::ZERO, "the pixels' colours")?,
         interval: try_copy(&maps.start, "the interval map")?,
         samples: try_vec(width * height, 0, "the pixels' sample counts")?,
+        borrowed: try_vec(width * height, false, "the sites that borrowed")?,
         rounds: 0,
     };
     for (b, refined, local) in done {
@@ -578,6 +588,7 @@ pub fn refine(
                 out.color[p] = refined.color[q];
                 out.interval[p] = refined.interval[q];
                 out.samples[p] = refined.samples[q];
+                out.borrowed[p] = refined.borrowed[q];
             }
         }
         out.rounds = out.rounds.max(refined.rounds);
@@ -723,11 +734,12 @@ fn refine_bucket(
 
     // Samples traced per pixel: the sites' own, whatever they borrow below.
     let samples = traced.est.iter().map(|e| e.n).collect();
-    traced.lend(maps, b, s.transparent)?;
+    let borrowed = traced.lend(maps, b, s.transparent)?;
     Ok(Some(Refined {
         color: final_colour(&traced, &interval, b),
         interval,
         samples,
+        borrowed,
         rounds,
     }))
 }

@@ -728,6 +728,15 @@ fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)
     lends.then_some(range)
 }
 
+/// What [`lend`] gives a window's sites.
+#[derive(Debug, Clone)]
+pub struct Lent {
+    /// Every site's estimate, its neighbours' samples lent to it where reuse holds.
+    pub estimates: Vec<Estimate>,
+    /// The sites whose estimate rests on lent samples.
+    pub borrowed: Vec<bool>,
+}
+
 /// The estimates of a window's sites with their neighbours' samples lent to them: for every
 /// pixel of the `width` x `height` window whose top left pixel is `(x0, y0)` in the image,
 /// `own[p]` where reuse does not hold (see the module documentation), nothing was traced or
@@ -741,7 +750,7 @@ pub fn lend(
     records: &[SiteRecords],
     own: &[Estimate],
     needy: &[bool],
-) -> Result<Vec<Estimate>, MemoryError> {
+) -> Result<Lent, MemoryError> {
     let mut members: Vec<Member> = Vec::new();
     for (p, r) in records.iter().enumerate() {
         let (x, y) = (x0 + p % width, y0 + p / width);
@@ -763,8 +772,11 @@ pub fn lend(
             });
         }
     }
-    let mut out = try_vec(own.len(), Estimate::default(), "the lent estimates")?;
-    out.copy_from_slice(own);
+    let mut out = Lent {
+        estimates: try_vec(own.len(), Estimate::default(), "the lent estimates")?,
+        borrowed: try_vec(own.len(), false, "the sites that borrowed")?,
+    };
+    out.estimates.copy_from_slice(own);
     if !members.iter().any(|m| m.needy) {
         return Ok(out);
     }
@@ -819,11 +831,12 @@ pub fn lend(
             // expectation); the rest, if it saw any, is its own samples' (see the module
             // documentation).
             let rest = rest(site, member);
-            out[member.p] = if rest.n > 0 {
+            out.estimates[member.p] = if rest.n > 0 {
                 value.blend(lent.weight(), rest)
             } else {
                 value
             };
+            out.borrowed[member.p] = true;
         }
     }
     Ok(out)
@@ -969,7 +982,9 @@ mod tests {
         for t in 0..trials {
             let (records, own) = render(t);
             let needy = vec![true; own.len()];
-            let lent = lend(&k, (0, 0), (size, size), &records, &own, &needy).unwrap();
+            let lent = lend(&k, (0, 0), (size, size), &records, &own, &needy)
+                .unwrap()
+                .estimates;
             let (a, b) = (
                 f64::from(own[site].mean().x),
                 f64::from(lent[site].mean().x),
@@ -992,11 +1007,13 @@ mod tests {
         let (records, own) = lattice(32, 4, 16, 6.0, |_| 0.3, 1);
         let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
         let mut borrowed = 0;
-        for (e, o) in lent.iter().zip(&own) {
+        for ((e, o), &b) in lent.estimates.iter().zip(&own).zip(&lent.borrowed) {
             assert_eq!(e.n == 0, o.n == 0);
+            // Marked as borrowing exactly where neighbours' samples came in.
+            assert_eq!(b, e.n > o.n);
             if o.n > 0 {
                 assert!((e.mean() - Vec3::splat(0.3)).length() < 1e-5);
-                borrowed += usize::from(e.n > o.n);
+                borrowed += usize::from(b);
             }
         }
         assert!(borrowed > 40, "most sites borrow: {borrowed}");
@@ -1078,7 +1095,9 @@ mod tests {
         near.shift = 1.0;
         near.centre = Vec2::new(8.5, 8.5);
         records[4 * 32 + 4].list.push(near);
-        let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
+        let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32])
+            .unwrap()
+            .estimates;
         assert_ne!(lent[two], own[two]);
         assert!((lent[two].mean() - Vec3::splat(0.3)).length() < 1e-5);
         assert_eq!(lent[behind], own[behind]);
@@ -1138,7 +1157,8 @@ mod tests {
                 &own,
                 &needy,
             )
-            .unwrap();
+            .unwrap()
+            .estimates;
             assert!(lent[site].n > own[site].n, "{x}: it borrows");
             let ((own_mean, own_var), (lent_mean, lent_var)) =
                 own_and_lent((size, site), trials, render);
@@ -1163,7 +1183,9 @@ mod tests {
         let field = |c: Vec2| 0.2 + 0.5 * (0.7 * c.y).sin().abs();
         let (records, own) = lattice(32, 4, 16, 5.0, field, 77);
         let needy = [true; 32 * 32];
-        let plain = lend(&k, (0, 0), (32, 32), &records, &own, &needy).unwrap();
+        let plain = lend(&k, (0, 0), (32, 32), &records, &own, &needy)
+            .unwrap()
+            .estimates;
         // Every sample gains a glossy part of its own site's (one site's much brighter and
         // noisy), which may not travel to other lens positions.
         let bright = 16 * 32 + 16;
@@ -1181,7 +1203,9 @@ mod tests {
                 own_glossy[p].add(r.radiance, 1.0, r.hit);
             }
         }
-        let lent = lend(&k, (0, 0), (32, 32), &glossy, &own_glossy, &needy).unwrap();
+        let lent = lend(&k, (0, 0), (32, 32), &glossy, &own_glossy, &needy)
+            .unwrap()
+            .estimates;
         let mut borrowed = 0;
         for p in (0..own.len()).filter(|&p| plain[p] != own[p]) {
             borrowed += 1;
