@@ -499,7 +499,6 @@ pub fn render_region(
         // Maps, sites and interpolation interleave in rounds: timed as shading.
         let refined = refine::refine(&shader, tolerance, &blur, region, progress, &mut tally)?;
         stats.rounds = refined.rounds;
-        // Counted over the region alone, as the sites are below.
         let borrowed = region.try_crop(&refined.borrowed, w, "the region's borrowing sites")?;
         stats.borrowing_sites = borrowed.iter().filter(|&&b| b).count() as u64;
         film.set_rgba(&refined.color);
