@@ -3,8 +3,8 @@
 //! wanted borrows the samples of the sites around it whose apertures saw the same surface
 //! points, so its value rests on its neighbours' samples as well as its own (Lehtinen et al.
 //! 2011 reconstruct the same light field; here the combination is multiple importance
-//! sampling, so it stays unbiased). Where and how many samples are traced is decided on the sites' own samples
-//! alone, so the error controller stays as conservative as without reuse.
+//! sampling, so it stays unbiased). Where and how many samples are traced is decided on the
+//! sites' own samples alone, so the error controller stays as conservative as without reuse.
 //!
 //! **Why a sample is valid elsewhere.** A sample of site q is a film position x drawn from
 //! the pixel filter's density f around q and a lens position l uniform on the unit disc. It
@@ -807,12 +807,10 @@ pub fn lend(
     }
     let mut pooled = vec![Estimate::default(); grid.members.len()];
     let mut near: Vec<(f32, u32)> = Vec::new();
-    // Lent in pixel order, so each receiver adds its samples in an order that does not
-    // depend on the grid.
-    let mut by_pixel: Vec<usize> = (0..grid.members.len()).collect();
-    by_pixel.sort_unstable_by_key(|&m| grid.members[m].p);
-    for m in by_pixel {
-        let member = &grid.members[m];
+    // Lent in pixel order (the grid's pixel index), so each receiver adds its samples in an
+    // order that does not depend on the grid.
+    for m in grid.index.iter().filter(|&&m| m != u32::MAX) {
+        let (m, member) = (*m as usize, &grid.members[*m as usize]);
         if member.covered {
             continue;
         }

@@ -452,11 +452,12 @@ const ALBEDO_ETA: usize = 12;
 /// `roughness` and relative index `eta >= 1`, as its ratio to the Fresnel reflectance at
 /// `cos_o`: tabulated over `sqrt(cos_o)`, `sqrt(roughness)` and `s = (eta - 1) / (eta + 1)`
 /// (the square root of the reflectance at normal incidence) by sampling the layer itself on a
-/// stratified 16 x 16 grid ([`tabulate_specular_albedo`], stored), read trilinearly, then multiplied by the exact
-/// `F(cos_o)`. The ratio is 1 for a smooth surface and varies slowly elsewhere, so the
-/// interpolation keeps the albedo of any index within the table's sampling error (the
-/// albedo itself is convex in the index, and interpolating it would always come out low,
-/// handing the diffuse layer light the specular layer also reflects).
+/// stratified 16 x 16 grid (`tabulate_specular_albedo`, stored in `albedo_table.rs`), read
+/// trilinearly, then multiplied by the exact `F(cos_o)`. The ratio is 1 for a smooth surface
+/// and varies slowly elsewhere, so the interpolation keeps the albedo of any index within the
+/// table's sampling error (the albedo itself is convex in the index, and interpolating it
+/// would always come out low, handing the diffuse layer light the specular layer also
+/// reflects).
 fn specular_albedo(cos_o: f32, roughness: f32, eta: f32) -> f32 {
     let table = &super::albedo_table::SPECULAR_ALBEDO;
     let x = cos_o.clamp(0.0, 1.0).sqrt() * (ALBEDO_COS - 1) as f32;
