@@ -549,6 +549,24 @@ uint64_t dofray_image_rays(const struct DofrayImage *image);
 uint64_t dofray_image_sample_sites(const struct DofrayImage *image);
 
 /**
+ * Sample sites that blur reaches, which took the render's `spp` samples (the others, in
+ * focus, took `aa`; 0 for NULL).
+ *
+ * # Safety
+ * `image` is NULL or a live image.
+ */
+uint64_t dofray_image_defocused_sites(const struct DofrayImage *image);
+
+/**
+ * Sample sites whose value rests on their neighbours' lent samples as well as their own
+ * (sample reuse, adaptive mode; 0 with reuse off, in other modes and for NULL).
+ *
+ * # Safety
+ * `image` is NULL or a live image.
+ */
+uint64_t dofray_image_borrowing_sites(const struct DofrayImage *image);
+
+/**
  * Wall-clock seconds the render took, without building the scene (0 for NULL).
  *
  * # Safety

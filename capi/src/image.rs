@@ -103,6 +103,28 @@ pub unsafe extern "C" fn dofray_image_sample_sites(image: *const DofrayImage) ->
     unsafe { value_of(image, 0, |i| i.stats.sample_sites) }
 }
 
+/// Sample sites that blur reaches, which took the render's `spp` samples (the others, in
+/// focus, took `aa`; 0 for NULL).
+///
+/// # Safety
+/// `image` is NULL or a live image.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dofray_image_defocused_sites(image: *const DofrayImage) -> u64 {
+    // SAFETY: the function's contract.
+    unsafe { value_of(image, 0, |i| i.stats.defocused_sites) }
+}
+
+/// Sample sites whose value rests on their neighbours' lent samples as well as their own
+/// (sample reuse, adaptive mode; 0 with reuse off, in other modes and for NULL).
+///
+/// # Safety
+/// `image` is NULL or a live image.
+#[unsafe(no_mangle)]
+pub unsafe extern "C" fn dofray_image_borrowing_sites(image: *const DofrayImage) -> u64 {
+    // SAFETY: the function's contract.
+    unsafe { value_of(image, 0, |i| i.stats.borrowing_sites) }
+}
+
 /// Wall-clock seconds the render took, without building the scene (0 for NULL).
 ///
 /// # Safety

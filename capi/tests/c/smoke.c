@@ -59,7 +59,9 @@ static int file_exists(const char *path) {
     return 1;
 }
 
-static void render_and_check(DofrayScene *scene, DofrayDevice *device, const char *dir) {
+/* adaptive: the scene is in adaptive mode (with sample reuse, the default), else dense. */
+static void render_and_check(DofrayScene *scene, DofrayDevice *device, const char *dir,
+                             int adaptive) {
     struct progress_log log = {0};
     DofrayImage *image = NULL;
     CHECK(dofray_render(scene, device, on_progress, &log, NULL, &image) == DOFRAY_OK);
@@ -105,6 +107,13 @@ static void render_and_check(DofrayScene *scene, DofrayDevice *device, const cha
     CHECK(dofray_image_sample_sites(image) > 0);
     CHECK(dofray_image_sample_sites(image) <= n);
     CHECK(dofray_image_seconds(image) >= 0);
+    /* paper at f/0.5 blurs its near floor; adaptive sites lend to each other, dense's never */
+    CHECK(dofray_image_defocused_sites(image) > 0);
+    CHECK(dofray_image_defocused_sites(image) <= dofray_image_sample_sites(image));
+    CHECK(adaptive ? dofray_image_borrowing_sites(image) > 0
+                   : dofray_image_borrowing_sites(image) == 0);
+    CHECK(dofray_image_borrowing_sites(image) <= dofray_image_defocused_sites(image));
+    CHECK(dofray_image_defocused_sites(NULL) == 0 && dofray_image_borrowing_sites(NULL) == 0);
 
     char path[4096];
     snprintf(path, sizeof path, "%s/smoke.png", dir);
@@ -146,13 +155,13 @@ int main(int argc, char **argv) {
     DofrayScene *scene = NULL;
     CHECK(dofray_scene_load("paper", &scene) == DOFRAY_OK);
     CHECK(dofray_scene_set_size(scene, 64, 48) == DOFRAY_OK);
-    CHECK(dofray_scene_set_f_number(scene, 2.8f) == DOFRAY_OK);
+    CHECK(dofray_scene_set_f_number(scene, 0.5f) == DOFRAY_OK);
     CHECK(dofray_scene_set_spp(scene, 8) == DOFRAY_OK);
     CHECK(dofray_scene_set_seed(scene, 7) == DOFRAY_OK);
-    render_and_check(scene, device, dir);
+    render_and_check(scene, device, dir, 1);
     /* Again, with a device the scene makes, in dense mode. */
     CHECK(dofray_scene_set_mode(scene, "dense") == DOFRAY_OK);
-    render_and_check(scene, NULL, dir);
+    render_and_check(scene, NULL, dir, 0);
 
     /* Cancelled from the callback: at its first call, then in the middle of a render. */
     DofrayImage *image = NULL;
