@@ -549,8 +549,8 @@ uint64_t dofray_image_rays(const struct DofrayImage *image);
 uint64_t dofray_image_sample_sites(const struct DofrayImage *image);
 
 /**
- * Sample sites that blur reaches, which took the render's `spp` samples (the others, in
- * focus, took `aa`; 0 for NULL).
+ * Sample sites that blur reaches, which took up to the render's `spp` samples (the others,
+ * in focus, up to `aa`; 0 for NULL).
  *
  * # Safety
  * `image` is NULL or a live image.

@@ -103,8 +103,8 @@ pub unsafe extern "C" fn dofray_image_sample_sites(image: *const DofrayImage) ->
     unsafe { value_of(image, 0, |i| i.stats.sample_sites) }
 }
 
-/// Sample sites that blur reaches, which took the render's `spp` samples (the others, in
-/// focus, took `aa`; 0 for NULL).
+/// Sample sites that blur reaches, which took up to the render's `spp` samples (the others,
+/// in focus, up to `aa`; 0 for NULL).
 ///
 /// # Safety
 /// `image` is NULL or a live image.

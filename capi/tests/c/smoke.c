@@ -113,7 +113,6 @@ static void render_and_check(DofrayScene *scene, DofrayDevice *device, const cha
     CHECK(adaptive ? dofray_image_borrowing_sites(image) > 0
                    : dofray_image_borrowing_sites(image) == 0);
     CHECK(dofray_image_borrowing_sites(image) <= dofray_image_defocused_sites(image));
-    CHECK(dofray_image_defocused_sites(NULL) == 0 && dofray_image_borrowing_sites(NULL) == 0);
 
     char path[4096];
     snprintf(path, sizeof path, "%s/smoke.png", dir);
@@ -299,6 +298,7 @@ int main(int argc, char **argv) {
                 "scene");
     CHECK_ERROR(dofray_image_write(NULL, "x.png"), DOFRAY_INVALID_ARGUMENT, "image");
     CHECK(dofray_image_width(NULL) == 0 && dofray_image_rgba(NULL) == NULL);
+    CHECK(dofray_image_defocused_sites(NULL) == 0 && dofray_image_borrowing_sites(NULL) == 0);
     CHECK(dofray_device_new("", NULL) == DOFRAY_INVALID_ARGUMENT);
     dofray_cancel(NULL);
     dofray_image_free(NULL);
