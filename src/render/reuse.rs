@@ -206,8 +206,8 @@ impl SiteRecords {
 #[derive(Debug, Clone)]
 pub struct Kernel {
     reach: f32,
-    /// `[K0, m / |d|]` per (shift row, squared-distance bin).
-    table: Vec<[f32; 2]>,
+    /// `(K0, m / |d|)` per (shift row, squared-distance bin).
+    table: Vec<Vec2>,
 }
 
 /// Shift bins per doubling, and doublings from [`MIN_SHIFT`].
@@ -279,7 +279,7 @@ impl Kernel {
                         })
                 });
                 let n = dirs.len() as f32 * area;
-                [mass / n, moment / (n * r)]
+                Vec2::new(mass / n, moment / (n * r))
             })
         };
         let table = (0..shifts).into_par_iter().flat_map_iter(row).collect();
@@ -303,11 +303,11 @@ impl Kernel {
         let k0 = ks.floor() as usize;
         // Beyond the table's widest shift the kernel is the disc's, scaled by area.
         let widest = MIN_SHIFT * (top / PER_OCTAVE as f32).exp2();
+        let row = |k: usize| &self.table[k * (RADIAL + 1)..(k + 1) * (RADIAL + 1)];
         ShiftKernel {
-            table: &self.table,
             extent: s + self.reach,
             bins_per_d2: RADIAL as f32 / ((s + self.reach) * (s + self.reach)),
-            rows: (k0, (k0 + 1).min(OCTAVES * PER_OCTAVE)),
+            rows: (row(k0), row((k0 + 1).min(OCTAVES * PER_OCTAVE))),
             fk: ks - k0 as f32,
             scale: if s > widest {
                 (widest / s) * (widest / s)
@@ -327,13 +327,12 @@ impl Kernel {
 /// [`Kernel`] for one sample, from [`Kernel::for_sample`].
 #[derive(Debug, Clone, Copy)]
 pub struct ShiftKernel<'a> {
-    table: &'a [[f32; 2]],
     /// `s + reach`: the kernel is 0 beyond.
     extent: f32,
     /// Table bins per square pixel of `|d|^2`.
     bins_per_d2: f32,
     /// The two shift rows of the table around `s`, and the weight of the second.
-    rows: (usize, usize),
+    rows: (&'a [Vec2], &'a [Vec2]),
     fk: f32,
     scale: f32,
     /// The shift gradient times the shift's sign: `K = K0 - tilt . d (m / |d|)`.
@@ -350,13 +349,10 @@ impl ShiftKernel<'_> {
         let kt = d2 * self.bins_per_d2;
         let t0 = (kt.floor() as usize).min(RADIAL - 1);
         let ft = kt - t0 as f32;
-        let row = |k: usize, i: usize| {
-            let base = k * (RADIAL + 1);
-            self.table[base + t0][i] * (1.0 - ft) + self.table[base + t0 + 1][i] * ft
-        };
-        let value =
-            |i: usize| row(self.rows.0, i) * (1.0 - self.fk) + row(self.rows.1, i) * self.fk;
-        ((value(0) - self.tilt.dot(d) * value(1)) * self.scale).max(0.0)
+        // Both columns at once: (K0, m / |d|).
+        let row = |row: &[Vec2]| row[t0] * (1.0 - ft) + row[t0 + 1] * ft;
+        let value = row(self.rows.0) * (1.0 - self.fk) + row(self.rows.1) * self.fk;
+        ((value.x - self.tilt.dot(d) * value.y) * self.scale).max(0.0)
     }
 }
 
@@ -395,6 +391,8 @@ struct Grid {
     /// `members[starts[c]..starts[c + 1]]`, so a scan of nearby cells reads them in a row.
     members: Vec<Member>,
     starts: Vec<u32>,
+    /// `members[i].at`, apart: the scans over nearby members test their distance first.
+    ats: Vec<Vec2>,
     /// Each cell's members' surfaces as one plane: their mean shift gradient, the greatest
     /// [`Member::lo`] carried along it to the cell's centre (minus infinity when it has no
     /// members), and how far their gradients stray from the mean ([`Grid::nearer_than_none`]).
@@ -429,10 +427,12 @@ impl Grid {
         for (i, m) in members.iter().enumerate() {
             index[m.p] = i as u32;
         }
+        let ats = members.iter().map(|m| m.at).collect();
         let mut grid = Self {
             origin,
             cols,
             rows,
+            ats,
             members,
             starts,
             plane: Vec::new(),
@@ -511,6 +511,20 @@ impl Grid {
         self.starts[cell] as usize..self.starts[cell + 1] as usize
     }
 
+    /// The indices of the members in cell `cell` closer to `c` than `extent` and their
+    /// offsets `c - at`.
+    fn within(&self, cell: usize, c: Vec2, extent: f32) -> impl Iterator<Item = (usize, Vec2)> {
+        let range = self.cell(cell);
+        let start = range.start;
+        self.ats[range]
+            .iter()
+            .enumerate()
+            .filter_map(move |(i, &at)| {
+                let d = c - at;
+                (d.length_squared() < extent * extent).then_some((start + i, d))
+            })
+    }
+
     /// The members in cell `cell`.
     fn in_cell(&self, cell: usize) -> &[Member] {
         &self.members[self.cell(cell)]
@@ -587,14 +601,9 @@ fn lend_one(
     if lends(me) {
         // A lender's sample goes to every needy member it reaches.
         for cell in grid.cells_near(r.centre, extent) {
-            for q in grid.cell(cell) {
+            // Only lenders (their density) and needy members (receivers) within reach count.
+            for (q, d) in grid.within(cell, r.centre, extent) {
                 let other = &members[q];
-                // Only lenders (their density) and needy members (receivers) within reach
-                // count; the cells are a square around the kernel's disc.
-                let d = r.centre - other.at;
-                if d.length_squared() >= extent * extent {
-                    continue;
-                }
                 let lender = lends(other);
                 if !(lender || other.needy) {
                     continue;
@@ -728,6 +737,27 @@ fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)
     lends.then_some(range)
 }
 
+/// Which members a nearer sample's footprint crosses: partly covered by something their own
+/// samples missed, they neither lend nor borrow.
+fn covered(grid: &Grid, records: &[SiteRecords], reach: f32) -> Vec<bool> {
+    let mut covered = vec![false; grid.members.len()];
+    for r in records.iter().flat_map(|r| &r.list) {
+        let extent = r.shift.abs().max(MIN_SHIFT) + reach;
+        for cell in grid.cells_near(r.centre, extent) {
+            if grid.nearer_than_none(cell, r.shift, r.centre, extent) {
+                continue;
+            }
+            for (m, _) in grid.within(cell, r.centre, extent) {
+                let member = &grid.members[m];
+                if member.carried(r) < member.lo {
+                    covered[m] = true;
+                }
+            }
+        }
+    }
+    covered
+}
+
 /// What [`lend`] gives a window's sites.
 #[derive(Debug, Clone)]
 pub struct Lent {
@@ -783,25 +813,7 @@ pub fn lend(
     let reach = kernel.reach();
     let origin = Vec2::new(x0 as f32, y0 as f32);
     let mut grid = Grid::new(origin, (width, height), members);
-    // A site whose footprint a nearer sample crosses is partly covered by something its own
-    // samples missed: it neither lends nor borrows.
-    let mut covered = vec![false; grid.members.len()];
-    for r in records.iter().flat_map(|r| &r.list) {
-        let s = r.shift.abs().max(MIN_SHIFT);
-        let extent = (s + reach) * (s + reach);
-        for cell in grid.cells_near(r.centre, s + reach) {
-            if grid.nearer_than_none(cell, r.shift, r.centre, s + reach) {
-                continue;
-            }
-            for m in grid.cell(cell) {
-                let member = &grid.members[m];
-                let near = (r.centre - member.at).length_squared() < extent;
-                if near && member.carried(r) < member.lo {
-                    covered[m] = true;
-                }
-            }
-        }
-    }
+    let covered = covered(&grid, records, reach);
     for (member, &covered) in grid.members.iter_mut().zip(&covered) {
         member.covered = covered;
     }
