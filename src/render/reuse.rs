@@ -96,8 +96,9 @@ pub const MIN_SHIFT: f32 = 0.5;
 /// stretch and fold over at 1) or curving away. The tilted kernel is exact on a plane below
 /// it.
 pub const MAX_TILT: f32 = 0.5;
-/// A site records at most this many samples for lending; one that takes more (it is noisy
-/// enough to need them) keeps its own mean.
+/// A site records at most this many samples for lending (bounding the memory a bucket holds);
+/// one that takes more lends its first ones, and a value it borrows for rests on those and
+/// its neighbours' (its later own samples count only where it borrows nothing).
 pub const MAX_RECORDS: usize = 256;
 
 /// One traced sample, as a trajectory.
@@ -169,10 +170,11 @@ impl Record {
 /// The samples one site recorded.
 #[derive(Debug, Clone, Default)]
 pub struct SiteRecords {
-    /// Its samples, in the order traced.
+    /// Its samples, in the order traced: the first [`MAX_RECORDS`] of them.
     pub list: Vec<Record>,
-    /// It took more than [`MAX_RECORDS`]: it keeps its own mean.
-    pub overflow: bool,
+    /// It records no more: it took more than [`MAX_RECORDS`], or takes no part
+    /// ([`SiteRecords::unlent`], with an empty list).
+    pub full: bool,
 }
 
 impl SiteRecords {
@@ -180,21 +182,19 @@ impl SiteRecords {
     pub fn unlent() -> Self {
         Self {
             list: Vec::new(),
-            overflow: true,
+            full: true,
         }
     }
 
-    /// Keeps `r`, up to [`MAX_RECORDS`]; nothing once the site has overflowed (or takes no
-    /// part, [`SiteRecords::unlent`]).
+    /// Keeps `r`, up to [`MAX_RECORDS`]; nothing once the site is full (or takes no part,
+    /// [`SiteRecords::unlent`]). The first samples of a stratified sequence are a valid set
+    /// of samples on their own, so lending only those stays unbiased.
     pub fn push(&mut self, r: Record) {
-        if self.overflow {
+        if self.full {
             return;
         }
-        if self.list.len() < MAX_RECORDS {
-            self.list.push(r);
-        } else {
-            self.overflow = true;
-        }
+        self.list.push(r);
+        self.full = self.list.len() >= MAX_RECORDS;
     }
 }
 
@@ -714,7 +714,7 @@ fn lends_within(r: &Record, at: Vec2, gradient: Vec2, (lo, hi): (f32, f32)) -> b
 /// others, a farther surface seen past the nearest's rim or samples that do not lend, stay
 /// with it: [`rest`]).
 fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)> {
-    if records.overflow || records.list.is_empty() {
+    if records.list.is_empty() {
         return None;
     }
     // A sample the site cannot average (not finite) keeps the whole site to itself.
@@ -772,7 +772,8 @@ pub struct Lent {
 /// `own[p]` where reuse does not hold (see the module documentation), nothing was traced or
 /// `needy[p]` is false (its own samples suffice), else the balance-heuristic combination of
 /// every sample that reaches it. `records[p]` holds pixel p's samples (those `own[p]`
-/// counts). The work is spent only on samples that can reach a needy site.
+/// counts, up to the first [`MAX_RECORDS`]). The work is spent only on samples that can
+/// reach a needy site.
 pub fn lend(
     kernel: &Kernel,
     (x0, y0): (usize, usize),
@@ -1011,22 +1012,29 @@ mod tests {
         ((own_mean, own_var), (lent_mean, lent_var))
     }
 
+    /// Also where sites took more samples than they record: they lend their first ones.
     #[test]
     fn a_flat_field_stays_exactly_flat() {
         let k = kernel(PixelFilterKind::Box);
-        let (records, own) = lattice(32, 4, 16, 6.0, |_| 0.3, 1);
-        let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
-        let mut borrowed = 0;
-        for ((e, o), &b) in lent.estimates.iter().zip(&own).zip(&lent.borrowed) {
-            assert_eq!(e.n == 0, o.n == 0);
-            // Marked as borrowing exactly where neighbours' samples came in.
-            assert_eq!(b, e.n > o.n);
-            if o.n > 0 {
-                assert!((e.mean() - Vec3::splat(0.3)).length() < 1e-5);
-                borrowed += usize::from(b);
+        for n in [16, MAX_RECORDS + 8] {
+            let (records, own) = lattice(32, 4, n, 6.0, |_| 0.3, 1);
+            assert!(records.iter().all(|r| r.list.len() <= MAX_RECORDS));
+            let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
+            let mut borrowed = 0;
+            for ((e, o), &b) in lent.estimates.iter().zip(&own).zip(&lent.borrowed) {
+                assert_eq!(e.n == 0, o.n == 0);
+                // Marked as borrowing exactly where neighbours' samples came in.
+                assert_eq!(b, e.n > o.n, "{n} samples");
+                if o.n > 0 {
+                    assert!((e.mean() - Vec3::splat(0.3)).length() < 1e-5);
+                    borrowed += usize::from(b);
+                }
             }
+            assert!(
+                borrowed > 40,
+                "most sites borrow at {n} samples: {borrowed}"
+            );
         }
-        assert!(borrowed > 40, "most sites borrow: {borrowed}");
     }
 
     /// On a ramp the lent estimate's expected value is the site's own (the ramp at the site:
