@@ -210,6 +210,62 @@ pub fn psnr(
     })
 }
 
+/// The squared error of one band of pixels: what [`error_by_band`] reports.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct BandError {
+    /// The band holds the pixels whose key is at least `lo` (`None`: no lower bound)...
+    pub lo: Option<f32>,
+    /// ...and below `hi` (`None`: no upper bound).
+    pub hi: Option<f32>,
+    /// Its share of the image's pixels (0 to 1).
+    pub pixels: f64,
+    /// Its share of the image's squared error (0 to 1; 0 everywhere when the images agree).
+    pub error: f64,
+    /// PSNR over its pixels alone (dB, as [`psnr`]); `None` when it has no pixels or they
+    /// agree.
+    pub psnr_db: Option<f64>,
+}
+
+/// Where `a` errs against `b`: the squared error split by a per-pixel `key` (for example the
+/// blur diameter) into bands below `edges[0]`, between consecutive edges (ascending) and from
+/// the last edge up. A key that is not a number counts in the first band.
+pub fn error_by_band(
+    a: &[[f32; 3]],
+    b: &[[f32; 3]],
+    (width, height): (usize, usize),
+    space: Space,
+    (key, edges): (&[f32], &[f32]),
+) -> Result<Vec<BandError>, MetricsError> {
+    let n = validate(a, b, width, height)?;
+    if key.len() != n {
+        return Err(MetricsError::SizeMismatch {
+            a_len: key.len(),
+            b_len: n,
+            width,
+            height,
+        });
+    }
+    let mut sums = vec![(0usize, 0.0f64); edges.len() + 1];
+    for (d, &k) in diffs(a, b, space).zip(key) {
+        let band = &mut sums[edges.iter().take_while(|&&e| k >= e).count()];
+        band.0 += 1;
+        band.1 += d.iter().map(|e| e * e).sum::<f64>();
+    }
+    let total: f64 = sums.iter().map(|s| s.1).sum();
+    Ok(sums
+        .iter()
+        .enumerate()
+        .map(|(i, &(count, sum_sq))| BandError {
+            lo: i.checked_sub(1).map(|j| edges[j]),
+            hi: edges.get(i).copied(),
+            pixels: count as f64 / n as f64,
+            error: if total > 0.0 { sum_sq / total } else { 0.0 },
+            psnr_db: (count > 0 && sum_sq > 0.0)
+                .then(|| -10.0 * (sum_sq / (3 * count) as f64).log10()),
+        })
+        .collect())
+}
+
 /// The largest per-pixel, per-channel absolute error `|a - b|` (in `[0, 1]`).
 pub fn max_abs_error(
     a: &[[f32; 3]],
@@ -435,6 +491,41 @@ mod tests {
     }
 
     // ---- linear_to_srgb ----
+
+    #[test]
+    fn the_error_splits_by_band_and_adds_up_to_the_whole() {
+        // Keys 0.5 and NaN in the first band, 2 and 3 in the middle one, 9 in the last.
+        let (w, h) = (5, 1);
+        let b = constant(w, h, [0.5; 3]);
+        let mut a = b.clone();
+        a[0] = [0.6; 3]; // error 0.1 in band 0
+        a[2] = [0.8; 3]; // error 0.3 in band 1
+        a[3] = [0.5; 3]; // exact, band 2
+        let key = [0.5, 2.0, 3.0, 9.0, f32::NAN];
+        let bands = error_by_band(&a, &b, (w, h), Space::Linear, (&key, &[1.0, 4.0])).unwrap();
+        assert_eq!(bands.len(), 3);
+        assert_eq!((bands[0].lo, bands[0].hi), (None, Some(1.0)));
+        assert_eq!((bands[2].lo, bands[2].hi), (Some(4.0), None));
+        let pixels: Vec<f64> = bands.iter().map(|b| b.pixels).collect();
+        assert_eq!(pixels, [0.4, 0.4, 0.2]);
+        let err: Vec<f64> = bands.iter().map(|b| b.error).collect();
+        assert!((err[0] - 0.1 / 1.0).abs() < 1e-6, "{err:?}");
+        assert!((err[1] - 0.9).abs() < 1e-6, "{err:?}");
+        assert_eq!(err[2], 0.0);
+        assert_eq!(bands[2].psnr_db, None);
+        // Each band's PSNR is over its own pixels: band 1 has one error of 0.3 in two pixels.
+        let expect = -10.0 * (0.09f64 / 2.0).log10();
+        assert!((bands[1].psnr_db.unwrap() - expect).abs() < 1e-4);
+        // The bands' squared errors add up to the image's.
+        let whole = psnr(&a, &b, w, h, Space::Linear).unwrap();
+        let sum: f64 = bands
+            .iter()
+            .filter_map(|b| b.psnr_db.map(|p| 10f64.powf(-p / 10.0) * b.pixels))
+            .sum();
+        assert!((-10.0 * sum.log10() - whole).abs() < 1e-4);
+        let short = error_by_band(&a, &b, (w, h), Space::Linear, (&key[..4], &[1.0]));
+        assert!(matches!(short, Err(MetricsError::SizeMismatch { .. })));
+    }
 
     #[test]
     fn srgb_transfer_known_values() {

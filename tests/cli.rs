@@ -479,6 +479,16 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
             }
             assert!(r["samples"].as_u64().unwrap() > 0);
             assert!(r["psnr_vs_reference"].as_f64().unwrap() > 10.0, "{r}");
+            // Where the error is: six blur bands whose pixels and errors add up to the whole.
+            let bands = r["error_by_blur"].as_array().unwrap();
+            assert_eq!(bands.len(), 6, "{r}");
+            let sum = |key: &str| bands.iter().map(|b| b[key].as_f64().unwrap()).sum::<f64>();
+            assert!((sum("pixels") - 1.0).abs() < 1e-9, "{r}");
+            assert!((sum("error") - 1.0).abs() < 1e-9, "{r}");
+            assert!(bands[0]["lo"].is_null() && bands[5]["hi"].is_null(), "{r}");
+            // The paper scene at 64 px: most of it is blurred, some of it sharp.
+            assert!(bands[0]["pixels"].as_f64().unwrap() < 0.5, "{r}");
+            assert!(bands[0]["pixels"].as_f64().unwrap() > 0.0, "{r}");
         }
     }
     // Dense shades every pixel: 4 spp at every site (the path tracer's in-focus sites take
@@ -531,6 +541,7 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
         "90 dB",
         "not reached",
         "highest level both reach",
+        "where the error is at 8 spp",
         "plot: ",
         "at about equal time: dense ",
         "side by side",

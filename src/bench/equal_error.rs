@@ -21,6 +21,9 @@ use crate::scene::{SceneDesc, World};
 pub const DEFAULT_LADDER: [u32; 6] = [4, 8, 16, 32, 64, 128];
 /// The PSNR levels (dB, sRGB) when none are given.
 pub const DEFAULT_LEVELS: [f64; 3] = [30.0, 35.0, 40.0];
+/// The edges of the blur bands each rung's error is split by ([`Rung::error_by_blur`]): the
+/// depth pass's CoC diameter, pixels.
+pub const BLUR_BANDS: [f32; 5] = [1.0, 4.0, 8.0, 16.0, 32.0];
 
 /// The anti-aliasing samples (per in-focus site) of each rung.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -131,6 +134,9 @@ pub struct Rung {
     pub light_paths: u64,
     /// sRGB PSNR (dB) against the reference; null if identical to it.
     pub psnr_vs_reference: f64,
+    /// Where its error is: the squared error against the reference by the blur of the
+    /// surface each pixel's depth pass saw (bands of [`BLUR_BANDS`]).
+    pub error_by_blur: Vec<metrics::BandError>,
 }
 
 /// Which side a reported time or speedup may err on.
@@ -368,7 +374,7 @@ pub fn run(
     // Per method and rung: the stats of every repeat, and from the first repeat the PSNR, the
     // samples traced and the image as 8-bit sRGB (for the equal-time picture).
     let mut runs: Vec<Vec<Vec<RenderStats>>> = vec![vec![Vec::new(); ladder.len()]; 2];
-    let mut quality: Vec<Vec<(f64, u64)>> = vec![Vec::new(); 2];
+    let mut quality: Vec<Vec<(f64, u64, Vec<metrics::BandError>)>> = vec![Vec::new(); 2];
     let mut pictures: Vec<Vec<Picture>> = vec![Vec::new(); 2];
     // Repeats outermost, so machine noise (these are shared machines) spreads over every rung.
     for repeat in 0..config.measure.repeat {
@@ -382,9 +388,13 @@ pub fn run(
                 );
                 let (film, stats) = render::render(world, camera, &settings, progress)?;
                 if repeat == 0 {
-                    let psnr = metrics::psnr(&film.rgb(), &reference.rgb, w, h, Space::Srgb)?;
+                    let rgb = film.rgb();
+                    let psnr = metrics::psnr(&rgb, &reference.rgb, w, h, Space::Srgb)?;
                     let samples = film.samples.iter().map(|&n| n as u64).sum();
-                    quality[m].push((psnr, samples));
+                    let bands = (&film.coc[..], &BLUR_BANDS[..]);
+                    let by_blur =
+                        metrics::error_by_band(&rgb, &reference.rgb, (w, h), Space::Srgb, bands)?;
+                    quality[m].push((psnr, samples, by_blur));
                     pictures[m].push(srgb8(film.color.iter().map(|&c| c.to_array())));
                 }
                 runs[m][r].push(stats);
@@ -397,7 +407,7 @@ pub fn run(
             .enumerate()
             .map(|(r, &spp)| {
                 let stats = &runs[m][r];
-                let (psnr, samples) = quality[m][r];
+                let (psnr, samples, ref by_blur) = quality[m][r];
                 Rung {
                     spp,
                     aa: config.aa.at(spp),
@@ -411,6 +421,7 @@ pub fn run(
                     samples,
                     light_paths: stats[0].light_paths,
                     psnr_vs_reference: psnr,
+                    error_by_blur: by_blur.clone(),
                 }
             })
             .collect()
@@ -580,6 +591,7 @@ pub(super) mod tests {
             samples: 0,
             light_paths: 0,
             psnr_vs_reference: psnr,
+            error_by_blur: Vec::new(),
         }
     }
 
@@ -659,6 +671,7 @@ pub(super) mod tests {
             "samples",
             "light_paths",
             "psnr_vs_reference",
+            "error_by_blur",
         ] {
             assert!(json["adaptive"][0].get(key).is_some(), "{key} missing");
         }

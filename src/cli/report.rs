@@ -106,6 +106,7 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
         "PSNR in sRGB against the reference; \"<=\": the cheapest rung already reaches the level \
          (an upper bound)."
     );
+    print_error_by_blur(r);
     let measured = r
         .dense
         .iter()
@@ -117,6 +118,43 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
         println!("plot: {}", plot.display());
     }
     print_equal_time(r);
+}
+
+/// Where the top rung's error is, by blur band, both methods side by side.
+fn print_error_by_blur(r: &equal_error::EqualErrorReport) {
+    let (Some(d), Some(a)) = (r.dense.last(), r.adaptive.last()) else {
+        return;
+    };
+    println!(
+        "where the error is at {} spp, by the CoC (diameter) the depth pass saw: the band's \
+         share of the squared error and its own PSNR:",
+        d.spp
+    );
+    println!(
+        "  {:>9} {:>7} | {:>7} {:>7} | {:>7} {:>7}",
+        "CoC px", "pixels", "dense", "dB", "adapt.", "dB"
+    );
+    let db = |p: Option<f64>| p.map_or("-".to_string(), |p| format!("{p:.2}"));
+    for (bd, ba) in d.error_by_blur.iter().zip(&a.error_by_blur) {
+        if bd.pixels == 0.0 {
+            continue;
+        }
+        let band = match (bd.lo, bd.hi) {
+            (None, Some(hi)) => format!("< {hi}"),
+            (Some(lo), Some(hi)) => format!("{lo}-{hi}"),
+            (Some(lo), None) => format!(">= {lo}"),
+            (None, None) => "all".to_string(),
+        };
+        println!(
+            "  {:>9} {:>6.1}% | {:>6.1}% {:>7} | {:>6.1}% {:>7}",
+            band,
+            100.0 * bd.pixels,
+            100.0 * bd.error,
+            db(bd.psnr_db),
+            100.0 * ba.error,
+            db(ba.psnr_db)
+        );
+    }
 }
 
 /// The equal-time pair of the side-by-side picture, and where the picture is.
