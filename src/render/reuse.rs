@@ -172,9 +172,8 @@ impl Record {
 pub struct SiteRecords {
     /// Its samples, in the order traced: the first [`MAX_RECORDS`] of them.
     pub list: Vec<Record>,
-    /// It records no more: it took more than [`MAX_RECORDS`], or takes no part
-    /// ([`SiteRecords::unlent`], with an empty list).
-    pub full: bool,
+    /// It takes no part in reuse ([`SiteRecords::unlent`]): it records nothing.
+    unlent: bool,
 }
 
 impl SiteRecords {
@@ -182,19 +181,17 @@ impl SiteRecords {
     pub fn unlent() -> Self {
         Self {
             list: Vec::new(),
-            full: true,
+            unlent: true,
         }
     }
 
-    /// Keeps `r`, up to [`MAX_RECORDS`]; nothing once the site is full (or takes no part,
+    /// Keeps `r`, up to [`MAX_RECORDS`] (none for a site that takes no part,
     /// [`SiteRecords::unlent`]). The first samples of a stratified sequence are a valid set
     /// of samples on their own, so lending only those stays unbiased.
     pub fn push(&mut self, r: Record) {
-        if self.full {
-            return;
+        if !self.unlent && self.list.len() < MAX_RECORDS {
+            self.list.push(r);
         }
-        self.list.push(r);
-        self.full = self.list.len() >= MAX_RECORDS;
     }
 }
 
@@ -391,8 +388,6 @@ struct Grid {
     /// `members[starts[c]..starts[c + 1]]`, so a scan of nearby cells reads them in a row.
     members: Vec<Member>,
     starts: Vec<u32>,
-    /// `members[i].at`, apart: the scans over nearby members test their distance first.
-    ats: Vec<Vec2>,
     /// Each cell's members' surfaces as one plane: their mean shift gradient, the greatest
     /// [`Member::lo`] carried along it to the cell's centre (minus infinity when it has no
     /// members), and how far their gradients stray from the mean ([`Grid::nearer_than_none`]).
@@ -427,12 +422,10 @@ impl Grid {
         for (i, m) in members.iter().enumerate() {
             index[m.p] = i as u32;
         }
-        let ats = members.iter().map(|m| m.at).collect();
         let mut grid = Self {
             origin,
             cols,
             rows,
-            ats,
             members,
             starts,
             plane: Vec::new(),
@@ -514,15 +507,10 @@ impl Grid {
     /// The indices of the members in cell `cell` closer to `c` than `extent` and their
     /// offsets `c - at`.
     fn within(&self, cell: usize, c: Vec2, extent: f32) -> impl Iterator<Item = (usize, Vec2)> {
-        let range = self.cell(cell);
-        let start = range.start;
-        self.ats[range]
-            .iter()
-            .enumerate()
-            .filter_map(move |(i, &at)| {
-                let d = c - at;
-                (d.length_squared() < extent * extent).then_some((start + i, d))
-            })
+        self.cell(cell).filter_map(move |i| {
+            let d = c - self.members[i].at;
+            (d.length_squared() < extent * extent).then_some((i, d))
+        })
     }
 
     /// The members in cell `cell`.
