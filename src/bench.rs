@@ -154,6 +154,8 @@ pub struct BenchRow {
     pub maps_seconds: f64,
     /// Median seconds shading sample sites.
     pub sites_seconds: f64,
+    /// Median seconds of `sites_seconds` lending samples between sites (sample reuse).
+    pub reuse_seconds: f64,
     /// Median seconds interpolating between sites.
     pub interpolate_seconds: f64,
     /// Rays traced per render, of every kind (the same in every repeat).
@@ -622,6 +624,7 @@ impl Compare<'_> {
             pinhole_seconds: median_of(runs, |s| s.pinhole_seconds),
             maps_seconds: median_of(runs, |s| s.maps_seconds),
             sites_seconds: median_of(runs, |s| s.sites_seconds),
+            reuse_seconds: median_of(runs, |s| s.reuse_seconds),
             interpolate_seconds: median_of(runs, |s| s.interpolate_seconds),
             rays: stats.rays.total(),
             primary_rays: stats.rays.primary,

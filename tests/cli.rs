@@ -104,6 +104,12 @@ fn renders_png_and_exr_with_a_json_summary() {
     })
     .sum();
     assert!(phases > 0.0 && phases <= json["seconds"].as_f64().unwrap());
+    // Lending samples between sites (reuse, on by default) is part of the sites' time.
+    let reuse = json["reuse_seconds"].as_f64().unwrap();
+    assert!(
+        reuse > 0.0 && reuse <= json["sites_seconds"].as_f64().unwrap(),
+        "{json}"
+    );
     // A missing --aov-dir is created.
     let nested = dir.join("new").join("aovs");
     let out = dofray(&[

@@ -122,6 +122,11 @@ pub struct Rung {
     pub tolerance: Option<f32>,
     /// Median wall time of the repeats.
     pub seconds: f64,
+    /// Median of the repeats' time lending samples between sites (sample reuse; included in
+    /// `seconds`, 0 for dense): what reconstruction costs ([`RenderStats::reuse_seconds`]).
+    ///
+    /// [`RenderStats::reuse_seconds`]: crate::render::RenderStats::reuse_seconds
+    pub reuse_seconds: f64,
     /// Rays traced per render, of every kind (the same in every repeat).
     pub rays: u64,
     /// Camera rays per render.
@@ -414,6 +419,7 @@ pub fn run(
                     tolerance: (methods[m] == Method::Adaptive)
                         .then(|| RenderSettings::default_tolerance(spp)),
                     seconds: median(stats.iter().map(|s| s.seconds).collect()),
+                    reuse_seconds: median(stats.iter().map(|s| s.reuse_seconds).collect()),
                     // Ray, site and sample counts are the same in every repeat.
                     rays: stats[0].rays.total(),
                     primary_rays: stats[0].rays.primary,
@@ -585,6 +591,7 @@ pub(super) mod tests {
             aa: 1,
             tolerance: None,
             seconds,
+            reuse_seconds: 0.0,
             rays: 0,
             primary_rays: 0,
             sample_sites: 0,

@@ -78,6 +78,16 @@ pub(crate) fn print_equal_error(r: &equal_error::EqualErrorReport) {
             ad.tolerance.unwrap_or(f32::NAN)
         );
     }
+    let lending: Vec<String> = r
+        .adaptive
+        .iter()
+        .filter(|a| a.seconds > 0.0)
+        .map(|a| format!("{:.0}%", 100.0 * a.reuse_seconds / a.seconds))
+        .collect();
+    println!(
+        "adaptive's time lending samples between sites (reuse), rung by rung: {}",
+        lending.join(", ")
+    );
     println!("time to reach each PSNR level (seconds, interpolated in log time between rungs):");
     println!(
         "  {:>10} {:>12} {:>12} {:>10}",
@@ -246,18 +256,22 @@ pub(crate) fn print_table(r: &bench::BenchReport) {
         r.intersect_only_mrays_per_s,
         100.0 * r.dense_vs_intersect_only
     );
-    println!("where the time goes (ms): depth pass + maps + sample sites + interpolation");
+    println!(
+        "where the time goes (ms): depth pass + maps + sample sites (of which lending samples \
+         between them) + interpolation"
+    );
     for row in r
         .rows
         .iter()
         .filter(|row| row.mode != render::Mode::Pinhole)
     {
         println!(
-            "  {:<20} {:>7.1} + {:>5.1} + {:>7.1} + {:>5.1}",
+            "  {:<20} {:>7.1} + {:>5.1} + {:>7.1} ({:>6.1}) + {:>5.1}",
             row.label,
             row.pinhole_seconds * 1e3,
             row.maps_seconds * 1e3,
             row.sites_seconds * 1e3,
+            row.reuse_seconds * 1e3,
             row.interpolate_seconds * 1e3
         );
     }

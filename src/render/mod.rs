@@ -99,6 +99,10 @@ pub struct RenderStats {
     pub maps_seconds: f64,
     /// Time spent shading sample sites (included in `seconds`).
     pub sites_seconds: f64,
+    /// Of `sites_seconds`, the time spent lending samples between sites (sample reuse,
+    /// adaptive mode): that phase's wall-clock time times lending's share of its worker
+    /// threads' time. 0 without reuse.
+    pub reuse_seconds: f64,
     /// Time spent interpolating between sites (included in `seconds`).
     pub interpolate_seconds: f64,
     /// Time spent tracing light from small emitters to the lens (included in `seconds`).
@@ -498,13 +502,9 @@ pub fn render_region(
     if let (Mode::Adaptive, Some(tolerance)) = (settings.mode, settings.tolerance()) {
         // Maps, sites and interpolation interleave in rounds: timed as shading.
         let refined = refine::refine(&shader, tolerance, &blur, region, progress, &mut tally)?;
-        stats.rounds = refined.rounds;
-        let borrowed = region.try_crop(&refined.borrowed, w, "the region's borrowing sites")?;
-        stats.borrowing_sites = borrowed.iter().filter(|&&b| b).count() as u64;
-        film.set_rgba(&refined.color);
-        film.interval = refined.interval;
-        film.samples = refined.samples;
+        let lend_share = take_refined(refined, region, &mut film, &mut stats)?;
         stats.sites_seconds = phase.elapsed().as_secs_f64();
+        stats.reuse_seconds = lend_share * stats.sites_seconds;
     } else {
         let sites = fixed_sites(settings, &mut film, &blur, region)?;
         stats.maps_seconds += phase.elapsed().as_secs_f64();
@@ -564,6 +564,26 @@ pub fn render_region(
 }
 
 /// [`RenderError::NonFinite`] when a pixel of `film` (the pixels of `region`) is not finite.
+/// The error-controlled rule's result into the film and the stats. Returns lending's share
+/// of its work ([`refine::Refined::lend_share`]), for `reuse_seconds` once the phase's time
+/// is known.
+fn take_refined(
+    refined: refine::Refined,
+    region: &Region,
+    film: &mut Film,
+    stats: &mut RenderStats,
+) -> Result<f64, MemoryError> {
+    stats.rounds = refined.rounds;
+    let lend_share = refined.lend_share();
+    let w = film.width;
+    let borrowed = region.try_crop(&refined.borrowed, w, "the region's borrowing sites")?;
+    stats.borrowing_sites = borrowed.iter().filter(|&&b| b).count() as u64;
+    film.set_rgba(&refined.color);
+    film.interval = refined.interval;
+    film.samples = refined.samples;
+    Ok(lend_share)
+}
+
 fn check_finite(film: &Film, region: &Region) -> Result<(), RenderError> {
     let bad = |c: &glam::Vec3| !c.is_finite();
     match film.color.iter().position(bad) {

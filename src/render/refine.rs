@@ -40,6 +40,8 @@
 //! units of the tolerance. Every decision depends only on the estimates, which depend only on
 //! the pixel and its sample indices, so the image is the same for any thread count.
 
+use std::time::Instant;
+
 use glam::{Vec3, Vec4};
 use rayon::prelude::*;
 
@@ -50,6 +52,17 @@ use super::reuse::{self, Kernel, SiteRecords};
 use super::site::SiteShader;
 use super::{Progress, Tally};
 use crate::limits::{MemoryError, try_collect, try_copy, try_vec};
+
+impl Refined {
+    /// Lending's share of the work on the buckets, 0 to 1 (0 when none was timed).
+    pub fn lend_share(&self) -> f64 {
+        if self.work_seconds > 0.0 {
+            (self.lend_seconds / self.work_seconds).min(1.0)
+        } else {
+            0.0
+        }
+    }
+}
 
 /// Start interval as a fraction of the CoC at a tolerance of 1 code value (see the module
 /// documentation).
@@ -81,6 +94,11 @@ pub struct Refined {
     pub borrowed: Vec<bool>,
     /// Rounds of shading and checking.
     pub rounds: u32,
+    /// Worker-thread seconds spent on the buckets, summed over threads.
+    pub work_seconds: f64,
+    /// Of `work_seconds`, those spent lending samples between sites ([`reuse`]): their
+    /// ratio is lending's share of the work.
+    pub lend_seconds: f64,
 }
 
 /// A lattice cell: the corners (x0, y0) to (x1, y1), clipped at the image border.
@@ -565,7 +583,14 @@ pub fn refine(
         .par_iter()
         .map(|b| {
             let mut local = Tally::new(s.record_rays);
+            let started = Instant::now();
             let refined = refine_bucket(shader, &maps, b, progress, &mut local);
+            let refined = refined.map(|r| {
+                r.map(|r| Refined {
+                    work_seconds: started.elapsed().as_secs_f64(),
+                    ..r
+                })
+            });
             progress.advance(1);
             (*b, refined, local)
         })
@@ -577,6 +602,8 @@ pub fn refine(
         samples: try_vec(width * height, 0, "the pixels' sample counts")?,
         borrowed: try_vec(width * height, false, "the sites that borrowed")?,
         rounds: 0,
+        work_seconds: 0.0,
+        lend_seconds: 0.0,
     };
     for (b, refined, local) in done {
         let Some(refined) = refined? else {
@@ -592,6 +619,8 @@ pub fn refine(
             }
         }
         out.rounds = out.rounds.max(refined.rounds);
+        out.work_seconds += refined.work_seconds;
+        out.lend_seconds += refined.lend_seconds;
         tally.merge(local);
     }
     Ok(out)
@@ -732,16 +761,31 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
+    finish(traced, maps, b, s.transparent, (interval, rounds)).map(Some)
+}
+
+/// A bucket's result once its rounds are done: its sites lend ([`Traced::lend`]), timed, and
+/// every pixel takes its colour.
+fn finish(
+    mut traced: Traced,
+    maps: &Maps,
+    b: &Bucket,
+    transparent: bool,
+    (interval, rounds): (Vec<u32>, u32),
+) -> Result<Refined, MemoryError> {
     // Samples traced per pixel: the sites' own, whatever they borrow below.
     let samples = traced.est.iter().map(|e| e.n).collect();
-    let borrowed = traced.lend(maps, b, s.transparent)?;
-    Ok(Some(Refined {
+    let lending = Instant::now();
+    let borrowed = traced.lend(maps, b, transparent)?;
+    Ok(Refined {
         color: final_colour(&traced, &interval, b),
         interval,
         samples,
         borrowed,
         rounds,
-    }))
+        work_seconds: 0.0,
+        lend_seconds: lending.elapsed().as_secs_f64(),
+    })
 }
 
 /// Each site's first and most samples in bucket `b` of a frame `full_width` wide, and its
