@@ -563,7 +563,6 @@ pub fn render_region(
     Ok((film, stats))
 }
 
-/// [`RenderError::NonFinite`] when a pixel of `film` (the pixels of `region`) is not finite.
 /// The error-controlled rule's result into the film and the stats. Returns lending's share
 /// of its work ([`refine::Refined::lend_share`]), for `reuse_seconds` once the phase's time
 /// is known.
@@ -584,6 +583,7 @@ fn take_refined(
     Ok(lend_share)
 }
 
+/// [`RenderError::NonFinite`] when a pixel of `film` (the pixels of `region`) is not finite.
 fn check_finite(film: &Film, region: &Region) -> Result<(), RenderError> {
     let bad = |c: &glam::Vec3| !c.is_finite();
     match film.color.iter().position(bad) {

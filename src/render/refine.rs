@@ -53,17 +53,6 @@ use super::site::SiteShader;
 use super::{Progress, Tally};
 use crate::limits::{MemoryError, try_collect, try_copy, try_vec};
 
-impl Refined {
-    /// Lending's share of the work on the buckets, 0 to 1 (0 when none was timed).
-    pub fn lend_share(&self) -> f64 {
-        if self.work_seconds > 0.0 {
-            (self.lend_seconds / self.work_seconds).min(1.0)
-        } else {
-            0.0
-        }
-    }
-}
-
 /// Start interval as a fraction of the CoC at a tolerance of 1 code value (see the module
 /// documentation).
 pub const START_K: f32 = 0.5;
@@ -99,6 +88,17 @@ pub struct Refined {
     /// Of `work_seconds`, those spent lending samples between sites ([`reuse`]): their
     /// ratio is lending's share of the work.
     pub lend_seconds: f64,
+}
+
+impl Refined {
+    /// Lending's share of the work on the buckets, 0 to 1 (0 when none was timed).
+    pub fn lend_share(&self) -> f64 {
+        if self.work_seconds > 0.0 {
+            (self.lend_seconds / self.work_seconds).min(1.0)
+        } else {
+            0.0
+        }
+    }
 }
 
 /// A lattice cell: the corners (x0, y0) to (x1, y1), clipped at the image border.
@@ -579,20 +579,14 @@ pub fn refine(
         .filter(|b| region.overlaps(&b.region(false)))
         .collect();
     progress.start("adaptive", buckets.len() as u64);
-    let done: Vec<(Bucket, Result<Option<Refined>, MemoryError>, Tally)> = buckets
+    let done: Vec<_> = buckets
         .par_iter()
         .map(|b| {
             let mut local = Tally::new(s.record_rays);
             let started = Instant::now();
             let refined = refine_bucket(shader, &maps, b, progress, &mut local);
-            let refined = refined.map(|r| {
-                r.map(|r| Refined {
-                    work_seconds: started.elapsed().as_secs_f64(),
-                    ..r
-                })
-            });
             progress.advance(1);
-            (*b, refined, local)
+            (*b, refined, local, started.elapsed().as_secs_f64())
         })
         .collect();
     super::check_cancelled(progress)?;
@@ -605,7 +599,7 @@ pub fn refine(
         work_seconds: 0.0,
         lend_seconds: 0.0,
     };
-    for (b, refined, local) in done {
+    for (b, refined, local, seconds) in done {
         let Some(refined) = refined? else {
             return Err(super::RenderError::Cancelled);
         };
@@ -619,7 +613,7 @@ pub fn refine(
             }
         }
         out.rounds = out.rounds.max(refined.rounds);
-        out.work_seconds += refined.work_seconds;
+        out.work_seconds += seconds;
         out.lend_seconds += refined.lend_seconds;
         tally.merge(local);
     }
@@ -783,6 +777,7 @@ fn finish(
         samples,
         borrowed,
         rounds,
+        // The bucket's whole time is known only to its caller.
         work_seconds: 0.0,
         lend_seconds: lending.elapsed().as_secs_f64(),
     })

@@ -161,6 +161,12 @@ impl Record {
         }
     }
 
+    /// How far from its centre its footprint reaches for a pixel filter of half-width
+    /// `reach`: its blur (at least [`MIN_SHIFT`]) plus the filter's.
+    fn extent(&self, reach: f32) -> f32 {
+        self.shift.abs().max(MIN_SHIFT) + reach
+    }
+
     /// The part of its radiance that holds along its whole trajectory: what it lends.
     fn lent(&self) -> Vec3 {
         self.radiance - self.own
@@ -517,7 +523,7 @@ impl Grid {
         for r in list {
             least = least.min(carried(r, c0, g));
             spread_out = spread_out.max((r.centre - c0).length());
-            extent = extent.max(r.shift.abs().max(MIN_SHIFT) + reach);
+            extent = extent.max(r.extent(reach));
         }
         self.cells_near(c0, spread_out + extent).all(|cell| {
             let (gradient, lo, spread) = self.plane[cell];
@@ -800,7 +806,7 @@ fn covered(grid: &Grid, records: &[SiteRecords], reach: f32) -> Vec<bool> {
         .iter()
         .filter(|r| !grid.nearer_than_none_of(&r.list, reach));
     for r in unclear.flat_map(|r| &r.list) {
-        let extent = r.shift.abs().max(MIN_SHIFT) + reach;
+        let extent = r.extent(reach);
         for cell in grid.cells_near(r.centre, extent) {
             if grid.nearer_than_none(cell, r.shift, r.centre, extent) {
                 continue;
@@ -1087,7 +1093,7 @@ mod tests {
                 .iter()
                 .map(|m| {
                     records.iter().flat_map(|r| &r.list).any(|r| {
-                        let extent = r.shift.abs().max(MIN_SHIFT) + reach;
+                        let extent = r.extent(reach);
                         let d2 = (r.centre - m.at).length_squared();
                         d2 < extent * extent && m.carried(r) < m.lo
                     })
