@@ -45,6 +45,12 @@ impl Estimate {
     /// Adds one sample of radiance `l` with lens-filter weight `w`; `hit` says whether its
     /// camera ray hit geometry.
     pub fn add(&mut self, l: Vec3, w: f32, hit: bool) {
+        self.add_lit(l, f64::from(luminance(l)), w, hit);
+    }
+
+    /// [`Estimate::add`] for a sample whose luminance `y` is already known (one sample lent
+    /// to many sites is added to each).
+    pub fn add_lit(&mut self, l: Vec3, y: f64, w: f32, hit: bool) {
         self.n += 1;
         self.sum += l * w;
         if hit {
@@ -52,7 +58,6 @@ impl Estimate {
         }
         self.w += w;
         self.w2 += w * w;
-        let y = f64::from(luminance(l));
         self.wy += f64::from(w) * y;
         self.wy2 += f64::from(w) * y * y;
         self.peak = self.peak.max(y as f32);

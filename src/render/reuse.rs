@@ -331,7 +331,7 @@ impl Kernel {
     /// `K` for one sample's signed shift and shift gradient ([`Record::gradient`]): the
     /// interpolation between the table's shift rows worked out once, for the many sites a
     /// sample is lent to.
-    pub fn for_sample(&self, shift: f32, gradient: Vec2) -> ShiftKernel<'_> {
+    pub fn for_sample(&self, shift: f32, gradient: Vec2) -> ShiftKernel {
         let s = shift.abs();
         let top = (OCTAVES * PER_OCTAVE) as f32;
         let ks = ((s / MIN_SHIFT).log2() * PER_OCTAVE as f32).clamp(0.0, top);
@@ -339,16 +339,22 @@ impl Kernel {
         // Beyond the table's widest shift the kernel is the disc's, scaled by area.
         let widest = MIN_SHIFT * (top / PER_OCTAVE as f32).exp2();
         let row = |k: usize| &self.table[k * (RADIAL + 1)..(k + 1) * (RADIAL + 1)];
+        let (below, above) = (row(k0), row((k0 + 1).min(OCTAVES * PER_OCTAVE)));
+        let fk = ks - k0 as f32;
+        let scale = if s > widest {
+            (widest / s) * (widest / s)
+        } else {
+            1.0
+        };
+        // The two rows interpolated and scaled once, for the many sites a sample is lent to.
+        let mut bins = [Vec2::ZERO; RADIAL + 1];
+        for (bin, (a, b)) in bins.iter_mut().zip(below.iter().zip(above)) {
+            *bin = (*a * (1.0 - fk) + *b * fk) * scale;
+        }
         ShiftKernel {
             extent: s + self.reach,
             bins_per_d2: RADIAL as f32 / ((s + self.reach) * (s + self.reach)),
-            rows: (row(k0), row((k0 + 1).min(OCTAVES * PER_OCTAVE))),
-            fk: ks - k0 as f32,
-            scale: if s > widest {
-                (widest / s) * (widest / s)
-            } else {
-                1.0
-            },
+            bins,
             tilt: gradient * shift.signum(),
         }
     }
@@ -361,33 +367,38 @@ impl Kernel {
 
 /// [`Kernel`] for one sample, from [`Kernel::for_sample`].
 #[derive(Debug, Clone, Copy)]
-pub struct ShiftKernel<'a> {
+pub struct ShiftKernel {
     /// `s + reach`: the kernel is 0 beyond.
     extent: f32,
     /// Table bins per square pixel of `|d|^2`.
     bins_per_d2: f32,
-    /// The two shift rows of the table around `s`, and the weight of the second.
-    rows: (&'a [Vec2], &'a [Vec2]),
-    fk: f32,
-    scale: f32,
+    /// `(K0, m / |d|)` for this shift by squared-distance bin (the table's two shift rows
+    /// around it interpolated, and scaled beyond its widest).
+    bins: [Vec2; RADIAL + 1],
     /// The shift gradient times the shift's sign: `K = K0 - tilt . d (m / |d|)`.
     tilt: Vec2,
 }
 
-impl ShiftKernel<'_> {
+impl ShiftKernel {
     /// `K` at offset `d` (pixels) from the site: the centre minus the site's pixel centre.
     pub fn at(&self, d: Vec2) -> f32 {
-        let d2 = d.length_squared();
-        if d2 >= self.extent * self.extent {
+        if d.length_squared() >= self.extent * self.extent {
             return 0.0;
         }
-        let kt = d2 * self.bins_per_d2;
-        let t0 = (kt.floor() as usize).min(RADIAL - 1);
+        self.within(d)
+    }
+
+    /// [`ShiftKernel::at`] for an offset `d` known to lie within its extent (beyond it,
+    /// some finite number): no branch, for the loops over many sites.
+    fn within(&self, d: Vec2) -> f32 {
+        // Clamped before the conversion, which then needs no saturation (`kt` is at least 0
+        // and, within the extent, under RADIAL: the same bin as its floor).
+        let kt = d.length_squared() * self.bins_per_d2;
+        let t0 = kt.min((RADIAL - 1) as f32) as u32 as usize;
         let ft = kt - t0 as f32;
         // Both columns at once: (K0, m / |d|).
-        let row = |row: &[Vec2]| row[t0] * (1.0 - ft) + row[t0 + 1] * ft;
-        let value = row(self.rows.0) * (1.0 - self.fk) + row(self.rows.1) * self.fk;
-        ((value.x - self.tilt.dot(d) * value.y) * self.scale).max(0.0)
+        let value = self.bins[t0] * (1.0 - ft) + self.bins[t0 + 1] * ft;
+        (value.x - self.tilt.dot(d) * value.y).max(0.0)
     }
 }
 
@@ -416,30 +427,34 @@ struct Member {
     covered: bool,
 }
 
-/// The sites of a `width` x `height` window whose top left is `origin` by 4 px cells, to find
-/// those near a point.
+/// The sites of a `width` x `height` window whose top left is `origin`, to find those near a
+/// point: by pixel row, and by 4 px cells.
 struct Grid {
     origin: Vec2,
     cols: usize,
     rows: usize,
-    /// The members, by cell (each cell's in pixel order): cell `c`'s are
-    /// `members[starts[c]..starts[c + 1]]`, so a scan of nearby cells reads them in a row.
+    /// The members, in pixel order.
     members: Vec<Member>,
+    /// How many members lie before each pixel of the window (and in all of it, last): the
+    /// members of row `y` from column `x0` to `x1` are `before[y w + x0]..before[y w + x1]`.
+    before: Vec<u32>,
+    /// The members by cell (each cell's in pixel order): cell `c`'s are
+    /// `by_cell[starts[c]..starts[c + 1]]`.
+    by_cell: Vec<u32>,
     starts: Vec<u32>,
     /// Each cell's members' surfaces as one plane: their mean shift gradient, the greatest
     /// [`Member::lo`] carried along it to the cell's centre (minus infinity when it has no
     /// members), and how far their gradients stray from the mean ([`Grid::nearer_than_none`]).
     plane: Vec<(Vec2, f32, f32)>,
-    /// The window's size, and the member at each of its pixels (`u32::MAX`: none).
+    /// The window's size.
     size: (usize, usize),
-    index: Vec<u32>,
 }
 
 const CELL: f32 = 4.0;
 
 impl Grid {
     /// The grid of `members`, given in pixel order.
-    fn new(origin: Vec2, (width, height): (usize, usize), mut members: Vec<Member>) -> Self {
+    fn new(origin: Vec2, (width, height): (usize, usize), members: Vec<Member>) -> Self {
         let cols = width.div_ceil(CELL as usize).max(1);
         let rows = height.div_ceil(CELL as usize).max(1);
         let cell_of = |m: &Member| {
@@ -447,8 +462,9 @@ impl Grid {
             let (cx, cy) = ((local.x / CELL) as usize, (local.y / CELL) as usize);
             cy.min(rows - 1) * cols + cx.min(cols - 1)
         };
+        let mut by_cell: Vec<u32> = (0..members.len() as u32).collect();
         // A stable sort: within a cell the members stay in pixel order.
-        members.sort_by_key(cell_of);
+        by_cell.sort_by_key(|&i| cell_of(&members[i as usize]));
         let mut starts = vec![0u32; cols * rows + 1];
         for m in &members {
             starts[cell_of(m) + 1] += 1;
@@ -456,24 +472,28 @@ impl Grid {
         for c in 0..cols * rows {
             starts[c + 1] += starts[c];
         }
-        let mut index = vec![u32::MAX; width * height];
-        for (i, m) in members.iter().enumerate() {
-            index[m.p] = i as u32;
+        let mut before = vec![0u32; width * height + 1];
+        for m in &members {
+            before[m.p + 1] += 1;
+        }
+        for p in 0..width * height {
+            before[p + 1] += before[p];
         }
         let mut grid = Self {
             origin,
             cols,
             rows,
             members,
+            before,
+            by_cell,
             starts,
             plane: Vec::new(),
             size: (width, height),
-            index,
         };
         grid.plane = (0..cols * rows)
             .map(|cell| {
-                let ms = || grid.in_cell(cell).iter();
-                let n = grid.in_cell(cell).len().max(1) as f32;
+                let ms = || grid.in_cell(cell);
+                let n = grid.cell(cell).count().max(1) as f32;
                 let gradient = ms().map(|m| m.gradient).sum::<Vec2>() / n;
                 let centre = grid.centre(cell);
                 let lo = ms()
@@ -558,9 +578,11 @@ impl Grid {
         let (ox, oy) = (self.origin.x as usize, self.origin.y as usize);
         let xs = span(c.x, self.origin.x, w);
         span(c.y, self.origin.y, h).flat_map(move |y| {
-            xs.clone()
-                .map(move |x| self.index[(y - oy) * w + (x - ox)])
-                .filter(|&i| i != u32::MAX)
+            xs.clone().filter_map(move |x| {
+                let p = (y - oy) * w + (x - ox);
+                let i = self.before[p];
+                (self.before[p + 1] > i).then_some(i)
+            })
         })
     }
 
@@ -571,8 +593,9 @@ impl Grid {
     }
 
     /// The indices of the members in cell `cell`.
-    fn cell(&self, cell: usize) -> std::ops::Range<usize> {
-        self.starts[cell] as usize..self.starts[cell + 1] as usize
+    fn cell(&self, cell: usize) -> impl Iterator<Item = usize> + '_ {
+        let range = self.starts[cell] as usize..self.starts[cell + 1] as usize;
+        self.by_cell[range].iter().map(|&i| i as usize)
     }
 
     /// The indices of the members in cell `cell` closer to `c` than `extent` and their
@@ -585,8 +608,8 @@ impl Grid {
     }
 
     /// The members in cell `cell`.
-    fn in_cell(&self, cell: usize) -> &[Member] {
-        &self.members[self.cell(cell)]
+    fn in_cell(&self, cell: usize) -> impl Iterator<Item = &Member> + '_ {
+        self.cell(cell).map(|i| &self.members[i])
     }
 
     /// The cells that reach within `radius` of `c` (whole cells: a superset), row by row: in
@@ -610,6 +633,33 @@ impl Grid {
             let dy = (top - c.y).max(c.y - bottom).max(0.0);
             let half = (radius * radius - dy * dy).max(0.0).sqrt();
             span(c.x, half, self.cols).map(move |cx| cy * self.cols + cx)
+        })
+    }
+
+    /// The members at the pixels whose centres may lie within `radius` of `c` (a superset),
+    /// a range of their indices per row of pixels.
+    fn rows_near(&self, c: Vec2, radius: f32) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+        let (w, h) = self.size;
+        let c = c - self.origin;
+        // Pixel `i`'s centre is at `i + 0.5`: those from `first` to `last` lie within `r` of
+        // `v` (a pixel more each side: the bounds are rounded outwards).
+        let span = |v: f32, r: f32, n: usize| {
+            let first = (v - 0.5 - r).floor().max(0.0) as usize;
+            let last = (v - 0.5 + r).ceil();
+            let end = if last < 0.0 {
+                0
+            } else {
+                (last as usize + 1).min(n)
+            };
+            first..end.max(first)
+        };
+        span(c.y, radius, h).filter_map(move |y| {
+            let dy = y as f32 + 0.5 - c.y;
+            let half = (radius * radius - dy * dy).max(0.0).sqrt();
+            let xs = span(c.x, half, w);
+            (!xs.is_empty()).then(|| {
+                self.before[y * w + xs.start] as usize..self.before[y * w + xs.end] as usize
+            })
         })
     }
 }
@@ -658,11 +708,15 @@ fn lend_one(
     let mut lenders = 0.0;
     near.clear();
     if lends(me) {
-        // A lender's sample goes to every needy member it reaches.
-        for cell in grid.cells_near(r.centre, extent) {
-            // Only lenders (their density) and needy members (receivers) within reach count.
-            for (q, d) in grid.within(cell, r.centre, extent) {
-                let other = &members[q];
+        // A lender's sample goes to every needy member it reaches. Only lenders (their
+        // density) and needy members (receivers) within reach count, read row by row.
+        let reach2 = extent * extent;
+        for range in grid.rows_near(r.centre, extent) {
+            for (q, other) in members[range.clone()].iter().enumerate() {
+                let d = r.centre - other.at;
+                if d.length_squared() >= reach2 {
+                    continue;
+                }
                 let lender = lends(other);
                 if !(lender || other.needy) {
                     continue;
@@ -673,14 +727,12 @@ fn lend_one(
                 if !(technique || receiver) {
                     continue;
                 }
-                let k = k_at.at(d);
-                if k > 0.0 {
-                    if technique {
-                        lenders += other.n * k;
-                    }
-                    if receiver {
-                        near.push((k, q as u32));
-                    }
+                let k = k_at.within(d);
+                if technique {
+                    lenders += other.n * k;
+                }
+                if receiver && k > 0.0 {
+                    near.push((k, (range.start + q) as u32));
                 }
             }
         }
@@ -701,10 +753,12 @@ fn lend_one(
         near.push((k, m as u32));
     }
     let density = |q: &Member, k: f32| lenders + if lends(q) { 0.0 } else { q.n * k };
+    let lent = r.lent();
+    let y = f64::from(super::estimate::luminance(lent));
     for &(k, q) in near.iter() {
         let other = &members[q as usize];
         if other.needy && k > 0.0 {
-            pooled[q as usize].add(r.lent(), k / density(other, k), r.hit);
+            pooled[q as usize].add_lit(lent, y, k / density(other, k), r.hit);
         }
     }
 }
@@ -896,8 +950,7 @@ pub fn lend(
     let mut near: Vec<(f32, u32)> = Vec::new();
     // Lent in pixel order (the grid's pixel index), so each receiver adds its samples in an
     // order that does not depend on the grid.
-    for m in grid.index.iter().filter(|&&m| m != u32::MAX) {
-        let (m, member) = (*m as usize, &grid.members[*m as usize]);
+    for (m, member) in grid.members.iter().enumerate() {
         if member.covered {
             continue;
         }
