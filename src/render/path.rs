@@ -14,7 +14,7 @@ use crate::sampler::{PATH_DIMENSIONS, SampleKey, path_numbers};
 use crate::scene::World;
 use crate::scene::emitters::{EmitterSample, punctual_sample};
 use crate::settings::{PathLimits, Strategy};
-use crate::shade::{Bsdf, Lobe, SurfacePoints16};
+use crate::shade::{Bsdf, Lobe, Scattering, SurfacePoints16};
 
 /// One bounce's random numbers of one path: 0-2 pick an emitter and a point on it, 3-5 the
 /// BSDF's lobe and direction, 6 Russian roulette, 8-9 a direction towards the world.
@@ -110,6 +110,25 @@ struct Vertices {
     ng: [Vec3; LANES],
     /// Distances from the rays' origins.
     t: [f32; LANES],
+}
+
+impl Vertices {
+    /// Each surface's BSDF seen from its ray (`wo` reversed, at the shading normals of
+    /// `points`), set up once for the light sample, the BSDF sample and the evaluations made
+    /// there; none for the lanes not in `hits` and where nothing scatters.
+    fn scattering(
+        &self,
+        hits: u32,
+        wo: &[Vec3; LANES],
+        points: &SurfacePoints16,
+    ) -> [Option<Scattering>; LANES] {
+        std::array::from_fn(|l| {
+            let n = points.get(l).normal;
+            (hits & (1 << l) != 0)
+                .then(|| self.bsdf[l].at(n, wo[l]))
+                .flatten()
+        })
+    }
 }
 
 /// A camera ray's first surface where light paths share the light reflected there
@@ -280,6 +299,7 @@ pub fn trace_path(
         let numbers = hit_numbers(keys, hits, bounce);
         let dir = packet.dirs();
         let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
+        let scattering = v.scattering(hits, &wo, &scratch.points);
         if bounce == 0
             && let Some(g) = glossy.filter(|g| g.shares_emitters())
         {
@@ -290,6 +310,7 @@ pub fn trace_path(
             strategy: limits.strategy,
             v: &v,
             wo: &wo,
+            scattering: &scattering,
             numbers: &numbers,
             lanes: &lanes,
             glossy: light_traced.glossy.as_ref().filter(|_| bounce == 0),
@@ -300,18 +321,8 @@ pub fn trace_path(
         if let Some(s) = split_here.as_deref_mut() {
             s.lit(first, scratch, radiance);
         }
-        packet.clear();
-        for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
-            let n = scratch.points.get(lane).normal;
-            let u = &numbers[lane];
-            if let Some(ray) = scatter(&v, lane, n, wo[lane], u, limits, bounce, &mut lanes[lane]) {
-                if let Some(s) = split_here.as_deref_mut() {
-                    s.shares[lane] =
-                        first_specular_share(&v.bsdf[lane], n, wo[lane], &ray, &lanes[lane]);
-                }
-                packet.set(lane, &ray);
-            }
-        }
+        let drawn = (&v, &scattering, &numbers, &scratch.points);
+        scatter_lanes(drawn, (limits, bounce), &mut lanes, split_here, packet);
         kind = RayKind::Secondary;
         hint = RayHint::Incoherent;
     }
@@ -363,12 +374,12 @@ impl ViewSplit {
 
 /// The share, per channel, of a first scattering's weight that the specular lobes carry: 1
 /// from a delta lobe, else `1 - eval_diffuse / (pdf weight)` at the direction drawn.
-fn first_specular_share(b: &Bsdf, n: Vec3, wo: Vec3, ray: &Ray, s: &Lane) -> Vec3 {
+fn first_specular_share(at: &Scattering, ray: &Ray, s: &Lane) -> Vec3 {
     if s.delta {
         return Vec3::ONE;
     }
     // At the first bounce the throughput is the weight, `f |cos| / pdf`.
-    specular_share(s.throughput * s.pdf, b.eval_diffuse(n, wo, ray.dir))
+    specular_share(s.throughput * s.pdf, at.eval_diffuse(ray.dir))
 }
 
 /// Per channel, the share of a BSDF value `total` (`f |cos|`) that its diffuse part
@@ -555,8 +566,10 @@ struct Shading<'a> {
     /// How light and BSDF samples are weighed.
     strategy: Strategy,
     v: &'a Vertices,
-    /// Unit directions towards the viewer (the reversed rays).
+    /// Unit directions towards the viewer (the reversed rays), and the BSDFs seen from
+    /// them (none where nothing scatters).
     wo: &'a [Vec3; LANES],
+    scattering: &'a [Option<Scattering>; LANES],
     numbers: &'a [Numbers; LANES],
     lanes: &'a [Lane; LANES],
     /// At a camera ray's first surface: the lamps whose glossy reflections light paths share.
@@ -614,7 +627,7 @@ fn shadow_packet(
     let Shading {
         hits,
         v,
-        wo,
+        scattering,
         numbers,
         lanes,
         ..
@@ -627,11 +640,14 @@ fn shadow_packet(
         let Some(es) = sample(p, &numbers[lane]) else {
             continue;
         };
+        let Some(bsdf) = &scattering[lane] else {
+            continue;
+        };
         // With the split, the diffuse layer's part too (from the same setup).
         let (f, bsdf_pdf, diffuse) = if specular.is_some() {
-            v.bsdf[lane].eval_pdf_diffuse(n, wo[lane], es.dir)
+            bsdf.eval_pdf_diffuse(es.dir)
         } else {
-            let (f, pdf) = v.bsdf[lane].eval_pdf(n, wo[lane], es.dir);
+            let (f, pdf) = bsdf.eval_pdf(es.dir);
             (f, pdf, Vec3::ZERO)
         };
         if f == Vec3::ZERO {
@@ -721,6 +737,37 @@ fn light_sample_weight(
     }
 }
 
+/// The next rays of the lanes that scatter ([`scatter`]: `v`'s surfaces seen as
+/// `scattering`, drawn with `numbers`, at the shading normals of `points`) into `packet`, which
+/// is cleared first; with `split`, each lane's specular share of its first scattering too.
+fn scatter_lanes(
+    (v, scattering, numbers, points): (
+        &Vertices,
+        &[Option<Scattering>; LANES],
+        &[Numbers; LANES],
+        &SurfacePoints16,
+    ),
+    (limits, bounce): (&PathLimits, u32),
+    lanes: &mut [Lane; LANES],
+    mut split: Option<&mut ViewSplit>,
+    packet: &mut RayPacket16,
+) {
+    packet.clear();
+    for lane in 0..LANES {
+        let Some(at) = &scattering[lane] else {
+            continue;
+        };
+        let n = points.get(lane).normal;
+        let u = &numbers[lane];
+        if let Some(ray) = scatter(v, lane, (n, at), u, limits, bounce, &mut lanes[lane]) {
+            if let Some(s) = split.as_deref_mut() {
+                s.shares[lane] = first_specular_share(at, &ray, &lanes[lane]);
+            }
+            packet.set(lane, &ray);
+        }
+    }
+}
+
 /// Draws the next direction of lane `lane` from its BSDF; updates the path's state and
 /// returns the ray to trace, or `None` when the path ends (absorbed, out of bounces for its
 /// kind, or stopped by Russian roulette).
@@ -728,14 +775,13 @@ fn light_sample_weight(
 fn scatter(
     v: &Vertices,
     lane: usize,
-    n: Vec3,
-    wo: Vec3,
+    (n, at): (Vec3, &Scattering),
     u: &Numbers,
     limits: &PathLimits,
     bounce: u32,
     s: &mut Lane,
 ) -> Option<Ray> {
-    let sample = v.bsdf[lane].sample(n, wo, [u[3], u[4], u[5]])?;
+    let sample = at.sample([u[3], u[4], u[5]])?;
     let (count, limit) = match sample.lobe {
         Lobe::Diffuse => (&mut s.diffuse, limits.diffuse),
         Lobe::Glossy => (&mut s.glossy, limits.glossy),

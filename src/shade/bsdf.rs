@@ -89,8 +89,10 @@ enum Through {
     Straight,
 }
 
-/// What [`Bsdf`] needs at one `wo`, computed once per call: clamped parameters, Fresnel
-/// constants and the lobe selection probability.
+/// What [`Bsdf`] needs at one `wo`, computed once per point and direction
+/// ([`Scattering`]): clamped parameters, Fresnel constants and the lobe selection
+/// probability.
+#[derive(Debug, Clone, Copy)]
 struct Setup {
     alpha: f32,
     a2: f32,
@@ -339,15 +341,13 @@ impl Bsdf {
     /// [`Bsdf::view_alpha`] measures). The viewer's direction changes it only through the
     /// specular layer's albedo above it, slowly except at grazing angles.
     pub fn eval_diffuse(&self, n: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
-        Setup::new(self, n, wo).map_or(Vec3::ZERO, |s| s.eval_diffuse(n, wi))
+        self.at(n, wo).map_or(Vec3::ZERO, |s| s.eval_diffuse(wi))
     }
 
     /// [`Bsdf::eval_pdf`] and [`Bsdf::eval_diffuse`] at once.
     pub fn eval_pdf_diffuse(&self, n: Vec3, wo: Vec3, wi: Vec3) -> (Vec3, f32, Vec3) {
-        Setup::new(self, n, wo).map_or((Vec3::ZERO, 0.0, Vec3::ZERO), |s| {
-            let (f, pdf) = s.eval_pdf(n, wo, wi);
-            (f, pdf, s.eval_diffuse(n, wi))
-        })
+        self.at(n, wo)
+            .map_or((Vec3::ZERO, 0.0, Vec3::ZERO), |s| s.eval_pdf_diffuse(wi))
     }
 
     /// The solid-angle density with which [`Bsdf::sample`] draws `wi` (zero for delta lobes).
@@ -358,7 +358,13 @@ impl Bsdf {
     /// [`Bsdf::eval`] and [`Bsdf::pdf`] at once (a light sample needs both; they share the
     /// work that depends on `wo`).
     pub fn eval_pdf(&self, n: Vec3, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
-        Setup::new(self, n, wo).map_or((Vec3::ZERO, 0.0), |s| s.eval_pdf(n, wo, wi))
+        self.at(n, wo).map_or((Vec3::ZERO, 0.0), |s| s.eval_pdf(wi))
+    }
+
+    /// The BSDF at shading normal `n` seen from `wo`, for several evaluations and samples
+    /// there; `None` where `wo` grazes the surface or lies below it (nothing scatters).
+    pub fn at(&self, n: Vec3, wo: Vec3) -> Option<Scattering> {
+        Setup::new(self, n, wo).map(|setup| Scattering { setup, n, wo })
     }
 
     /// The angle (radians) over which what the surface sends a viewer may change as the
@@ -388,7 +394,42 @@ impl Bsdf {
     /// Draws a direction from three uniform numbers; `None` when the sample carries nothing.
     /// `u[0]` picks the lobe, `u[1]` and `u[2]` the direction within it.
     pub fn sample(&self, n: Vec3, wo: Vec3, u: [f32; 3]) -> Option<BsdfSample> {
-        let s = Setup::new(self, n, wo)?;
+        self.at(n, wo)?.sample(u)
+    }
+}
+
+/// A [`Bsdf`] at one point seen from one direction ([`Bsdf::at`]): what depends on the
+/// normal and `wo` (Fresnel at `wo`, the specular layer's albedo, the lobes' sampling
+/// probabilities) worked out once for the light sample, the BSDF sample and the evaluations a
+/// path makes there.
+#[derive(Debug, Clone, Copy)]
+pub struct Scattering {
+    setup: Setup,
+    n: Vec3,
+    wo: Vec3,
+}
+
+impl Scattering {
+    /// [`Bsdf::eval_pdf`] at `wi`.
+    pub fn eval_pdf(&self, wi: Vec3) -> (Vec3, f32) {
+        self.setup.eval_pdf(self.n, self.wo, wi)
+    }
+
+    /// [`Bsdf::eval_diffuse`] at `wi`.
+    pub fn eval_diffuse(&self, wi: Vec3) -> Vec3 {
+        self.setup.eval_diffuse(self.n, wi)
+    }
+
+    /// [`Bsdf::eval_pdf_diffuse`] at `wi`.
+    pub fn eval_pdf_diffuse(&self, wi: Vec3) -> (Vec3, f32, Vec3) {
+        let (f, pdf) = self.eval_pdf(wi);
+        (f, pdf, self.eval_diffuse(wi))
+    }
+
+    /// [`Bsdf::sample`]: draws a direction from three uniform numbers; `None` when the sample carries nothing.
+    /// `u[0]` picks the lobe, `u[1]` and `u[2]` the direction within it.
+    pub fn sample(&self, u: [f32; 3]) -> Option<BsdfSample> {
+        let (s, n, wo) = (&self.setup, self.n, self.wo);
         let (wi, lobe, delta) = if u[0] >= s.p_micro {
             (cosine_hemisphere(n, u[1], u[2]), Lobe::Diffuse, None)
         } else {

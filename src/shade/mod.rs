@@ -9,7 +9,7 @@ mod material;
 mod microfacet;
 mod texture;
 
-pub use bsdf::{Bsdf, BsdfSample, Lobe, basis, cosine_hemisphere};
+pub use bsdf::{Bsdf, BsdfSample, Lobe, Scattering, basis, cosine_hemisphere};
 pub use environment::{EnvSample, EnvironmentError, EnvironmentMap, uniform_sphere};
 pub use light::*;
 pub use material::*;
