@@ -687,13 +687,18 @@ fn lend_one(
 ) {
     let s = r.shift.abs();
     let extent = s + kernel.reach();
-    let k_at = kernel.for_sample(r.shift, r.gradient);
     let members = &grid.members;
     let me = &members[m];
     let g = spacing(s);
     // A power of two: a mask, not a division, in the loop over every member in reach.
     let mask = g - 1;
     let lends = |q: &Member| q.lattice & mask == 0;
+    // A sample that does not lend goes to its own site alone: nowhere, when that site does
+    // not borrow (decided before the kernel is set up).
+    if !(lends(me) || me.needy) {
+        return;
+    }
+    let k_at = kernel.for_sample(r.shift, r.gradient);
     // Whether member q takes `r` (it is of q's cluster and q is not covered), and whether q
     // counts among the techniques that could have drawn it: where it takes it, and where
     // `r` lies nearer than all q saw (then it covers q, which cannot take it, but nothing
@@ -737,11 +742,8 @@ fn lend_one(
             }
         }
     } else {
-        // Any other sample goes to its own site alone: only the lenders' kernels and its
-        // site's are needed.
-        if !me.needy {
-            return;
-        }
+        // Any other sample goes to its own site alone (a needy one, above): only the
+        // lenders' kernels and its site's are needed.
         for q in grid.on_lattice(r.centre, extent, g) {
             let other = &members[q as usize];
             if !role(other).1 {

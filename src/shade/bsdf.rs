@@ -426,8 +426,9 @@ impl Scattering {
         (f, pdf, self.eval_diffuse(wi))
     }
 
-    /// [`Bsdf::sample`]: draws a direction from three uniform numbers; `None` when the sample carries nothing.
-    /// `u[0]` picks the lobe, `u[1]` and `u[2]` the direction within it.
+    /// [`Bsdf::sample`]: draws a direction from three uniform numbers; `None` when the
+    /// sample carries nothing. `u[0]` picks the lobe, `u[1]` and `u[2]` the direction within
+    /// it.
     pub fn sample(&self, u: [f32; 3]) -> Option<BsdfSample> {
         let (s, n, wo) = (&self.setup, self.n, self.wo);
         let (wi, lobe, delta) = if u[0] >= s.p_micro {
