@@ -1,5 +1,6 @@
-//! Point lights seen in glossy surfaces, traced from the light too (`render::glossy_light`): a
-//! polished ball's highlight, out of focus, keeps its energy (light tracing on or off agree),
+//! Lamps seen in glossy surfaces, traced from the light too (`render::glossy_light`): a
+//! polished ball's highlight of a point light, an emissive ball or a softbox, out of focus,
+//! keeps its energy (light tracing on or off agree),
 //! comes out far less noisy, and regions and thread counts get the same splats; a scene with
 //! nothing glossy renders exactly as without it.
 
@@ -222,6 +223,95 @@ fn an_emissive_balls_reflection_keeps_its_light_and_loses_its_speckle() {
     assert!(
         noise_on * 3.0 < noise_off,
         "seed-to-seed difference on the ball: {noise_off:.4} camera alone, {noise_on:.4} with light paths"
+    );
+}
+
+/// A small polished ball of `roughness` 0.6 m in front of an 85 mm f/1.4 lens focused at 4 m
+/// (a disc about 40 px across in a 96 px frame, the ball itself about 7 px), lit only by a
+/// 1 x 1 m softbox (an emissive quad, two triangles) beside and behind the camera: the ball's
+/// blurred reflection of the panel is the whole image.
+fn softbox(roughness: f32) -> SceneDesc {
+    let src = format!(
+        r#"
+name = "softbox"
+ambient = 0
+lights = []
+
+[image]
+width = {WIDTH}
+height = {HEIGHT}
+
+[camera]
+eye = [0, 0, 0]
+look_at = [0, 0, 1]
+f_number = 1.4
+focal_length_mm = 85
+sensor_width_mm = 36
+focus_distance = 4
+
+[background]
+horizon = 0
+zenith = 0
+
+[[materials]]
+name = "panel"
+diffuse = 0
+emission = 20
+
+[[materials]]
+name = "ball"
+diffuse = 0.9
+metallic = 1.0
+roughness = {roughness}
+
+[[objects]]
+type = "quad"
+size = [1, 1]
+rotate = [90, 0, 0]
+translate = [0.6, 0.6, -1.5]
+material = "panel"
+
+[[objects]]
+type = "sphere"
+center = [0, 0, 0.6]
+radius = 0.02
+material = "ball"
+"#
+    );
+    dofray::scene::file::parse(&src, Path::new("softbox.toml")).unwrap()
+}
+
+#[test]
+fn a_softboxs_reflection_in_a_small_ball_keeps_its_light_and_loses_its_speckle() {
+    // A panel's light paths leave from a point of it towards the ball (`Aim::FromPoint`):
+    // from the panel's centre, cones holding the ball as seen from all of the panel found it
+    // in 1 of tens of thousands of directions, and the camera kept the reflection, speckled.
+    let ball = softbox(0.15);
+    let all = |_: usize| true;
+    let mean = |spp: u32, lt: bool, seeds: std::ops::RangeInclusive<u64>| {
+        let n = seeds.clone().count() as f64;
+        (seeds.map(|s| total(&render(&ball, &settings(Mode::Dense, spp, lt, s)), all))).sum::<f64>()
+            / n
+    };
+    let (off, on) = (mean(256, false, 1..=3), mean(64, true, 1..=3));
+    eprintln!("light in the frame: camera alone {off:.3}, with light paths {on:.3}");
+    assert!(off > 1.0, "the reflection is there: {off}");
+    assert!(
+        (on / off - 1.0).abs() < 0.03,
+        "light in the frame: camera alone {off:.3}, with light paths {on:.3}"
+    );
+    let pair = |lt: bool| {
+        let a = render(&ball, &settings(Mode::Dense, 32, lt, 11));
+        let b = render(&ball, &settings(Mode::Dense, 32, lt, 12));
+        rms_difference(&a, &b, all)
+    };
+    let (noise_off, noise_on) = (pair(false), pair(true));
+    eprintln!(
+        "seed-to-seed difference: {noise_off:.5} camera alone, {noise_on:.5} with light paths"
+    );
+    assert!(
+        noise_on * 4.0 < noise_off,
+        "seed-to-seed difference: {noise_off:.5} camera alone, {noise_on:.5} with light paths"
     );
 }
 

@@ -51,7 +51,11 @@
 //! position to trace from), as do emitters beyond that count.
 //!
 //! **Where the lamp's paths go.** Directions are drawn within cones around the bounds of the
-//! geometry whose materials can be glossy, each cone's directions on a [`GRID`] x [`GRID`] grid.
+//! geometry whose materials can be glossy, each cone's directions on a [`GRID`] x [`GRID`] grid
+//! ([`Aim`]): from a punctual light or an emissive sphere's centre, cones that hold each bound
+//! as seen from all of the lamp; from the point an emissive triangle's path leaves (drawn
+//! first), cones that hold the bound alone (a softbox's cones from its centre would hold a
+//! small ball in a sliver of their directions).
 //! Only a small patch of a curved mirror sends a lamp's light into the lens, so a pilot of
 //! [`PILOT`] paths drawn evenly measures how much light each cell lands, and the render's paths
 //! draw cells in proportion to it ([`DEFENSIVE`] of them evenly, so nothing the pilot missed
@@ -85,7 +89,7 @@ use crate::limits::{MemoryError, try_with_capacity};
 use crate::sampler::{path_numbers, sample_key};
 use crate::scene::World;
 use crate::scene::emitters::{
-    primitive_bounds, primitive_point, punctual_sample, sphere_point_facing,
+    PrimitivePoint, primitive_bounds, primitive_point, punctual_sample, sphere_point_facing,
 };
 use crate::settings::{Integrator, Mode, RenderSettings, Strategy};
 use crate::shade::{Bsdf, Light, Material, SurfacePoint, SurfacePoints16, basis, luminance};
@@ -209,6 +213,43 @@ impl Cone {
     }
 }
 
+/// Where a lamp's light paths are aimed: one cone per glossy sphere (cone `k` holds sphere
+/// `k`), each cone's directions on a [`GRID`] x [`GRID`] grid.
+#[derive(Debug, Clone)]
+enum Aim {
+    /// Cones from the lamp's centre, each holding its sphere as seen from all of the lamp:
+    /// punctual lights and emissive spheres, whose directions are drawn before their points.
+    Fixed(Vec<Cone>),
+    /// Cones from the point a path leaves, each holding one glossy sphere (centre, radius):
+    /// emissive triangles, whose points are drawn first. A panel's cones from its centre
+    /// would have to hold a small ball as seen from every point of it: a 2 cm chrome ball 5 m
+    /// from a 4 x 2 m softbox fills 1 / 40000 of such a cone, so its pilot found nothing and
+    /// the ball's defocused reflection of the panel stayed with the camera, speckled.
+    FromPoint(Vec<(Vec3, f32)>),
+}
+
+impl Aim {
+    /// How many cones.
+    fn len(&self) -> usize {
+        match self {
+            Self::Fixed(cones) => cones.len(),
+            Self::FromPoint(spheres) => spheres.len(),
+        }
+    }
+
+    /// Cone `k` for a path leaving the lamp's point `from` (ignored by fixed cones); `None`
+    /// when no direction from there reaches its sphere.
+    fn cone(&self, k: usize, from: Vec3) -> Option<Cone> {
+        match self {
+            Self::Fixed(cones) => Some(cones[k]),
+            Self::FromPoint(spheres) => {
+                let (centre, radius) = spheres[k];
+                Cone::towards(from, centre, radius)
+            }
+        }
+    }
+}
+
 /// Where a lamp's light paths start.
 #[derive(Debug, Clone, Copy)]
 enum Source {
@@ -303,7 +344,7 @@ struct Lamp {
     source: Source,
     /// Light paths to trace.
     paths: u32,
-    cones: Vec<Cone>,
+    aim: Aim,
     /// Probability of each cell of each cone's grid (cone-major, [`GRID`]^2 per cone).
     cells: Vec<f32>,
     /// Running sum of `cells` (the last entry is 1).
@@ -311,13 +352,13 @@ struct Lamp {
 }
 
 impl Lamp {
-    /// A lamp drawing directions in `cones`, each cell alike.
-    fn new(source: Source, paths: u32, cones: Vec<Cone>) -> Self {
-        let n = cones.len() * GRID * GRID;
+    /// A lamp drawing directions as `aim` says, each cell alike.
+    fn new(source: Source, paths: u32, aim: Aim) -> Self {
+        let n = aim.len() * GRID * GRID;
         let mut lamp = Self {
             source,
             paths,
-            cones,
+            aim,
             cells: Vec::new(),
             cdf: Vec::new(),
         };
@@ -342,8 +383,8 @@ impl Lamp {
         self.cells = cells;
     }
 
-    /// The density (per steradian) of drawing unit direction `dir` from the lamp; `drawn`:
-    /// the cell it was drawn in, if known.
+    /// The density (per steradian) of drawing unit direction `dir` from the lamp's point
+    /// `from`; `drawn`: the cell it was drawn in, if known.
     ///
     /// Which cell a direction lies in is measured back from it, and within float rounding of
     /// a cell's edge may come out as its neighbour's, whose probability can be 10^4 times
@@ -351,10 +392,11 @@ impl Lamp {
     /// never underestimated by more than the other cones' share, so its weight stays bounded
     /// and the only departure from an unbiased estimate is bounded by the share of the light
     /// that falls within rounding of an edge.
-    fn pdf(&self, dir: Vec3, drawn: Option<usize>) -> f32 {
+    fn pdf(&self, from: Vec3, dir: Vec3, drawn: Option<usize>) -> f32 {
         let per_cell = (GRID * GRID) as f32;
-        (self.cones.iter().enumerate())
-            .filter_map(|(k, c)| {
+        (0..self.aim.len())
+            .filter_map(|k| {
+                let c = self.aim.cone(k, from)?;
                 let cell = match drawn {
                     Some(d) if d / (GRID * GRID) == k => d,
                     _ => k * GRID * GRID + Cone::cell(c.square(dir)?),
@@ -364,8 +406,9 @@ impl Lamp {
             .sum()
     }
 
-    /// A direction from three uniform numbers (the first picks the cell) and its cell.
-    fn sample(&self, u: [f32; 3]) -> (Vec3, usize) {
+    /// A direction from the lamp's point `from` by three uniform numbers (the first picks the
+    /// cell) and its cell; `None` when the cell's cone is empty from there.
+    fn sample(&self, from: Vec3, u: [f32; 3]) -> Option<(Vec3, usize)> {
         let c = self
             .cdf
             .partition_point(|&f| f <= u[0])
@@ -375,7 +418,44 @@ impl Lamp {
             ((ij / GRID) as f32 + u[1]) / GRID as f32,
             ((ij % GRID) as f32 + u[2]) / GRID as f32,
         );
-        (self.cones[k].sample(q), c)
+        Some((self.aim.cone(k, from)?.sample(q), c))
+    }
+
+    /// Where path `u` (its numbers: 0-2 the direction, 6-7 the point on an emitter) leaves
+    /// the lamp, its direction and the cell drawn; `None` when it carries nothing (an
+    /// emitter's back, an empty cone).
+    fn start(&self, world: &World, u: &[f32; 10]) -> Option<(Start, Vec3, usize)> {
+        let on = Vec2::new(u[6], u[7]);
+        let dir_u = [u[0], u[1], u[2]];
+        match self.source {
+            Source::Punctual { position, .. } => {
+                let (dir, cell) = self.sample(position, dir_u)?;
+                let start = Start {
+                    origin: position,
+                    point: position,
+                    radiance: Vec3::ZERO,
+                };
+                Some((start, dir, cell))
+            }
+            // The point first: the direction's cones are aimed from it.
+            Source::Triangle { geometry, prim, .. } => {
+                let p = primitive_point(world, geometry, prim, on)?;
+                let (dir, cell) = self.sample(p.position, dir_u)?;
+                Some((Start::leaving(world, (geometry, prim), p, dir)?, dir, cell))
+            }
+            // The direction first: the point is drawn on the disc facing it.
+            Source::Sphere {
+                geometry,
+                prim,
+                center,
+                radius,
+                ..
+            } => {
+                let (dir, cell) = self.sample(center, dir_u)?;
+                let p = sphere_point_facing(center, radius, dir, on);
+                Some((Start::leaving(world, (geometry, prim), p, dir)?, dir, cell))
+            }
+        }
     }
 }
 
@@ -471,9 +551,14 @@ impl GlossyPaths {
             let cones: Vec<Cone> = (spheres.iter())
                 .filter_map(|&(c, r)| Cone::towards(at, c, r + size))
                 .collect();
-            if !cones.is_empty() {
-                lamps.push(Lamp::new(source, paths, cones));
+            if cones.is_empty() {
+                continue;
             }
+            let aim = match source {
+                Source::Triangle { .. } => Aim::FromPoint(spheres.clone()),
+                _ => Aim::Fixed(cones),
+            };
+            lamps.push(Lamp::new(source, paths, aim));
         }
         if lamps.is_empty() {
             return None;
@@ -664,7 +749,7 @@ impl GlossyPaths {
             _ => camera * b.pdf(n, to_lens, to_light),
         };
         let camera = camera * nee;
-        let p_w = lamp.pdf(-to_light, at.drawn);
+        let p_w = lamp.pdf(x + to_light * d_light, -to_light, at.drawn);
         let pos = lamp.source.position_density(x, to_light, d_light);
         if !(p_w > 0.0 && pos > 0.0) {
             return Some(Densities {
@@ -773,9 +858,7 @@ impl GlossyPaths {
             let mut cells = [0usize; LANES];
             let mut starts = [None; LANES];
             for (lane, u) in numbers.iter().enumerate().take(count as usize) {
-                let (dir, cell) = lamp.sample([u[0], u[1], u[2]]);
-                let Some(start) = Start::new(world, &lamp.source, dir, Vec2::new(u[6], u[7]))
-                else {
+                let Some((start, dir, cell)) = lamp.start(world, u) else {
                     continue;
                 };
                 cells[lane] = cell;
@@ -905,28 +988,14 @@ struct Start {
 }
 
 impl Start {
-    /// The start of a path leaving `source` along unit `dir`, at the point `u` draws on an
-    /// emitter; `None` when the emitter sends nothing that way (its back, a sphere's inside).
-    fn new(world: &World, source: &Source, dir: Vec3, u: Vec2) -> Option<Self> {
-        let (geometry, prim, p) = match *source {
-            Source::Punctual { position, .. } => {
-                return Some(Self {
-                    origin: position,
-                    point: position,
-                    radiance: Vec3::ZERO,
-                });
-            }
-            Source::Triangle { geometry, prim, .. } => {
-                (geometry, prim, primitive_point(world, geometry, prim, u)?)
-            }
-            Source::Sphere {
-                geometry,
-                prim,
-                center,
-                radius,
-                ..
-            } => (geometry, prim, sphere_point_facing(center, radius, dir, u)),
-        };
+    /// The start of a path leaving point `p` of emissive primitive (geometry, prim) along
+    /// unit `dir`; `None` when it sends nothing that way.
+    fn leaving(
+        world: &World,
+        (geometry, prim): (u32, u32),
+        p: PrimitivePoint,
+        dir: Vec3,
+    ) -> Option<Self> {
         let cos = p.normal.dot(dir);
         if cos == 0.0 {
             return None;
@@ -1201,7 +1270,7 @@ mod tests {
             light: 0,
             position: Vec3::ZERO,
         };
-        let mut lamp = Lamp::new(source, 1, vec![cone]);
+        let mut lamp = Lamp::new(source, 1, Aim::Fixed(vec![cone]));
         // One cell holds nearly everything, its neighbours almost nothing.
         let mut cells = vec![1e-6f32; GRID * GRID];
         cells[5 * GRID + 7] = 1.0;
@@ -1209,9 +1278,9 @@ mod tests {
         let want = lamp.cells[5 * GRID + 7] * (GRID * GRID) as f32 * cone.inv_solid_angle;
         // A direction on the drawn cell's edge with its neighbour's row.
         let dir = cone.sample(Vec2::new(6.0 / GRID as f32, 7.5 / GRID as f32));
-        let drawn = lamp.pdf(dir, Some(5 * GRID + 7));
+        let drawn = lamp.pdf(Vec3::ZERO, dir, Some(5 * GRID + 7));
         assert_eq!(drawn, want);
-        let measured = lamp.pdf(dir, None);
+        let measured = lamp.pdf(Vec3::ZERO, dir, None);
         assert!(measured > 0.0 && measured <= want, "{measured} vs {want}");
     }
 }
