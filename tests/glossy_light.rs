@@ -48,19 +48,15 @@ material = "lamp"
     )
 }
 
-/// [`scene`] lit by `lamp` (scene-file tables) alone.
-fn with_lamp(roughness: f32, metallic: f32, lamp: &str) -> SceneDesc {
-    // Without `[[lights]]` a scene file gets a default key light.
-    let no_lights = if lamp.contains("[[lights]]") {
-        ""
-    } else {
-        "lights = []"
-    };
-    let src = format!(
+/// The scene-file head every scene here shares: scene `name`, `lights` (`""` or `"lights =
+/// []"`), the frame, an 85 mm f/1.4 lens at the origin looking down +z focused at 4 m, and a
+/// black world.
+fn frame(name: &str, lights: &str) -> String {
+    format!(
         r#"
-name = "ball"
+name = "{name}"
 ambient = 0
-{no_lights}
+{lights}
 
 [image]
 width = {WIDTH}
@@ -77,7 +73,20 @@ focus_distance = 4
 [background]
 horizon = 0
 zenith = 0
+"#
+    )
+}
 
+/// [`scene`] lit by `lamp` (scene-file tables) alone.
+fn with_lamp(roughness: f32, metallic: f32, lamp: &str) -> SceneDesc {
+    // Without `[[lights]]` a scene file gets a default key light.
+    let no_lights = if lamp.contains("[[lights]]") {
+        ""
+    } else {
+        "lights = []"
+    };
+    let src = format!(
+        r#"{}
 {lamp}
 
 [[materials]]
@@ -101,7 +110,8 @@ type = "quad"
 size = [20, 20]
 translate = [0, -1, 2]
 material = "floor"
-"#
+"#,
+        frame("ball", no_lights)
     );
     dofray::scene::file::parse(&src, Path::new("ball.toml")).unwrap()
 }
@@ -232,27 +242,7 @@ fn an_emissive_balls_reflection_keeps_its_light_and_loses_its_speckle() {
 /// blurred reflection of the panel is the whole image.
 fn softbox(roughness: f32) -> SceneDesc {
     let src = format!(
-        r#"
-name = "softbox"
-ambient = 0
-lights = []
-
-[image]
-width = {WIDTH}
-height = {HEIGHT}
-
-[camera]
-eye = [0, 0, 0]
-look_at = [0, 0, 1]
-f_number = 1.4
-focal_length_mm = 85
-sensor_width_mm = 36
-focus_distance = 4
-
-[background]
-horizon = 0
-zenith = 0
-
+        r#"{}
 [[materials]]
 name = "panel"
 diffuse = 0
@@ -276,7 +266,8 @@ type = "sphere"
 center = [0, 0, 0.6]
 radius = 0.02
 material = "ball"
-"#
+"#,
+        frame("softbox", "lights = []")
     );
     dofray::scene::file::parse(&src, Path::new("softbox.toml")).unwrap()
 }
