@@ -52,7 +52,7 @@
 //!
 //! **Where the lamp's paths go.** Directions are drawn within cones around the bounds of the
 //! geometry whose materials can be glossy, each cone's directions on a [`GRID`] x [`GRID`] grid
-//! ([`Aim`]): from a punctual light or an emissive sphere's centre, cones that hold each bound
+//! (`Aim`): from a punctual light or an emissive sphere's centre, cones that hold each bound
 //! as seen from all of the lamp; from the point an emissive triangle's path leaves (drawn
 //! first), cones that hold the bound alone (a softbox's cones from its centre would hold a
 //! small ball in a sliver of their directions).
