@@ -308,17 +308,19 @@ fn a_softboxs_reflection_in_a_small_ball_keeps_its_light_and_loses_its_speckle()
 
 #[test]
 fn adaptive_mode_keeps_the_highlights_light() {
-    let ball = scene(0.08, 1.0);
-    let dense = total(&render(&ball, &settings(Mode::Dense, 64, true, 5)), on_ball);
-    let adaptive = total(
-        &render(&ball, &settings(Mode::Adaptive, 64, true, 5)),
-        on_ball,
-    );
-    eprintln!("light on the ball: dense {dense:.3}, adaptive {adaptive:.3}");
-    assert!(
-        (adaptive / dense - 1.0).abs() < 0.05,
-        "light on the ball: dense {dense:.2}, adaptive {adaptive:.2}"
-    );
+    // A point light's highlight (on the ball), and a softbox's reflection (the whole frame).
+    let all = |_: usize| true;
+    let cases: [(SceneDesc, &dyn Fn(usize) -> bool); 2] =
+        [(scene(0.08, 1.0), &on_ball), (softbox(0.15), &all)];
+    for (ball, mask) in cases {
+        let dense = total(&render(&ball, &settings(Mode::Dense, 64, true, 5)), mask);
+        let adaptive = total(&render(&ball, &settings(Mode::Adaptive, 64, true, 5)), mask);
+        eprintln!("light on the ball: dense {dense:.3}, adaptive {adaptive:.3}");
+        assert!(
+            (adaptive / dense - 1.0).abs() < 0.05,
+            "light on the ball: dense {dense:.2}, adaptive {adaptive:.2}"
+        );
+    }
 }
 
 #[test]
@@ -332,26 +334,28 @@ fn a_rough_ball_renders_as_without_light_paths() {
 
 #[test]
 fn regions_and_thread_counts_get_the_same_glossy_splats() {
-    let ball = scene(0.1, 0.5);
-    let s = settings(Mode::Adaptive, 16, true, 1);
-    let device = dofray::embree::Device::new().unwrap();
-    let world = World::build(&ball, &device).unwrap();
-    let camera = ball.camera.build(|_| None).unwrap();
-    let full = render::render(&world, &camera, &s, &NoProgress).unwrap().0;
-    let region = Region {
-        x0: 40,
-        y0: 20,
-        x1: 70,
-        y1: 40,
-    };
-    let part = render::render_region(&world, &camera, &s, &region, &NoProgress)
-        .unwrap()
-        .0;
-    assert_eq!(part.color, full.crop(&region).color);
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap()
-        .install(|| render::render(&world, &camera, &s, &NoProgress).unwrap().0);
-    assert_eq!(one.color, full.color);
+    // A point light's paths, and a panel's (aimed from the points they leave).
+    for ball in [scene(0.1, 0.5), softbox(0.15)] {
+        let s = settings(Mode::Adaptive, 16, true, 1);
+        let device = dofray::embree::Device::new().unwrap();
+        let world = World::build(&ball, &device).unwrap();
+        let camera = ball.camera.build(|_| None).unwrap();
+        let full = render::render(&world, &camera, &s, &NoProgress).unwrap().0;
+        let region = Region {
+            x0: 40,
+            y0: 20,
+            x1: 70,
+            y1: 40,
+        };
+        let part = render::render_region(&world, &camera, &s, &region, &NoProgress)
+            .unwrap()
+            .0;
+        assert_eq!(part.color, full.crop(&region).color);
+        let one = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| render::render(&world, &camera, &s, &NoProgress).unwrap().0);
+        assert_eq!(one.color, full.color);
+    }
 }
