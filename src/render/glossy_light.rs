@@ -548,17 +548,17 @@ impl GlossyPaths {
             .clamp(1.0, f64::from(u32::MAX)) as u32;
         let mut lamps = Vec::new();
         for (source, at, size) in sources {
-            let cones: Vec<Cone> = (spheres.iter())
-                .filter_map(|&(c, r)| Cone::towards(at, c, r + size))
-                .collect();
-            if cones.is_empty() {
-                continue;
-            }
             let aim = match source {
                 Source::Triangle { .. } => Aim::FromPoint(spheres.clone()),
-                _ => Aim::Fixed(cones),
+                _ => Aim::Fixed(
+                    (spheres.iter())
+                        .filter_map(|&(c, r)| Cone::towards(at, c, r + size))
+                        .collect(),
+                ),
             };
-            lamps.push(Lamp::new(source, paths, aim));
+            if aim.len() > 0 {
+                lamps.push(Lamp::new(source, paths, aim));
+            }
         }
         if lamps.is_empty() {
             return None;
