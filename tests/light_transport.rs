@@ -244,6 +244,66 @@ fn a_sphere_light_lights_a_plane_as_the_closed_form_says() {
     }
 }
 
+/// A street of 40 small sphere lamps, 3 m up in two rows 8 m apart, one every 3 m along
+/// each: a point of the ground beneath one of them takes most of its light from the few
+/// nearest, which the light sample must pick most (by power alone it picked each one draw in
+/// 40, and the ground at 16 samples was noise: a relative spread of 0.52 between pixels, now
+/// 0.047). The
+/// radiance is the closed form's, rho L sum (r / d)^2 cos, and the pixels agree.
+#[test]
+fn a_street_of_lamps_lights_the_ground_from_the_lamps_near_each_point() {
+    let (rho, le, r) = (0.7, 200.0, 0.05);
+    let lamps: Vec<Vec3> = (0..40)
+        .map(|k| {
+            Vec3::new(
+                if k % 2 == 0 { -4.0 } else { 4.0 },
+                3.0,
+                3.0 * (k / 2) as f32,
+            )
+        })
+        .collect();
+    let at = Vec3::new(-4.0, 0.0, 30.0);
+    let mut objects = vec![Object::Mesh {
+        mesh: ground(200.0),
+        materials: MeshMaterials::One(0),
+    }];
+    objects.extend(lamps.iter().map(|&center| Object::Sphere {
+        center,
+        radius: r,
+        material: 1,
+    }));
+    let desc = SceneDesc {
+        camera: camera(at + Vec3::new(0.3, 1.0, 0.0), at, 0.3),
+        materials: vec![
+            Material::diffuse(Vec3::splat(rho)),
+            Material {
+                emission: Vec3::splat(le),
+                ..Material::diffuse(Vec3::ZERO)
+            },
+        ],
+        objects,
+        lights: vec![],
+        ambient: Vec3::ZERO,
+        background: Background::uniform(Vec3::ZERO),
+        ..Default::default()
+    };
+    let want: f32 = (lamps.iter())
+        .map(|&c| {
+            let v = c - at;
+            rho * le * r * r / v.length_squared() * (v.y / v.length())
+        })
+        .sum();
+    let film = render_path(&desc, 16, 1);
+    assert_close(mean(&film).x, want, 0.02, "the street's ground");
+    let n = film.color.len() as f32;
+    let spread = (film.color.iter())
+        .map(|c| (c.x - want) * (c.x - want))
+        .sum::<f32>()
+        / n;
+    let relative = spread.sqrt() / want;
+    assert!(relative < 0.1, "relative spread between pixels {relative}");
+}
+
 /// Writes a `w` x `h` Radiance .hdr file of radiance `texel(x, y)` (row 0 at the top) into a
 /// fresh folder and returns the folder.
 fn hdr_map(test: &str, w: u32, h: u32, texel: impl Fn(u32, u32) -> [f32; 3]) -> std::path::PathBuf {

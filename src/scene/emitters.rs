@@ -2,9 +2,10 @@
 //! sun), emissive triangles and spheres (area lights are emissive geometry), and the world.
 //!
 //! Each next-event estimate takes up to three kinds of sample: one per punctual light when there
-//! are few ([`Emitters::always`]), one of the world ([`Emitters::sample_world`]) when it emits,
-//! and one of an emitter picked from the rest ([`Emitters::sample`]) with probability
-//! proportional to an estimate of its power (luminance-weighted), then a direction towards it.
+//! are few ([`Emitters::always`]; with more, one per sun), one of the world
+//! ([`Emitters::sample_world`]) when it emits, and one of an emitter picked from the rest
+//! ([`Emitters::sample`]) by what it may send to the point, its power over its distance squared
+//! within its cone of emission ([`super::light_tree`]), then a direction towards it.
 //! The world has its own sample because no power estimate weighs it fairly against local
 //! lights: a sky's power grows with the scene's size while what it sends to a point does not,
 //! so picked by power a dim sky over a large floor starves a bright lamp next to the point.
@@ -21,6 +22,7 @@ use crate::embree::{Geometry, GeometryId, Hit};
 use crate::shade::{Light, SunDisc, luminance};
 
 use super::World;
+use super::light_tree::{LightBounds, LightTree};
 
 /// One emitter.
 #[derive(Debug, Clone, Copy)]
@@ -88,43 +90,39 @@ pub struct Emitters {
     /// under a bright sky has no noise from choosing between them.
     pub always: Vec<Light>,
     list: Vec<Emitter>,
-    /// Picking probability of each emitter.
-    prob: Vec<f32>,
-    /// Running sum of `prob` (the last entry is 1).
-    cdf: Vec<f32>,
+    /// Picks from `list` by what each may send to a point.
+    tree: LightTree,
     /// Emitter index of each emissive triangle or sphere, by (geometry, primitive).
     by_prim: HashMap<(u32, u32), u32>,
     /// Whether the world emits and can be sampled ([`Emitters::sample_world`]).
     world: bool,
-    /// The discs of suns with an angle, each with the probability its light samples are
-    /// taken with (1 in [`Emitters::always`], else its picking): what
+    /// The discs of suns with an angle (all in [`Emitters::always`]): what
     /// [`Emitters::suns_seen`] looks through for every ray that leaves the scene.
-    suns: Vec<(SunDisc, f32)>,
+    suns: Vec<SunDisc>,
 }
 
 impl Emitters {
-    /// The most punctual lights sampled at every vertex; with more, they join the
-    /// distribution the other emitters are picked from.
+    /// The most punctual lights sampled at every vertex; with more, the point and spot lights
+    /// join the emitters picked from (suns, which no position tells apart, stay sampled at
+    /// every vertex).
     pub const ALWAYS_SAMPLED: usize = 8;
 
     /// The emitters of `world`: its lights, its emissive primitives, and its background when it
     /// is not black.
     pub fn build(world: &World) -> Self {
-        let (lo, hi) = world.scene.bounds();
-        let radius = if lo.cmple(hi).all() {
-            ((hi - lo).length() * 0.5).max(1e-3)
-        } else {
-            1.0
-        };
         let mut list = Vec::new();
-        let mut power = Vec::new();
+        let mut bounds = Vec::new();
         let mut always = Vec::new();
-        if world.lights.len() <= Self::ALWAYS_SAMPLED {
-            always = world.lights.clone();
-        } else {
-            for light in &world.lights {
-                list.push(Emitter::Punctual(*light));
-                power.push(punctual_power(light, radius));
+        for light in &world.lights {
+            let picked = (world.lights.len() > Self::ALWAYS_SAMPLED)
+                .then(|| punctual_bounds(light))
+                .flatten();
+            match picked {
+                Some(b) => {
+                    list.push(Emitter::Punctual(*light));
+                    bounds.push(b);
+                }
+                None => always.push(*light),
             }
         }
         let mut by_prim = HashMap::new();
@@ -139,22 +137,36 @@ impl Emitters {
                 if material.emission == Vec3::ZERO {
                     continue;
                 }
-                let (emitter, area) = match geometry {
-                    Geometry::Mesh(m) => (
-                        Emitter::Triangle { geometry: g, prim },
-                        0.5 * m.face_normal(prim).length(),
-                    ),
+                let sides = if material.one_sided { 1.0 } else { 2.0 };
+                let power = |area: f32| sides * PI * area * luminance(material.emission);
+                let (emitter, b) = match geometry {
+                    Geometry::Mesh(m) => {
+                        let [a, b, c] = (m.indices()[prim as usize])
+                            .map(|v| Vec3::from(m.positions()[v as usize]));
+                        let n = (b - a).cross(c - a);
+                        let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+                        // Light leaves its front face (the winding's normal) or both.
+                        let bounds = LightBounds::new(
+                            lo,
+                            hi,
+                            power(0.5 * n.length()),
+                            n,
+                            1.0,
+                            0.0,
+                            !material.one_sided,
+                        );
+                        (Emitter::Triangle { geometry: g, prim }, bounds)
+                    }
                     Geometry::Spheres(s) => {
-                        let r = s.radius(prim);
-                        (Emitter::Sphere { geometry: g, prim }, 4.0 * PI * r * r)
+                        let (c, r) = (s.center(prim), s.radius(prim));
+                        let bounds = LightBounds::everywhere(c - r, c + r, power(4.0 * PI * r * r));
+                        (Emitter::Sphere { geometry: g, prim }, bounds)
                     }
                 };
-                let sides = if material.one_sided { 1.0 } else { 2.0 };
-                let p = sides * PI * area * luminance(material.emission);
-                if p > 0.0 && p.is_finite() {
+                if b.power() > 0.0 && b.power().is_finite() {
                     by_prim.insert((g, prim), list.len() as u32);
                     list.push(emitter);
-                    power.push(p);
+                    bounds.push(b);
                 }
             }
         }
@@ -165,33 +177,11 @@ impl Emitters {
                 luminance(sky) > 0.0
             }
         };
-        let total: f64 = power.iter().map(|&p| p as f64).sum();
-        let prob: Vec<f32> = if total > 0.0 && total.is_finite() {
-            power.iter().map(|&p| (p as f64 / total) as f32).collect()
-        } else {
-            vec![1.0 / list.len().max(1) as f32; list.len()]
-        };
-        let mut sum = 0.0f64;
-        let cdf = prob
-            .iter()
-            .map(|&p| {
-                sum += p as f64;
-                sum as f32
-            })
-            .collect();
-        let always_suns = always.iter().map(|l| (l, 1.0));
-        let picked_suns = (list.iter().zip(&prob)).filter_map(|(e, &pick)| match e {
-            Emitter::Punctual(l) => Some((l, pick)),
-            _ => None,
-        });
-        let suns = (always_suns.chain(picked_suns))
-            .filter_map(|(light, pick)| Some((light.sun_disc()?, pick)))
-            .collect();
+        let suns = always.iter().filter_map(Light::sun_disc).collect();
         Self {
             always,
             list,
-            prob,
-            cdf,
+            tree: LightTree::build(&bounds),
             by_prim,
             world: world_emits,
             suns,
@@ -214,22 +204,16 @@ impl Emitters {
         !self.list.is_empty()
     }
 
-    /// Picks an emitter with `u0` and draws a direction towards it from `p` with `u1`, `u2`.
+    /// Picks an emitter for `p` with `u0` (by what it may send there) and draws a direction
+    /// towards it from `p` with `u1`, `u2`.
     /// `None` when nothing was drawn (no emitters, or one that sends nothing towards `p`).
     pub fn sample(&self, world: &World, p: Vec3, u: [f32; 3]) -> Option<EmitterSample> {
-        if self.list.is_empty() {
-            return None;
-        }
-        let i = self
-            .cdf
-            .partition_point(|&c| c <= u[0])
-            .min(self.list.len() - 1);
-        let pick = self.prob[i];
+        let (i, pick) = self.tree.sample(p, u[0])?;
         if pick <= 0.0 {
             return None;
         }
         let u = Vec2::new(u[1], u[2]);
-        let s = match self.list[i] {
+        let s = match self.list[i as usize] {
             Emitter::Punctual(light) => usable(punctual_sample(&light, p, u))?,
             Emitter::Triangle { geometry, prim } | Emitter::Sphere { geometry, prim } => {
                 sample_primitive(world, geometry, prim, p, u)?
@@ -306,7 +290,10 @@ impl Emitters {
         let Some(&i) = self.by_prim.get(&(geometry, prim)) else {
             return 0.0;
         };
-        let pick = self.prob[i as usize];
+        let pick = self.tree.pmf(from, i);
+        if pick <= 0.0 {
+            return 0.0;
+        }
         match world.scene.geometry(GeometryId(geometry)) {
             Geometry::Mesh(m) => {
                 let n = m.face_normal(prim);
@@ -330,8 +317,8 @@ impl Emitters {
     /// [`Emitters::always`] or [`Emitters::sample`], its picking included) draw `dir` with.
     pub fn suns_seen(&self, dir: Vec3) -> impl Iterator<Item = (Vec3, f32)> + '_ {
         (self.suns.iter())
-            .filter(move |(disc, _)| disc.contains(dir))
-            .map(|&(disc, pick)| (disc.radiance, disc.pdf * pick))
+            .filter(move |disc| disc.contains(dir))
+            .map(|disc| (disc.radiance, disc.pdf))
     }
 
     /// The density [`Emitters::sample_world`] draws world direction `dir` with (zero when the
@@ -447,21 +434,44 @@ pub fn sphere_point_facing(center: Vec3, radius: f32, dir: Vec3, u: Vec2) -> Pri
     }
 }
 
-/// Estimated power of a punctual light, for picking it (luminance-weighted watts); a sun's
-/// power is what falls on a disc of the scene's `radius`.
-fn punctual_power(light: &Light, radius: f32) -> f32 {
+/// What the light tree knows of a point or spot light: where its light leaves from, which way,
+/// and its estimated power (luminance-weighted watts). `None` for a sun, whose light no
+/// position tells apart: it is sampled at every vertex.
+fn punctual_bounds(light: &Light) -> Option<LightBounds> {
     match *light {
-        Light::Point { intensity, .. } => 4.0 * PI * luminance(intensity),
+        Light::Point {
+            position,
+            intensity,
+        } => Some(LightBounds::everywhere(
+            position,
+            position,
+            4.0 * PI * luminance(intensity),
+        )),
         Light::Spot {
+            position,
+            direction,
             intensity,
             outer_angle,
             inner_angle,
-            ..
+            radius,
         } => {
             let cos = 0.5 * (inner_angle.cos() + outer_angle.cos());
-            2.0 * PI * (1.0 - cos) * luminance(intensity)
+            let power = 2.0 * PI * (1.0 - cos) * luminance(intensity);
+            // Its disc lies within `radius` of the position; light leaves within the outer
+            // cone around the axis.
+            let r = Vec3::splat(radius.max(0.0));
+            let cos_e = outer_angle.cos();
+            Some(LightBounds::new(
+                position - r,
+                position + r,
+                power,
+                direction,
+                1.0,
+                cos_e,
+                false,
+            ))
         }
-        Light::Directional { irradiance, .. } => PI * radius * radius * luminance(irradiance),
+        Light::Directional { .. } => None,
     }
 }
 

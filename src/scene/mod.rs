@@ -9,6 +9,7 @@ pub mod error;
 pub mod file;
 pub mod gltf;
 pub mod input;
+pub mod light_tree;
 mod mesh_input;
 pub mod model;
 pub mod obj;

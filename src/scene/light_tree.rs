@@ -1,0 +1,634 @@
+//! Which emitter a light sample goes to: a bounding volume hierarchy over the emitters that
+//! picks, from any point, the ones likely to light it most (many-light sampling after Conty
+//! Estevez and Kulla, "Importance Sampling of Many Lights with Adaptive Tree Splitting", 2018,
+//! as pbrt-v4's `BVHLightSampler` builds and walks it).
+//!
+//! Picking by power alone treats a street of a hundred lamps as one light: a point under one
+//! lamp picks it once in a hundred draws, and the ninety-nine others, far off, send it almost
+//! nothing. Here every node bounds its emitters by a box, their total power and the cone of
+//! directions they emit in. A draw walks down from the root and takes each child with a
+//! probability proportional to its *importance* at the point ([`LightBounds::importance`]):
+//! power over squared distance, times the cosine of the angle by which the point lies outside
+//! the emission cone, zero only where no emitter of the node can send light. The probability
+//! of any one emitter ([`LightTree::pmf`]) is the product along the path the draw takes to it,
+//! followed by the bits each emitter keeps of that path.
+//!
+//! Every emitter keeps a probability above zero wherever it can light the point, so the
+//! estimate stays unbiased; the importance, a heuristic, sets only its variance. It knows
+//! nothing of the surface's reflection: a glossy floor reflecting a far lamp gets that lamp
+//! rarely from the walk alone. So a share [`DEFENSIVE`] of the draws picks by power alone, as
+//! before the tree, and every probability is the mixture's: no emitter is picked less often
+//! than that share of its power-only probability (defensive importance sampling).
+
+use std::f32::consts::{FRAC_PI_2, PI};
+
+use glam::{Quat, Vec3};
+
+/// The least squared distance the importance divides by (a point on a point light).
+const MIN_DISTANCE2: f32 = 1e-12;
+/// The share of draws that pick by power alone (see the module documentation).
+pub const DEFENSIVE: f32 = 0.2;
+/// Buckets per axis the build tries splits between.
+const BUCKETS: usize = 12;
+/// The deepest a path may go: a path is kept as one bit per level.
+const MAX_DEPTH: u32 = 63;
+
+/// What a node knows of its emitters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LightBounds {
+    lo: Vec3,
+    hi: Vec3,
+    /// Total power (luminance-weighted; only ratios matter).
+    phi: f32,
+    /// Axis of the cone holding every emitter's main direction (unit).
+    w: Vec3,
+    /// Cosine of that cone's half-angle.
+    cos_o: f32,
+    /// Cosine of the angle beyond a main direction up to which light leaves.
+    cos_e: f32,
+    /// Whether light also leaves against the main direction (both faces of a triangle).
+    two_sided: bool,
+}
+
+impl LightBounds {
+    /// An emitter within the box `lo`..`hi` of power `phi` whose light leaves within the
+    /// angle `acos(cos_e)` of directions in the cone of axis `w` and half-angle `acos(cos_o)`
+    /// (and of their opposites when `two_sided`).
+    pub fn new(
+        lo: Vec3,
+        hi: Vec3,
+        phi: f32,
+        w: Vec3,
+        cos_o: f32,
+        cos_e: f32,
+        two_sided: bool,
+    ) -> Self {
+        // A cone without an axis emits everywhere.
+        let (w, cos_o) = w.try_normalize().map_or((Vec3::Z, -1.0), |w| (w, cos_o));
+        Self {
+            lo: lo.min(hi),
+            hi: hi.max(lo),
+            phi: phi.max(0.0),
+            w,
+            cos_o: cos_o.clamp(-1.0, 1.0),
+            cos_e: cos_e.clamp(-1.0, 1.0),
+            two_sided,
+        }
+    }
+
+    /// Light leaving a point (or a box) in every direction: a point light or a sphere.
+    pub fn everywhere(lo: Vec3, hi: Vec3, phi: f32) -> Self {
+        Self::new(lo, hi, phi, Vec3::Z, -1.0, 0.0, false)
+    }
+
+    /// The power it was given (luminance-weighted; only ratios matter).
+    pub fn power(&self) -> f32 {
+        self.phi
+    }
+
+    fn centroid(&self) -> Vec3 {
+        0.5 * (self.lo + self.hi)
+    }
+
+    fn union(&self, b: &Self) -> Self {
+        let (w, cos_o) = cone_union((self.w, self.cos_o), (b.w, b.cos_o));
+        Self {
+            lo: self.lo.min(b.lo),
+            hi: self.hi.max(b.hi),
+            phi: self.phi + b.phi,
+            w,
+            cos_o,
+            cos_e: self.cos_e.min(b.cos_e),
+            two_sided: self.two_sided || b.two_sided,
+        }
+    }
+
+    /// [`Probe::importance`] of these bounds.
+    pub fn importance(&self, p: Vec3) -> f32 {
+        Probe::of(self).importance(p)
+    }
+
+    /// pbrt-v4's measure of the solid angle a cone of emission covers, for the build's cost.
+    fn direction_measure(&self) -> f32 {
+        let theta_o = self.cos_o.clamp(-1.0, 1.0).acos();
+        let theta_e = self.cos_e.clamp(-1.0, 1.0).acos();
+        let theta_w = (theta_o + theta_e).min(PI);
+        let sin_o = safe_sqrt(1.0 - self.cos_o * self.cos_o);
+        2.0 * PI * (1.0 - self.cos_o)
+            + FRAC_PI_2
+                * (2.0 * theta_w * sin_o - (theta_o - 2.0 * theta_w).cos() - 2.0 * theta_o * sin_o
+                    + self.cos_o)
+    }
+
+    fn surface_area(&self) -> f32 {
+        let d = self.hi - self.lo;
+        2.0 * (d.x * d.y + d.y * d.z + d.z * d.x)
+    }
+}
+
+/// What [`Probe::importance`] reads of a node's bounds, worked out once at the build.
+#[derive(Debug, Clone, Copy)]
+struct Probe {
+    centre: Vec3,
+    /// Half the box's diagonal.
+    radius: f32,
+    phi: f32,
+    w: Vec3,
+    cos_o: f32,
+    sin_o: f32,
+    cos_e: f32,
+    two_sided: bool,
+}
+
+impl Probe {
+    fn of(b: &LightBounds) -> Self {
+        Self {
+            centre: b.centroid(),
+            radius: 0.5 * (b.hi - b.lo).length(),
+            phi: b.phi,
+            w: b.w,
+            cos_o: b.cos_o,
+            sin_o: safe_sqrt(1.0 - b.cos_o * b.cos_o),
+            cos_e: b.cos_e,
+            two_sided: b.two_sided,
+        }
+    }
+
+    /// How much light the node's emitters may send to `p`, up to a common factor: power over
+    /// the squared distance to the box's centre (at least its half-diagonal's length, as
+    /// pbrt-v4 clamps it: a looser bound than its square for the large boxes near the root,
+    /// whose children a point inside them must still tell apart), times the cosine of the
+    /// smallest angle between a direction from the box to `p` and a direction in the emission
+    /// cone; zero when that angle is beyond the emission's spread.
+    #[inline]
+    fn importance(&self, p: Vec3) -> f32 {
+        let v = p - self.centre;
+        let d2_centre = v.length_squared();
+        let r2 = self.radius * self.radius;
+        let d2 = d2_centre.max(self.radius).max(MIN_DISTANCE2);
+        let cos_p = if d2_centre <= r2 || self.cos_o <= -1.0 {
+            // Inside the box's sphere, or from emitters that send light every way, every
+            // direction may reach p.
+            1.0
+        } else {
+            let wi = v / d2_centre.sqrt();
+            let mut cos_w = self.w.dot(wi);
+            if self.two_sided {
+                cos_w = cos_w.abs();
+            }
+            let sin_w = safe_sqrt(1.0 - cos_w * cos_w);
+            // The angle the box subtends from p.
+            let sin_b2 = r2 / d2_centre;
+            let (sin_b, cos_b) = (sin_b2.sqrt(), safe_sqrt(1.0 - sin_b2));
+            let (cos_x, sin_x) = sub_clamped((sin_w, cos_w), (self.sin_o, self.cos_o));
+            sub_clamped((sin_x, cos_x), (sin_b, cos_b)).0
+        };
+        if cos_p <= self.cos_e {
+            return 0.0;
+        }
+        let importance = self.phi * cos_p / d2;
+        if importance.is_finite() {
+            importance.max(0.0)
+        } else {
+            0.0
+        }
+    }
+}
+
+fn safe_sqrt(x: f32) -> f32 {
+    x.max(0.0).sqrt()
+}
+
+/// (cos, sin) of the angle a - b, clamped at zero (a and b given as (sin, cos)).
+fn sub_clamped((sin_a, cos_a): (f32, f32), (sin_b, cos_b): (f32, f32)) -> (f32, f32) {
+    if cos_a > cos_b {
+        (1.0, 0.0)
+    } else {
+        (cos_a * cos_b + sin_a * sin_b, sin_a * cos_b - cos_a * sin_b)
+    }
+}
+
+/// The angle between unit vectors, accurate for nearly parallel and opposite ones.
+fn angle_between(a: Vec3, b: Vec3) -> f32 {
+    if a.dot(b) < 0.0 {
+        PI - 2.0 * ((a + b).length() * 0.5).min(1.0).asin()
+    } else {
+        2.0 * ((b - a).length() * 0.5).min(1.0).asin()
+    }
+}
+
+/// The smallest cone (axis, cosine of half-angle) holding both cones.
+fn cone_union(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
+    let (theta_a, theta_b) = (a.1.clamp(-1.0, 1.0).acos(), b.1.clamp(-1.0, 1.0).acos());
+    let theta_d = angle_between(a.0, b.0);
+    if (theta_d + theta_b).min(PI) <= theta_a {
+        return a;
+    }
+    if (theta_d + theta_a).min(PI) <= theta_b {
+        return b;
+    }
+    let theta_o = 0.5 * (theta_a + theta_d + theta_b);
+    let axis = a.0.cross(b.0);
+    if theta_o >= PI || axis.length_squared() == 0.0 {
+        return (a.0, -1.0);
+    }
+    // Turn a's axis towards b's until the cone reaches both.
+    let w = Quat::from_axis_angle(axis.normalize(), theta_o - theta_a) * a.0;
+    (w.normalize(), theta_o.cos())
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Node {
+    bounds: Probe,
+    /// A leaf's emitter, or an interior node's second child (its first follows it).
+    index: u32,
+    leaf: bool,
+}
+
+/// The tree over a list of emitters, which keep their indices.
+#[derive(Debug, Clone, Default)]
+pub struct LightTree {
+    nodes: Vec<Node>,
+    /// For each emitter, the path from the root to its leaf: bit d set where level d takes
+    /// the second child.
+    trail: Vec<u64>,
+    /// Each emitter's share of the total power.
+    power: Vec<f32>,
+    /// Running sum of `power` (the last entry is 1).
+    cdf: Vec<f32>,
+}
+
+impl LightTree {
+    /// The tree over `emitters` (emitter i is `emitters[i]`).
+    pub fn build(emitters: &[LightBounds]) -> Self {
+        let total: f64 = emitters.iter().map(|b| b.phi as f64).sum();
+        let power: Vec<f32> = if total > 0.0 && total.is_finite() {
+            emitters
+                .iter()
+                .map(|b| (b.phi as f64 / total) as f32)
+                .collect()
+        } else {
+            vec![1.0 / emitters.len().max(1) as f32; emitters.len()]
+        };
+        let mut sum = 0.0f64;
+        let cdf = (power.iter())
+            .map(|&p| {
+                sum += p as f64;
+                sum as f32
+            })
+            .collect();
+        let mut tree = Self {
+            nodes: Vec::with_capacity(2 * emitters.len()),
+            trail: vec![0; emitters.len()],
+            power,
+            cdf,
+        };
+        let mut items: Vec<(LightBounds, u32)> = emitters
+            .iter()
+            .enumerate()
+            .map(|(i, b)| (*b, i as u32))
+            .collect();
+        if !items.is_empty() {
+            tree.build_range(&mut items, 0, 0);
+        }
+        tree
+    }
+
+    /// Whether there is no emitter to pick.
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    fn build_range(&mut self, items: &mut [(LightBounds, u32)], trail: u64, depth: u32) {
+        let bounds = (items[1..].iter()).fold(items[0].0, |acc, (b, _)| acc.union(b));
+        if items.len() == 1 {
+            self.trail[items[0].1 as usize] = trail;
+            self.nodes.push(Node {
+                bounds: Probe::of(&bounds),
+                index: items[0].1,
+                leaf: true,
+            });
+            return;
+        }
+        let mid = split(items, &bounds, depth);
+        let node = self.nodes.len();
+        self.nodes.push(Node {
+            bounds: Probe::of(&bounds),
+            index: 0,
+            leaf: false,
+        });
+        let (first, second) = items.split_at_mut(mid);
+        self.build_range(first, trail, depth + 1);
+        self.nodes[node].index = self.nodes.len() as u32;
+        self.build_range(second, trail | (1 << depth), depth + 1);
+    }
+
+    /// Picks an emitter for point `p` with `u` in [0, 1): its index and the probability it was
+    /// picked with ([`LightTree::pmf`]). `None` when there is none to pick.
+    pub fn sample(&self, p: Vec3, u: f32) -> Option<(u32, f32)> {
+        let (i, walked) = if u < DEFENSIVE {
+            let u = u / DEFENSIVE;
+            let i = self.cdf.partition_point(|&c| c <= u);
+            let i = (i < self.power.len()).then_some(i as u32)?;
+            (i, self.walk_pmf(p, i))
+        } else {
+            let u = ((u - DEFENSIVE) / (1.0 - DEFENSIVE)).clamp(0.0, ONE_MINUS_EPSILON);
+            self.walk(p, u)?
+        };
+        // The same sum as `pmf`'s, so the two agree to the bit.
+        let pmf = DEFENSIVE * self.power[i as usize] + (1.0 - DEFENSIVE) * walked;
+        (pmf > 0.0).then_some((i, pmf))
+    }
+
+    /// The probability [`LightTree::sample`] picks emitter `i` for point `p` with.
+    pub fn pmf(&self, p: Vec3, i: u32) -> f32 {
+        let Some(&power) = self.power.get(i as usize) else {
+            return 0.0;
+        };
+        DEFENSIVE * power + (1.0 - DEFENSIVE) * self.walk_pmf(p, i)
+    }
+
+    /// The walk down the tree alone: an emitter and its probability.
+    fn walk(&self, p: Vec3, mut u: f32) -> Option<(u32, f32)> {
+        let mut node = 0;
+        let mut pmf = 1.0f32;
+        loop {
+            let n = self.nodes.get(node)?;
+            if n.leaf {
+                return (node > 0 || n.bounds.importance(p) > 0.0).then_some((n.index, pmf));
+            }
+            let (a, b) = (node + 1, n.index as usize);
+            let ia = self.nodes[a].bounds.importance(p);
+            let ib = self.nodes[b].bounds.importance(p);
+            let total = ia + ib;
+            if total.is_nan() || total <= 0.0 {
+                return None;
+            }
+            let pa = ia / total;
+            if u < pa {
+                node = a;
+                pmf *= pa;
+                u = (u / pa).min(ONE_MINUS_EPSILON);
+            } else {
+                node = b;
+                pmf *= ib / total;
+                u = ((u - pa) / (1.0 - pa)).clamp(0.0, ONE_MINUS_EPSILON);
+            }
+        }
+    }
+
+    /// The probability [`LightTree::walk`] reaches emitter `i` for point `p` with.
+    fn walk_pmf(&self, p: Vec3, i: u32) -> f32 {
+        let Some(&trail) = self.trail.get(i as usize) else {
+            return 0.0;
+        };
+        let Some(root) = self.nodes.first() else {
+            return 0.0;
+        };
+        if root.leaf {
+            return if root.bounds.importance(p) > 0.0 {
+                1.0
+            } else {
+                0.0
+            };
+        }
+        let (mut node, mut trail, mut pmf) = (0, trail, 1.0f32);
+        loop {
+            let n = &self.nodes[node];
+            if n.leaf {
+                return pmf;
+            }
+            let (a, b) = (node + 1, n.index as usize);
+            let ia = self.nodes[a].bounds.importance(p);
+            let ib = self.nodes[b].bounds.importance(p);
+            let total = ia + ib;
+            if total.is_nan() || total <= 0.0 {
+                return 0.0;
+            }
+            if trail & 1 == 0 {
+                node = a;
+                pmf *= ia / total;
+            } else {
+                node = b;
+                pmf *= ib / total;
+            }
+            trail >>= 1;
+        }
+    }
+}
+
+const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// Reorders `items` (at least two) into the node's two children and returns where the second
+/// starts: between the buckets along an axis that minimise pbrt-v4's cost (power times
+/// direction measure times surface area, with a penalty for thin axes), or at the median
+/// along the longest axis when the tree would otherwise grow too deep or no axis has extent.
+fn split(items: &mut [(LightBounds, u32)], bounds: &LightBounds, depth: u32) -> usize {
+    let (clo, chi) = (items.iter())
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), (b, _)| {
+            (lo.min(b.centroid()), hi.max(b.centroid()))
+        });
+    let extent = chi - clo;
+    // Median splits finish within log2(n) more levels.
+    let levels_left = usize::BITS - (items.len() - 1).leading_zeros();
+    let bucketed = depth + levels_left + 8 < MAX_DEPTH;
+    let node_extent = bounds.hi - bounds.lo;
+    let mut best: Option<(f32, usize, usize)> = None;
+    for dim in 0..3 {
+        let flat = |x: f32| x.is_nan() || x <= 0.0;
+        if !bucketed || flat(extent[dim]) || flat(node_extent[dim]) {
+            continue;
+        }
+        let bucket_of = |b: &LightBounds| {
+            let t = (b.centroid()[dim] - clo[dim]) / extent[dim];
+            ((t * BUCKETS as f32) as usize).min(BUCKETS - 1)
+        };
+        let mut buckets: [Option<LightBounds>; BUCKETS] = [None; BUCKETS];
+        for (b, _) in items.iter() {
+            let k = bucket_of(b);
+            buckets[k] = Some(buckets[k].map_or(*b, |acc| acc.union(b)));
+        }
+        let kr = node_extent.max_element() / node_extent[dim];
+        let cost = |b: &Option<LightBounds>| {
+            b.map_or(0.0, |b| {
+                b.phi * b.direction_measure() * kr * b.surface_area()
+            })
+        };
+        for cut in 1..BUCKETS {
+            let join = |range: &[Option<LightBounds>]| {
+                range
+                    .iter()
+                    .flatten()
+                    .fold(None, |acc: Option<LightBounds>, b| {
+                        Some(acc.map_or(*b, |a| a.union(b)))
+                    })
+            };
+            let (below, above) = (join(&buckets[..cut]), join(&buckets[cut..]));
+            if below.is_none() || above.is_none() {
+                continue;
+            }
+            let c = cost(&below) + cost(&above);
+            if best.is_none_or(|(bc, _, _)| c < bc) {
+                best = Some((c, dim, cut));
+            }
+        }
+    }
+    if let Some((_, dim, cut)) = best {
+        let below = |b: &LightBounds| {
+            let t = (b.centroid()[dim] - clo[dim]) / extent[dim];
+            ((t * BUCKETS as f32) as usize).min(BUCKETS - 1) < cut
+        };
+        let mut mid = 0;
+        for i in 0..items.len() {
+            if below(&items[i].0) {
+                items.swap(i, mid);
+                mid += 1;
+            }
+        }
+        if mid > 0 && mid < items.len() {
+            return mid;
+        }
+    }
+    let dim = extent.max_position();
+    let mid = items.len() / 2;
+    items.select_nth_unstable_by(mid, |a, b| {
+        a.0.centroid()[dim].total_cmp(&b.0.centroid()[dim])
+    });
+    mid
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic number in [0, 1) for draw `i` (a scrambled van der Corput sequence).
+    fn uniform(i: u32) -> f32 {
+        (i.reverse_bits() ^ 0x5bd1_e995) as f32 / 4_294_967_296.0
+    }
+
+    /// A mix of every kind of emitter: lamps along a street, one-sided and two-sided panels
+    /// facing different ways, spots, and lamps at one position.
+    fn emitters() -> Vec<LightBounds> {
+        let mut list = Vec::new();
+        for k in 0..40 {
+            let c = Vec3::new(if k % 2 == 0 { -4.0 } else { 4.0 }, 3.0, 3.0 * k as f32);
+            list.push(LightBounds::everywhere(
+                c - 0.05,
+                c + 0.05,
+                1.0 + (k % 3) as f32,
+            ));
+        }
+        for k in 0..12 {
+            let c = Vec3::new(k as f32 - 6.0, 2.5, -2.0);
+            let n = Vec3::new((k as f32).sin(), -1.0, (k as f32).cos());
+            let (lo, hi) = (c - 0.3, c + 0.3);
+            list.push(LightBounds::new(lo, hi, 5.0, n, 1.0, 0.0, k % 2 == 0));
+        }
+        for k in 0..6 {
+            let c = Vec3::new(1.0, 4.0, k as f32);
+            let axis = Vec3::new(0.2 * k as f32, -1.0, 0.0);
+            let cos_e = (0.3 + 0.1 * k as f32).cos();
+            list.push(LightBounds::new(c, c, 20.0, axis, 1.0, cos_e, false));
+        }
+        let same = Vec3::new(0.0, 1.0, 50.0);
+        list.extend([LightBounds::everywhere(same, same, 3.0); 3]);
+        list
+    }
+
+    fn points() -> Vec<Vec3> {
+        (0..40)
+            .map(|i| {
+                let u = [uniform(3 * i), uniform(3 * i + 1), uniform(3 * i + 2)];
+                Vec3::new(16.0 * u[0] - 8.0, 5.0 * u[1], 130.0 * u[2] - 10.0)
+            })
+            .chain([Vec3::new(-4.0, 3.0, 0.0), Vec3::new(1.0, 4.0, 2.0)])
+            .collect()
+    }
+
+    #[test]
+    fn probabilities_sum_to_one_and_no_emitter_is_starved() {
+        let list = emitters();
+        let tree = LightTree::build(&list);
+        let total: f32 = list.iter().map(|b| b.phi).sum();
+        for p in points() {
+            let pmf: Vec<f32> = (0..list.len() as u32).map(|i| tree.pmf(p, i)).collect();
+            let sum: f32 = pmf.iter().sum();
+            // A walk may end where no emitter below can reach the point (no light sample
+            // then); where all can, the probabilities are complete.
+            assert!((DEFENSIVE - 1e-4..=1.0 + 1e-4).contains(&sum), "{p}: {sum}");
+            if list.iter().all(|b| b.importance(p) > 0.0) {
+                assert!((sum - 1.0).abs() < 1e-4, "{p}: {sum}");
+            }
+            for (i, b) in list.iter().enumerate() {
+                assert!(
+                    pmf[i] >= DEFENSIVE * b.phi / total * 0.999,
+                    "{p}: emitter {i}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn draws_follow_the_probabilities() {
+        let list = emitters();
+        let tree = LightTree::build(&list);
+        let draws = 200_000u32;
+        for p in points().into_iter().step_by(7) {
+            let mut count = vec![0u32; list.len()];
+            for k in 0..draws {
+                let u = (k as f32 + 0.5) / draws as f32;
+                if let Some((i, pmf)) = tree.sample(p, u) {
+                    assert_eq!(pmf, tree.pmf(p, i));
+                    count[i as usize] += 1;
+                }
+            }
+            for (i, &c) in count.iter().enumerate() {
+                let expected = tree.pmf(p, i as u32) * draws as f32;
+                // Stratified draws: within a few draws of the expectation per level walked.
+                assert!(
+                    (c as f32 - expected).abs() <= 8.0 + 0.01 * expected,
+                    "{p} {i}: {c} against {expected}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_point_under_one_lamp_of_a_street_picks_it_most() {
+        let list = emitters();
+        let tree = LightTree::build(&list);
+        // Beneath lamp 10 (x = -4, z = 30), 0.5 m above the ground.
+        let p = Vec3::new(-4.0, 0.5, 30.0);
+        let lamp = tree.pmf(p, 10);
+        let power_only = list[10].phi / list.iter().map(|b| b.phi).sum::<f32>();
+        assert!(lamp > 8.0 * power_only, "{lamp} against {power_only}");
+        // Behind a one-sided panel facing down, the walk never picks it.
+        let panel = 41; // odd: one-sided, facing down and away
+        let above = Vec3::new(-5.0, 6.0, -2.0);
+        let only_power = DEFENSIVE * list[panel].phi / list.iter().map(|b| b.phi).sum::<f32>();
+        assert!((tree.pmf(above, panel as u32) - only_power).abs() < 1e-6);
+    }
+
+    #[test]
+    fn one_emitter_and_none() {
+        let one = [LightBounds::everywhere(Vec3::ZERO, Vec3::ZERO, 1.0)];
+        let tree = LightTree::build(&one);
+        assert_eq!(tree.sample(Vec3::ONE, 0.7), Some((0, 1.0)));
+        let none = LightTree::build(&[]);
+        assert!(none.is_empty());
+        assert_eq!(none.sample(Vec3::ONE, 0.3), None);
+        assert_eq!(none.pmf(Vec3::ONE, 0), 0.0);
+    }
+
+    #[test]
+    fn cones_merge_to_hold_both() {
+        let a = (Vec3::X, 0.9f32);
+        let b = (Vec3::Y, 0.8f32);
+        let (w, cos) = cone_union(a, b);
+        for (axis, c) in [a, b] {
+            let edge_angle = w.dot(axis).clamp(-1.0, 1.0).acos() + c.acos();
+            assert!(edge_angle <= cos.acos() + 1e-4);
+        }
+        assert_eq!(cone_union((Vec3::X, 1.0), (-Vec3::X, 1.0)).1, -1.0);
+    }
+}
