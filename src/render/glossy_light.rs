@@ -1040,7 +1040,9 @@ impl Start {
                     return None;
                 }
                 let to = v / d;
-                let nee = (world.emitters).pdf_primitive(world, geometry, prim, x, self.point, to);
+                let from = (x, b.glossy_share());
+                let nee =
+                    (world.emitters).pdf_primitive(world, geometry, prim, from, self.point, to);
                 (to, d, self.radiance, nee)
             }
         };

@@ -42,6 +42,9 @@ struct Lane {
     delta: bool,
     /// Where the last bounce left from.
     from: Vec3,
+    /// [`crate::shade::Bsdf::glossy_share`] of the surface it left (what light sampling there
+    /// picked lamps with).
+    from_glossy: f32,
     /// The smallest density of the non-delta directions the path took so far (infinite on
     /// the camera ray): what the glossy filter ([`PathLimits::filter_glossy`]) reads.
     min_pdf: f32,
@@ -57,6 +60,7 @@ impl Lane {
         pdf: 1.0,
         delta: true,
         from: Vec3::ZERO,
+        from_glossy: 0.0,
         min_pdf: f32::INFINITY,
         diffuse: 0,
         glossy: 0,
@@ -502,7 +506,8 @@ fn vertices(
             let w = if s.delta {
                 1.0
             } else {
-                let pdf_light = world.emitters.pdf_hit(world, &hit, s.from, sp.position, d);
+                let from = (s.from, s.from_glossy);
+                let pdf_light = world.emitters.pdf_hit(world, &hit, from, sp.position, d);
                 // Where light paths share the emitter's reflection, the weight counts them.
                 let shared = found.and_then(|(g, first)| {
                     let f = first[lane]?;
@@ -589,28 +594,32 @@ fn next_event(
 ) {
     let emitters = &world.emitters;
     for (i, light) in emitters.always.iter().enumerate() {
-        let sample = |p: Vec3, u: &Numbers| Some(punctual_sample(light, p, Vec2::new(u[1], u[2])));
+        let sample =
+            |p: Vec3, u: &Numbers, _: f32| Some(punctual_sample(light, p, Vec2::new(u[1], u[2])));
         shadow_packet(world, at, clamp, sample, Some(i), scratch, radiance, tally);
     }
     if emitters.samples_world() {
-        let sample = |_: Vec3, u: &Numbers| emitters.sample_world(world, Vec2::new(u[8], u[9]));
+        let sample =
+            |_: Vec3, u: &Numbers, _: f32| emitters.sample_world(world, Vec2::new(u[8], u[9]));
         shadow_packet(world, at, clamp, sample, None, scratch, radiance, tally);
     }
     if emitters.has_distribution() {
-        let sample = |p: Vec3, u: &Numbers| emitters.sample(world, p, [u[0], u[1], u[2]]);
+        let sample = |p: Vec3, u: &Numbers, glossy: f32| {
+            emitters.sample(world, p, [u[0], u[1], u[2]], glossy)
+        };
         shadow_packet(world, at, clamp, sample, None, scratch, radiance, tally);
     }
 }
 
-/// Draws one light sample per lane that hit with `sample` (from the lane's leaving origin and
-/// numbers), traces them as one shadow packet and adds the unoccluded ones. `punctual` is the
+/// Draws one light sample per lane that hit with `sample` (from the lane's leaving origin,
+/// numbers and [`crate::shade::Bsdf::glossy_share`]), traces them as one shadow packet and adds the unoccluded ones. `punctual` is the
 /// index of the punctual light sampled, whose glossy reflections light paths may share.
 #[allow(clippy::too_many_arguments)]
 fn shadow_packet(
     world: &World,
     at: &Shading,
     clamp: f32,
-    sample: impl Fn(Vec3, &Numbers) -> Option<EmitterSample>,
+    sample: impl Fn(Vec3, &Numbers, f32) -> Option<EmitterSample>,
     punctual: Option<usize>,
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
@@ -637,7 +646,7 @@ fn shadow_packet(
     for lane in sampled {
         let n = points.get(lane).normal;
         let p = v.origins.at(lane, true);
-        let Some(es) = sample(p, &numbers[lane]) else {
+        let Some(es) = sample(p, &numbers[lane], v.bsdf[lane].glossy_share()) else {
             continue;
         };
         let Some(bsdf) = &scattering[lane] else {
@@ -812,5 +821,6 @@ fn scatter(
         s.min_pdf = s.min_pdf.min(sample.pdf);
     }
     s.from = origin;
+    s.from_glossy = v.bsdf[lane].glossy_share();
     Some(Ray::new(origin, sample.wi))
 }

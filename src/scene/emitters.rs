@@ -204,11 +204,18 @@ impl Emitters {
         !self.list.is_empty()
     }
 
-    /// Picks an emitter for `p` with `u0` (by what it may send there) and draws a direction
-    /// towards it from `p` with `u1`, `u2`.
+    /// Picks an emitter for `p` with `u0` (by what it may send there; `glossy` is the share of
+    /// the surface's light a narrow glossy lobe reflects, [`crate::shade::Bsdf::glossy_share`])
+    /// and draws a direction towards it from `p` with `u1`, `u2`.
     /// `None` when nothing was drawn (no emitters, or one that sends nothing towards `p`).
-    pub fn sample(&self, world: &World, p: Vec3, u: [f32; 3]) -> Option<EmitterSample> {
-        let (i, pick) = self.tree.sample(p, u[0])?;
+    pub fn sample(
+        &self,
+        world: &World,
+        p: Vec3,
+        u: [f32; 3],
+        glossy: f32,
+    ) -> Option<EmitterSample> {
+        let (i, pick) = self.tree.sample(p, u[0], glossy)?;
         if pick <= 0.0 {
             return None;
         }
@@ -270,27 +277,36 @@ impl Emitters {
         usable(s)
     }
 
-    /// The density [`Emitters::sample`] draws direction `dir` from point `from` with, for a ray
-    /// that found emissive primitive `hit` at `at` (zero if it is not an emitter).
-    pub fn pdf_hit(&self, world: &World, hit: &Hit, from: Vec3, at: Vec3, dir: Vec3) -> f32 {
-        self.pdf_primitive(world, hit.geometry.0, hit.prim, from, at, dir)
+    /// The density [`Emitters::sample`] draws direction `dir` from point `from` (whose surface
+    /// is `glossy`) with, for a ray that found emissive primitive `hit` at `at` (zero if it is
+    /// not an emitter).
+    pub fn pdf_hit(
+        &self,
+        world: &World,
+        hit: &Hit,
+        (from, glossy): (Vec3, f32),
+        at: Vec3,
+        dir: Vec3,
+    ) -> f32 {
+        self.pdf_primitive(world, hit.geometry.0, hit.prim, (from, glossy), at, dir)
     }
 
-    /// The density [`Emitters::sample`] draws direction `dir` from point `from` with, towards
-    /// point `at` of primitive `prim` of geometry `geometry` (zero if it is not an emitter).
+    /// The density [`Emitters::sample`] draws direction `dir` from point `from` (whose surface
+    /// is `glossy`) with, towards point `at` of primitive `prim` of geometry `geometry` (zero if
+    /// it is not an emitter).
     pub fn pdf_primitive(
         &self,
         world: &World,
         geometry: u32,
         prim: u32,
-        from: Vec3,
+        (from, glossy): (Vec3, f32),
         at: Vec3,
         dir: Vec3,
     ) -> f32 {
         let Some(&i) = self.by_prim.get(&(geometry, prim)) else {
             return 0.0;
         };
-        let pick = self.tree.pmf(from, i);
+        let pick = self.tree.pmf(from, i, glossy);
         if pick <= 0.0 {
             return 0.0;
         }

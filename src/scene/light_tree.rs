@@ -6,24 +6,32 @@
 //! Picking by power alone treats a street of a hundred lamps as one light: a point under one
 //! lamp picks it once in a hundred draws, and the ninety-nine others, far off, send it almost
 //! nothing. Here every node bounds its emitters by a box, their total power and the cone of
-//! directions they emit in. A draw walks down from the root and takes each child with a
-//! probability proportional to its *importance* at the point ([`LightBounds::importance`]):
-//! power over squared distance, times the cosine of the angle by which the point lies outside
-//! the emission cone, zero only where no emitter of the node can send light. The probability
-//! of any one emitter ([`LightTree::pmf`]) is the product along the path the draw takes to it,
+//! directions they emit in. A draw walks down from the root and takes each child with the
+//! mean of two shares of the children's *importance* at the point: power over the squared
+//! distance to the box's centre (pbrt's and Cycles' estimate) and to the box's nearest point
+//! (which finds the nearest lamps of a long street from its end), each times the cosine of the
+//! angle by which the point lies outside the emission cone, and zero only where no emitter of
+//! the node can send light. The probability of any one emitter ([`LightTree::pmf`]) is the
+//! product along the path the draw takes to it,
 //! followed by the bits each emitter keeps of that path.
 //!
 //! Every emitter keeps a probability above zero wherever it can light the point, so the
 //! estimate stays unbiased; the importance, a heuristic, sets only its variance. It knows
 //! nothing of the surface's reflection: a glossy floor reflecting a far lamp gets that lamp
 //! rarely from the walk alone. So a share [`DEFENSIVE`] of the draws picks by power alone, as
-//! before the tree, and every probability is the mixture's: no emitter is picked less often
-//! than that share of its power-only probability (defensive importance sampling).
+//! before the tree, and so does the share of the surface's light that a narrow glossy lobe
+//! reflects (the caller's `glossy`); every probability is the mixture's, so no emitter is
+//! picked less often than that share of its power-only probability (defensive importance
+//! sampling).
 
 use std::f32::consts::{FRAC_PI_2, PI};
 
 use glam::{Quat, Vec3};
 
+/// The nearest a point inside a node's box is taken to be to its light, as a fraction of the
+/// box's half-diagonal, squared: a tenth. (Taken as touching, a box holding the point would
+/// take every draw, however little its lamps send against a bright window further off.)
+const NEAR_CLAMP: f32 = 0.01;
 /// The least squared distance the importance divides by (a point on a point light).
 const MIN_DISTANCE2: f32 = 1e-12;
 /// The share of draws that pick by power alone (see the module documentation).
@@ -103,9 +111,10 @@ impl LightBounds {
         }
     }
 
-    /// [`Probe::importance`] of these bounds.
+    /// What these bounds' emitters may send to `p`, up to a common factor (the tree's estimate
+    /// by the distance to the box's centre; see the module documentation).
     pub fn importance(&self, p: Vec3) -> f32 {
-        Probe::of(self).importance(p)
+        Probe::of(self).importance(p).0
     }
 
     /// pbrt-v4's measure of the solid angle a cone of emission covers, for the build's cost.
@@ -129,6 +138,8 @@ impl LightBounds {
 /// What [`Probe::importance`] reads of a node's bounds, worked out once at the build.
 #[derive(Debug, Clone, Copy)]
 struct Probe {
+    lo: Vec3,
+    hi: Vec3,
     centre: Vec3,
     /// Half the box's diagonal.
     radius: f32,
@@ -143,6 +154,8 @@ struct Probe {
 impl Probe {
     fn of(b: &LightBounds) -> Self {
         Self {
+            lo: b.lo,
+            hi: b.hi,
             centre: b.centroid(),
             radius: 0.5 * (b.hi - b.lo).length(),
             phi: b.phi,
@@ -154,18 +167,18 @@ impl Probe {
         }
     }
 
-    /// How much light the node's emitters may send to `p`, up to a common factor: power over
-    /// the squared distance to the box's centre (at least its half-diagonal's length, as
-    /// pbrt-v4 clamps it: a looser bound than its square for the large boxes near the root,
-    /// whose children a point inside them must still tell apart), times the cosine of the
-    /// smallest angle between a direction from the box to `p` and a direction in the emission
-    /// cone; zero when that angle is beyond the emission's spread.
+    /// How much light the node's emitters may send to `p`, up to a common factor, two ways:
+    /// power over the squared distance to the box's centre (at least half the box's
+    /// half-diagonal, as Cycles clamps it), and power over the squared distance to the box's
+    /// nearest point (at least [`NEAR_CLAMP`]; near an upper bound: the box's light may all be
+    /// there, as a street's nearest lamps are for a point at one end of it). Both times the cosine
+    /// of the smallest angle between a direction from the box to `p` and a direction in the
+    /// emission cone, and zero when that angle is beyond the emission's spread.
     #[inline]
-    fn importance(&self, p: Vec3) -> f32 {
+    fn importance(&self, p: Vec3) -> (f32, f32) {
         let v = p - self.centre;
         let d2_centre = v.length_squared();
         let r2 = self.radius * self.radius;
-        let d2 = d2_centre.max(self.radius).max(MIN_DISTANCE2);
         let cos_p = if d2_centre <= r2 || self.cos_o <= -1.0 {
             // Inside the box's sphere, or from emitters that send light every way, every
             // direction may reach p.
@@ -184,14 +197,37 @@ impl Probe {
             sub_clamped((sin_x, cos_x), (sin_b, cos_b)).0
         };
         if cos_p <= self.cos_e {
-            return 0.0;
+            return (0.0, 0.0);
         }
-        let importance = self.phi * cos_p / d2;
-        if importance.is_finite() {
-            importance.max(0.0)
-        } else {
-            0.0
-        }
+        let d2_near = (p - p.clamp(self.lo, self.hi))
+            .length_squared()
+            .max(NEAR_CLAMP * r2);
+        let at = |d2: f32| {
+            let importance = self.phi * cos_p / d2.max(MIN_DISTANCE2);
+            if importance.is_finite() {
+                importance.max(0.0)
+            } else {
+                0.0
+            }
+        };
+        (at(d2_centre.max(0.25 * r2)), at(d2_near))
+    }
+}
+
+/// The probability of walking to the first of two children with importances `a` and `b`
+/// ([`Probe::importance`]): the mean of the two estimates' shares, so a child whose box holds
+/// the point (the nearest lamps) gets at least half, and one far off about its share of
+/// power over distance squared. `None` when neither child can light the point.
+fn first_share(a: (f32, f32), b: (f32, f32)) -> Option<f32> {
+    let share = |x: f32, y: f32| {
+        let total = x + y;
+        (total > 0.0 && total.is_finite()).then(|| x / total)
+    };
+    let centre = share(a.0, b.0);
+    let near = share(a.1, b.1);
+    match (centre, near) {
+        (Some(c), Some(n)) => Some(0.5 * (c + n)),
+        (c, n) => c.or(n),
     }
 }
 
@@ -324,28 +360,39 @@ impl LightTree {
     }
 
     /// Picks an emitter for point `p` with `u` in [0, 1): its index and the probability it was
-    /// picked with ([`LightTree::pmf`]). `None` when there is none to pick.
-    pub fn sample(&self, p: Vec3, u: f32) -> Option<(u32, f32)> {
-        let (i, walked) = if u < DEFENSIVE {
-            let u = u / DEFENSIVE;
+    /// picked with ([`LightTree::pmf`]). `None` when there is none to pick. `glossy` in [0, 1]
+    /// is the share of the surface's light that comes through a narrow glossy lobe, which
+    /// reflects lamps by direction, not by distance: that share of the draws picks by power
+    /// too, beyond [`DEFENSIVE`].
+    pub fn sample(&self, p: Vec3, u: f32, glossy: f32) -> Option<(u32, f32)> {
+        let by_power = by_power(glossy);
+        let (i, walked) = if u < by_power {
+            let u = u / by_power;
             let i = self.cdf.partition_point(|&c| c <= u);
             let i = (i < self.power.len()).then_some(i as u32)?;
             (i, self.walk_pmf(p, i))
         } else {
-            let u = ((u - DEFENSIVE) / (1.0 - DEFENSIVE)).clamp(0.0, ONE_MINUS_EPSILON);
+            let u = ((u - by_power) / (1.0 - by_power)).clamp(0.0, ONE_MINUS_EPSILON);
             self.walk(p, u)?
         };
         // The same sum as `pmf`'s, so the two agree to the bit.
-        let pmf = DEFENSIVE * self.power[i as usize] + (1.0 - DEFENSIVE) * walked;
+        let pmf = by_power * self.power[i as usize] + (1.0 - by_power) * walked;
         (pmf > 0.0).then_some((i, pmf))
     }
 
     /// The probability [`LightTree::sample`] picks emitter `i` for point `p` with.
-    pub fn pmf(&self, p: Vec3, i: u32) -> f32 {
+    pub fn pmf(&self, p: Vec3, i: u32, glossy: f32) -> f32 {
         let Some(&power) = self.power.get(i as usize) else {
             return 0.0;
         };
-        DEFENSIVE * power + (1.0 - DEFENSIVE) * self.walk_pmf(p, i)
+        let by_power = by_power(glossy);
+        by_power * power + (1.0 - by_power) * self.walk_pmf(p, i)
+    }
+
+    /// [`first_share`] of nodes `a` and `b` at `p`.
+    fn first_share(&self, a: usize, b: usize, p: Vec3) -> Option<f32> {
+        let (na, nb) = (&self.nodes[a].bounds, &self.nodes[b].bounds);
+        first_share(na.importance(p), nb.importance(p))
     }
 
     /// The walk down the tree alone: an emitter and its probability.
@@ -355,23 +402,17 @@ impl LightTree {
         loop {
             let n = self.nodes.get(node)?;
             if n.leaf {
-                return (node > 0 || n.bounds.importance(p) > 0.0).then_some((n.index, pmf));
+                return (node > 0 || n.bounds.importance(p).0 > 0.0).then_some((n.index, pmf));
             }
             let (a, b) = (node + 1, n.index as usize);
-            let ia = self.nodes[a].bounds.importance(p);
-            let ib = self.nodes[b].bounds.importance(p);
-            let total = ia + ib;
-            if total.is_nan() || total <= 0.0 {
-                return None;
-            }
-            let pa = ia / total;
+            let pa = self.first_share(a, b, p)?;
             if u < pa {
                 node = a;
                 pmf *= pa;
                 u = (u / pa).min(ONE_MINUS_EPSILON);
             } else {
                 node = b;
-                pmf *= ib / total;
+                pmf *= 1.0 - pa;
                 u = ((u - pa) / (1.0 - pa)).clamp(0.0, ONE_MINUS_EPSILON);
             }
         }
@@ -386,7 +427,7 @@ impl LightTree {
             return 0.0;
         };
         if root.leaf {
-            return if root.bounds.importance(p) > 0.0 {
+            return if root.bounds.importance(p).0 > 0.0 {
                 1.0
             } else {
                 0.0
@@ -399,18 +440,15 @@ impl LightTree {
                 return pmf;
             }
             let (a, b) = (node + 1, n.index as usize);
-            let ia = self.nodes[a].bounds.importance(p);
-            let ib = self.nodes[b].bounds.importance(p);
-            let total = ia + ib;
-            if total.is_nan() || total <= 0.0 {
+            let Some(pa) = self.first_share(a, b, p) else {
                 return 0.0;
-            }
+            };
             if trail & 1 == 0 {
                 node = a;
-                pmf *= ia / total;
+                pmf *= pa;
             } else {
                 node = b;
-                pmf *= ib / total;
+                pmf *= 1.0 - pa;
             }
             trail >>= 1;
         }
@@ -418,6 +456,20 @@ impl LightTree {
 }
 
 const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// The share of draws that pick by power for a surface whose light is `glossy` glossy: all of
+/// them from half glossy up. (The glossy part's worst case, a far lamp in the lobe, costs
+/// variance in proportion to 1 / share, the matte part's gain from the tree far less
+/// than its share's; a wet street at night took 1.35 times the variance with the share
+/// itself, 0.65.)
+fn by_power(glossy: f32) -> f32 {
+    let glossy = if glossy.is_nan() {
+        0.0
+    } else {
+        glossy.clamp(0.0, 1.0)
+    };
+    DEFENSIVE + (1.0 - DEFENSIVE) * (2.0 * glossy).min(1.0)
+}
 
 /// Reorders `items` (at least two) into the node's two children and returns where the second
 /// starts: between the buckets along an axis that minimise pbrt-v4's cost (power times
@@ -551,7 +603,9 @@ mod tests {
         let tree = LightTree::build(&list);
         let total: f32 = list.iter().map(|b| b.phi).sum();
         for p in points() {
-            let pmf: Vec<f32> = (0..list.len() as u32).map(|i| tree.pmf(p, i)).collect();
+            let pmf: Vec<f32> = (0..list.len() as u32)
+                .map(|i| tree.pmf(p, i, 0.0))
+                .collect();
             let sum: f32 = pmf.iter().sum();
             // A walk may end where no emitter below can reach the point (no light sample
             // then); where all can, the probabilities are complete.
@@ -573,20 +627,23 @@ mod tests {
         let list = emitters();
         let tree = LightTree::build(&list);
         let draws = 200_000u32;
-        for p in points().into_iter().step_by(7) {
+        for (k, p) in points().into_iter().step_by(7).enumerate() {
+            // Matte surfaces and glossy ones (more draws by power).
+            let glossy = [0.0, 0.6][k % 2];
             let mut count = vec![0u32; list.len()];
-            for k in 0..draws {
-                let u = (k as f32 + 0.5) / draws as f32;
-                if let Some((i, pmf)) = tree.sample(p, u) {
-                    assert_eq!(pmf, tree.pmf(p, i));
+            for d in 0..draws {
+                let u = (d as f32 + 0.5) / draws as f32;
+                if let Some((i, pmf)) = tree.sample(p, u, glossy) {
+                    assert_eq!(pmf, tree.pmf(p, i, glossy));
                     count[i as usize] += 1;
                 }
             }
             for (i, &c) in count.iter().enumerate() {
-                let expected = tree.pmf(p, i as u32) * draws as f32;
+                let expected = tree.pmf(p, i as u32, glossy) * draws as f32;
                 // Stratified draws: within a few draws of the expectation per level walked.
+                let off = (c as f32 - expected).abs();
                 assert!(
-                    (c as f32 - expected).abs() <= 8.0 + 0.01 * expected,
+                    off <= 8.0 + 0.01 * expected,
                     "{p} {i}: {c} against {expected}"
                 );
             }
@@ -599,25 +656,32 @@ mod tests {
         let tree = LightTree::build(&list);
         // Beneath lamp 10 (x = -4, z = 30), 0.5 m above the ground.
         let p = Vec3::new(-4.0, 0.5, 30.0);
-        let lamp = tree.pmf(p, 10);
+        let lamp = tree.pmf(p, 10, 0.0);
         let power_only = list[10].phi / list.iter().map(|b| b.phi).sum::<f32>();
-        assert!(lamp > 8.0 * power_only, "{lamp} against {power_only}");
+        assert!(lamp > 20.0 * power_only, "{lamp} against {power_only}");
+        // A near-mirror there picks by power more: the lamp it reflects may be any of them.
+        let mirror = tree.pmf(p, 10, 0.5);
+        assert!(
+            (mirror - power_only).abs() < 1e-6,
+            "{mirror} against {power_only}"
+        );
+        assert!(tree.pmf(p, 10, 0.25) < lamp);
         // Behind a one-sided panel facing down, the walk never picks it.
         let panel = 41; // odd: one-sided, facing down and away
         let above = Vec3::new(-5.0, 6.0, -2.0);
         let only_power = DEFENSIVE * list[panel].phi / list.iter().map(|b| b.phi).sum::<f32>();
-        assert!((tree.pmf(above, panel as u32) - only_power).abs() < 1e-6);
+        assert!((tree.pmf(above, panel as u32, 0.0) - only_power).abs() < 1e-6);
     }
 
     #[test]
     fn one_emitter_and_none() {
         let one = [LightBounds::everywhere(Vec3::ZERO, Vec3::ZERO, 1.0)];
         let tree = LightTree::build(&one);
-        assert_eq!(tree.sample(Vec3::ONE, 0.7), Some((0, 1.0)));
+        assert_eq!(tree.sample(Vec3::ONE, 0.7, 0.0), Some((0, 1.0)));
         let none = LightTree::build(&[]);
         assert!(none.is_empty());
-        assert_eq!(none.sample(Vec3::ONE, 0.3), None);
-        assert_eq!(none.pmf(Vec3::ONE, 0), 0.0);
+        assert_eq!(none.sample(Vec3::ONE, 0.3, 0.0), None);
+        assert_eq!(none.pmf(Vec3::ONE, 0, 0.0), 0.0);
     }
 
     #[test]

@@ -76,6 +76,8 @@ const MIN_MICRO: f32 = 0.02;
 /// Below this `n . wo`, `wo` grazes the surface and nothing scatters (it keeps the
 /// `1 / cos` factors finite).
 const MIN_COS: f32 = 1e-6;
+/// The widest GGX lobe [`Bsdf::glossy_share`] counts as glossy (roughness 0.3).
+const GLOSSY_SHARE_ALPHA: f32 = 0.09;
 
 /// How transmitted light leaves the other side.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -380,6 +382,40 @@ impl Bsdf {
             r * r
         } else {
             f32::INFINITY
+        }
+    }
+
+    /// Roughly what share of the light this surface reflects comes through a narrow glossy
+    /// lobe (GGX alpha at most 0.09, roughness 0.3): 0 for matte and rough surfaces. Light
+    /// sampling picks lamps for such a surface less by their distance
+    /// ([`crate::scene::light_tree`]): what a near-mirror reflects is the lamp in its lobe,
+    /// however far. A function of the material alone, so the light sample and the BSDF sample
+    /// that finds the same lamp agree on it.
+    pub fn glossy_share(&self) -> f32 {
+        let roughness = clamp(self.roughness, 0.0, 1.0);
+        if roughness * roughness > GLOSSY_SHARE_ALPHA {
+            return 0.0;
+        }
+        let (metallic, transmission) = (
+            clamp(self.metallic, 0.0, 1.0),
+            clamp(self.transmission, 0.0, 1.0),
+        );
+        let base = mean(self.base_color.clamp(Vec3::ZERO, Vec3::ONE));
+        let f0 = ((self.eta - 1.0) / (self.eta + 1.0)).powi(2);
+        let f0 = if f0.is_finite() {
+            f0.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        // Fresnel's mean over the hemisphere is near f0 + (1 - f0) / 21.
+        let fresnel = f0 + (1.0 - f0) / 21.0;
+        let glossy =
+            metallic * base + (1.0 - metallic) * (fresnel + transmission * base * (1.0 - fresnel));
+        let diffuse = (1.0 - metallic) * (1.0 - transmission) * base * (1.0 - fresnel);
+        if glossy + diffuse > 0.0 {
+            (glossy / (glossy + diffuse)).clamp(0.0, 1.0)
+        } else {
+            0.0
         }
     }
 
