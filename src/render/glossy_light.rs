@@ -89,7 +89,8 @@ use crate::limits::{MemoryError, try_with_capacity};
 use crate::sampler::{path_numbers, sample_key};
 use crate::scene::World;
 use crate::scene::emitters::{
-    PrimitivePoint, primitive_bounds, primitive_point, punctual_sample, sphere_point_facing,
+    PrimitivePoint, Receiver, primitive_bounds, primitive_point, punctual_sample,
+    sphere_point_facing,
 };
 use crate::settings::{Integrator, Mode, RenderSettings, Strategy};
 use crate::shade::{Bsdf, Light, Material, SurfacePoint, SurfacePoints16, basis, luminance};
@@ -1040,9 +1041,13 @@ impl Start {
                     return None;
                 }
                 let to = v / d;
-                let from = (x, b.glossy_share());
+                let from = Receiver {
+                    p: x,
+                    n: sp.normal,
+                    glossy: b.glossy_share(),
+                };
                 let nee =
-                    (world.emitters).pdf_primitive(world, geometry, prim, from, self.point, to);
+                    (world.emitters).pdf_primitive(world, geometry, prim, &from, self.point, to);
                 (to, d, self.radiance, nee)
             }
         };

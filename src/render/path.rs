@@ -12,7 +12,7 @@ use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
 use crate::sampler::{PATH_DIMENSIONS, SampleKey, path_numbers};
 use crate::scene::World;
-use crate::scene::emitters::{EmitterSample, punctual_sample};
+use crate::scene::emitters::{EmitterSample, Receiver, punctual_sample};
 use crate::settings::{PathLimits, Strategy};
 use crate::shade::{Bsdf, Lobe, Scattering, SurfacePoints16};
 
@@ -40,11 +40,8 @@ struct Lane {
     /// The last direction came from a delta lobe (or the camera): emitters found get full
     /// weight.
     delta: bool,
-    /// Where the last bounce left from.
-    from: Vec3,
-    /// [`crate::shade::Bsdf::glossy_share`] of the surface it left (what light sampling there
-    /// picked lamps with).
-    from_glossy: f32,
+    /// The surface it left, as light sampling there picked lamps for it.
+    from: Receiver,
     /// The smallest density of the non-delta directions the path took so far (infinite on
     /// the camera ray): what the glossy filter ([`PathLimits::filter_glossy`]) reads.
     min_pdf: f32,
@@ -59,8 +56,11 @@ impl Lane {
         throughput: Vec3::ONE,
         pdf: 1.0,
         delta: true,
-        from: Vec3::ZERO,
-        from_glossy: 0.0,
+        from: Receiver {
+            p: Vec3::ZERO,
+            n: Vec3::ZERO,
+            glossy: 0.0,
+        },
         min_pdf: f32::INFINITY,
         diffuse: 0,
         glossy: 0,
@@ -408,7 +408,7 @@ fn camera_lanes(packet: &RayPacket16, radiance: &mut [Vec3; LANES]) -> [Lane; LA
     let mut lanes = [Lane::CAMERA; LANES];
     for lane in (0..LANES).filter(|&l| packet.is_active(l)) {
         radiance[lane] = Vec3::ZERO;
-        lanes[lane].from = packet.ray(lane).origin;
+        lanes[lane].from = Receiver::at(packet.ray(lane).origin);
     }
     lanes
 }
@@ -506,8 +506,7 @@ fn vertices(
             let w = if s.delta {
                 1.0
             } else {
-                let from = (s.from, s.from_glossy);
-                let pdf_light = world.emitters.pdf_hit(world, &hit, from, sp.position, d);
+                let pdf_light = world.emitters.pdf_hit(world, &hit, &s.from, sp.position, d);
                 // Where light paths share the emitter's reflection, the weight counts them.
                 let shared = found.and_then(|(g, first)| {
                     let f = first[lane]?;
@@ -595,31 +594,29 @@ fn next_event(
     let emitters = &world.emitters;
     for (i, light) in emitters.always.iter().enumerate() {
         let sample =
-            |p: Vec3, u: &Numbers, _: f32| Some(punctual_sample(light, p, Vec2::new(u[1], u[2])));
+            |r: &Receiver, u: &Numbers| Some(punctual_sample(light, r.p, Vec2::new(u[1], u[2])));
         shadow_packet(world, at, clamp, sample, Some(i), scratch, radiance, tally);
     }
     if emitters.samples_world() {
         let sample =
-            |_: Vec3, u: &Numbers, _: f32| emitters.sample_world(world, Vec2::new(u[8], u[9]));
+            |_: &Receiver, u: &Numbers| emitters.sample_world(world, Vec2::new(u[8], u[9]));
         shadow_packet(world, at, clamp, sample, None, scratch, radiance, tally);
     }
     if emitters.has_distribution() {
-        let sample = |p: Vec3, u: &Numbers, glossy: f32| {
-            emitters.sample(world, p, [u[0], u[1], u[2]], glossy)
-        };
+        let sample = |r: &Receiver, u: &Numbers| emitters.sample(world, r, [u[0], u[1], u[2]]);
         shadow_packet(world, at, clamp, sample, None, scratch, radiance, tally);
     }
 }
 
-/// Draws one light sample per lane that hit with `sample` (from the lane's leaving origin,
-/// numbers and [`crate::shade::Bsdf::glossy_share`]), traces them as one shadow packet and adds the unoccluded ones. `punctual` is the
+/// Draws one light sample per lane that hit with `sample` (for the lane's leaving origin and
+/// surface, with its numbers), traces them as one shadow packet and adds the unoccluded ones. `punctual` is the
 /// index of the punctual light sampled, whose glossy reflections light paths may share.
 #[allow(clippy::too_many_arguments)]
 fn shadow_packet(
     world: &World,
     at: &Shading,
     clamp: f32,
-    sample: impl Fn(Vec3, &Numbers, f32) -> Option<EmitterSample>,
+    sample: impl Fn(&Receiver, &Numbers) -> Option<EmitterSample>,
     punctual: Option<usize>,
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
@@ -646,7 +643,12 @@ fn shadow_packet(
     for lane in sampled {
         let n = points.get(lane).normal;
         let p = v.origins.at(lane, true);
-        let Some(es) = sample(p, &numbers[lane], v.bsdf[lane].glossy_share()) else {
+        let r = Receiver {
+            p,
+            n,
+            glossy: v.bsdf[lane].glossy_share(),
+        };
+        let Some(es) = sample(&r, &numbers[lane]) else {
             continue;
         };
         let Some(bsdf) = &scattering[lane] else {
@@ -820,7 +822,10 @@ fn scatter(
     if !sample.delta {
         s.min_pdf = s.min_pdf.min(sample.pdf);
     }
-    s.from = origin;
-    s.from_glossy = v.bsdf[lane].glossy_share();
+    s.from = Receiver {
+        p: origin,
+        n,
+        glossy: v.bsdf[lane].glossy_share(),
+    };
     Some(Ray::new(origin, sample.wi))
 }

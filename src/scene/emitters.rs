@@ -22,6 +22,7 @@ use crate::embree::{Geometry, GeometryId, Hit};
 use crate::shade::{Light, SunDisc, luminance};
 
 use super::World;
+pub use super::light_tree::Receiver;
 use super::light_tree::{LightBounds, LightTree};
 
 /// One emitter.
@@ -204,18 +205,12 @@ impl Emitters {
         !self.list.is_empty()
     }
 
-    /// Picks an emitter for `p` with `u0` (by what it may send there; `glossy` is the share of
-    /// the surface's light a narrow glossy lobe reflects, [`crate::shade::Bsdf::glossy_share`])
-    /// and draws a direction towards it from `p` with `u1`, `u2`.
-    /// `None` when nothing was drawn (no emitters, or one that sends nothing towards `p`).
-    pub fn sample(
-        &self,
-        world: &World,
-        p: Vec3,
-        u: [f32; 3],
-        glossy: f32,
-    ) -> Option<EmitterSample> {
-        let (i, pick) = self.tree.sample(p, u[0], glossy)?;
+    /// Picks an emitter for receiver `r` with `u0` (by what it may send there) and draws a
+    /// direction towards it from `r.p` with `u1`, `u2`. `None` when nothing was drawn (no
+    /// emitters, or one that sends nothing towards `r.p`).
+    pub fn sample(&self, world: &World, r: &Receiver, u: [f32; 3]) -> Option<EmitterSample> {
+        let p = r.p;
+        let (i, pick) = self.tree.sample(r, u[0])?;
         if pick <= 0.0 {
             return None;
         }
@@ -277,36 +272,28 @@ impl Emitters {
         usable(s)
     }
 
-    /// The density [`Emitters::sample`] draws direction `dir` from point `from` (whose surface
-    /// is `glossy`) with, for a ray that found emissive primitive `hit` at `at` (zero if it is
-    /// not an emitter).
-    pub fn pdf_hit(
-        &self,
-        world: &World,
-        hit: &Hit,
-        (from, glossy): (Vec3, f32),
-        at: Vec3,
-        dir: Vec3,
-    ) -> f32 {
-        self.pdf_primitive(world, hit.geometry.0, hit.prim, (from, glossy), at, dir)
+    /// The density [`Emitters::sample`] draws direction `dir` for receiver `from` with, for a
+    /// ray that found emissive primitive `hit` at `at` (zero if it is not an emitter).
+    pub fn pdf_hit(&self, world: &World, hit: &Hit, from: &Receiver, at: Vec3, dir: Vec3) -> f32 {
+        self.pdf_primitive(world, hit.geometry.0, hit.prim, from, at, dir)
     }
 
-    /// The density [`Emitters::sample`] draws direction `dir` from point `from` (whose surface
-    /// is `glossy`) with, towards point `at` of primitive `prim` of geometry `geometry` (zero if
-    /// it is not an emitter).
+    /// The density [`Emitters::sample`] draws direction `dir` for receiver `r` with, towards
+    /// point `at` of primitive `prim` of geometry `geometry` (zero if it is not an emitter).
     pub fn pdf_primitive(
         &self,
         world: &World,
         geometry: u32,
         prim: u32,
-        (from, glossy): (Vec3, f32),
+        r: &Receiver,
         at: Vec3,
         dir: Vec3,
     ) -> f32 {
+        let from = r.p;
         let Some(&i) = self.by_prim.get(&(geometry, prim)) else {
             return 0.0;
         };
-        let pick = self.tree.pmf(from, i, glossy);
+        let pick = self.tree.pmf(r, i);
         if pick <= 0.0 {
             return 0.0;
         }

@@ -10,8 +10,9 @@
 //! mean of two shares of the children's *importance* at the point: power over the squared
 //! distance to the box's centre (pbrt's and Cycles' estimate) and to the box's nearest point
 //! (which finds the nearest lamps of a long street from its end), each times the cosine of the
-//! angle by which the point lies outside the emission cone, and zero only where no emitter of
-//! the node can send light. The probability of any one emitter ([`LightTree::pmf`]) is the
+//! angle by which the point lies outside the emission cone and the cosine at the receiving
+//! surface (either side, so glass still takes light from behind), and zero only where no
+//! emitter of the node can send light. The probability of any one emitter ([`LightTree::pmf`]) is the
 //! product along the path the draw takes to it,
 //! followed by the bits each emitter keeps of that path.
 //!
@@ -114,7 +115,7 @@ impl LightBounds {
     /// What these bounds' emitters may send to `p`, up to a common factor (the tree's estimate
     /// by the distance to the box's centre; see the module documentation).
     pub fn importance(&self, p: Vec3) -> f32 {
-        Probe::of(self).importance(p).0
+        Probe::of(self).importance(&Receiver::at(p)).0
     }
 
     /// pbrt-v4's measure of the solid angle a cone of emission covers, for the build's cost.
@@ -175,35 +176,48 @@ impl Probe {
     /// of the smallest angle between a direction from the box to `p` and a direction in the
     /// emission cone, and zero when that angle is beyond the emission's spread.
     #[inline]
-    fn importance(&self, p: Vec3) -> (f32, f32) {
+    fn importance(&self, r: &Receiver) -> (f32, f32) {
+        let p = r.p;
         let v = p - self.centre;
         let d2_centre = v.length_squared();
         let r2 = self.radius * self.radius;
-        let cos_p = if d2_centre <= r2 || self.cos_o <= -1.0 {
-            // Inside the box's sphere, or from emitters that send light every way, every
-            // direction may reach p.
-            1.0
-        } else {
-            let wi = v / d2_centre.sqrt();
-            let mut cos_w = self.w.dot(wi);
-            if self.two_sided {
-                cos_w = cos_w.abs();
-            }
-            let sin_w = safe_sqrt(1.0 - cos_w * cos_w);
+        // Inside the box's sphere every direction may reach p, at any angle to its surface.
+        let mut weight = self.phi;
+        if d2_centre > r2 {
+            let inv_d = d2_centre.sqrt().recip();
+            let wi = v * inv_d;
             // The angle the box subtends from p.
-            let sin_b2 = r2 / d2_centre;
-            let (sin_b, cos_b) = (sin_b2.sqrt(), safe_sqrt(1.0 - sin_b2));
-            let (cos_x, sin_x) = sub_clamped((sin_w, cos_w), (self.sin_o, self.cos_o));
-            sub_clamped((sin_x, cos_x), (sin_b, cos_b)).0
-        };
-        if cos_p <= self.cos_e {
+            let sin_b2 = r2 * inv_d * inv_d;
+            let b = (sin_b2.sqrt(), safe_sqrt(1.0 - sin_b2));
+            if self.cos_o > -1.0 {
+                let mut cos_w = self.w.dot(wi);
+                if self.two_sided {
+                    cos_w = cos_w.abs();
+                }
+                let sin_w = safe_sqrt(1.0 - cos_w * cos_w);
+                let (cos_x, sin_x) = sub_clamped((sin_w, cos_w), (self.sin_o, self.cos_o));
+                let cos_p = sub_clamped((sin_x, cos_x), b).0;
+                if cos_p <= self.cos_e {
+                    return (0.0, 0.0);
+                }
+                weight *= cos_p;
+            } else if self.cos_e >= 1.0 {
+                return (0.0, 0.0);
+            }
+            // Light arriving along the surface lights it little (either side: glass and thin
+            // sheets take light from behind).
+            if r.n != Vec3::ZERO {
+                let cos_i = r.n.dot(wi).abs().min(1.0);
+                weight *= sub_clamped((safe_sqrt(1.0 - cos_i * cos_i), cos_i), b).0;
+            }
+        } else if self.cos_e >= 1.0 {
             return (0.0, 0.0);
         }
         let d2_near = (p - p.clamp(self.lo, self.hi))
             .length_squared()
             .max(NEAR_CLAMP * r2);
         let at = |d2: f32| {
-            let importance = self.phi * cos_p / d2.max(MIN_DISTANCE2);
+            let importance = weight / d2.max(MIN_DISTANCE2);
             if importance.is_finite() {
                 importance.max(0.0)
             } else {
@@ -211,6 +225,29 @@ impl Probe {
             }
         };
         (at(d2_centre.max(0.25 * r2)), at(d2_near))
+    }
+}
+
+/// The point a light sample is drawn for: where it is, its surface's (shading) normal (zero
+/// for none) and [`crate::shade::Bsdf::glossy_share`] of its surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Receiver {
+    /// Where the light sample leaves from.
+    pub p: Vec3,
+    /// Its surface's normal (either side), or zero.
+    pub n: Vec3,
+    /// The share of its light a narrow glossy lobe reflects, in [0, 1].
+    pub glossy: f32,
+}
+
+impl Receiver {
+    /// A point with no surface to weigh directions by, matte.
+    pub fn at(p: Vec3) -> Self {
+        Self {
+            p,
+            n: Vec3::ZERO,
+            glossy: 0.0,
+        }
     }
 }
 
@@ -360,20 +397,20 @@ impl LightTree {
     }
 
     /// Picks an emitter for point `p` with `u` in [0, 1): its index and the probability it was
-    /// picked with ([`LightTree::pmf`]). `None` when there is none to pick. `glossy` in [0, 1]
-    /// is the share of the surface's light that comes through a narrow glossy lobe, which
-    /// reflects lamps by direction, not by distance: that share of the draws picks by power
-    /// too, beyond [`DEFENSIVE`].
-    pub fn sample(&self, p: Vec3, u: f32, glossy: f32) -> Option<(u32, f32)> {
-        let by_power = by_power(glossy);
+    /// picked with ([`LightTree::pmf`]). `None` when there is none to pick. The receiver's
+    /// `glossy`, the share of its light that comes through a narrow glossy lobe, which
+    /// reflects lamps by direction, not by distance, sets how many more draws than
+    /// [`DEFENSIVE`] pick by power.
+    pub fn sample(&self, r: &Receiver, u: f32) -> Option<(u32, f32)> {
+        let by_power = by_power(r.glossy);
         let (i, walked) = if u < by_power {
             let u = u / by_power;
             let i = self.cdf.partition_point(|&c| c <= u);
             let i = (i < self.power.len()).then_some(i as u32)?;
-            (i, self.walk_pmf(p, i))
+            (i, self.walk_pmf(r, i))
         } else {
             let u = ((u - by_power) / (1.0 - by_power)).clamp(0.0, ONE_MINUS_EPSILON);
-            self.walk(p, u)?
+            self.walk(r, u)?
         };
         // The same sum as `pmf`'s, so the two agree to the bit.
         let pmf = by_power * self.power[i as usize] + (1.0 - by_power) * walked;
@@ -381,31 +418,31 @@ impl LightTree {
     }
 
     /// The probability [`LightTree::sample`] picks emitter `i` for point `p` with.
-    pub fn pmf(&self, p: Vec3, i: u32, glossy: f32) -> f32 {
+    pub fn pmf(&self, r: &Receiver, i: u32) -> f32 {
         let Some(&power) = self.power.get(i as usize) else {
             return 0.0;
         };
-        let by_power = by_power(glossy);
-        by_power * power + (1.0 - by_power) * self.walk_pmf(p, i)
+        let by_power = by_power(r.glossy);
+        by_power * power + (1.0 - by_power) * self.walk_pmf(r, i)
     }
 
     /// [`first_share`] of nodes `a` and `b` at `p`.
-    fn first_share(&self, a: usize, b: usize, p: Vec3) -> Option<f32> {
+    fn first_share(&self, a: usize, b: usize, r: &Receiver) -> Option<f32> {
         let (na, nb) = (&self.nodes[a].bounds, &self.nodes[b].bounds);
-        first_share(na.importance(p), nb.importance(p))
+        first_share(na.importance(r), nb.importance(r))
     }
 
     /// The walk down the tree alone: an emitter and its probability.
-    fn walk(&self, p: Vec3, mut u: f32) -> Option<(u32, f32)> {
+    fn walk(&self, r: &Receiver, mut u: f32) -> Option<(u32, f32)> {
         let mut node = 0;
         let mut pmf = 1.0f32;
         loop {
             let n = self.nodes.get(node)?;
             if n.leaf {
-                return (node > 0 || n.bounds.importance(p).0 > 0.0).then_some((n.index, pmf));
+                return (node > 0 || n.bounds.importance(r).0 > 0.0).then_some((n.index, pmf));
             }
             let (a, b) = (node + 1, n.index as usize);
-            let pa = self.first_share(a, b, p)?;
+            let pa = self.first_share(a, b, r)?;
             if u < pa {
                 node = a;
                 pmf *= pa;
@@ -419,7 +456,7 @@ impl LightTree {
     }
 
     /// The probability [`LightTree::walk`] reaches emitter `i` for point `p` with.
-    fn walk_pmf(&self, p: Vec3, i: u32) -> f32 {
+    fn walk_pmf(&self, r: &Receiver, i: u32) -> f32 {
         let Some(&trail) = self.trail.get(i as usize) else {
             return 0.0;
         };
@@ -427,7 +464,7 @@ impl LightTree {
             return 0.0;
         };
         if root.leaf {
-            return if root.bounds.importance(p).0 > 0.0 {
+            return if root.bounds.importance(r).0 > 0.0 {
                 1.0
             } else {
                 0.0
@@ -440,7 +477,7 @@ impl LightTree {
                 return pmf;
             }
             let (a, b) = (node + 1, n.index as usize);
-            let Some(pa) = self.first_share(a, b, p) else {
+            let Some(pa) = self.first_share(a, b, r) else {
                 return 0.0;
             };
             if trail & 1 == 0 {
@@ -587,6 +624,12 @@ mod tests {
         list
     }
 
+    /// A point of a surface facing a direction of its own, `glossy` glossy.
+    fn matte(p: Vec3, glossy: f32) -> Receiver {
+        let n = Vec3::new(p.z.sin(), 1.0, p.x.cos()).normalize();
+        Receiver { p, n, glossy }
+    }
+
     fn points() -> Vec<Vec3> {
         (0..40)
             .map(|i| {
@@ -604,7 +647,7 @@ mod tests {
         let total: f32 = list.iter().map(|b| b.phi).sum();
         for p in points() {
             let pmf: Vec<f32> = (0..list.len() as u32)
-                .map(|i| tree.pmf(p, i, 0.0))
+                .map(|i| tree.pmf(&Receiver::at(p), i))
                 .collect();
             let sum: f32 = pmf.iter().sum();
             // A walk may end where no emitter below can reach the point (no light sample
@@ -633,13 +676,13 @@ mod tests {
             let mut count = vec![0u32; list.len()];
             for d in 0..draws {
                 let u = (d as f32 + 0.5) / draws as f32;
-                if let Some((i, pmf)) = tree.sample(p, u, glossy) {
-                    assert_eq!(pmf, tree.pmf(p, i, glossy));
+                if let Some((i, pmf)) = tree.sample(&matte(p, glossy), u) {
+                    assert_eq!(pmf, tree.pmf(&matte(p, glossy), i));
                     count[i as usize] += 1;
                 }
             }
             for (i, &c) in count.iter().enumerate() {
-                let expected = tree.pmf(p, i as u32, glossy) * draws as f32;
+                let expected = tree.pmf(&matte(p, glossy), i as u32) * draws as f32;
                 // Stratified draws: within a few draws of the expectation per level walked.
                 let off = (c as f32 - expected).abs();
                 assert!(
@@ -656,32 +699,32 @@ mod tests {
         let tree = LightTree::build(&list);
         // Beneath lamp 10 (x = -4, z = 30), 0.5 m above the ground.
         let p = Vec3::new(-4.0, 0.5, 30.0);
-        let lamp = tree.pmf(p, 10, 0.0);
+        let lamp = tree.pmf(&Receiver::at(p), 10);
         let power_only = list[10].phi / list.iter().map(|b| b.phi).sum::<f32>();
         assert!(lamp > 20.0 * power_only, "{lamp} against {power_only}");
         // A near-mirror there picks by power more: the lamp it reflects may be any of them.
-        let mirror = tree.pmf(p, 10, 0.5);
+        let mirror = tree.pmf(&matte(p, 0.5), 10);
         assert!(
             (mirror - power_only).abs() < 1e-6,
             "{mirror} against {power_only}"
         );
-        assert!(tree.pmf(p, 10, 0.25) < lamp);
+        assert!(tree.pmf(&matte(p, 0.25), 10) < lamp);
         // Behind a one-sided panel facing down, the walk never picks it.
         let panel = 41; // odd: one-sided, facing down and away
         let above = Vec3::new(-5.0, 6.0, -2.0);
         let only_power = DEFENSIVE * list[panel].phi / list.iter().map(|b| b.phi).sum::<f32>();
-        assert!((tree.pmf(above, panel as u32, 0.0) - only_power).abs() < 1e-6);
+        assert!((tree.pmf(&Receiver::at(above), panel as u32) - only_power).abs() < 1e-6);
     }
 
     #[test]
     fn one_emitter_and_none() {
         let one = [LightBounds::everywhere(Vec3::ZERO, Vec3::ZERO, 1.0)];
         let tree = LightTree::build(&one);
-        assert_eq!(tree.sample(Vec3::ONE, 0.7, 0.0), Some((0, 1.0)));
+        assert_eq!(tree.sample(&Receiver::at(Vec3::ONE), 0.7), Some((0, 1.0)));
         let none = LightTree::build(&[]);
         assert!(none.is_empty());
-        assert_eq!(none.sample(Vec3::ONE, 0.3, 0.0), None);
-        assert_eq!(none.pmf(Vec3::ONE, 0, 0.0), 0.0);
+        assert_eq!(none.sample(&Receiver::at(Vec3::ONE), 0.3), None);
+        assert_eq!(none.pmf(&Receiver::at(Vec3::ONE), 0), 0.0);
     }
 
     #[test]
