@@ -53,6 +53,8 @@ pub struct LightBounds {
     w: Vec3,
     /// Cosine of that cone's half-angle.
     cos_o: f32,
+    /// That half-angle (radians), kept for the build's unions.
+    theta_o: f32,
     /// Cosine of the angle beyond a main direction up to which light leaves.
     cos_e: f32,
     /// Whether light also leaves against the main direction (both faces of a triangle).
@@ -80,6 +82,7 @@ impl LightBounds {
             phi: phi.max(0.0),
             w,
             cos_o: cos_o.clamp(-1.0, 1.0),
+            theta_o: cos_o.clamp(-1.0, 1.0).acos(),
             cos_e: cos_e.clamp(-1.0, 1.0),
             two_sided,
         }
@@ -100,13 +103,17 @@ impl LightBounds {
     }
 
     fn union(&self, b: &Self) -> Self {
-        let (w, cos_o) = cone_union((self.w, self.cos_o), (b.w, b.cos_o));
+        let (w, cos_o, theta_o) = cone_union(
+            (self.w, self.cos_o, self.theta_o),
+            (b.w, b.cos_o, b.theta_o),
+        );
         Self {
             lo: self.lo.min(b.lo),
             hi: self.hi.max(b.hi),
             phi: self.phi + b.phi,
             w,
             cos_o,
+            theta_o,
             cos_e: self.cos_e.min(b.cos_e),
             two_sided: self.two_sided || b.two_sided,
         }
@@ -120,7 +127,7 @@ impl LightBounds {
 
     /// pbrt-v4's measure of the solid angle a cone of emission covers, for the build's cost.
     fn direction_measure(&self) -> f32 {
-        let theta_o = self.cos_o.clamp(-1.0, 1.0).acos();
+        let theta_o = self.theta_o;
         let theta_e = self.cos_e.clamp(-1.0, 1.0).acos();
         let theta_w = (theta_o + theta_e).min(PI);
         let sin_o = safe_sqrt(1.0 - self.cos_o * self.cos_o);
@@ -291,8 +298,19 @@ fn angle_between(a: Vec3, b: Vec3) -> f32 {
 }
 
 /// The smallest cone (axis, cosine of half-angle) holding both cones.
-fn cone_union(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
-    let (theta_a, theta_b) = (a.1.clamp(-1.0, 1.0).acos(), b.1.clamp(-1.0, 1.0).acos());
+fn cone_union(a: (Vec3, f32, f32), b: (Vec3, f32, f32)) -> (Vec3, f32, f32) {
+    // The common cases first, without trigonometry: a cone of every direction, and the
+    // same axis (a flat emissive mesh's triangles).
+    if a.1 <= -1.0 {
+        return a;
+    }
+    if b.1 <= -1.0 {
+        return b;
+    }
+    if a.0 == b.0 {
+        return if a.2 >= b.2 { a } else { b };
+    }
+    let (theta_a, theta_b) = (a.2, b.2);
     let theta_d = angle_between(a.0, b.0);
     if (theta_d + theta_b).min(PI) <= theta_a {
         return a;
@@ -303,11 +321,11 @@ fn cone_union(a: (Vec3, f32), b: (Vec3, f32)) -> (Vec3, f32) {
     let theta_o = 0.5 * (theta_a + theta_d + theta_b);
     let axis = a.0.cross(b.0);
     if theta_o >= PI || axis.length_squared() == 0.0 {
-        return (a.0, -1.0);
+        return (a.0, -1.0, PI);
     }
     // Turn a's axis towards b's until the cone reaches both.
     let w = Quat::from_axis_angle(axis.normalize(), theta_o - theta_a) * a.0;
-    (w.normalize(), theta_o.cos())
+    (w.normalize(), theta_o.cos(), theta_o)
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -543,16 +561,20 @@ fn split(items: &mut [(LightBounds, u32)], bounds: &LightBounds, depth: u32) -> 
                 b.phi * b.direction_measure() * kr * b.surface_area()
             })
         };
+        // Running unions from each end: what lies below and above every cut.
+        let join = |acc: Option<LightBounds>, b: Option<LightBounds>| match (acc, b) {
+            (Some(a), Some(b)) => Some(a.union(&b)),
+            (a, b) => a.or(b),
+        };
+        let mut below = [None; BUCKETS];
+        let mut above = [None; BUCKETS + 1];
+        for k in 1..BUCKETS {
+            below[k] = join(below[k - 1], buckets[k - 1]);
+            let j = BUCKETS - k;
+            above[j] = join(above[j + 1], buckets[j]);
+        }
         for cut in 1..BUCKETS {
-            let join = |range: &[Option<LightBounds>]| {
-                range
-                    .iter()
-                    .flatten()
-                    .fold(None, |acc: Option<LightBounds>, b| {
-                        Some(acc.map_or(*b, |a| a.union(b)))
-                    })
-            };
-            let (below, above) = (join(&buckets[..cut]), join(&buckets[cut..]));
+            let (below, above) = (below[cut], above[cut]);
             if below.is_none() || above.is_none() {
                 continue;
             }
@@ -729,13 +751,16 @@ mod tests {
 
     #[test]
     fn cones_merge_to_hold_both() {
-        let a = (Vec3::X, 0.9f32);
-        let b = (Vec3::Y, 0.8f32);
-        let (w, cos) = cone_union(a, b);
-        for (axis, c) in [a, b] {
+        let a = (Vec3::X, 0.9f32, 0.9f32.acos());
+        let b = (Vec3::Y, 0.8f32, 0.8f32.acos());
+        let (w, cos, _) = cone_union(a, b);
+        for (axis, c, _) in [a, b] {
             let edge_angle = w.dot(axis).clamp(-1.0, 1.0).acos() + c.acos();
             assert!(edge_angle <= cos.acos() + 1e-4);
         }
-        assert_eq!(cone_union((Vec3::X, 1.0), (-Vec3::X, 1.0)).1, -1.0);
+        assert_eq!(
+            cone_union((Vec3::X, 1.0, 0.0), (-Vec3::X, 1.0, 0.0)).1,
+            -1.0
+        );
     }
 }
