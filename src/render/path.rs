@@ -609,8 +609,9 @@ fn next_event(
 }
 
 /// Draws one light sample per lane that hit with `sample` (for the lane's leaving origin and
-/// surface, with its numbers), traces them as one shadow packet and adds the unoccluded ones. `punctual` is the
-/// index of the punctual light sampled, whose glossy reflections light paths may share.
+/// surface, with its numbers), traces them as one shadow packet and adds the unoccluded ones.
+/// `punctual` is the index of the punctual light sampled, whose glossy reflections light paths
+/// may share.
 #[allow(clippy::too_many_arguments)]
 fn shadow_packet(
     world: &World,

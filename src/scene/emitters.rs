@@ -316,8 +316,8 @@ impl Emitters {
     }
 
     /// The discs of suns with an angle that unit direction `dir` (a ray leaving the scene)
-    /// sees: for each, its radiance and the density this light's samples (from
-    /// [`Emitters::always`] or [`Emitters::sample`], its picking included) draw `dir` with.
+    /// sees: for each, its radiance and the density its own light sample (every sun is in
+    /// [`Emitters::always`]) draws `dir` with.
     pub fn suns_seen(&self, dir: Vec3) -> impl Iterator<Item = (Vec3, f32)> + '_ {
         (self.suns.iter())
             .filter(move |disc| disc.contains(dir))
