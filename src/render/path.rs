@@ -304,6 +304,7 @@ pub fn trace_path(
         let dir = packet.dirs();
         let wo: [Vec3; LANES] = std::array::from_fn(|l| -lane_vec(dir, l));
         let scattering = v.scattering(hits, &wo, &scratch.points);
+        let glossy_share = std::array::from_fn(|l| v.bsdf[l].glossy_share());
         if bounce == 0
             && let Some(g) = glossy.filter(|g| g.shares_emitters())
         {
@@ -315,6 +316,7 @@ pub fn trace_path(
             v: &v,
             wo: &wo,
             scattering: &scattering,
+            glossy_share: &glossy_share,
             numbers: &numbers,
             lanes: &lanes,
             glossy: light_traced.glossy.as_ref().filter(|_| bounce == 0),
@@ -574,6 +576,9 @@ struct Shading<'a> {
     /// them (none where nothing scatters).
     wo: &'a [Vec3; LANES],
     scattering: &'a [Option<Scattering>; LANES],
+    /// [`Bsdf::glossy_share`] of each surface (after the glossy filter), once for all its
+    /// light samples.
+    glossy_share: &'a [f32; LANES],
     numbers: &'a [Numbers; LANES],
     lanes: &'a [Lane; LANES],
     /// At a camera ray's first surface: the lamps whose glossy reflections light paths share.
@@ -635,6 +640,7 @@ fn shadow_packet(
         hits,
         v,
         scattering,
+        glossy_share,
         numbers,
         lanes,
         ..
@@ -643,11 +649,10 @@ fn shadow_packet(
     let sampled = (0..LANES).filter(|&l| hits & (1 << l) != 0 && !v.bsdf[l].is_delta());
     for lane in sampled {
         let n = points.get(lane).normal;
-        let p = v.origins.at(lane, true);
         let r = Receiver {
-            p,
+            p: v.origins.at(lane, true),
             n,
-            glossy: v.bsdf[lane].glossy_share(),
+            glossy: glossy_share[lane],
         };
         let Some(es) = sample(&r, &numbers[lane]) else {
             continue;

@@ -211,9 +211,6 @@ impl Emitters {
     pub fn sample(&self, world: &World, r: &Receiver, u: [f32; 3]) -> Option<EmitterSample> {
         let p = r.p;
         let (i, pick) = self.tree.sample(r, u[0])?;
-        if pick <= 0.0 {
-            return None;
-        }
         let u = Vec2::new(u[1], u[2]);
         let s = match self.list[i as usize] {
             Emitter::Punctual(light) => usable(punctual_sample(&light, p, u))?,

@@ -12,9 +12,9 @@
 //! (which finds the nearest lamps of a long street from its end), each times the cosine of the
 //! angle by which the point lies outside the emission cone and the cosine at the receiving
 //! surface (either side, so glass still takes light from behind), and zero only where no
-//! emitter of the node can send light. The probability of any one emitter ([`LightTree::pmf`]) is the
-//! product along the path the draw takes to it,
-//! followed by the bits each emitter keeps of that path.
+//! emitter of the node can send light. The probability of any one emitter
+//! ([`LightTree::pmf`]) is the product along the path the draw takes to it, followed by the
+//! bits each emitter keeps of that path.
 //!
 //! Every emitter keeps a probability above zero wherever it can light the point, so the
 //! estimate stays unbiased; the importance, a heuristic, sets only its variance. It knows
@@ -121,7 +121,8 @@ impl LightBounds {
 
     /// What these bounds' emitters may send to `p`, up to a common factor (the tree's estimate
     /// by the distance to the box's centre; see the module documentation).
-    pub fn importance(&self, p: Vec3) -> f32 {
+    #[cfg(test)]
+    fn importance(&self, p: Vec3) -> f32 {
         Probe::of(self).importance(&Receiver::at(p)).0
     }
 
@@ -179,9 +180,10 @@ impl Probe {
     /// power over the squared distance to the box's centre (at least half the box's
     /// half-diagonal, as Cycles clamps it), and power over the squared distance to the box's
     /// nearest point (at least [`NEAR_CLAMP`]; near an upper bound: the box's light may all be
-    /// there, as a street's nearest lamps are for a point at one end of it). Both times the cosine
-    /// of the smallest angle between a direction from the box to `p` and a direction in the
-    /// emission cone, and zero when that angle is beyond the emission's spread.
+    /// there, as a street's nearest lamps are for a point at one end of it). Both times the
+    /// cosine of the smallest angle between a direction from the box to `p` and a direction in
+    /// the emission cone (zero when that angle is beyond the emission's spread) and the cosine
+    /// at the receiving surface, each less the angle the box subtends.
     #[inline]
     fn importance(&self, r: &Receiver) -> (f32, f32) {
         let p = r.p;
@@ -414,7 +416,7 @@ impl LightTree {
         self.build_range(second, trail | (1 << depth), depth + 1);
     }
 
-    /// Picks an emitter for point `p` with `u` in [0, 1): its index and the probability it was
+    /// Picks an emitter for receiver `r` with `u` in [0, 1): its index and the probability it was
     /// picked with ([`LightTree::pmf`]). `None` when there is none to pick. The receiver's
     /// `glossy`, the share of its light that comes through a narrow glossy lobe, which
     /// reflects lamps by direction, not by distance, sets how many more draws than
@@ -435,7 +437,7 @@ impl LightTree {
         (pmf > 0.0).then_some((i, pmf))
     }
 
-    /// The probability [`LightTree::sample`] picks emitter `i` for point `p` with.
+    /// The probability [`LightTree::sample`] picks emitter `i` for receiver `r` with.
     pub fn pmf(&self, r: &Receiver, i: u32) -> f32 {
         let Some(&power) = self.power.get(i as usize) else {
             return 0.0;
@@ -444,7 +446,7 @@ impl LightTree {
         by_power * power + (1.0 - by_power) * self.walk_pmf(r, i)
     }
 
-    /// [`first_share`] of nodes `a` and `b` at `p`.
+    /// [`first_share`] of nodes `a` and `b` for `r`.
     fn first_share(&self, a: usize, b: usize, r: &Receiver) -> Option<f32> {
         let (na, nb) = (&self.nodes[a].bounds, &self.nodes[b].bounds);
         first_share(na.importance(r), nb.importance(r))
@@ -473,7 +475,7 @@ impl LightTree {
         }
     }
 
-    /// The probability [`LightTree::walk`] reaches emitter `i` for point `p` with.
+    /// The probability [`LightTree::walk`] reaches emitter `i` for receiver `r` with.
     fn walk_pmf(&self, r: &Receiver, i: u32) -> f32 {
         let Some(&trail) = self.trail.get(i as usize) else {
             return 0.0;
