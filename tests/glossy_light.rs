@@ -337,25 +337,12 @@ fn regions_and_thread_counts_get_the_same_glossy_splats() {
     // A point light's paths, and a panel's (aimed from the points they leave).
     for ball in [scene(0.1, 0.5), softbox(0.15)] {
         let s = settings(Mode::Adaptive, 16, true, 1);
-        let device = dofray::embree::Device::new().unwrap();
-        let world = World::build(&ball, &device).unwrap();
-        let camera = ball.camera.build(|_| None).unwrap();
-        let full = render::render(&world, &camera, &s, &NoProgress).unwrap().0;
         let region = Region {
             x0: 40,
             y0: 20,
             x1: 70,
             y1: 40,
         };
-        let part = render::render_region(&world, &camera, &s, &region, &NoProgress)
-            .unwrap()
-            .0;
-        assert_eq!(part.color, full.crop(&region).color);
-        let one = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
-            .build()
-            .unwrap()
-            .install(|| render::render(&world, &camera, &s, &NoProgress).unwrap().0);
-        assert_eq!(one.color, full.color);
+        crate::light_tracing::same_in_a_region_and_on_one_thread(&ball, &s, &region);
     }
 }

@@ -225,12 +225,6 @@ fn an_emitter_large_and_sharp_on_screen_stays_with_the_camera() {
 
 #[test]
 fn regions_and_thread_counts_get_the_same_splats() {
-    let lamp = scene(0.0005, true);
-    let s = settings(Mode::Adaptive, 16, true);
-    let device = dofray::embree::Device::new().unwrap();
-    let world = World::build(&lamp, &device).unwrap();
-    let camera = lamp.camera.build(|_| None).unwrap();
-    let full = render::render(&world, &camera, &s, &NoProgress).unwrap().0;
     // A region through the middle of the disc.
     let region = Region {
         x0: 90,
@@ -238,21 +232,37 @@ fn regions_and_thread_counts_get_the_same_splats() {
         x1: 130,
         y1: 90,
     };
-    let part = render::render_region(&world, &camera, &s, &region, &NoProgress)
-        .unwrap()
-        .0;
+    let s = settings(Mode::Adaptive, 16, true);
+    let full = same_in_a_region_and_on_one_thread(&scene(0.0005, true), &s, &region);
     let crop = full.crop(&region);
     assert!(
         crop.color.iter().any(|c| c.x > 0.3),
         "the disc is in the region"
     );
-    assert_eq!(part.color, crop.color);
+}
+
+/// Renders `desc` whole, then `region` alone and whole on one thread, asserts that both give
+/// the full render's pixels (light paths' splats included), and returns the full render.
+pub(crate) fn same_in_a_region_and_on_one_thread(
+    desc: &SceneDesc,
+    s: &RenderSettings,
+    region: &Region,
+) -> Film {
+    let device = dofray::embree::Device::new().unwrap();
+    let world = World::build(desc, &device).unwrap();
+    let camera = desc.camera.build(|_| None).unwrap();
+    let full = render::render(&world, &camera, s, &NoProgress).unwrap().0;
+    let part = render::render_region(&world, &camera, s, region, &NoProgress)
+        .unwrap()
+        .0;
+    assert_eq!(part.color, full.crop(region).color);
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .unwrap()
-        .install(|| render::render(&world, &camera, &s, &NoProgress).unwrap().0);
+        .install(|| render::render(&world, &camera, s, &NoProgress).unwrap().0);
     assert_eq!(one.color, full.color);
+    full
 }
 
 /// A night scene's worth of sub-pixel lamps, far more than light tracing's budget of paths at
