@@ -365,6 +365,10 @@ mod tests {
                 ResourceLimit,
             ),
             case(SceneError::from(embree(ErrorCode::Unknown)), BadInput),
+            case(
+                SceneError::from(crate::limits::MemoryError::allocation("the light tree", 1)),
+                ResourceLimit,
+            ),
             case(camera_error(), BadInput),
             case(
                 crate::camera::LensFileError::Invalid {

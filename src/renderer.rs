@@ -127,9 +127,13 @@ impl Renderer {
         let base_camera = desc.camera.clone();
         overrides.apply_scene(&mut desc)?;
         crate::limits::check_image_memory(desc.camera.width, desc.camera.height)?;
-        let world = World::build(&desc, device).map_err(|source| RendererError::Scene {
-            name: desc.name.clone(),
-            source,
+        let world = World::build(&desc, device).map_err(|source| match source {
+            // Not the scene's fault: the memory its lights' distribution needs.
+            SceneError::Memory(e) => RendererError::Memory(*e),
+            source => RendererError::Scene {
+                name: desc.name.clone(),
+                source,
+            },
         })?;
         Ok(Self {
             desc,

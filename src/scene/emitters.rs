@@ -19,7 +19,8 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 use crate::embree::{Geometry, GeometryId, Hit};
-use crate::shade::{Light, SunDisc, luminance};
+use crate::limits::{MemoryError, try_with_capacity};
+use crate::shade::{Light, Material, SunDisc, luminance};
 
 use super::World;
 pub use super::light_tree::Receiver;
@@ -28,8 +29,10 @@ use super::light_tree::{LightBounds, LightTree};
 /// One emitter.
 #[derive(Debug, Clone, Copy)]
 enum Emitter {
-    /// A point, spot or directional light (a delta: only next-event estimation finds it).
-    Punctual(Light),
+    /// A point, spot or directional light (a delta: only next-event estimation finds it), by
+    /// its index in [`Emitters::punctual`] (a light inline would take four times the room of
+    /// every emissive triangle's entry).
+    Punctual(u32),
     /// A triangle of an emissive mesh.
     Triangle { geometry: u32, prim: u32 },
     /// An emissive sphere.
@@ -83,6 +86,43 @@ pub fn punctual_sample(light: &Light, p: Vec3, u: Vec2) -> EmitterSample {
     }
 }
 
+/// How many primitives `geometry` has.
+fn primitive_count(geometry: &Geometry) -> usize {
+    match geometry {
+        Geometry::Mesh(m) => m.triangle_count(),
+        Geometry::Spheres(s) => s.len(),
+    }
+}
+
+/// Emissive primitive `prim` of geometry `g` (`geometry`) of material `material`, and what it
+/// may send where ([`LightBounds`]).
+fn emitter_bounds(
+    geometry: &Geometry,
+    g: u32,
+    prim: u32,
+    material: &Material,
+) -> (Emitter, LightBounds) {
+    let sides = if material.one_sided { 1.0 } else { 2.0 };
+    let power = |area: f32| sides * PI * area * luminance(material.emission);
+    match geometry {
+        Geometry::Mesh(m) => {
+            let [a, b, c] =
+                (m.indices()[prim as usize]).map(|v| Vec3::from(m.positions()[v as usize]));
+            let n = (b - a).cross(c - a);
+            let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
+            // Light leaves its front face (the winding's normal) or both.
+            let two_sided = !material.one_sided;
+            let bounds = LightBounds::new(lo, hi, power(0.5 * n.length()), n, 1.0, 0.0, two_sided);
+            (Emitter::Triangle { geometry: g, prim }, bounds)
+        }
+        Geometry::Spheres(s) => {
+            let (c, r) = (s.center(prim), s.radius(prim));
+            let bounds = LightBounds::everywhere(c - r, c + r, power(4.0 * PI * r * r));
+            (Emitter::Sphere { geometry: g, prim }, bounds)
+        }
+    }
+}
+
 /// The emitters of a world and the distribution they are picked from.
 #[derive(Debug, Default)]
 pub struct Emitters {
@@ -90,6 +130,8 @@ pub struct Emitters {
     /// [`Emitters::ALWAYS_SAMPLED`]): each gets its own shadow ray, so a scene of a few lamps
     /// under a bright sky has no noise from choosing between them.
     pub always: Vec<Light>,
+    /// The punctual lights picked from the tree.
+    punctual: Vec<Light>,
     list: Vec<Emitter>,
     /// Picks from `list` by what each may send to a point.
     tree: LightTree,
@@ -109,61 +151,57 @@ impl Emitters {
     pub const ALWAYS_SAMPLED: usize = 8;
 
     /// The emitters of `world`: its lights, its emissive primitives, and its background when it
-    /// is not black.
-    pub fn build(world: &World) -> Self {
-        let mut list = Vec::new();
-        let mut bounds = Vec::new();
+    /// is not black. A memory error when their distribution cannot be allocated (about 270
+    /// bytes per emissive triangle or sphere while building, 210 after).
+    pub fn build(world: &World) -> Result<Self, MemoryError> {
         let mut always = Vec::new();
+        let mut punctual = Vec::new();
+        let mut picked = Vec::new();
         for light in &world.lights {
-            let picked = (world.lights.len() > Self::ALWAYS_SAMPLED)
+            let bounds = (world.lights.len() > Self::ALWAYS_SAMPLED)
                 .then(|| punctual_bounds(light))
                 .flatten();
-            match picked {
+            match bounds {
                 Some(b) => {
-                    list.push(Emitter::Punctual(*light));
-                    bounds.push(b);
+                    picked.push((Emitter::Punctual(punctual.len() as u32), b));
+                    punctual.push(*light);
                 }
                 None => always.push(*light),
             }
         }
+        // Counted first, so everything is allocated once and fallibly.
+        let emissive = |g: u32, prim: u32| {
+            let material = world.material_of(GeometryId(g), prim);
+            (material.emission != Vec3::ZERO).then_some(material)
+        };
+        let geometries = world.scene.geometries();
+        let count = |g: usize, geometry: &Geometry| {
+            (0..primitive_count(geometry) as u32)
+                .filter(|&prim| emissive(g as u32, prim).is_some())
+                .count()
+        };
+        let primitives: usize = (geometries.iter().enumerate())
+            .map(|(g, x)| count(g, x))
+            .sum();
+        let total = primitives + picked.len();
+        let mut list = try_with_capacity(total, "the emitters")?;
+        let mut bounds = try_with_capacity(total, "the emitters' bounds")?;
         let mut by_prim = HashMap::new();
-        for (g, geometry) in world.scene.geometries().iter().enumerate() {
+        by_prim.try_reserve(primitives).map_err(|_| {
+            let entry = size_of::<((u32, u32), u32)>() as u128;
+            MemoryError::allocation("the emitters' index", primitives as u128 * entry)
+        })?;
+        for (emitter, b) in picked {
+            list.push(emitter);
+            bounds.push(b);
+        }
+        for (g, geometry) in geometries.iter().enumerate() {
             let g = g as u32;
-            let count = match geometry {
-                Geometry::Mesh(m) => m.triangle_count(),
-                Geometry::Spheres(s) => s.len(),
-            };
-            for prim in 0..count as u32 {
-                let material = world.material_of(GeometryId(g), prim);
-                if material.emission == Vec3::ZERO {
+            for prim in 0..primitive_count(geometry) as u32 {
+                let Some(material) = emissive(g, prim) else {
                     continue;
-                }
-                let sides = if material.one_sided { 1.0 } else { 2.0 };
-                let power = |area: f32| sides * PI * area * luminance(material.emission);
-                let (emitter, b) = match geometry {
-                    Geometry::Mesh(m) => {
-                        let [a, b, c] = (m.indices()[prim as usize])
-                            .map(|v| Vec3::from(m.positions()[v as usize]));
-                        let n = (b - a).cross(c - a);
-                        let (lo, hi) = (a.min(b).min(c), a.max(b).max(c));
-                        // Light leaves its front face (the winding's normal) or both.
-                        let bounds = LightBounds::new(
-                            lo,
-                            hi,
-                            power(0.5 * n.length()),
-                            n,
-                            1.0,
-                            0.0,
-                            !material.one_sided,
-                        );
-                        (Emitter::Triangle { geometry: g, prim }, bounds)
-                    }
-                    Geometry::Spheres(s) => {
-                        let (c, r) = (s.center(prim), s.radius(prim));
-                        let bounds = LightBounds::everywhere(c - r, c + r, power(4.0 * PI * r * r));
-                        (Emitter::Sphere { geometry: g, prim }, bounds)
-                    }
                 };
+                let (emitter, b) = emitter_bounds(geometry, g, prim, material);
                 if b.power() > 0.0 && b.power().is_finite() {
                     by_prim.insert((g, prim), list.len() as u32);
                     list.push(emitter);
@@ -179,14 +217,15 @@ impl Emitters {
             }
         };
         let suns = always.iter().filter_map(Light::sun_disc).collect();
-        Self {
+        Ok(Self {
             always,
+            punctual,
             list,
-            tree: LightTree::build(&bounds),
+            tree: LightTree::build(&bounds)?,
             by_prim,
             world: world_emits,
             suns,
-        }
+        })
     }
 
     /// Whether there is nothing to sample.
@@ -213,7 +252,7 @@ impl Emitters {
         let (i, pick) = self.tree.sample(r, u[0])?;
         let u = Vec2::new(u[1], u[2]);
         let s = match self.list[i as usize] {
-            Emitter::Punctual(light) => usable(punctual_sample(&light, p, u))?,
+            Emitter::Punctual(k) => usable(punctual_sample(&self.punctual[k as usize], p, u))?,
             Emitter::Triangle { geometry, prim } | Emitter::Sphere { geometry, prim } => {
                 sample_primitive(world, geometry, prim, p, u)?
             }

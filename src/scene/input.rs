@@ -97,6 +97,11 @@ pub struct Input {
 }
 
 impl Input {
+    /// The file's size when it was opened, bytes.
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
     /// The reader (at most the limit plus one byte).
     pub fn reader(&mut self) -> &mut Take<BufReader<File>> {
         &mut self.reader

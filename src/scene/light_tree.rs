@@ -29,6 +29,8 @@ use std::f32::consts::{FRAC_PI_2, PI};
 
 use glam::{Quat, Vec3};
 
+use crate::limits::{MemoryError, try_collect, try_vec};
+
 /// The nearest a point inside a node's box is taken to be to its light, as a fraction of the
 /// box's half-diagonal, squared: a tenth. (Taken as touching, a box holding the point would
 /// take every draw, however little its lamps send against a bright window further off.)
@@ -103,20 +105,20 @@ impl LightBounds {
     }
 
     fn union(&self, b: &Self) -> Self {
-        let (w, cos_o, theta_o) = cone_union(
-            (self.w, self.cos_o, self.theta_o),
-            (b.w, b.cos_o, b.theta_o),
-        );
-        Self {
-            lo: self.lo.min(b.lo),
-            hi: self.hi.max(b.hi),
-            phi: self.phi + b.phi,
-            w,
-            cos_o,
-            theta_o,
-            cos_e: self.cos_e.min(b.cos_e),
-            two_sided: self.two_sided || b.two_sided,
-        }
+        let mut u = *self;
+        u.merge(b);
+        u
+    }
+
+    /// Grows these bounds to hold `b` too ([`LightBounds::union`] in place).
+    fn merge(&mut self, b: &Self) {
+        let cone = (self.w, self.cos_o, self.theta_o);
+        (self.w, self.cos_o, self.theta_o) = cone_union(cone, (b.w, b.cos_o, b.theta_o));
+        self.lo = self.lo.min(b.lo);
+        self.hi = self.hi.max(b.hi);
+        self.phi += b.phi;
+        self.cos_e = self.cos_e.min(b.cos_e);
+        self.two_sided |= b.two_sided;
     }
 
     /// What these bounds' emitters may send to `p`, up to a common factor (the tree's estimate
@@ -352,68 +354,57 @@ pub struct LightTree {
 }
 
 impl LightTree {
-    /// The tree over `emitters` (emitter i is `emitters[i]`).
-    pub fn build(emitters: &[LightBounds]) -> Self {
+    /// The tree over `emitters` (emitter i is `emitters[i]`), or the memory error naming what
+    /// could not be allocated (about 190 bytes per emitter while building, 175 after). Large
+    /// subtrees are built in parallel.
+    pub fn build(emitters: &[LightBounds]) -> Result<Self, MemoryError> {
+        let n = emitters.len();
         let total: f64 = emitters.iter().map(|b| b.phi as f64).sum();
-        let power: Vec<f32> = if total > 0.0 && total.is_finite() {
-            emitters
-                .iter()
-                .map(|b| (b.phi as f64 / total) as f32)
-                .collect()
-        } else {
-            vec![1.0 / emitters.len().max(1) as f32; emitters.len()]
+        let share = |b: &LightBounds| {
+            if total > 0.0 && total.is_finite() {
+                (b.phi as f64 / total) as f32
+            } else {
+                1.0 / n as f32
+            }
         };
+        let power = try_collect(emitters.iter().map(share), "the light tree's powers")?;
         let mut sum = 0.0f64;
-        let cdf = (power.iter())
-            .map(|&p| {
-                sum += p as f64;
-                sum as f32
-            })
-            .collect();
-        let mut tree = Self {
-            nodes: Vec::with_capacity(2 * emitters.len()),
-            trail: vec![0; emitters.len()],
+        let running = |&p: &f32| {
+            sum += p as f64;
+            sum as f32
+        };
+        let cdf = try_collect(power.iter().map(running), "the light tree's powers")?;
+        let build = Build {
+            bounds: emitters,
+            centroids: try_collect(
+                emitters.iter().map(|b| b.centroid()),
+                "the light tree's build",
+            )?,
+        };
+        let mut order = try_collect(0..n as u32, "the light tree's build")?;
+        let placeholder = Node {
+            bounds: Probe::of(&LightBounds::everywhere(Vec3::ZERO, Vec3::ZERO, 0.0)),
+            index: 0,
+            leaf: true,
+        };
+        // A subtree over m emitters takes exactly 2 m - 1 nodes, in depth-first order.
+        let mut nodes = try_vec((2 * n).saturating_sub(1), placeholder, "the light tree")?;
+        if n > 0 {
+            build.subtree(&mut nodes, 0, &mut order, 0);
+        }
+        let mut trail = try_vec(n, 0u64, "the light tree's paths")?;
+        set_trails(&nodes, &mut trail);
+        Ok(Self {
+            nodes,
+            trail,
             power,
             cdf,
-        };
-        let mut items: Vec<(LightBounds, u32)> = emitters
-            .iter()
-            .enumerate()
-            .map(|(i, b)| (*b, i as u32))
-            .collect();
-        if !items.is_empty() {
-            tree.build_range(&mut items, 0, 0);
-        }
-        tree
+        })
     }
 
     /// Whether there is no emitter to pick.
     pub fn is_empty(&self) -> bool {
         self.nodes.is_empty()
-    }
-
-    fn build_range(&mut self, items: &mut [(LightBounds, u32)], trail: u64, depth: u32) {
-        let bounds = (items[1..].iter()).fold(items[0].0, |acc, (b, _)| acc.union(b));
-        if items.len() == 1 {
-            self.trail[items[0].1 as usize] = trail;
-            self.nodes.push(Node {
-                bounds: Probe::of(&bounds),
-                index: items[0].1,
-                leaf: true,
-            });
-            return;
-        }
-        let mid = split(items, &bounds, depth);
-        let node = self.nodes.len();
-        self.nodes.push(Node {
-            bounds: Probe::of(&bounds),
-            index: 0,
-            leaf: false,
-        });
-        let (first, second) = items.split_at_mut(mid);
-        self.build_range(first, trail, depth + 1);
-        self.nodes[node].index = self.nodes.len() as u32;
-        self.build_range(second, trail | (1 << depth), depth + 1);
     }
 
     /// Picks an emitter for receiver `r` with `u` in [0, 1): its index and the probability it was
@@ -512,6 +503,87 @@ impl LightTree {
     }
 }
 
+/// Subtrees over fewer emitters than this are built on the calling thread.
+const PARALLEL_BUILD: usize = 4096;
+/// The most emitters of a node whose bounds are binned to choose its split: a larger node
+/// bins an even spread of this many of them (the cut then applies to all), so the build's
+/// unions of emission cones, each a few inverse trigonometric functions, stay O(n) in all
+/// (binning all of them at every level took 15 s for two million emissive triangles).
+const BINNED: usize = 2048;
+
+/// The emitters a tree is built over, with their bounds' centres.
+struct Build<'a> {
+    bounds: &'a [LightBounds],
+    centroids: Vec<Vec3>,
+}
+
+impl Build<'_> {
+    /// Fills `nodes` (exactly `2 order.len() - 1` of them, the first at index `base` of the
+    /// whole tree) with the subtree over the emitters `order` lists: the node, its first
+    /// child's subtree right after it, then its second's. Returns the subtree's bounds: each
+    /// node's are its children's union (as pbrt-v4 builds them), so every emitter's bounds are
+    /// merged once per level it rises.
+    fn subtree(
+        &self,
+        nodes: &mut [Node],
+        base: usize,
+        order: &mut [u32],
+        depth: u32,
+    ) -> LightBounds {
+        if let [index] = *order {
+            let bounds = self.bounds[index as usize];
+            nodes[0] = Node {
+                bounds: Probe::of(&bounds),
+                index,
+                leaf: true,
+            };
+            return bounds;
+        }
+        let mid = self.split(order, depth);
+        let second = base + 2 * mid;
+        let (node, below) = nodes
+            .split_first_mut()
+            .expect("2 n - 1 nodes for n >= 2 emitters");
+        let (first_nodes, second_nodes) = below.split_at_mut(2 * mid - 1);
+        let (first, rest) = order.split_at_mut(mid);
+        let (a, b) = if first.len() + rest.len() >= PARALLEL_BUILD {
+            rayon::join(
+                || self.subtree(first_nodes, base + 1, first, depth + 1),
+                || self.subtree(second_nodes, second, rest, depth + 1),
+            )
+        } else {
+            (
+                self.subtree(first_nodes, base + 1, first, depth + 1),
+                self.subtree(second_nodes, second, rest, depth + 1),
+            )
+        };
+        let bounds = a.union(&b);
+        *node = Node {
+            bounds: Probe::of(&bounds),
+            index: second as u32,
+            leaf: false,
+        };
+        bounds
+    }
+}
+
+/// Writes each emitter's path from the root ([`LightTree::trail`]) by walking `nodes`.
+fn set_trails(nodes: &[Node], trail: &mut [u64]) {
+    // (node, its path, its depth); at most one pending second child per level.
+    let mut stack = vec![(0usize, 0u64, 0u32)];
+    while let Some((node, path, depth)) = stack.pop() {
+        let Some(n) = nodes.get(node) else {
+            continue;
+        };
+        if n.leaf {
+            trail[n.index as usize] = path;
+        } else {
+            stack.push((n.index as usize, path | (1 << depth), depth + 1));
+            stack.push((node + 1, path, depth + 1));
+        }
+    }
+}
+
 const ONE_MINUS_EPSILON: f32 = 1.0 - f32::EPSILON / 2.0;
 
 /// The share of draws that pick by power for a surface whose light is `glossy` glossy: all of
@@ -528,86 +600,98 @@ fn by_power(glossy: f32) -> f32 {
     DEFENSIVE + (1.0 - DEFENSIVE) * (2.0 * glossy).min(1.0)
 }
 
-/// Reorders `items` (at least two) into the node's two children and returns where the second
-/// starts: between the buckets along an axis that minimise pbrt-v4's cost (power times
-/// direction measure times surface area, with a penalty for thin axes), or at the median
-/// along the longest axis when the tree would otherwise grow too deep or no axis has extent.
-fn split(items: &mut [(LightBounds, u32)], bounds: &LightBounds, depth: u32) -> usize {
-    let (clo, chi) = (items.iter())
-        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), (b, _)| {
-            (lo.min(b.centroid()), hi.max(b.centroid()))
-        });
-    let extent = chi - clo;
-    // Median splits finish within log2(n) more levels.
-    let levels_left = usize::BITS - (items.len() - 1).leading_zeros();
-    let bucketed = depth + levels_left + 8 < MAX_DEPTH;
-    let node_extent = bounds.hi - bounds.lo;
-    let mut best: Option<(f32, usize, usize)> = None;
-    for dim in 0..3 {
-        let flat = |x: f32| x.is_nan() || x <= 0.0;
-        if !bucketed || flat(extent[dim]) || flat(node_extent[dim]) {
-            continue;
-        }
-        let bucket_of = |b: &LightBounds| {
-            let t = (b.centroid()[dim] - clo[dim]) / extent[dim];
+impl Build<'_> {
+    /// Reorders `order` (at least two emitters) into the node's two children and returns
+    /// where the second starts: between the buckets along an axis that minimise pbrt-v4's cost
+    /// (power times direction measure times surface area, with a penalty for thin axes; from
+    /// at most [`BINNED`] of them), or at the median along the longest axis when the tree would
+    /// otherwise grow too deep or no axis has extent.
+    fn split(&self, order: &mut [u32], depth: u32) -> usize {
+        let (bounds, centroid) = (self.bounds, |i: u32| self.centroids[i as usize]);
+        // The node's box and its emitters' centres' box.
+        let (lo, hi, clo, chi) = order.iter().fold(
+            (
+                Vec3::INFINITY,
+                Vec3::NEG_INFINITY,
+                Vec3::INFINITY,
+                Vec3::NEG_INFINITY,
+            ),
+            |(lo, hi, clo, chi), &i| {
+                let (b, c) = (&bounds[i as usize], centroid(i));
+                (lo.min(b.lo), hi.max(b.hi), clo.min(c), chi.max(c))
+            },
+        );
+        let extent = chi - clo;
+        // Median splits finish within log2(n) more levels.
+        let levels_left = usize::BITS - (order.len() - 1).leading_zeros();
+        let bucketed = depth + levels_left + 8 < MAX_DEPTH;
+        let node_extent = hi - lo;
+        // An even spread of at most BINNED of them choose the cut.
+        let stride = order.len().div_ceil(BINNED);
+        let bucket_of = |i: u32, dim: usize| {
+            let t = (centroid(i)[dim] - clo[dim]) / extent[dim];
             ((t * BUCKETS as f32) as usize).min(BUCKETS - 1)
         };
-        let mut buckets: [Option<LightBounds>; BUCKETS] = [None; BUCKETS];
-        for (b, _) in items.iter() {
-            let k = bucket_of(b);
-            buckets[k] = Some(buckets[k].map_or(*b, |acc| acc.union(b)));
-        }
-        let kr = node_extent.max_element() / node_extent[dim];
-        let cost = |b: &Option<LightBounds>| {
-            b.map_or(0.0, |b| {
-                b.phi * b.direction_measure() * kr * b.surface_area()
-            })
-        };
-        // Running unions from each end: what lies below and above every cut.
-        let join = |acc: Option<LightBounds>, b: Option<LightBounds>| match (acc, b) {
-            (Some(a), Some(b)) => Some(a.union(&b)),
-            (a, b) => a.or(b),
-        };
-        let mut below = [None; BUCKETS];
-        let mut above = [None; BUCKETS + 1];
-        for k in 1..BUCKETS {
-            below[k] = join(below[k - 1], buckets[k - 1]);
-            let j = BUCKETS - k;
-            above[j] = join(above[j + 1], buckets[j]);
-        }
-        for cut in 1..BUCKETS {
-            let (below, above) = (below[cut], above[cut]);
-            if below.is_none() || above.is_none() {
+        let mut best: Option<(f32, usize, usize)> = None;
+        for dim in 0..3 {
+            let flat = |x: f32| x.is_nan() || x <= 0.0;
+            if !bucketed || flat(extent[dim]) || flat(node_extent[dim]) {
                 continue;
             }
-            let c = cost(&below) + cost(&above);
-            if best.is_none_or(|(bc, _, _)| c < bc) {
-                best = Some((c, dim, cut));
+            let mut buckets: [Option<LightBounds>; BUCKETS] = [None; BUCKETS];
+            for &i in order.iter().step_by(stride) {
+                let b = &bounds[i as usize];
+                match &mut buckets[bucket_of(i, dim)] {
+                    Some(acc) => acc.merge(b),
+                    empty => *empty = Some(*b),
+                }
+            }
+            let kr = node_extent.max_element() / node_extent[dim];
+            let cost = |b: &Option<LightBounds>| {
+                b.map_or(0.0, |b| {
+                    b.phi * b.direction_measure() * kr * b.surface_area()
+                })
+            };
+            // Running unions from each end: what lies below and above every cut.
+            let join = |acc: Option<LightBounds>, b: Option<LightBounds>| match (acc, b) {
+                (Some(a), Some(b)) => Some(a.union(&b)),
+                (a, b) => a.or(b),
+            };
+            let mut below = [None; BUCKETS];
+            let mut above = [None; BUCKETS + 1];
+            for k in 1..BUCKETS {
+                below[k] = join(below[k - 1], buckets[k - 1]);
+                let j = BUCKETS - k;
+                above[j] = join(above[j + 1], buckets[j]);
+            }
+            for cut in 1..BUCKETS {
+                let (below, above) = (below[cut], above[cut]);
+                if below.is_none() || above.is_none() {
+                    continue;
+                }
+                let c = cost(&below) + cost(&above);
+                if best.is_none_or(|(bc, _, _)| c < bc) {
+                    best = Some((c, dim, cut));
+                }
             }
         }
-    }
-    if let Some((_, dim, cut)) = best {
-        let below = |b: &LightBounds| {
-            let t = (b.centroid()[dim] - clo[dim]) / extent[dim];
-            ((t * BUCKETS as f32) as usize).min(BUCKETS - 1) < cut
-        };
-        let mut mid = 0;
-        for i in 0..items.len() {
-            if below(&items[i].0) {
-                items.swap(i, mid);
-                mid += 1;
+        if let Some((_, dim, cut)) = best {
+            let mut mid = 0;
+            for k in 0..order.len() {
+                if bucket_of(order[k], dim) < cut {
+                    order.swap(k, mid);
+                    mid += 1;
+                }
+            }
+            if mid > 0 && mid < order.len() {
+                return mid;
             }
         }
-        if mid > 0 && mid < items.len() {
-            return mid;
-        }
+        let dim = extent.max_position();
+        let mid = order.len() / 2;
+        order.select_nth_unstable_by(mid, |&a, &b| centroid(a)[dim].total_cmp(&centroid(b)[dim]));
+        mid
     }
-    let dim = extent.max_position();
-    let mid = items.len() / 2;
-    items.select_nth_unstable_by(mid, |a, b| {
-        a.0.centroid()[dim].total_cmp(&b.0.centroid()[dim])
-    });
-    mid
 }
 
 #[cfg(test)]
@@ -667,7 +751,7 @@ mod tests {
     #[test]
     fn probabilities_sum_to_one_and_no_emitter_is_starved() {
         let list = emitters();
-        let tree = LightTree::build(&list);
+        let tree = LightTree::build(&list).unwrap();
         let total: f32 = list.iter().map(|b| b.phi).sum();
         for p in points() {
             let pmf: Vec<f32> = (0..list.len() as u32)
@@ -692,7 +776,7 @@ mod tests {
     #[test]
     fn draws_follow_the_probabilities() {
         let list = emitters();
-        let tree = LightTree::build(&list);
+        let tree = LightTree::build(&list).unwrap();
         let draws = 200_000u32;
         for (k, p) in points().into_iter().step_by(7).enumerate() {
             // Matte surfaces and glossy ones (more draws by power).
@@ -720,7 +804,7 @@ mod tests {
     #[test]
     fn a_point_under_one_lamp_of_a_street_picks_it_most() {
         let list = emitters();
-        let tree = LightTree::build(&list);
+        let tree = LightTree::build(&list).unwrap();
         // Beneath lamp 10 (x = -4, z = 30), 0.5 m above the ground.
         let p = Vec3::new(-4.0, 0.5, 30.0);
         let lamp = tree.pmf(&Receiver::at(p), 10);
@@ -741,11 +825,48 @@ mod tests {
     }
 
     #[test]
+    fn a_large_tree_built_in_parallel_keeps_every_path() {
+        // Past PARALLEL_BUILD the subtrees are built on several threads into one array.
+        let mut list = Vec::new();
+        for k in 0..3 * PARALLEL_BUILD as u32 {
+            let u = [uniform(3 * k), uniform(3 * k + 1), uniform(3 * k + 2)];
+            let c = Vec3::new(100.0 * u[0], 10.0 * u[1], 100.0 * u[2]);
+            let n = Vec3::new(u[1] - 0.5, -1.0, u[0] - 0.5);
+            list.push(LightBounds::new(
+                c - 0.1,
+                c + 0.1,
+                1.0 + u[2],
+                n,
+                1.0,
+                0.0,
+                k % 3 == 0,
+            ));
+        }
+        let tree = LightTree::build(&list).unwrap();
+        assert_eq!(tree.nodes.len(), 2 * list.len() - 1);
+        // Every emitter has one leaf, and its trail leads there.
+        let mut leaves = vec![0u32; list.len()];
+        for n in tree.nodes.iter().filter(|n| n.leaf) {
+            leaves[n.index as usize] += 1;
+        }
+        assert!(leaves.iter().all(|&c| c == 1));
+        for p in [Vec3::new(50.0, 0.0, 50.0), Vec3::new(-20.0, 5.0, 130.0)] {
+            let r = matte(p, 0.0);
+            for k in 0..2000 {
+                let (i, pmf) = tree.sample(&r, uniform(k)).unwrap();
+                assert_eq!(pmf, tree.pmf(&r, i), "emitter {i} from {p}");
+            }
+            let sum: f64 = (0..list.len() as u32).map(|i| tree.pmf(&r, i) as f64).sum();
+            assert!((sum - 1.0).abs() < 1e-3, "{sum}");
+        }
+    }
+
+    #[test]
     fn one_emitter_and_none() {
         let one = [LightBounds::everywhere(Vec3::ZERO, Vec3::ZERO, 1.0)];
-        let tree = LightTree::build(&one);
+        let tree = LightTree::build(&one).unwrap();
         assert_eq!(tree.sample(&Receiver::at(Vec3::ONE), 0.7), Some((0, 1.0)));
-        let none = LightTree::build(&[]);
+        let none = LightTree::build(&[]).unwrap();
         assert!(none.is_empty());
         assert_eq!(none.sample(&Receiver::at(Vec3::ONE), 0.3), None);
         assert_eq!(none.pmf(&Receiver::at(Vec3::ONE), 0), 0.0);

@@ -54,6 +54,16 @@ pub enum SceneError {
     /// Embree failed to build the scene.
     #[error(transparent)]
     Embree(#[from] EmbreeError),
+    /// What the scene's emitters need to be sampled could not be allocated (boxed: it is
+    /// rare and large).
+    #[error(transparent)]
+    Memory(Box<crate::limits::MemoryError>),
+}
+
+impl From<crate::limits::MemoryError> for SceneError {
+    fn from(e: crate::limits::MemoryError) -> Self {
+        Self::Memory(Box::new(e))
+    }
 }
 
 /// Material lookup for one Embree geometry.
@@ -494,7 +504,7 @@ impl World {
             background: desc.background.clone(),
             emitters: Default::default(),
         };
-        world.emitters = super::emitters::Emitters::build(&world);
+        world.emitters = super::emitters::Emitters::build(&world)?;
         Ok(world)
     }
 
@@ -690,7 +700,7 @@ impl HasKind for SceneError {
             // Geometry Embree refused came from the scene.
             Self::Embree(e) => e.kind_or(ErrorKind::BadInput),
             // A budget of time the scene would exceed.
-            Self::Stacked(_) => ErrorKind::ResourceLimit,
+            Self::Stacked(_) | Self::Memory(_) => ErrorKind::ResourceLimit,
             _ => ErrorKind::BadInput,
         }
     }
