@@ -661,8 +661,12 @@ mod tests {
 
     #[test]
     fn reference_cache_round_trips_and_rejects_other_sizes() {
-        let dir = std::env::temp_dir().join(format!("dofray-bench-cache-{}", std::process::id()));
-        let path = dir.join("x.ref");
+        let dir = tempfile::Builder::new()
+            .prefix("dofray-bench-cache-")
+            .tempdir()
+            .unwrap();
+        // In a directory that does not exist yet: writing the reference makes it.
+        let path = dir.path().join("cache").join("x.ref");
         let rgb = vec![[0.25, 0.5, 1.0], [0.0, 2.0, 3.5]];
         write_reference(&path, 2, 1, &rgb, Some(41.5)).unwrap();
         assert_eq!(read_reference(&path, 2, 1), Some((rgb.clone(), Some(41.5))));
@@ -671,12 +675,16 @@ mod tests {
         assert_eq!(read_reference(&path, 2, 1), Some((rgb, None)));
         std::fs::write(&path, b"DOFREF02garbage").unwrap();
         assert_eq!(read_reference(&path, 2, 1), None);
-        std::fs::remove_dir_all(dir).unwrap();
+        dir.close().unwrap();
     }
 
     #[test]
     fn cache_dir_is_created_and_checked() {
-        let base = std::env::temp_dir().join(format!("dofray-bench-dir-{}", std::process::id()));
+        let scratch = tempfile::Builder::new()
+            .prefix("dofray-bench-dir-")
+            .tempdir()
+            .unwrap();
+        let base = scratch.path();
         let dir = base.join("a").join("b");
         check_cache_dir(&dir).unwrap();
         assert!(dir.is_dir());
@@ -687,7 +695,7 @@ mod tests {
         let err = check_cache_dir(&file.join("cache")).unwrap_err();
         assert!(matches!(err, BenchError::CacheDir { .. }), "{err:?}");
         assert!(err.to_string().contains("file/cache"), "{err}");
-        std::fs::remove_dir_all(base).unwrap();
+        scratch.close().unwrap();
     }
 
     #[test]

@@ -793,13 +793,15 @@ Max file locks            unlimited            unlimited            locks
         );
     }
 
-    /// A directory standing in for `/`, with `files` (absolute path, text) written into it.
-    fn fake_root(name: &str, files: &[(&str, &str)]) -> PathBuf {
-        let root =
-            std::env::temp_dir().join(format!("dofray-limits-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&root);
+    /// A directory standing in for `/`, with `files` (absolute path, text) written into it;
+    /// removed when it is dropped.
+    fn fake_root(name: &str, files: &[(&str, &str)]) -> tempfile::TempDir {
+        let root = tempfile::Builder::new()
+            .prefix(&format!("dofray-limits-{name}-"))
+            .tempdir()
+            .unwrap();
         for (path, text) in files {
-            let path = root.join(path.trim_start_matches('/'));
+            let path = root.path().join(path.trim_start_matches('/'));
             std::fs::create_dir_all(path.parent().unwrap()).unwrap();
             std::fs::write(path, text).unwrap();
         }
@@ -836,7 +838,7 @@ Max file locks            unlimited            unlimited            locks
                 ),
             ],
         );
-        let budget = SystemFiles::under(&root).memory_budget();
+        let budget = SystemFiles::under(root.path()).memory_budget();
         assert_eq!(budget.limits.len(), 3, "{budget:?}");
         assert_eq!(
             budget.limits[1],
@@ -862,7 +864,6 @@ Max file locks            unlimited            unlimited            locks
                 && m.contains("400.0 MiB of which is in use"),
             "{m}"
         );
-        let _ = std::fs::remove_dir_all(root);
     }
 
     #[test]
@@ -885,7 +886,7 @@ Max file locks            unlimited            unlimited            locks
                 ("/sys/fs/cgroup/memory.current", "5\n"),
             ],
         );
-        let budget = SystemFiles::under(&root).memory_budget();
+        let budget = SystemFiles::under(root.path()).memory_budget();
         assert_eq!(budget.limits.len(), 2, "{budget:?}");
         assert_eq!(budget.bytes(), 3_072_000_000 - 2_048_000_000);
         let e = check_image_memory_against(1, 200_000_000, &budget.binding()).unwrap_err();
@@ -898,7 +899,6 @@ Max file locks            unlimited            unlimited            locks
             "{m}"
         );
         assert_eq!(e.limit().name(), "address_space");
-        let _ = std::fs::remove_dir_all(root);
     }
 
     #[test]
@@ -926,7 +926,7 @@ Max file locks            unlimited            unlimited            locks
             ]
         };
         let root = fake_root("v1", &files("9223372036854771712\n"));
-        let budget = SystemFiles::under(&root).memory_budget();
+        let budget = SystemFiles::under(root.path()).memory_budget();
         let want = |limit| MemoryLimit::CgroupV1 {
             dir: dir.into(),
             limit,
@@ -934,18 +934,20 @@ Max file locks            unlimited            unlimited            locks
         };
         assert_eq!(budget.limits, vec![want(2_000_000_000)]);
         let root = fake_root("v1-own", &files("1000000000\n"));
-        let budget = SystemFiles::under(&root).memory_budget();
+        let budget = SystemFiles::under(root.path()).memory_budget();
         assert_eq!(budget.limits, vec![want(1_000_000_000)]);
         assert_eq!(budget.bytes(), 800_000_000);
         // Unlimited everywhere: no cgroup limit.
         let root = fake_root("v1-none", &files("9223372036854771712\n")[..4]);
-        assert_eq!(SystemFiles::under(&root).memory_budget().limits, vec![]);
+        assert_eq!(
+            SystemFiles::under(root.path()).memory_budget().limits,
+            vec![]
+        );
         // Nothing readable at all: the fallback cap.
         assert_eq!(
-            SystemFiles::under(&root).memory_budget().bytes(),
+            SystemFiles::under(root.path()).memory_budget().bytes(),
             FALLBACK_LIMIT_BYTES
         );
-        let _ = std::fs::remove_dir_all(root);
     }
 
     #[test]

@@ -12,6 +12,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use crate::scratch::Scratch;
+
 /// The cgroup's limit: 320 MiB.
 const LIMIT: u64 = 320 << 20;
 
@@ -83,9 +85,7 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
             return;
         }
     };
-    let dir = std::env::temp_dir().join(format!("dofray-cgroup-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("cgroup");
 
     // 20000 x 20000 needs about 48 GiB of buffers: refused before anything is allocated.
     let out = dir.join("big.png");
@@ -139,5 +139,4 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
     );
     assert!(std::fs::metadata(&out).unwrap().len() > 0);
     drop(cgroup);
-    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -1,7 +1,8 @@
 //! The `dofray` command: summaries, outputs and clear rejections of bad arguments.
 
-use std::path::PathBuf;
 use std::process::{Command, Output};
+
+use crate::scratch::Scratch;
 
 fn dofray(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_dofray"))
@@ -11,11 +12,8 @@ fn dofray(args: &[&str]) -> Output {
 }
 
 /// A fresh, empty scratch directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("cli-{name}"))
 }
 
 fn stderr(o: &Output) -> String {
@@ -154,7 +152,7 @@ fn renders_png_and_exr_with_a_json_summary() {
             "{name} missing from {names:?}"
         );
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -244,7 +242,7 @@ fn bad_arguments_are_rejected_with_a_message_and_no_output() {
     assert!(!jpg.exists());
     // Nothing at all was left behind (no temporary files either).
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0);
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -384,7 +382,7 @@ fn bench_reports_every_mode_and_caches_the_reference() {
     assert!(dense_rays(&direct) < dense_rays(&report));
     let again: serde_json::Value = serde_json::from_slice(&dofray(&direct_args).stdout).unwrap();
     assert_eq!(again["reference_cached"], true);
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -432,7 +430,7 @@ fn bench_reference_ceiling_predicts_what_dense_measures() {
         text.contains(&format!("would measure {ceiling:.2} dB against it")),
         "{text}"
     );
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -554,7 +552,7 @@ fn bench_equal_error_reports_levels_rungs_and_a_plot() {
     ] {
         assert!(table.contains(phrase), "table lacks {phrase:?}:\n{table}");
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -835,7 +833,7 @@ fn lens_flags_keep_what_the_scene_says_unless_replaced() {
         picture(&["--aperture-radius", "0.01"]),
         "the framing changed"
     );
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -896,7 +894,7 @@ fn bad_model_files_fail_with_the_file_named_and_no_output() {
         );
         assert!(!png.exists(), "{file} left an output file");
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// The seed's lens from the command line: the aperture follows from the sharp range and the
@@ -1069,7 +1067,7 @@ fn the_site_rule_follows_the_flags_and_the_scene_file() {
         err.contains("render.tolerance") && err.contains("rule.toml"),
         "{err}"
     );
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// The one JSON object a failing `--json` run prints on stdout.
@@ -1203,7 +1201,6 @@ fn exit_codes_name_the_kind_of_failure() {
         assert!(!png.exists(), "{all:?} left an output file");
     }
     assert_eq!(std::fs::read(&read_only).unwrap(), b"keep");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -1228,7 +1225,6 @@ fn json_summaries_carry_the_schema_and_build() {
     let width = v["embree"]["native_packet_width"].as_u64().unwrap();
     assert!([1, 4, 8, 16].contains(&width), "{v}");
     assert!(v["embree"]["isa"].is_string(), "{v}");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
@@ -1331,7 +1327,7 @@ fn outputs_record_their_settings_and_colour_space() {
     };
     assert_eq!(text_of("dofray:spp"), "4");
     assert_eq!(text_of("dofray:scene"), "gallery");
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -1467,7 +1463,7 @@ fn progress_is_plain_lines_when_stderr_is_not_a_terminal() {
     let asked = run(&["--json", "--progress", "plain"]);
     assert!(stderr(&asked).contains("progress: "));
     serde_json::from_slice::<serde_json::Value>(&asked.stdout).unwrap();
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -1585,7 +1581,7 @@ fn png_views_apply_record_and_reject_what_they_cannot_do() {
             && err.contains("needs the AgX view"),
         "{err}"
     );
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// `--filter-glossy` and a scene's `filter_glossy` take a finite number >= 0; anything else is
@@ -1613,5 +1609,5 @@ fn a_bad_glossy_filter_is_refused_by_name() {
     let out = dofray(&["render", scene.to_str().unwrap(), "--spp", "1", "-o", png]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(!std::path::Path::new(png).with_extension("png.tmp").exists());
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }

@@ -10,6 +10,8 @@ use dofray::render::{Film, Mode, NoProgress, RenderSettings, SamplingRule, rende
 use dofray::scene::{self, SceneDesc, World};
 use glam::Vec3;
 
+use crate::scratch::Scratch;
+
 const SIZE: u32 = 96;
 const VFOV_DEG: f32 = 30.0;
 const RADIUS: f32 = 0.5;
@@ -19,9 +21,7 @@ const BACKGROUND: [f32; 3] = [0.2, 0.4, 0.9];
 /// A grey sphere of radius 0.5 at the origin seen from 5 units away, on a uniform background,
 /// lit only by ambient light; `lens` adds camera keys.
 fn sphere_scene(test: &str, lens: &str) -> SceneDesc {
-    let dir = std::env::temp_dir().join(format!("dofray-coverage-{test}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new(&format!("coverage-{test}"));
     let [r, g, b] = BACKGROUND;
     let toml = format!(
         r#"

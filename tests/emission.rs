@@ -5,20 +5,18 @@
 //! samples emitters as lights: tests/light_transport.rs).
 
 use crate::scene_assets;
+use crate::scratch::Scratch;
 
 use dofray::render::Integrator;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use dofray::embree::Device;
 use dofray::render::{Film, Mode, NoProgress, RenderSettings, render};
 use dofray::scene::{self, LoadError, SceneDesc, World};
 use glam::Vec3;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-emission-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("emission-{name}"))
 }
 
 /// Writes `files` into a scratch directory and loads the first one.

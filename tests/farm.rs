@@ -1,8 +1,10 @@
 //! Batch and farm rendering from the command line: frame sequences, resume, tiles and their
 //! merge, shards from flags and from Slurm's and Kubernetes' environment.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
+
+use crate::scratch::Scratch;
 
 /// A dofray command with no scheduler in its environment.
 fn cmd() -> Command {
@@ -25,11 +27,8 @@ fn dofray(args: &[&str]) -> Output {
     cmd().args(args).output().expect("run dofray")
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-farm-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("farm-{name}"))
 }
 
 fn s(p: &Path) -> &str {
@@ -406,10 +405,12 @@ fn a_killed_focus_pull_resumes_with_skip_existing() {
             child.try_wait().unwrap().is_none(),
             "the render ended before it could be killed"
         );
-        assert!(
-            started.elapsed().as_secs() < 600,
-            "no frames after 10 minutes"
-        );
+        if started.elapsed().as_secs() >= 600 {
+            // Killed, so that it is gone before the scratch directory it writes to is removed.
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("no frames after 10 minutes");
+        }
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
     child.kill().unwrap();
@@ -534,14 +535,14 @@ fn a_whole_image_tile_merges_and_merge_refuses_what_is_not_a_file() {
     let fifo = dir.join("t.tile-000.exr");
     let made = Command::new("mkfifo").arg(&fifo).status().unwrap();
     assert!(made.success());
-    for tile in [fifo.clone(), dir.clone()] {
+    for tile in [fifo.clone(), dir.to_path_buf()] {
         let start = std::time::Instant::now();
         let o = dofray(&["merge", s(&tile), "-o", s(&dir.join("m.exr"))]);
         assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
         assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
         assert!(start.elapsed().as_secs() < 30);
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -614,7 +615,7 @@ fn skip_existing_renders_again_frames_that_are_not_finished() {
             png_pixels(&p)
         });
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 #[test]
@@ -639,8 +640,13 @@ fn concurrent_runs_of_the_same_tiles_all_succeed() {
                     .unwrap()
             })
             .collect();
-        for child in children {
-            let o = child.wait_with_output().unwrap();
+        // All four waited for before any is checked: none still writes to the scratch
+        // directory when a failed check ends the test and removes it.
+        let outputs: Vec<Output> = children
+            .into_iter()
+            .map(|child| child.wait_with_output().unwrap())
+            .collect();
+        for o in outputs {
             assert!(o.status.success(), "round {round}: {}", stderr(&o));
         }
         assert!(
@@ -655,5 +661,5 @@ fn concurrent_runs_of_the_same_tiles_all_succeed() {
             .collect();
         assert!(left.is_empty(), "round {round}: tiles left {left:?}");
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }

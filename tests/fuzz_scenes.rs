@@ -8,6 +8,7 @@
 //! to search longer: `FUZZ_CASES=2000 cargo test --release --test integration fuzz_scenes`.
 
 use crate::scene_assets; // for its base64 encoder
+use crate::scratch::Scratch;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -291,6 +292,7 @@ fn run(scene: &Path, out: &Path, mode: &str) -> Result<(i32, String), String> {
         }
         if start.elapsed() > Duration::from_secs(30) {
             let _ = child.kill();
+            let _ = child.wait(); // gone before the test's scratch directory is removed
             return Err("did not finish within 30 s".into());
         }
         std::thread::sleep(Duration::from_millis(5));
@@ -321,9 +323,7 @@ fn extreme_but_well_formed_scenes_never_crash_or_produce_nan() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(64);
-    let dir = std::env::temp_dir().join(format!("dofray-fuzz-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("fuzz");
     let mut runner = TestRunner::new(Config {
         cases,
         failure_persistence: None,

@@ -14,17 +14,16 @@ use dofray::scene::{self, LoadError, SceneDesc, World};
 use dofray::shade::{LUMENS_PER_WATT, Light, spot_falloff};
 use glam::Vec3;
 
+use crate::scratch::{Scratch, ScratchFile};
+
 fn asset(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/scene_assets/blender")
         .join(name)
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-lights-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("lights-{name}"))
 }
 
 fn load(path: &Path) -> Result<SceneDesc, LoadError> {
@@ -32,13 +31,15 @@ fn load(path: &Path) -> Result<SceneDesc, LoadError> {
 }
 
 fn toml_scene(test: &str, toml: &str) -> Result<SceneDesc, LoadError> {
-    let path = scratch(test).join("scene.toml");
+    let dir = scratch(test);
+    let path = dir.join("scene.toml");
     std::fs::write(&path, toml).unwrap();
     load(&path)
 }
 
-/// ortho.gltf's JSON, edited by `edit`, written next to a copy of its buffer.
-fn edited_ortho(test: &str, edit: impl FnOnce(&mut serde_json::Value)) -> PathBuf {
+/// ortho.gltf's JSON, edited by `edit`, written next to a copy of its buffer in a scratch
+/// directory, which lives as long as the returned path.
+fn edited_ortho(test: &str, edit: impl FnOnce(&mut serde_json::Value)) -> ScratchFile {
     let dir = scratch(test);
     let mut json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(asset("ortho.gltf")).unwrap()).unwrap();
@@ -46,7 +47,7 @@ fn edited_ortho(test: &str, edit: impl FnOnce(&mut serde_json::Value)) -> PathBu
     std::fs::copy(asset("ortho.bin"), dir.join("ortho.bin")).unwrap();
     let path = dir.join("edited.gltf");
     std::fs::write(&path, serde_json::to_vec(&json).unwrap()).unwrap();
-    path
+    ScratchFile::new(dir, path)
 }
 
 fn near(a: Vec3, b: Vec3, eps: f32) -> bool {
@@ -486,7 +487,7 @@ fn perspective(
     test: &str,
     camera_extras: serde_json::Value,
     node_extras: serde_json::Value,
-) -> PathBuf {
+) -> ScratchFile {
     edited_ortho(test, |j| {
         let mut camera = serde_json::json!({"type": "perspective",
             "perspective": {"yfov": 0.6, "znear": 0.1}});

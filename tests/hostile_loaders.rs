@@ -6,12 +6,11 @@ use std::time::{Duration, Instant};
 
 use dofray::scene::{self, LoadError, LoadOptions, Object, SceneDesc};
 
+use crate::scratch::Scratch;
+
 /// A fresh scratch directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-hostile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("hostile-{name}"))
 }
 
 fn load(path: &Path) -> Result<SceneDesc, LoadError> {
@@ -573,9 +572,7 @@ fn references_outside_the_model_folder_are_refused_unless_allowed() {
 /// The command line raises (or lowers) the loader limits.
 #[test]
 fn limit_flags_set_the_loader_limits() {
-    let dir = std::env::temp_dir().join(format!("dofray-limit-flags-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("limit-flags");
     let obj = dir.join("big.obj");
     let mut text = "v 0 0 0\nv 1 0 0\nv 0 1 0\n".repeat(60_000);
     text.push_str("f 1 2 3\n");
@@ -610,7 +607,6 @@ fn limit_flags_set_the_loader_limits() {
         "{}",
         String::from_utf8_lossy(&raised.stderr)
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -11,11 +11,10 @@ use dofray::scene::{Background, MeshMaterials, Object, SceneDesc, World, builtin
 use dofray::shade::{Material, Pattern, Texture};
 use glam::Vec3;
 
-fn scratch(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-hostile-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+use crate::scratch::Scratch;
+
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("hostile-{name}"))
 }
 
 /// The flags that used to abort inside Embree (SIGABRT, exit 134): each is now a
@@ -322,5 +321,5 @@ fn values_refused_after_parsing_point_at_the_file_line_and_key() {
         assert_eq!(out.status.code(), Some(3), "{table}: {err}");
         assert!(err.contains(expect), "{table}: {err}");
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }

@@ -12,6 +12,8 @@ use dofray::scene::{Background, MeshMaterials, Object, SceneDesc, World};
 use dofray::shade::{Light, Material};
 use glam::Vec3;
 
+use crate::scratch::Scratch;
+
 /// A pinhole camera at `eye` looking at `look_at`, 16 x 16 pixels over `vfov` degrees.
 fn camera(eye: Vec3, look_at: Vec3, vfov: f32) -> CameraSpec {
     CameraSpec {
@@ -305,10 +307,9 @@ fn a_street_of_lamps_lights_the_ground_from_the_lamps_near_each_point() {
 }
 
 /// Writes a `w` x `h` Radiance .hdr file of radiance `texel(x, y)` (row 0 at the top) into a
-/// fresh folder and returns the folder.
-fn hdr_map(test: &str, w: u32, h: u32, texel: impl Fn(u32, u32) -> [f32; 3]) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-env-{test}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// fresh folder and returns the folder (removed when it is dropped).
+fn hdr_map(test: &str, w: u32, h: u32, texel: impl Fn(u32, u32) -> [f32; 3]) -> Scratch {
+    let dir = Scratch::new(&format!("env-{test}"));
     let img = image::Rgb32FImage::from_fn(w, h, |x, y| image::Rgb(texel(x, y)));
     image::DynamicImage::ImageRgb32F(img)
         .save_with_format(dir.join("sky.hdr"), image::ImageFormat::Hdr)
@@ -391,8 +392,7 @@ fn an_environment_map_lights_a_plane_as_its_integral_says() {
 /// A world map that is missing is an error naming it.
 #[test]
 fn a_missing_world_map_is_an_error_naming_it() {
-    let dir = std::env::temp_dir().join(format!("dofray-env-missing-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("env-missing");
     std::fs::write(
         dir.join("scene.toml"),
         "[world]\nmap = \"nowhere.hdr\"\n[[objects]]\ntype = \"sphere\"\ncenter = [0, 0, 0]\nradius = 1\n",
@@ -409,8 +409,7 @@ fn a_missing_world_map_is_an_error_naming_it() {
 /// 0.1% for a light a twentieth of h across). Written as a scene file, with Blender's watts.
 #[test]
 fn a_rect_light_in_watts_lights_a_plane_as_cycles_would() {
-    let dir = std::env::temp_dir().join(format!("dofray-rect-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("rect");
     let (p, h) = (50.0f32, 2.0f32);
     let toml = format!(
         "[image]\nwidth = 16\nheight = 16\n[camera]\neye = [0, 0.5, 0]\nlook_at = [0, 0, 0]\n\
@@ -438,8 +437,7 @@ fn a_rect_light_in_watts_lights_a_plane_as_cycles_would() {
 /// always, and the camera sees its radiance P / (pi A) when it is visible.
 #[test]
 fn area_lights_cast_no_shadow_and_hide_as_blender_lights_do() {
-    let dir = std::env::temp_dir().join(format!("dofray-light-object-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("light-object");
     let (e, p) = (2.0f32, 30.0f32);
     let render_light = |facing: &str, p: f32, extra: &str| {
         let toml = format!(
@@ -467,7 +465,6 @@ fn area_lights_cast_no_shadow_and_hide_as_blender_lights_do() {
     // A dark sphere light hidden from the camera: neither seen nor casting a shadow.
     let sphere = render_sphere_light(&dir, e);
     assert_close(sphere, e / PI, 1e-3, "through a hidden sphere light");
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The mean of the plane of `area_lights_cast_no_shadow_and_hide_as_blender_lights_do` under a
@@ -490,8 +487,7 @@ fn render_sphere_light(dir: &std::path::Path, e: f32) -> f32 {
 /// field of view), lit by the scene file's `lights` (its `[[lights]]` tables) with `objects`
 /// added, and returns the mean red radiance.
 fn plane_under(test: &str, lights: &str, objects: &str) -> f32 {
-    let dir = std::env::temp_dir().join(format!("dofray-{test}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new(test);
     let toml = format!(
         "[image]\nwidth = 16\nheight = 16\n[camera]\neye = [0, 0.5, 0]\nlook_at = [0, 0, 0]\n\
          up = [0, 0, -1]\nvfov = 0.5\n[world]\ncolor = 0\n{lights}\n\
@@ -500,9 +496,7 @@ fn plane_under(test: &str, lights: &str, objects: &str) -> f32 {
     );
     std::fs::write(dir.join("scene.toml"), toml).unwrap();
     let desc = dofray::scene::load(dir.join("scene.toml").to_str().unwrap()).unwrap();
-    let m = mean(&render_path(&desc, 256, 1)).x;
-    let _ = std::fs::remove_dir_all(&dir);
-    m
+    mean(&render_path(&desc, 256, 1)).x
 }
 
 /// A spot light with a radius shines from a disc facing each point it lights, as Cycles' spot

@@ -34,4 +34,5 @@ mod render;
 mod reuse;
 mod scene_assets;
 mod scene_files;
+mod scratch;
 mod shadows;

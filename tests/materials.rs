@@ -4,10 +4,10 @@
 //! TOML files around small glTF quads written by the tests.
 
 use crate::scene_assets; // for its base64 encoder
+use crate::scratch::Scratch;
 
 use dofray::render::Integrator;
 use std::io::Cursor;
-use std::path::PathBuf;
 
 use dofray::embree::{Device, PacketWidth, Ray};
 use dofray::filter::{PixelFilter, PixelFilterKind};
@@ -16,11 +16,8 @@ use dofray::scene::{self, SceneDesc, World};
 use glam::{Vec2, Vec3};
 use serde_json::json;
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-materials-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("materials-{name}"))
 }
 
 /// A PNG of `w` x `h` RGBA texels from `f(x, y)` (y = 0 is the top row).

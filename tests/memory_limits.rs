@@ -9,8 +9,9 @@
 //! about 0.3 GB Embree's device cannot be made), so 3 GB leaves a normal render plenty, and
 //! 1 x 200,000,000 pixels (about 24 GiB of buffers) cannot fit.
 
-use std::path::PathBuf;
 use std::process::{Command, Output};
+
+use crate::scratch::Scratch;
 
 /// Address-space limit of the command line runs, in KiB (`ulimit -v`): 2.9 GiB.
 const LIMIT_KIB: u64 = 3_000_000;
@@ -26,11 +27,8 @@ fn dofray_limited(kib: u64, args: &[&str]) -> Output {
         .expect("sh runs")
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-memory-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("memory-{name}"))
 }
 
 fn text(bytes: &[u8]) -> String {
@@ -95,7 +93,6 @@ fn the_cli_refuses_an_image_beyond_the_address_space_limit_with_exit_5() {
         message.contains("1x200000000") && message.contains("address-space limit"),
         "{message}"
     );
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// The command that started this test binary: its path, or, when it was started through the

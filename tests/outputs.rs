@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use crate::scratch::Scratch;
+
 fn bin() -> PathBuf {
     std::env::var_os("DOFRAY_TEST_BIN")
         .map(PathBuf::from)
@@ -22,11 +24,8 @@ fn dofray(args: &[&str]) -> Output {
 }
 
 /// A fresh, empty scratch directory for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-outputs-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn scratch(name: &str) -> Scratch {
+    Scratch::new(&format!("outputs-{name}"))
 }
 
 fn stderr(o: &Output) -> String {
@@ -123,10 +122,12 @@ fn sigint_during_a_large_exr_write_removes_the_temporary_file() {
         if let Some(status) = child.try_wait().unwrap() {
             panic!("dofray exited ({status}) before its temporary file was seen");
         }
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "no write started"
-        );
+        if start.elapsed() >= Duration::from_secs(30) {
+            // Killed, so that it is gone before the scratch directory it writes to is removed.
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("no write started");
+        }
         std::thread::sleep(Duration::from_millis(2));
     }
     send("-INT", &child);
@@ -514,7 +515,7 @@ fn oiiotool_reads_layers_alpha_depth_precision_compression_and_metadata() {
         ]);
         assert!(roles.contains("alpha=4 z=5"), "{roles} for {case}");
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// Every channel of an EXR by name, widened to f32, with whether it was stored as half.
@@ -581,7 +582,7 @@ fn exr_half_round_trips_the_beauty_within_half_precision() {
         .2;
     assert!(depth.contains(&dofray::output::exr::DEPTH_MISS));
     assert!(depth.iter().all(|d| d.is_finite() && *d > 0.0));
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// The EXR says which colour space its linear values are in (Rec.709 primaries, D65 white), as
@@ -619,5 +620,5 @@ fn exr_carries_rec709_d65_chromaticities() {
         assert_eq!(xy(c.blue), (0.15, 0.06));
         assert_eq!(xy(c.white), (0.3127, 0.3290));
     }
-    std::fs::remove_dir_all(dir).unwrap();
+    dir.close().unwrap();
 }

@@ -24,6 +24,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use crate::scratch::Scratch;
+
 const TABLE: &str = "tests/pixel_identity.txt";
 
 /// (case name, arguments after `dofray render`). Small images keep the suite fast; every
@@ -216,7 +218,7 @@ fn every_scene_and_mode_renders_the_pixels_it_did_before() {
         let hash = render_hash(&args, &dir, i).unwrap_or_else(|e| panic!("{name}: {e}"));
         got.insert(name.to_string(), format!("{hash:016x}"));
     }
-    std::fs::remove_dir_all(&dir).ok();
+    dir.close().ok();
     if bless {
         std::fs::write(&table, blessed(&sections, &platform, &got)).unwrap();
         eprintln!("wrote {} for {platform}", table.display());
@@ -311,8 +313,6 @@ fn cpu_vendor() -> String {
         .unwrap_or_else(|| "an unknown CPU".to_string())
 }
 
-fn tempdir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("dofray-pixel-identity-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn tempdir() -> Scratch {
+    Scratch::new("pixel-identity")
 }

@@ -7,6 +7,8 @@ use std::sync::Arc;
 use dofray::camera::optics::Optics;
 use dofray::camera::{Camera, CameraLens, CameraSpec, Focus, Prescription, RealLens, RealLensSpec};
 
+use crate::scratch::Scratch;
+
 fn lens(name: &str) -> Arc<Prescription> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("lenses")
@@ -208,13 +210,14 @@ fn scene_files_take_a_lens_and_point_at_its_faults() {
         e.contains("scene.toml:5") && e.contains("camera.lens") && e.contains("missing.dat"),
         "{e}"
     );
-    let bad = std::env::temp_dir().join(format!("dofray-bad-lens-{}.dat", std::process::id()));
+    let bad_dir = Scratch::new("bad-lens");
+    let bad = bad_dir.join("bad-lens.dat");
     std::fs::write(&bad, "# bad\n10 2 1.5 10\n0 1 0 8\n-10 0 1.5 10 x\n").unwrap();
     let e = parse(&format!("lens = {:?}\n", bad.to_str().unwrap()))
         .unwrap_err()
         .to_string();
     assert!(e.contains(&format!("{}:4: abbe", bad.display())), "{e}");
-    std::fs::remove_file(&bad).unwrap();
+    bad_dir.close().unwrap();
     let e = parse("lens = \"double-gauss-50mm.dat\"\nvfov = 30\n")
         .unwrap_err()
         .to_string();
@@ -244,8 +247,7 @@ fn scene_files_take_a_lens_and_point_at_its_faults() {
 /// a thin lens, the corners darker), and a bad lens file is bad input (exit 3) naming it.
 #[test]
 fn the_command_line_renders_through_a_lens() {
-    let dir = std::env::temp_dir().join(format!("dofray-real-lens-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("real-lens");
     let lens = Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses/double-gauss-50mm.dat");
     let render = |extra: &[&str], out: &str| {
         std::process::Command::new(env!("CARGO_BIN_EXE_dofray"))
@@ -309,7 +311,7 @@ fn the_command_line_renders_through_a_lens() {
         "x.png",
     );
     assert_eq!(out.status.code(), Some(2));
-    std::fs::remove_dir_all(&dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// Defocused lamps through the double Gauss wide open: towards the corner their bokeh shrinks
@@ -317,8 +319,7 @@ fn the_command_line_renders_through_a_lens() {
 /// lens's traced relative illumination says.
 #[test]
 fn bokeh_becomes_a_cats_eye_towards_the_corners() {
-    let dir = std::env::temp_dir().join(format!("dofray-cats-eye-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("cats-eye");
     let (w, h) = (240u32, 160u32);
     // Two lamps of 0.1 m radius 10 m away (5 px images), seen at the centre and at (0.8,
     // 0.8) of the half frame, with the lens focused at 0.7 m: discs of about 14 px.
@@ -448,7 +449,7 @@ fn bokeh_becomes_a_cats_eye_towards_the_corners() {
         (ratio / predicted - 1.0).abs() < 0.1,
         "energy ratio {ratio}, traced {predicted}"
     );
-    std::fs::remove_dir_all(&dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// The blur bound stays a bound beyond its table, nearer than any lens focuses: it grows as
@@ -480,8 +481,7 @@ fn the_blur_bound_holds_nearer_than_its_table() {
 /// camera-only spp, dense): the two estimators of the real lens meet, vignetting included.
 #[test]
 fn light_traced_lamps_through_a_real_lens_match_the_camera() {
-    let dir = std::env::temp_dir().join(format!("dofray-lens-light-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = Scratch::new("lens-light");
     let (w, h) = (150u32, 100u32);
     let lens_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses/double-gauss-50mm.dat");
     // Lamps 0.16 m across 10 m away (3.3 px sharp), focused at 0.7 m: discs of about 9 px,
@@ -560,7 +560,7 @@ fn light_traced_lamps_through_a_real_lens_match_the_camera() {
     let total = |img: &[f32]| img.iter().map(|&v| f64::from(v)).sum::<f64>();
     let ratio = total(&traced) / total(&camera_only);
     assert!((ratio - 1.0).abs() < 0.03, "whole image {ratio}");
-    std::fs::remove_dir_all(&dir).unwrap();
+    dir.close().unwrap();
 }
 
 /// A real lens projects a point where its chief ray images it, distortion included: the

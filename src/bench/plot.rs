@@ -398,8 +398,11 @@ mod tests {
 
     #[test]
     fn the_plot_is_a_png_of_the_documented_size() {
-        let dir = std::env::temp_dir().join(format!("dofray-plot-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("dofray-plot-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let cases = [
             report(
                 vec![
@@ -426,10 +429,10 @@ mod tests {
             let rgb = img.to_rgb8();
             assert!(rgb.pixels().any(|p| p.0 != [255, 255, 255]), "case {i}");
             // write_plot names the file and records it.
-            write_plot(&mut r, &dir).unwrap();
+            write_plot(&mut r, dir).unwrap();
             assert_eq!(r.plot.as_deref(), Some(dir.join(EQUAL_ERROR_PNG).as_path()));
         }
-        std::fs::remove_dir_all(dir).unwrap();
+        scratch.close().unwrap();
     }
 
     #[test]

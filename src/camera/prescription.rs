@@ -306,8 +306,11 @@ mod tests {
 
     #[test]
     fn the_file_errors_name_the_file() {
-        let dir = std::env::temp_dir().join(format!("dofray-lens-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("dofray-lens-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let path = dir.join("bad.dat");
         std::fs::write(&path, "# bad\n10 2 1.5\n").unwrap();
         let e = Prescription::load(&path).unwrap_err().to_string();
@@ -316,8 +319,8 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("missing.dat: cannot read lens file"), "{e}");
-        let e = Prescription::load(&dir).unwrap_err().to_string();
+        let e = Prescription::load(dir).unwrap_err().to_string();
         assert!(e.contains("not a regular file"), "{e}");
-        std::fs::remove_dir_all(&dir).unwrap();
+        scratch.close().unwrap();
     }
 }

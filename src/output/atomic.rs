@@ -177,9 +177,11 @@ mod tests {
 
     #[test]
     fn temp_files_are_listed_while_they_exist_and_removed_on_drop() {
-        let dir = std::env::temp_dir().join(format!("dofray-atomic-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let target = dir.join("t.png");
+        let dir = tempfile::Builder::new()
+            .prefix("dofray-atomic-")
+            .tempdir()
+            .unwrap();
+        let target = dir.path().join("t.png");
         let mut tmp = TempFile::create(&target).unwrap();
         let path = tmp.path().to_path_buf();
         assert!(path.is_file());
@@ -194,6 +196,6 @@ mod tests {
         tmp.persist().unwrap();
         assert!(!path.exists() && !registry().contains(&path));
         assert_eq!(std::fs::read(&target).unwrap(), b"done");
-        std::fs::remove_dir_all(dir).unwrap();
+        dir.close().unwrap();
     }
 }

@@ -350,45 +350,39 @@ impl HasKind for OutputError {
 mod tests {
     use super::*;
     use std::io::Write;
-    use std::sync::atomic::{AtomicU64, Ordering};
 
     /// A unique scratch directory under the system temp dir, removed on drop.
-    struct Scratch(PathBuf);
+    struct Scratch(tempfile::TempDir);
 
     impl Scratch {
         fn new(tag: &str) -> Self {
-            static N: AtomicU64 = AtomicU64::new(0);
-            let dir = std::env::temp_dir().join(format!(
-                "dofray-output-{tag}-{}-{}",
-                std::process::id(),
-                N.fetch_add(1, Ordering::Relaxed)
-            ));
-            std::fs::create_dir_all(&dir).unwrap();
+            let dir = tempfile::Builder::new()
+                .prefix(&format!("dofray-output-{tag}-"))
+                .tempdir()
+                .unwrap();
             Self(dir)
+        }
+
+        fn path(&self) -> &Path {
+            self.0.path()
         }
 
         /// Writes `film` as `name` here with the default options; checks it is the only file
         /// written (no temporary file left behind) and returns its path.
         fn write_only(&self, name: &str, film: &Film) -> PathBuf {
-            let path = self.0.join(name);
+            let path = self.path().join(name);
             write_film(&path, film).unwrap();
             assert_eq!(self.entries(), vec![name.to_owned()]);
             path
         }
 
         fn entries(&self) -> Vec<String> {
-            let mut names: Vec<String> = std::fs::read_dir(&self.0)
+            let mut names: Vec<String> = std::fs::read_dir(self.path())
                 .unwrap()
                 .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
                 .collect();
             names.sort();
             names
-        }
-    }
-
-    impl Drop for Scratch {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
         }
     }
 
@@ -535,7 +529,7 @@ mod tests {
     #[test]
     fn exr_half_beauty_keeps_the_passes_f32() {
         let dir = Scratch::new("exr-half");
-        let path = dir.0.join("half.exr");
+        let path = dir.path().join("half.exr");
         let mut film = transparent_film();
         film.color[1] = Vec3::new(1e6, -1e6, 0.1); // beyond half's range: clamped
         film.depth[2] = 1234.567; // needs f32
@@ -574,7 +568,7 @@ mod tests {
         let film = transparent_film();
         for compression in ExrCompression::ALL {
             for half in [false, true] {
-                let path = dir.0.join(format!("{compression}-{half}.exr"));
+                let path = dir.path().join(format!("{compression}-{half}.exr"));
                 let options = WriteOptions {
                     exr_half: half,
                     exr_compression: compression,
@@ -611,7 +605,7 @@ mod tests {
         let dir = Scratch::new("png-rgba");
         let film = transparent_film();
         for sixteen in [false, true] {
-            let path = dir.0.join(format!("rgba-{sixteen}.png"));
+            let path = dir.path().join(format!("rgba-{sixteen}.png"));
             let options = WriteOptions {
                 png_alpha: true,
                 png_16bit: sixteen,
@@ -660,7 +654,7 @@ mod tests {
     #[test]
     fn missing_directory_is_an_io_error_and_creates_nothing() {
         let dir = Scratch::new("missing");
-        let missing = dir.0.join("no-such-dir");
+        let missing = dir.path().join("no-such-dir");
         for name in ["out.png", "out.exr"] {
             let path = missing.join(name);
             let err = write_film(&path, &test_film()).unwrap_err();
@@ -682,21 +676,21 @@ mod tests {
     fn check_writable_accepts_a_writable_directory_and_leaves_it_clean() {
         let dir = Scratch::new("check");
         assert_eq!(
-            check_writable(&dir.0.join("a.png")).unwrap(),
+            check_writable(&dir.path().join("a.png")).unwrap(),
             ImageFormat::Png
         );
         assert_eq!(
-            check_writable(&dir.0.join("a.exr")).unwrap(),
+            check_writable(&dir.path().join("a.exr")).unwrap(),
             ImageFormat::Exr
         );
         assert!(matches!(
-            check_writable(&dir.0.join("a.jpg")),
+            check_writable(&dir.path().join("a.jpg")),
             Err(OutputError::UnknownExtension { .. })
         ));
         // A directory named like an image is not a writable output path.
-        std::fs::create_dir(dir.0.join("d.png")).unwrap();
+        std::fs::create_dir(dir.path().join("d.png")).unwrap();
         assert!(matches!(
-            check_writable(&dir.0.join("d.png")),
+            check_writable(&dir.path().join("d.png")),
             Err(OutputError::Io { .. })
         ));
         assert_eq!(dir.entries(), vec!["d.png".to_owned()]);
@@ -707,33 +701,33 @@ mod tests {
         let dir = Scratch::new("fail");
         // Unknown extension: nothing is created.
         assert!(matches!(
-            write_film(&dir.0.join("x.jpg"), &test_film()),
+            write_film(&dir.path().join("x.jpg"), &test_film()),
             Err(OutputError::UnknownExtension { .. })
         ));
         // Empty images.
         assert!(matches!(
-            write_film(&dir.0.join("e.png"), &Film::new(0, 3)),
+            write_film(&dir.path().join("e.png"), &Film::new(0, 3)),
             Err(OutputError::EmptyImage)
         ));
         assert!(matches!(
-            write_png_rgb(&dir.0.join("e.png"), 3, 0, &[]),
+            write_png_rgb(&dir.path().join("e.png"), 3, 0, &[]),
             Err(OutputError::EmptyImage)
         ));
         // Mismatched buffers.
         let mut bad = test_film();
         bad.depth.pop();
         assert!(matches!(
-            write_film(&dir.0.join("b.exr"), &bad),
+            write_film(&dir.path().join("b.exr"), &bad),
             Err(OutputError::Encode { .. })
         ));
         assert!(matches!(
-            write_png_rgb(&dir.0.join("b.png"), 2, 2, &[Vec3::ONE; 3]),
+            write_png_rgb(&dir.path().join("b.png"), 2, 2, &[Vec3::ONE; 3]),
             Err(OutputError::Encode { .. })
         ));
         assert!(dir.entries().is_empty(), "{:?}", dir.entries());
 
         // A failure inside the writer removes the temp file and keeps the previous target.
-        let target = dir.0.join("keep.png");
+        let target = dir.path().join("keep.png");
         std::fs::write(&target, b"old").unwrap();
         let err = Target::new(&target)
             .unwrap()

@@ -383,21 +383,19 @@ mod tests {
     }
 
     /// A fresh directory under the system temp dir, removed on drop.
-    struct Scratch(PathBuf);
+    struct Scratch(tempfile::TempDir);
 
     impl Scratch {
         fn new(tag: &str) -> Self {
-            let dir =
-                std::env::temp_dir().join(format!("dofray-target-{tag}-{}", std::process::id()));
-            let _ = std::fs::remove_dir_all(&dir);
-            std::fs::create_dir_all(&dir).unwrap();
+            let dir = tempfile::Builder::new()
+                .prefix(&format!("dofray-target-{tag}-"))
+                .tempdir()
+                .unwrap();
             Self(dir)
         }
-    }
 
-    impl Drop for Scratch {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
+        fn path(&self) -> &Path {
+            self.0.path()
         }
     }
 
@@ -406,15 +404,15 @@ mod tests {
     fn a_target_keeps_the_given_path_and_writes_what_its_links_name() {
         use std::os::unix::fs::{PermissionsExt, symlink};
         let dir = Scratch::new("links");
-        let real = dir.0.join("real.png");
-        let link = dir.0.join("link.PNG");
+        let real = dir.path().join("real.png");
+        let link = dir.path().join("link.PNG");
         symlink("real.png", &link).unwrap();
         let target = Target::new(&link).unwrap();
         assert_eq!(target.path(), link);
         assert_eq!(target.resolved(), real);
         assert_eq!(target.format(), ImageFormat::Png);
         target.check_writable().unwrap();
-        let with = Target::with_format(dir.0.join("plot.svg"), ImageFormat::Png).unwrap();
+        let with = Target::with_format(dir.path().join("plot.svg"), ImageFormat::Png).unwrap();
         assert_eq!(with.format(), ImageFormat::Png);
 
         // Made read-only after the target was made: still refused when it is written.
@@ -428,12 +426,12 @@ mod tests {
     #[test]
     fn render_targets_refuse_collisions_and_name_the_pictures() {
         let dir = Scratch::new("render");
-        let aov = dir.0.join("aov");
+        let aov = dir.path().join("aov");
         let err = RenderTargets::new(&aov.join(AOV_SAMPLES), Some(&aov)).unwrap_err();
         assert!(matches!(err, OutputError::Collision { .. }), "{err:?}");
         assert!(!aov.exists(), "nothing made");
 
-        let image = dir.0.join("image.exr");
+        let image = dir.path().join("image.exr");
         let targets = RenderTargets::new(&image, Some(&aov)).unwrap();
         assert_eq!(targets.image.format(), ImageFormat::Exr);
         let aovs = targets.aovs.unwrap();

@@ -83,8 +83,11 @@ mod tests {
 
     #[test]
     fn finished_images_pass_and_broken_ones_say_why() {
-        let dir = std::env::temp_dir().join(format!("dofray-verify-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("dofray-verify-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         for ext in ["png", "exr"] {
             let path = dir.join(format!("f.{ext}"));
             let mut film = Film::new(33, 17);
@@ -104,7 +107,7 @@ mod tests {
                 assert!(!e.is_empty(), "{ext} cut to {keep}");
             }
         }
-        assert!(check_complete(&dir, 1, 1).unwrap_err().contains("regular"));
-        std::fs::remove_dir_all(dir).unwrap();
+        assert!(check_complete(dir, 1, 1).unwrap_err().contains("regular"));
+        scratch.close().unwrap();
     }
 }
