@@ -20,7 +20,7 @@ pub enum RendererError {
     #[error(transparent)]
     Load(#[from] LoadError),
     /// The scene's description cannot be built into an Embree world.
-    #[error("invalid scene {name}")]
+    #[error("scene {name}")]
     Scene {
         /// The scene's name.
         name: String,

@@ -180,3 +180,80 @@ fn child_render_beyond_the_address_space() {
     let (film, _) = render::render(&world, &camera, &settings, &NoProgress).unwrap();
     assert_eq!(film.color.len(), 16 * 12);
 }
+
+/// A flat emissive grid of `2 n^2` triangles as an OBJ file (with its MTL) in `dir`.
+fn emissive_grid(dir: &std::path::Path, n: usize) -> std::path::PathBuf {
+    use std::fmt::Write;
+    std::fs::write(
+        dir.join("glow.mtl"),
+        "newmtl glow\nKd 0.8 0.8 0.8\nKe 2 2 2\n",
+    )
+    .unwrap();
+    let mut obj = String::from("mtllib glow.mtl\nusemtl glow\n");
+    for j in 0..=n {
+        for i in 0..=n {
+            writeln!(obj, "v {} 0 {}", i as f32 / n as f32, j as f32 / n as f32).unwrap();
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i + 1;
+            let (b, c, d) = (a + 1, a + n + 1, a + n + 2);
+            writeln!(obj, "f {a} {b} {d}\nf {a} {d} {c}").unwrap();
+        }
+    }
+    let path = dir.join("grid.obj");
+    std::fs::write(&path, obj).unwrap();
+    path
+}
+
+/// An emissive mesh of 405,000 triangles, under address-space limits rising 20 MB at a time
+/// until it renders: every run either renders or exits 5 naming what could not be had, and
+/// some run fails on what the light tree and the emitters' list need (allocated infallibly
+/// before: an abort, SIGABRT) or, lower, on what parsing the OBJ needs (tobj, which grows
+/// its tables infallibly, is refused up front).
+#[test]
+fn an_emissive_mesh_beyond_the_address_space_is_refused_never_aborted() {
+    let dir = scratch("emissive");
+    let model = emissive_grid(&dir, 450);
+    let out = dir.join("out.png");
+    let args = [
+        "render",
+        model.to_str().unwrap(),
+        "--spp",
+        "1",
+        "--width",
+        "16",
+        "--threads",
+        "1",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    let mut failures = Vec::new();
+    let mut rendered = None;
+    for kib in (300_000..=1_200_000).step_by(20_000) {
+        let run = dofray_limited(kib, &args);
+        let err = text(&run.stderr);
+        match run.status.code() {
+            Some(0) => {
+                rendered = Some(kib);
+                break;
+            }
+            Some(5) => {
+                // Ours, or Embree's (RTC_ERROR_OUT_OF_MEMORY) below what its device needs.
+                let err_lower = err.to_lowercase().replace('_', " ");
+                assert!(err_lower.contains("out of memory"), "{kib} KiB: {err}");
+                failures.push((kib, err));
+            }
+            _ => panic!("{kib} KiB: {} {err}", run.status),
+        }
+    }
+    let names = |what: &str| failures.iter().any(|(_, e)| e.contains(what));
+    assert!(rendered.is_some(), "never rendered: {failures:?}");
+    assert!(
+        names("the light tree") || names("the emitters"),
+        "no run stopped at the emitters: {failures:?}"
+    );
+    assert!(out.is_file());
+}
