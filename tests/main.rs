@@ -26,6 +26,7 @@ mod light_tracing;
 mod light_transport;
 mod materials;
 mod memory_limits;
+mod night_scene;
 mod outputs;
 mod pixel_identity;
 mod real_lens;

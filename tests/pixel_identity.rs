@@ -33,12 +33,13 @@ const TABLE: &str = "tests/pixel_identity.txt";
 fn cases() -> Vec<(&'static str, Vec<&'static str>)> {
     let size = ["--width", "96", "--height", "72"];
     let mut cases: Vec<(&'static str, Vec<&'static str>)> = Vec::new();
-    let scenes: [(&str, &str); 7] = [
+    let scenes: [(&str, &str); 8] = [
         ("paper", "paper"),
         ("paper.toml", "scenes/paper.toml"),
         ("gallery", "scenes/gallery.toml"),
         ("vase", "scenes/vase.toml"),
         ("bokeh", "scenes/bokeh.toml"),
+        ("night", "scenes/night.toml"),
         ("focus_pull", "scenes/focus_pull.toml"),
         ("blender_lights", "tests/scene_assets/blender/lights.gltf"),
     ];

@@ -170,6 +170,7 @@ fn every_scene_file_loads_builds_and_renders() {
             "focus_pull",
             "gallery",
             "interior",
+            "night",
             "paper",
             "vase"
         ]
