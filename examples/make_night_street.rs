@@ -34,21 +34,14 @@ const WALL_X: f64 = 5.0;
 const WINDOWS: usize = 12;
 const WINDOW_SPACING: f64 = 3.5;
 
-/// SplitMix64: a tiny, fixed, well-mixed sequence.
+/// SplitMix64 from the seed: numbers uniform in [0, 1) (its mix is the library's `hash64`).
 struct Rng(u64);
 
 impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
     fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+        let z = dofray::sampler::hash64(self.0);
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        (z >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
