@@ -138,7 +138,9 @@ fn report(path: &Path, device: &Device) {
 }
 
 fn benches(c: &mut Criterion) {
-    let path = write_grid(&std::env::temp_dir());
+    // Removed when the bench ends, however it ends.
+    let dir = tempfile::tempdir().unwrap();
+    let path = write_grid(dir.path());
     let device = Device::new().unwrap();
     report(&path, &device);
 
@@ -155,7 +157,6 @@ fn benches(c: &mut Criterion) {
         })
     });
     g.finish();
-    let _ = std::fs::remove_file(&path);
 }
 
 criterion_group!(mesh_load, benches);
