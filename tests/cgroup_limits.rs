@@ -138,5 +138,37 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
         text(&admitted.stderr)
     );
     assert!(std::fs::metadata(&out).unwrap().len() > 0);
+
+    // A million emissive triangles: the mesh fits, the emitters' light tree (about 280 bytes
+    // an emitter) does not. No allocation fails under a cgroup (the OOM killer ends the
+    // process instead), so this is refused from the budget before the tree is built (or, on
+    // a machine with less left, before the OBJ is parsed): exit 5, never SIGKILL.
+    let model = crate::memory_limits::emissive_grid(&dir, 707);
+    let out = dir.join("emissive.png");
+    let refused = cgroup.dofray(&[
+        "render",
+        model.to_str().unwrap(),
+        "--spp",
+        "1",
+        "--width",
+        "32",
+        "--threads",
+        "1",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let err = text(&refused.stderr);
+    assert_eq!(
+        refused.status.code(),
+        Some(5),
+        "{:?}: {err}",
+        refused.status
+    );
+    assert!(
+        err.contains("out of memory") && err.contains("cgroup memory limit"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing is written");
     drop(cgroup);
 }

@@ -182,7 +182,7 @@ fn child_render_beyond_the_address_space() {
 }
 
 /// A flat emissive grid of `2 n^2` triangles as an OBJ file (with its MTL) in `dir`.
-fn emissive_grid(dir: &std::path::Path, n: usize) -> std::path::PathBuf {
+pub fn emissive_grid(dir: &std::path::Path, n: usize) -> std::path::PathBuf {
     use std::fmt::Write;
     std::fs::write(
         dir.join("glow.mtl"),
