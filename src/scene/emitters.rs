@@ -179,8 +179,9 @@ impl Emitters {
     pub const ALWAYS_SAMPLED: usize = 8;
 
     /// The emitters of `world`: its lights, its emissive primitives, and its background when it
-    /// is not black. A memory error when their distribution cannot be allocated (about 270
-    /// bytes per emissive triangle or sphere while building, 210 after).
+    /// is not black. A memory error when their distribution cannot be allocated (about 280
+    /// bytes per emissive triangle or sphere while building, 210 after; from 4096 of them on,
+    /// checked against the memory budget first).
     pub fn build(world: &World) -> Result<Self, MemoryError> {
         let mut always = Vec::new();
         let mut punctual = Vec::new();
