@@ -630,6 +630,17 @@ pub fn check_image_memory_against(
     }
 }
 
+/// Refuses `bytes` for `what` when the memory budget ([`MemoryBudget::read`]) leaves less:
+/// for memory that third-party code allocates infallibly, or that a cgroup would grant and
+/// then reclaim with its OOM killer, so nothing could fail later with an error.
+pub fn check_budget(what: &'static str, bytes: u128) -> Result<(), MemoryError> {
+    let limit = MemoryBudget::read().binding();
+    if bytes > u128::from(limit.remaining()) {
+        return Err(MemoryError::Allocation { what, bytes, limit });
+    }
+    Ok(())
+}
+
 /// An empty vector with room for exactly `n` elements, or [`MemoryError::Allocation`] (naming
 /// `what`) when the allocator refuses, instead of aborting the process.
 pub fn try_with_capacity<T>(n: usize, what: &'static str) -> Result<Vec<T>, MemoryError> {

@@ -19,7 +19,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 use crate::embree::{Geometry, GeometryId, Hit};
-use crate::limits::{MemoryBudget, MemoryError, try_with_capacity};
+use crate::limits::{MemoryError, check_budget, try_with_capacity};
 use crate::shade::{Light, Material, SunDisc, luminance};
 
 use super::World;
@@ -98,20 +98,14 @@ const BYTES_PER_EMITTER: u128 = 280;
 /// limit no allocation fails (the kernel kills the process when the pages are touched: exit
 /// 137, no message), so the fallible allocations alone would not catch it. Few emitters are
 /// not checked (nothing to read from `/proc` for them).
-fn check_budget(count: usize) -> Result<(), MemoryError> {
+fn check_emitters_budget(count: usize) -> Result<(), MemoryError> {
     if count < 4096 {
         return Ok(());
     }
-    let bytes = count as u128 * BYTES_PER_EMITTER;
-    let limit = MemoryBudget::read().binding();
-    if bytes > u128::from(limit.remaining()) {
-        return Err(MemoryError::Allocation {
-            what: "the emitters' light tree (about 280 bytes per emissive triangle or sphere)",
-            bytes,
-            limit,
-        });
-    }
-    Ok(())
+    check_budget(
+        "the emitters' light tree (about 280 bytes per emissive triangle or sphere)",
+        count as u128 * BYTES_PER_EMITTER,
+    )
 }
 
 /// How many primitives `geometry` has.
@@ -213,7 +207,7 @@ impl Emitters {
             .map(|(g, x)| count(g, x))
             .sum();
         let total = primitives + picked.len();
-        check_budget(total)?;
+        check_emitters_budget(total)?;
         let mut list = try_with_capacity(total, "the emitters")?;
         let mut bounds = try_with_capacity(total, "the emitters' bounds")?;
         let mut by_prim = HashMap::new();

@@ -17,7 +17,7 @@ use super::input::{self, LoadOptions};
 use super::mesh_input::{MeshBuffers, ModelFile, buffer, guarded, keep_winding, memory_error};
 use super::model::{Model, ModelMesh, Transform, short_vec};
 use super::texture::TextureCache;
-use crate::limits::MemoryError;
+use crate::limits::check_budget;
 use crate::shade::{Material, Texture, Wrap};
 
 /// A buffered reader that follows the bytes an OBJ or MTL parser consumes: it counts lines, so
@@ -394,15 +394,11 @@ fn parse(file: &ModelFile) -> Result<Parsed, LoadError> {
     // tobj grows its buffers infallibly (an abort, not an error, where memory runs out):
     // what it will hold is refused up front instead.
     let needed = u128::from(input.size()) * PARSE_BYTES_PER_FILE_BYTE;
-    let budget = crate::limits::MemoryBudget::read().binding();
-    if needed > u128::from(budget.remaining()) {
-        let e = MemoryError::Allocation {
-            what: "parsing the OBJ text (about 8 bytes per byte of the file)",
-            bytes: needed,
-            limit: budget,
-        };
-        return Err(memory_error(file.path, e));
-    }
+    check_budget(
+        "parsing the OBJ text (about 8 bytes per byte of the file)",
+        needed,
+    )
+    .map_err(|e| memory_error(file.path, e))?;
     let mut reader = LineCounter::new(input.reader(), &line);
     // tobj asks for MTL libraries by name and keeps only their materials: keep which file
     // each came from (texture paths are relative to it) and any failure, with its line.
