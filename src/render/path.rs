@@ -56,11 +56,7 @@ impl Lane {
         throughput: Vec3::ONE,
         pdf: 1.0,
         delta: true,
-        from: Receiver {
-            p: Vec3::ZERO,
-            n: Vec3::ZERO,
-            glossy: 0.0,
-        },
+        from: Receiver::at(Vec3::ZERO),
         min_pdf: f32::INFINITY,
         diffuse: 0,
         glossy: 0,
@@ -327,7 +323,7 @@ pub fn trace_path(
         if let Some(s) = split_here.as_deref_mut() {
             s.lit(first, scratch, radiance);
         }
-        let drawn = (&v, &scattering, &numbers, &scratch.points);
+        let drawn = (&v, &scattering, &glossy_share, &numbers, &scratch.points);
         scatter_lanes(drawn, (limits, bounce), &mut lanes, split_here, packet);
         kind = RayKind::Secondary;
         hint = RayHint::Incoherent;
@@ -755,12 +751,14 @@ fn light_sample_weight(
 }
 
 /// The next rays of the lanes that scatter ([`scatter`]: `v`'s surfaces seen as
-/// `scattering`, drawn with `numbers`, at the shading normals of `points`) into `packet`, which
-/// is cleared first; with `split`, each lane's specular share of its first scattering too.
+/// `scattering`, of glossy shares `glossy_share`, drawn with `numbers`, at the shading normals
+/// of `points`) into `packet`, which is cleared first; with `split`, each lane's specular
+/// share of its first scattering too.
 fn scatter_lanes(
-    (v, scattering, numbers, points): (
+    (v, scattering, glossy_share, numbers, points): (
         &Vertices,
         &[Option<Scattering>; LANES],
+        &[f32; LANES],
         &[Numbers; LANES],
         &SurfacePoints16,
     ),
@@ -776,7 +774,8 @@ fn scatter_lanes(
         };
         let n = points.get(lane).normal;
         let u = &numbers[lane];
-        if let Some(ray) = scatter(v, lane, (n, at), u, limits, bounce, &mut lanes[lane]) {
+        let surface = (n, at, glossy_share[lane]);
+        if let Some(ray) = scatter(v, lane, surface, u, limits, bounce, &mut lanes[lane]) {
             if let Some(s) = split.as_deref_mut() {
                 s.shares[lane] = first_specular_share(at, &ray, &lanes[lane]);
             }
@@ -792,7 +791,7 @@ fn scatter_lanes(
 fn scatter(
     v: &Vertices,
     lane: usize,
-    (n, at): (Vec3, &Scattering),
+    (n, at, glossy): (Vec3, &Scattering, f32),
     u: &Numbers,
     limits: &PathLimits,
     bounce: u32,
@@ -831,7 +830,7 @@ fn scatter(
     s.from = Receiver {
         p: origin,
         n,
-        glossy: v.bsdf[lane].glossy_share(),
+        glossy,
     };
     Some(Ray::new(origin, sample.wi))
 }

@@ -253,7 +253,7 @@ pub struct Receiver {
 
 impl Receiver {
     /// A point with no surface to weigh directions by, matte.
-    pub fn at(p: Vec3) -> Self {
+    pub const fn at(p: Vec3) -> Self {
         Self {
             p,
             n: Vec3::ZERO,
