@@ -87,8 +87,8 @@ pub fn punctual_sample(light: &Light, p: Vec3, u: Vec2) -> EmitterSample {
 }
 
 /// What building the emitters' distribution allocates per emitter: the list (12 bytes), bounds
-/// (56), index (about 15), the tree's nodes (160), its build's centres and order (16) and its
-/// paths and powers (16). (Peak resident memory grew by 202 bytes per emitter for 898,000
+/// (56), index (about 15), the tree's nodes (160), its build's order (4) and its paths and
+/// powers (16): 263, with room. (Peak resident memory grew by 202 bytes per emitter for 898,000
 /// emissive triangles, against the same mesh not emitting: the allocator reuses what parsing
 /// freed. Taken at that, a 980,000-triangle mesh was admitted under a 320 MiB cgroup and
 /// killed by its OOM killer.)

@@ -355,7 +355,7 @@ pub struct LightTree {
 
 impl LightTree {
     /// The tree over `emitters` (emitter i is `emitters[i]`), or the memory error naming what
-    /// could not be allocated (about 190 bytes per emitter while building, 175 after). Large
+    /// could not be allocated (about 180 bytes per emitter while building, 175 after). Large
     /// subtrees are built in parallel.
     pub fn build(emitters: &[LightBounds]) -> Result<Self, MemoryError> {
         let n = emitters.len();
@@ -374,13 +374,7 @@ impl LightTree {
             sum as f32
         };
         let cdf = try_collect(power.iter().map(running), "the light tree's powers")?;
-        let build = Build {
-            bounds: emitters,
-            centroids: try_collect(
-                emitters.iter().map(|b| b.centroid()),
-                "the light tree's build",
-            )?,
-        };
+        let build = Build { bounds: emitters };
         let mut order = try_collect(0..n as u32, "the light tree's build")?;
         let placeholder = Node {
             bounds: Probe::of(&LightBounds::everywhere(Vec3::ZERO, Vec3::ZERO, 0.0)),
@@ -511,10 +505,9 @@ const PARALLEL_BUILD: usize = 4096;
 /// every level, two million emissive triangles took about 10 s to build; now about 3).
 const BINNED: usize = 2048;
 
-/// The emitters a tree is built over, with their bounds' centres.
+/// The emitters a tree is built over.
 struct Build<'a> {
     bounds: &'a [LightBounds],
-    centroids: Vec<Vec3>,
 }
 
 impl Build<'_> {
@@ -607,7 +600,7 @@ impl Build<'_> {
     /// at most [`BINNED`] of them), or at the median along the longest axis when the tree would
     /// otherwise grow too deep or no axis has extent.
     fn split(&self, order: &mut [u32], depth: u32) -> usize {
-        let (bounds, centroid) = (self.bounds, |i: u32| self.centroids[i as usize]);
+        let (bounds, centroid) = (self.bounds, |i: u32| self.bounds[i as usize].centroid());
         // The node's box and its emitters' centres' box.
         let (lo, hi, clo, chi) = order.iter().fold(
             (
