@@ -77,6 +77,8 @@ use std::f32::consts::SQRT_2;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+mod lanes;
+
 use super::estimate::Estimate;
 use crate::camera::Reprojection;
 use crate::filter::FilterDensity;
@@ -444,10 +446,12 @@ struct Grid {
     starts: Vec<u32>,
     /// Each cell's members' surfaces as one plane: their mean shift gradient, the greatest
     /// [`Member::lo`] carried along it to the cell's centre (minus infinity when it has no
-    /// members), and how far their gradients stray from the mean ([`Grid::nearer_than_none`]).
+    /// members), and how far their gradients stray from the mean ([`Grid::nearer_than_none_of`]).
     plane: Vec<(Vec2, f32, f32)>,
     /// The window's size.
     size: (usize, usize),
+    /// The members as columns, for the loops over every member in reach ([`lanes`]).
+    columns: lanes::Columns,
 }
 
 const CELL: f32 = 4.0;
@@ -489,6 +493,7 @@ impl Grid {
             starts,
             plane: Vec::new(),
             size: (width, height),
+            columns: lanes::Columns::default(),
         };
         grid.plane = (0..cols * rows)
             .map(|cell| {
@@ -505,34 +510,28 @@ impl Grid {
                 (gradient, lo, spread)
             })
             .collect();
+        grid.columns = lanes::Columns::new(&grid.members);
         grid
     }
 
-    /// Whether a sample of shift `shift` at centre `c` is certainly nearer than none of
-    /// `cell`'s members within `extent` of `c`: for each such member m,
-    /// `shift - m.gradient . (c - m.at) >= m.lo`. With the cell's plane (mean gradient G,
-    /// carried `lo` L, spread D) that holds when `shift - G . (c - centre) - L` is at least
-    /// `D` times the distance to the farthest member, which is at most `extent` and at most
-    /// the distance to the cell's centre plus half its diagonal (tested without a square
-    /// root). Exact on a plane, so only cells where another surface may lie nearer fail.
-    fn nearer_than_none(&self, cell: usize, shift: f32, c: Vec2, extent: f32) -> bool {
-        let (gradient, lo, spread) = self.plane[cell];
-        if lo == f32::NEG_INFINITY {
-            return true;
+    /// Marks the members that [`covered`] found covered.
+    fn set_covered(&mut self, covered: &[bool]) {
+        for (member, &covered) in self.members.iter_mut().zip(covered) {
+            member.covered = covered;
         }
-        let v = c - self.centre(cell);
-        let margin = shift - gradient.dot(v) - lo;
-        let room = margin - spread * 0.5 * SQRT_2 * CELL;
-        margin >= spread * extent
-            || (room >= 0.0 && spread * spread * v.length_squared() <= room * room)
+        self.columns.set_covered(covered);
     }
 
     /// Whether every sample of `list` is certainly nearer than none of the members within its
-    /// reach (its `|shift|`, at least [`MIN_SHIFT`], plus `reach`), as
-    /// [`Grid::nearer_than_none`] would find for each: one bound for them all, from their
-    /// least shift carried along their mean gradient g to the first one's centre c0 and how
-    /// far they spread around it. True only where every sample's own test would be (less a
-    /// margin for rounding), so it spares those tests without changing what they find.
+    /// reach (its `|shift|`, at least [`MIN_SHIFT`], plus `reach`): for each such member m,
+    /// `shift - m.gradient . (c - m.at) >= m.lo`. With a cell's plane (mean gradient G,
+    /// carried `lo` L, spread D) that holds for a sample at c when the margin
+    /// `shift - G . (c - centre) - L` is at least `D` times its extent (exact on a plane, so
+    /// only cells where another surface may lie nearer fail). One bound for all the samples,
+    /// from their least shift carried along their mean gradient g to the first one's centre
+    /// c0 and how far they spread around it, less a margin for rounding: true only where
+    /// every sample's own test ([`covered`]) would find nothing, so it spares those tests
+    /// without changing what they find.
     fn nearer_than_none_of(&self, list: &[Record], reach: f32) -> bool {
         let Some(first) = list.first() else {
             return true;
@@ -598,15 +597,6 @@ impl Grid {
         self.by_cell[range].iter().map(|&i| i as usize)
     }
 
-    /// The indices of the members in cell `cell` closer to `c` than `extent` and their
-    /// offsets `c - at`.
-    fn within(&self, cell: usize, c: Vec2, extent: f32) -> impl Iterator<Item = (usize, Vec2)> {
-        self.cell(cell).filter_map(move |i| {
-            let d = c - self.members[i].at;
-            (d.length_squared() < extent * extent).then_some((i, d))
-        })
-    }
-
     /// The members in cell `cell`.
     fn in_cell(&self, cell: usize) -> impl Iterator<Item = &Member> + '_ {
         self.cell(cell).map(|i| &self.members[i])
@@ -654,6 +644,10 @@ impl Grid {
             first..end.max(first)
         };
         span(c.y, radius, h).filter_map(move |y| {
+            // Rows without members are common (sites spaced by the blur): skipped first.
+            if self.before[y * w] == self.before[(y + 1) * w] {
+                return None;
+            }
             let dy = y as f32 + 0.5 - c.y;
             let half = (radius * radius - dy * dy).max(0.0).sqrt();
             let xs = span(c.x, half, w);
@@ -682,7 +676,7 @@ fn lend_one(
     kernel: &Kernel,
     grid: &Grid,
     (m, r): (usize, &Record),
-    near: &mut Vec<(f32, u32)>,
+    near: &mut [(f32, u32, f32)],
     pooled: &mut [Estimate],
 ) {
     let s = r.shift.abs();
@@ -711,33 +705,29 @@ fn lend_one(
         (takes, takes || (other.covered && c < other.lo))
     };
     let mut lenders = 0.0;
-    near.clear();
+    // `near[..len]`: the receivers, with their kernel and what their own technique adds to
+    // the lenders' density (nothing for a lender: it is counted among them).
+    let mut len = 0;
     if lends(me) {
         // A lender's sample goes to every needy member it reaches. Only lenders (their
-        // density) and needy members (receivers) within reach count, read row by row.
-        let reach2 = extent * extent;
+        // density) and needy members (receivers) within reach count, read row by row, eight
+        // members at a time ([`lanes`]); the density is summed in pixel order.
+        let sample = lanes::Sample {
+            centre: r.centre,
+            shift: r.shift,
+            reach2: extent * extent,
+            mask: mask as u32,
+            kernel: &k_at,
+        };
+        let mut block = lanes::Block::default();
         for range in grid.rows_near(r.centre, extent) {
-            for (q, other) in members[range.clone()].iter().enumerate() {
-                let d = r.centre - other.at;
-                if d.length_squared() >= reach2 {
-                    continue;
-                }
-                let lender = lends(other);
-                if !(lender || other.needy) {
-                    continue;
-                }
-                let (takes, counts) = role(other);
-                let technique = lender && counts;
-                let receiver = other.needy && takes;
-                if !(technique || receiver) {
-                    continue;
-                }
-                let k = k_at.within(d);
-                if technique {
-                    lenders += other.n * k;
-                }
-                if receiver && k > 0.0 {
-                    near.push((k, (range.start + q) as u32));
+            for start in range.clone().step_by(lanes::LANES) {
+                let valid = (range.end - start).min(lanes::LANES);
+                sample.block(&grid.columns, start, valid, &mut block);
+                for j in 0..valid {
+                    lenders += block.technique[j];
+                    near[len] = (block.k[j], (start + j) as u32, block.own[j]);
+                    len += usize::from(block.receives[j]);
                 }
             }
         }
@@ -752,15 +742,14 @@ fn lend_one(
             lenders += other.n * k_at.at(r.centre - other.at);
         }
         let k = k_at.at(r.centre - me.at);
-        near.push((k, m as u32));
+        near[0] = (k, m as u32, if lends(me) { 0.0 } else { me.n * k });
+        len = 1;
     }
-    let density = |q: &Member, k: f32| lenders + if lends(q) { 0.0 } else { q.n * k };
     let lent = r.lent();
     let y = f64::from(super::estimate::luminance(lent));
-    for &(k, q) in near.iter() {
-        let other = &members[q as usize];
-        if other.needy && k > 0.0 {
-            pooled[q as usize].add_lit(lent, y, k / density(other, k), r.hit);
+    for &(k, q, own) in &near[..len] {
+        if members[q as usize].needy && k > 0.0 {
+            pooled[q as usize].add_lit(lent, y, k / (lenders + own), r.hit);
         }
     }
 }
@@ -857,20 +846,21 @@ fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)
 fn covered(grid: &Grid, records: &[SiteRecords], reach: f32) -> Vec<bool> {
     let mut covered = vec![false; grid.members.len()];
     // A site's samples are tested one by one only where they may lie nearer than some
-    // member: mostly they do not, and one bound for them all says so.
+    // member: mostly they do not, and one bound for them all says so. The others are tested
+    // against every member in reach, eight at a time.
     let unclear = records
         .iter()
         .filter(|r| !grid.nearer_than_none_of(&r.list, reach));
     for r in unclear.flat_map(|r| &r.list) {
         let extent = r.extent(reach);
-        for cell in grid.cells_near(r.centre, extent) {
-            if grid.nearer_than_none(cell, r.shift, r.centre, extent) {
-                continue;
-            }
-            for (m, _) in grid.within(cell, r.centre, extent) {
-                let member = &grid.members[m];
-                if member.carried(r) < member.lo {
-                    covered[m] = true;
+        for range in grid.rows_near(r.centre, extent) {
+            for start in range.clone().step_by(lanes::LANES) {
+                let valid = (range.end - start).min(lanes::LANES);
+                let sample = (r.centre, r.shift, extent);
+                let mut hits = lanes::covers(&grid.columns, sample, start, valid);
+                while hits != 0 {
+                    covered[start + hits.trailing_zeros() as usize] = true;
+                    hits &= hits - 1;
                 }
             }
         }
@@ -945,11 +935,10 @@ pub fn lend(
     let origin = Vec2::new(x0 as f32, y0 as f32);
     let mut grid = Grid::new(origin, (width, height), members);
     let covered = covered(&grid, records, reach);
-    for (member, &covered) in grid.members.iter_mut().zip(&covered) {
-        member.covered = covered;
-    }
+    grid.set_covered(&covered);
     let mut pooled = vec![Estimate::default(); grid.members.len()];
-    let mut near: Vec<(f32, u32)> = Vec::new();
+    // Scratch for the receivers of one sample: at most every member.
+    let mut near = vec![(0.0, 0, 0.0); grid.members.len()];
     // Lent in pixel order (the grid's pixel index), so each receiver adds its samples in an
     // order that does not depend on the grid.
     for (m, member) in grid.members.iter().enumerate() {
