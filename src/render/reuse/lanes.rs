@@ -1,10 +1,9 @@
 //! The inner loop of lending, eight members at a time. A lender's sample visits every member
 //! within its reach (about fifty, a few to a row) and works out for each its kernel at the
-//! sample and its role. Member by member that is a chain of loads and branches the processor
-//! cannot predict; here the members are columns (one array per field, padded by [`LANES`]) and
-//! each row of them is worked out in blocks of eight with the same arithmetic in the same
-//! order, which the compiler turns into vector instructions. The table lookups in between are
-//! plain loads. Only summing the lenders' density stays one member at a time, in pixel order,
+//! sample and its role. The compiler does not vectorise that loop member by member; here the
+//! members are columns (one array per field, padded by [`LANES`]) and each row of them is
+//! worked out in blocks of eight `f32x8` lanes with the same arithmetic in the same order.
+//! The table lookups in between are plain loads. Only summing the lenders' density stays one member at a time, in pixel order,
 //! so every value is the same to the last bit as member by member.
 
 use glam::Vec2;
@@ -58,9 +57,20 @@ impl Columns {
             covered: column(&|m| f32::from(u8::from(m.covered))),
         }
     }
-}
 
-impl Columns {
+    /// For the block from `start` and a sample at `centre` of shift `shift`: the offsets
+    /// `centre - at`, their squared lengths, and the sample's shift carried along each
+    /// member's surface to it (comparable with its cluster; [`super::Member::carried`]).
+    #[inline]
+    fn offsets(&self, centre: Vec2, shift: f32, start: usize) -> ((f32x8, f32x8), f32x8, f32x8) {
+        let dx = f32x8::splat(centre.x) - load(&self.x, start);
+        let dy = f32x8::splat(centre.y) - load(&self.y, start);
+        let d2 = dx * dx + dy * dy;
+        let carried =
+            f32x8::splat(shift) - (load(&self.gx, start) * dx + load(&self.gy, start) * dy);
+        ((dx, dy), d2, carried)
+    }
+
     /// Marks the members covered (see [`super::covered`]).
     pub(super) fn set_covered(&mut self, covered: &[bool]) {
         for (c, &is) in self.covered.iter_mut().zip(covered) {
@@ -79,12 +89,8 @@ pub(super) fn covers(
     start: usize,
     valid: usize,
 ) -> u32 {
-    let load = |c: &[f32]| f32x8::from(lanes(c, start));
-    let dx = f32x8::splat(centre.x) - load(&cols.x);
-    let dy = f32x8::splat(centre.y) - load(&cols.y);
-    let d2 = dx * dx + dy * dy;
-    let c = f32x8::splat(shift) - (load(&cols.gx) * dx + load(&cols.gy) * dy);
-    let hit = d2.cmp_lt(f32x8::splat(extent * extent)) & c.cmp_lt(load(&cols.lo));
+    let (_, d2, c) = cols.offsets(centre, shift, start);
+    let hit = d2.cmp_lt(f32x8::splat(extent * extent)) & c.cmp_lt(load(&cols.lo, start));
     (hit.move_mask() as u32) & ((1u32 << valid) - 1)
 }
 
@@ -122,18 +128,14 @@ impl Sample<'_> {
     /// neither count nor receive.
     #[inline]
     pub(super) fn block(&self, cols: &Columns, start: usize, valid: usize, out: &mut Block) {
-        let load = |c: &[f32]| f32x8::from(lanes(c, start));
-        let flag = |c: &[f32]| load(c).cmp_eq(f32x8::ONE);
+        let column = |c: &[f32]| load(c, start);
+        let flag = |c: &[f32]| column(c).cmp_eq(f32x8::ONE);
         let kernel = self.kernel;
-        let dx = f32x8::splat(self.centre.x) - load(&cols.x);
-        let dy = f32x8::splat(self.centre.y) - load(&cols.y);
-        let d2 = dx * dx + dy * dy;
+        let ((dx, dy), d2, c) = cols.offsets(self.centre, self.shift, start);
         let lane: [f32; LANES] = std::array::from_fn(|j| j as f32);
         let in_reach = d2.cmp_lt(f32x8::splat(self.reach2))
             & f32x8::from(lane).cmp_lt(f32x8::splat(valid as f32));
-        // The member's cluster: the sample's shift carried along its surface.
-        let c = f32x8::splat(self.shift) - (load(&cols.gx) * dx + load(&cols.gy) * dy);
-        let (lo, hi) = (load(&cols.lo), load(&cols.hi));
+        let (lo, hi) = (column(&cols.lo), column(&cols.hi));
         let covered = flag(&cols.covered);
         let takes = !covered & lo.cmp_le(c) & c.cmp_le(hi);
         let counts = takes | (covered & c.cmp_lt(lo));
@@ -169,13 +171,19 @@ impl Sample<'_> {
         let v1 = f32x8::from(b0y) * one_minus + f32x8::from(b1y) * ft;
         let tilt = f32x8::splat(kernel.tilt.x) * dx + f32x8::splat(kernel.tilt.y) * dy;
         let k = (v0 - tilt * v1).max(f32x8::ZERO);
-        let nk = load(&cols.n) * k;
+        let nk = column(&cols.n) * k;
         out.k = k.to_array();
         out.technique = technique.blend(nk, f32x8::ZERO).to_array();
         out.own = lender.blend(f32x8::ZERO, nk).to_array();
         let receives = (receiver & k.cmp_gt(f32x8::ZERO)).move_mask();
         out.receives = std::array::from_fn(|j| receives & (1 << j) != 0);
     }
+}
+
+/// The block of `column` from `start`, as a vector.
+#[inline]
+fn load(column: &[f32], start: usize) -> f32x8 {
+    f32x8::from(lanes(column, start))
 }
 
 /// The block of `column` from `start`: one bounds check for all its lanes.

@@ -738,7 +738,8 @@ fn lend_one(
             lenders += other.n * k_at.at(r.centre - other.at);
         }
         let k = k_at.at(r.centre - me.at);
-        near[0] = (k, m as u32, if lends(me) { 0.0 } else { me.n * k });
+        // It does not lend: its own technique adds to the density.
+        near[0] = (k, m as u32, me.n * k);
         len = 1;
     }
     let lent = r.lent();
