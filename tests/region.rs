@@ -156,13 +156,21 @@ fn a_tile_grid_reassembles_into_the_full_render_at_any_thread_count() {
 
 #[test]
 fn a_region_costs_less_than_the_frame() {
-    let (world, camera) = paper(256, 192);
-    let s = RenderSettings::default();
+    // With sample reuse a region also refines the buckets its lending windows read (a row
+    // of up to four buckets and one more each way, see `refine::lending`): here a 4 x 4
+    // grid's last tile (2 x 2 of the 8 x 6 buckets) refines 5 x 3 of them.
+    let (width, height) = (512, 384);
+    let (world, camera) = paper(width, height);
+    let s = RenderSettings {
+        spp: 16,
+        ..RenderSettings::default()
+    };
     let (_, full) = render(&world, &camera, &s, &NoProgress).unwrap();
-    let quarter = Region::grid(256, 192, 2, 2).unwrap()[3];
-    let (_, part) = render_region(&world, &camera, &s, &quarter, &NoProgress).unwrap();
-    // The depth pass is the whole frame's; the rest is the quarter's (plus its closure).
-    let depth_rays = 256 * 192;
+    let tile = Region::grid(width, height, 4, 4).unwrap()[15];
+    let (_, part) = render_region(&world, &camera, &s, &tile, &NoProgress).unwrap();
+    // The depth pass is the whole frame's; the rest is the tile's, its closure's and the
+    // buckets' its sites borrow from.
+    let depth_rays = u64::from(width * height);
     let shaded = |n: u64| n - depth_rays;
     assert!(
         shaded(part.rays.primary) < shaded(full.rays.primary) / 2,

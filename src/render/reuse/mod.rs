@@ -72,6 +72,7 @@
 //!
 //! [`view_alpha`]: crate::shade::Bsdf::view_alpha
 
+use std::borrow::Borrow;
 use std::f32::consts::SQRT_2;
 
 use glam::{Vec2, Vec3};
@@ -840,15 +841,23 @@ fn cluster(records: &SiteRecords, at: Vec2, gradient: Vec2) -> Option<(f32, f32)
 
 /// Which members a nearer sample's footprint crosses: partly covered by something their own
 /// samples missed, they neither lend nor borrow.
-fn covered(grid: &Grid, records: &[SiteRecords], reach: f32) -> Vec<bool> {
+fn covered<R: Borrow<SiteRecords>>(
+    grid: &Grid,
+    records: &[R],
+    reach: f32,
+    members: &Bounds,
+) -> Vec<bool> {
     let mut covered = vec![false; grid.members.len()];
     // A site's samples are tested one by one only where they may lie nearer than some
     // member: mostly they do not, and one bound for them all says so. The others are tested
-    // against every member in reach, eight at a time.
+    // against every member in reach, eight at a time. Samples that reach no member's box
+    // are skipped.
+    let near = |r: &Record| members.reached_by(r, reach);
     let unclear = records
         .iter()
-        .filter(|r| !grid.nearer_than_none_of(&r.list, reach));
-    for r in unclear.flat_map(|r| &r.list) {
+        .map(Borrow::borrow)
+        .filter(|r| r.list.iter().any(near) && !grid.nearer_than_none_of(&r.list, reach));
+    for r in unclear.flat_map(|r| r.list.iter().filter(|r| near(r))) {
         let extent = r.extent(reach);
         for range in grid.rows_near(r.centre, extent) {
             for start in range.clone().step_by(lanes::LANES) {
@@ -867,14 +876,18 @@ fn covered(grid: &Grid, records: &[SiteRecords], reach: f32) -> Vec<bool> {
 
 /// The sites of a window `width` wide whose top left pixel is `(x0, y0)` that take part in
 /// reuse (those with a cluster that lends), in pixel order.
-fn members(
+fn members<R: Borrow<SiteRecords>>(
     (x0, y0): (usize, usize),
     width: usize,
-    records: &[SiteRecords],
+    records: &[R],
     needy: &[bool],
+    taking_part: impl Fn(usize) -> bool,
 ) -> Vec<Member> {
     let mut members = Vec::new();
-    for (p, r) in records.iter().enumerate() {
+    for (p, r) in records.iter().map(Borrow::borrow).enumerate() {
+        if !taking_part(p) {
+            continue;
+        }
         let (x, y) = (x0 + p % width, y0 + p / width);
         let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
         let gradient = mean_gradient(&r.list);
@@ -895,6 +908,42 @@ fn members(
     members
 }
 
+/// A box of pixel positions, to skip what lies too far from the sites that borrow.
+#[derive(Debug, Clone, Copy)]
+struct Bounds {
+    lo: Vec2,
+    hi: Vec2,
+}
+
+impl Bounds {
+    /// The box around `points` (empty, farther than anything, when there are none).
+    fn around(points: impl Iterator<Item = Vec2>) -> Self {
+        let (lo, hi) = points.fold((Vec2::INFINITY, Vec2::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p), hi.max(p))
+        });
+        Self { lo, hi }
+    }
+
+    /// The box grown by `d` each way.
+    fn grown(self, d: f32) -> Self {
+        Self {
+            lo: self.lo - d,
+            hi: self.hi + d,
+        }
+    }
+
+    fn distance(&self, p: Vec2) -> f32 {
+        (self.lo - p).max(p - self.hi).max(Vec2::ZERO).length()
+    }
+
+    /// Whether sample `r`'s footprint (for a filter of half-width `reach`) may reach into
+    /// the box: within its extent, a pixel more for rounding (its kernel is zero from its
+    /// extent on).
+    fn reached_by(&self, r: &Record, reach: f32) -> bool {
+        self.distance(r.centre) <= r.extent(reach) + 1.0
+    }
+}
+
 /// What [`lend`] gives a window's sites.
 #[derive(Debug, Clone)]
 pub struct Lent {
@@ -911,44 +960,67 @@ pub struct Lent {
 /// every sample that reaches it. `records[p]` holds pixel p's samples (those `own[p]`
 /// counts: the first [`MAX_RECORDS`] and the sum of the rest). The work is spent only on
 /// samples that can reach a needy site.
-pub fn lend(
+pub fn lend<R: Borrow<SiteRecords>>(
     kernel: &Kernel,
     (x0, y0): (usize, usize),
     (width, height): (usize, usize),
-    records: &[SiteRecords],
+    records: &[R],
     own: &[Estimate],
     needy: &[bool],
 ) -> Result<Lent, MemoryError> {
-    let members = members((x0, y0), width, records, needy);
     let mut out = Lent {
         estimates: try_vec(own.len(), Estimate::default(), "the lent estimates")?,
         borrowed: try_vec(own.len(), false, "the sites that borrowed")?,
     };
     out.estimates.copy_from_slice(own);
+    let reach = kernel.reach();
+    let at = |p: usize| Vec2::new((x0 + p % width) as f32 + 0.5, (y0 + p / width) as f32 + 0.5);
+    // Where only part of the window may borrow (a bucket among its neighbours), only the
+    // sites within two footprints of it take part: a sample lent to a receiver lies within
+    // its footprint of it, and so do its site and the sites whose density it is weighed by
+    // (their own coverage is tested against every sample that reaches them).
+    let receivers = Bounds::around((0..own.len()).filter(|&p| needy[p]).map(at));
+    let lent_extent = records
+        .iter()
+        .flat_map(|r| &r.borrow().list)
+        .filter(|r| r.lends)
+        .map(|r| r.extent(reach))
+        .fold(0.0, f32::max);
+    let taking_part = receivers.grown(2.0 * lent_extent + 2.0);
+    let members = members((x0, y0), width, records, needy, |p| {
+        taking_part.distance(at(p)) == 0.0
+    });
     if !members.iter().any(|m| m.needy) {
         return Ok(out);
     }
-    let reach = kernel.reach();
     let origin = Vec2::new(x0 as f32, y0 as f32);
     let mut grid = Grid::new(origin, (width, height), members);
-    let covered = covered(&grid, records, reach);
+    let covered = covered(&grid, records, reach, &taking_part);
     grid.set_covered(&covered);
     let mut pooled = vec![Estimate::default(); grid.members.len()];
     // Scratch for the receivers of one sample: at most every member.
     let mut near = vec![(0.0, 0, 0.0); grid.members.len()];
+    // A sample farther from every receiver than its footprint reaches gives nothing: where
+    // only part of the window borrows (a bucket among its neighbours), most are skipped.
+    let receivers = Bounds::around(
+        (grid.members.iter())
+            .filter(|m| m.needy && !m.covered)
+            .map(|m| m.at),
+    );
     // Lent in pixel order (the grid's pixel index), so each receiver adds its samples in an
     // order that does not depend on the grid.
     for (m, member) in grid.members.iter().enumerate() {
         if member.covered {
             continue;
         }
-        for r in records[member.p].list.iter().filter(|r| member.lends(r)) {
+        let samples = records[member.p].borrow().list.iter();
+        for r in samples.filter(|r| member.lends(r) && receivers.reached_by(r, reach)) {
             lend_one(kernel, &grid, (m, r), &mut near, &mut pooled);
         }
     }
     for (member, lent) in grid.members.iter().zip(pooled) {
         if member.needy && !member.covered && lent.n > 0 && lent.mean().is_finite() {
-            let site = &records[member.p];
+            let site = records[member.p].borrow();
             let value = match own_part(site, member) {
                 Some((mean, variance)) => lent.plus(mean, variance),
                 None => lent,
@@ -1126,9 +1198,10 @@ mod tests {
                 let (centre, shift) = on_plane(4.0, far, film, r);
                 matte(centre, shift, far, 0.8)
             });
-            let members = members((0, 0), size, &records, &vec![true; size * size]);
+            let members = members((0, 0), size, &records, &vec![true; size * size], |_| true);
             let grid = Grid::new(Vec2::ZERO, (size, size), members);
-            let found = covered(&grid, &records, reach);
+            let everywhere = Bounds::around([Vec2::ZERO, Vec2::splat(size as f32)].into_iter());
+            let found = covered(&grid, &records, reach, &everywhere);
             let every_pair: Vec<bool> = grid
                 .members
                 .iter()

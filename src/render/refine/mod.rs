@@ -48,10 +48,12 @@ use rayon::prelude::*;
 use super::allocation::{self, FocusBudget};
 use super::estimate::{Estimate, code3};
 use super::maps;
-use super::reuse::{self, Kernel, SiteRecords};
+use super::reuse::{Kernel, SiteRecords};
 use super::site::SiteShader;
 use super::{Progress, Tally};
 use crate::limits::{MemoryError, try_collect, try_copy, try_vec};
+
+mod lending;
 
 /// Start interval as a fraction of the CoC at a tolerance of 1 code value (see the module
 /// documentation).
@@ -252,30 +254,6 @@ impl Traced {
             se_alpha: vec![f32::INFINITY; n],
             code: vec![Vec3::ZERO; n],
         }
-    }
-
-    /// With reuse, the sites' values with their neighbours' samples lent ([`reuse::lend`]);
-    /// where and how many samples were taken was decided on their own samples alone. Only
-    /// blurred sites take part, and only those still noisier than the rule wanted borrow (the
-    /// others' error is already within what the tolerance allows). Returns the sites that
-    /// borrowed.
-    fn lend(
-        &mut self,
-        maps: &Maps,
-        b: &Bucket,
-        transparent: bool,
-    ) -> Result<Vec<bool>, MemoryError> {
-        let (Some(records), Some(kernel)) = (self.records.as_ref(), maps.kernel.as_ref()) else {
-            return try_vec(self.est.len(), false, "the sites that borrowed");
-        };
-        let limit = SAMPLING_SHARE * maps.tolerance;
-        let needy: Vec<bool> = (0..self.est.len())
-            .map(|p| self.se[p] > limit || (transparent && self.se_alpha[p] > limit))
-            .collect();
-        let (window, size) = ((b.x0, b.y0), (b.w, b.h));
-        let lent = reuse::lend(kernel, window, size, records, &self.est, &needy)?;
-        self.est = lent.estimates;
-        Ok(lent.borrowed)
     }
 
     /// Recomputes the cached values of the pixels in `changed`.
@@ -571,24 +549,16 @@ pub fn refine(
         kernel: reuses(shader).then(|| Kernel::new(&s.pixel_filter.density())),
         focus,
     };
-    let size = s.max_interval as usize;
-    let buckets: Vec<Bucket> = (0..height)
-        .step_by(size)
-        .flat_map(|y0| (0..width).step_by(size).map(move |x0| (x0, y0)))
-        .map(|(x0, y0)| Bucket::new(x0, y0, size, width, height))
-        .filter(|b| region.overlaps(&b.region(false)))
+    let layout = Layout::new(s.max_interval as usize, width, height);
+    let wanted: Vec<bool> = (0..layout.count())
+        .map(|i| region.overlaps(&layout.bucket(i).region(false)))
         .collect();
-    progress.start("adaptive", buckets.len() as u64);
-    let done: Vec<_> = buckets
-        .par_iter()
-        .map(|b| {
-            let mut local = Tally::new(s.record_rays);
-            let started = Instant::now();
-            let refined = refine_bucket(shader, &maps, b, progress, &mut local);
-            progress.advance(1);
-            (*b, refined, local, started.elapsed().as_secs_f64())
-        })
-        .collect();
+    progress.start("adaptive", wanted.iter().filter(|&&w| w).count() as u64);
+    let done = if maps.kernel.is_some() {
+        lending::refine(shader, &maps, &layout, &wanted, progress, tally)?
+    } else {
+        refine_alone(shader, &maps, &layout, &wanted, progress, tally)?
+    };
     super::check_cancelled(progress)?;
     let mut out = Refined {
         color: try_vec(width * height, Vec4::ZERO, "the pixels' colours")?,
@@ -596,13 +566,10 @@ pub fn refine(
         samples: try_vec(width * height, 0, "the pixels' sample counts")?,
         borrowed: try_vec(width * height, false, "the sites that borrowed")?,
         rounds: 0,
-        work_seconds: 0.0,
-        lend_seconds: 0.0,
+        work_seconds: done.work_seconds,
+        lend_seconds: done.lend_seconds,
     };
-    for (b, refined, local, seconds) in done {
-        let Some(refined) = refined? else {
-            return Err(super::RenderError::Cancelled);
-        };
+    for (b, refined) in done.buckets {
         for y in 0..b.owned_h {
             for x in 0..b.owned_w {
                 let (p, q) = ((b.y0 + y) * width + b.x0 + x, y * b.w + x);
@@ -613,11 +580,118 @@ pub fn refine(
             }
         }
         out.rounds = out.rounds.max(refined.rounds);
-        out.work_seconds += seconds;
-        out.lend_seconds += refined.lend_seconds;
-        tally.merge(local);
     }
     Ok(out)
+}
+
+/// The buckets' results and the worker-thread seconds spent on them.
+struct Finished {
+    /// Each wanted bucket's result over its closure, of which the owned pixels are final.
+    buckets: Vec<(Bucket, Refined)>,
+    work_seconds: f64,
+    /// Of `work_seconds`, those spent lending.
+    lend_seconds: f64,
+}
+
+/// [`refine`] without sample reuse: each bucket on its own, all in parallel.
+fn refine_alone(
+    shader: &SiteShader,
+    maps: &Maps,
+    layout: &Layout,
+    wanted: &[bool],
+    progress: &dyn Progress,
+    tally: &mut Tally,
+) -> Result<Finished, super::RenderError> {
+    let record_rays = shader.settings.record_rays;
+    let buckets: Vec<Bucket> = (0..layout.count())
+        .filter(|&i| wanted[i])
+        .map(|i| layout.bucket(i))
+        .collect();
+    let done: Vec<_> = buckets
+        .par_iter()
+        .map(|b| {
+            let mut local = Tally::new(record_rays);
+            let started = Instant::now();
+            let rounds = refine_bucket(shader, maps, b, progress, &mut local);
+            progress.advance(1);
+            (*b, rounds, local, started.elapsed().as_secs_f64())
+        })
+        .collect();
+    let mut out = Finished {
+        buckets: Vec::with_capacity(done.len()),
+        work_seconds: 0.0,
+        lend_seconds: 0.0,
+    };
+    for (b, rounds, local, seconds) in done {
+        tally.merge(local);
+        let Some(rounds) = rounds? else {
+            return Err(super::RenderError::Cancelled);
+        };
+        out.buckets.push((b, rounds.finish(&b)));
+        out.work_seconds += seconds;
+    }
+    Ok(out)
+}
+
+/// The frame's buckets: `nx` x `ny` squares of `size` pixels, row by row.
+struct Layout {
+    size: usize,
+    nx: usize,
+    ny: usize,
+    width: usize,
+    height: usize,
+}
+
+impl Layout {
+    fn new(size: usize, width: usize, height: usize) -> Self {
+        Self {
+            size,
+            nx: width.div_ceil(size),
+            ny: height.div_ceil(size),
+            width,
+            height,
+        }
+    }
+
+    fn count(&self) -> usize {
+        self.nx * self.ny
+    }
+
+    /// Bucket `i` (row by row).
+    fn bucket(&self, i: usize) -> Bucket {
+        let (bx, by) = (i % self.nx, i / self.nx);
+        Bucket::new(
+            bx * self.size,
+            by * self.size,
+            self.size,
+            self.width,
+            self.height,
+        )
+    }
+}
+
+/// A bucket whose rounds are done: its sites' samples, before lending.
+struct Rounds {
+    traced: Traced,
+    interval: Vec<u32>,
+    rounds: u32,
+}
+
+impl Rounds {
+    /// The result without lending: every site keeps its own samples' mean.
+    fn finish(self, b: &Bucket) -> Refined {
+        let samples = self.traced.est.iter().map(|e| e.n).collect();
+        Refined {
+            color: final_colour(&self.traced.est, &self.interval, b),
+            samples,
+            borrowed: vec![false; b.w * b.h],
+            interval: self.interval,
+            rounds: self.rounds,
+            // Counted by the caller.
+            work_seconds: 0.0,
+            lend_seconds: 0.0,
+        }
+    }
 }
 
 /// Whether the site at a pixel of start interval `start` takes samples by its noise
@@ -665,14 +739,15 @@ fn reuses(shader: &SiteShader) -> bool {
 }
 
 /// The error-controlled rule inside one bucket; the result covers the bucket's closure, of
-/// which the owned pixels are final. `None` when `progress` cancelled it (polled every round).
+/// which the owned pixels are the bucket's. `None` when `progress` cancelled it (polled
+/// every round).
 fn refine_bucket(
     shader: &SiteShader,
     maps: &Maps,
     b: &Bucket,
     progress: &dyn Progress,
     tally: &mut Tally,
-) -> Result<Option<Refined>, MemoryError> {
+) -> Result<Option<Rounds>, MemoryError> {
     let s = shader.settings;
     let full_width = shader.camera.width as usize;
     let (width, height) = (b.w, b.h);
@@ -755,32 +830,11 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
-    finish(traced, maps, b, s.transparent, (interval, rounds)).map(Some)
-}
-
-/// A bucket's result once its rounds are done: its sites lend ([`Traced::lend`]), timed, and
-/// every pixel takes its colour.
-fn finish(
-    mut traced: Traced,
-    maps: &Maps,
-    b: &Bucket,
-    transparent: bool,
-    (interval, rounds): (Vec<u32>, u32),
-) -> Result<Refined, MemoryError> {
-    // Samples traced per pixel: the sites' own, whatever they borrow below.
-    let samples = traced.est.iter().map(|e| e.n).collect();
-    let lending = Instant::now();
-    let borrowed = traced.lend(maps, b, transparent)?;
-    Ok(Refined {
-        color: final_colour(&traced, &interval, b),
+    Ok(Some(Rounds {
+        traced,
         interval,
-        samples,
-        borrowed,
         rounds,
-        // The bucket's whole time is known only to its caller.
-        work_seconds: 0.0,
-        lend_seconds: lending.elapsed().as_secs_f64(),
-    })
+    }))
 }
 
 /// Each site's first and most samples in bucket `b` of a frame `full_width` wide, and its
@@ -896,22 +950,31 @@ fn shade_changed_rows(
     }
 }
 
-/// The bucket's colours once refinement ends: sites keep their means, the owned pixels
-/// between them are interpolated from their cells.
-fn final_colour(traced: &Traced, interval: &[u32], b: &Bucket) -> Vec<Vec4> {
+/// The bucket's colours once refinement ends, from its sites' values `est`: sites keep
+/// them, the owned pixels between them are interpolated from their cells.
+fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
     let (width, height) = (b.w, b.h);
     (0..width * height)
         .map(|p| {
-            let e = &traced.est[p];
+            let e = &est[p];
             let (x, y) = (p % width, p / width);
             if e.n > 0 || !b.owns(x, y) {
                 return e.mean_rgba();
             }
             let cell = Cell::of(x, y, interval[p], width, height);
-            let centre = cell.centre();
-            interpolate_at(traced, width, &cell, (x, y), centre)
-                .map(|(v, ..)| v)
-                .expect("every corner and centre of every cell is traced before the loop ends")
+            let mut value = Vec4::ZERO;
+            for ((px, py), w) in cell.weights(x, y, cell.centre()) {
+                if w == 0.0 {
+                    continue;
+                }
+                let e = &est[py * width + px];
+                assert!(
+                    e.n > 0,
+                    "every corner and centre of every cell is traced before the loop ends"
+                );
+                value += e.mean_rgba() * w;
+            }
+            value
         })
         .collect()
 }

@@ -1,0 +1,484 @@
+//! [`super::refine`] with sample reuse ([`reuse`]): buckets lend across their borders.
+//!
+//! Lending within each bucket alone left seams at its borders: receivers either side of one
+//! drew on disjoint sets of samples, so their (smooth, low-frequency) error jumped there.
+//! Here a site borrows from its own bucket's sites and its neighbours', so one near a
+//! border draws on both sides of it, as one inside draws on all around it.
+//!
+//! **Windows.** A row of up to [`CHUNK`] buckets lends as one *window*: its sites receive,
+//! and every site of the block one bucket larger each way lends (the most a site's samples
+//! reach is about twice its blur, which a bucket's width covers but for the largest blurs).
+//! The windows are fixed by the frame, so a region renders as in the full frame: the
+//! buckets around it are refined too.
+//!
+//! **One value a site.** A site on a bucket's last column or row (a cell's corner there) may
+//! be traced by two to four buckets; their samples are the same up to the fewer's count, so
+//! it counts once, as traced by the one that took the most, and its value is the one its
+//! own bucket's window gives it. Every bucket that interpolates from it uses that value.
+//!
+//! **Order and memory.** Buckets are refined a band of rows at a time (enough for the
+//! threads); each step also lends the rows whose neighbours are refined and colours those
+//! whose next row is lent, and a row's samples are dropped once nothing still to come reads
+//! them: a few rows of samples are held, not the frame's.
+
+use std::ops::Range;
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use super::{Bucket, Finished, Layout, Maps, Refined, Rounds, SAMPLING_SHARE, final_colour};
+use crate::limits::{MemoryError, try_collect, try_vec};
+use crate::render::estimate::Estimate;
+use crate::render::reuse::{self, SiteRecords};
+use crate::render::site::SiteShader;
+use crate::render::{Progress, RenderError, Tally};
+
+/// How many buckets of a row receive in one lending window: more share the work of the
+/// window's sites among more receivers, fewer give more windows to run in parallel.
+const CHUNK: usize = 4;
+
+/// The receivers of one lending window: bucket row `row`, bucket columns `cols`.
+#[derive(Debug, Clone)]
+struct Chunk {
+    row: usize,
+    cols: Range<usize>,
+}
+
+impl Chunk {
+    /// The window's buckets (columns, rows): the chunk's and one more each way.
+    fn block(&self, layout: &Layout) -> (Range<usize>, Range<usize>) {
+        (
+            self.cols.start.saturating_sub(1)..(self.cols.end + 1).min(layout.nx),
+            self.row.saturating_sub(1)..(self.row + 2).min(layout.ny),
+        )
+    }
+}
+
+/// The chunks of every row, row by row.
+fn chunks(layout: &Layout) -> Vec<Chunk> {
+    (0..layout.ny)
+        .flat_map(|row| {
+            (0..layout.nx).step_by(CHUNK).map(move |c| Chunk {
+                row,
+                cols: c..(c + CHUNK).min(layout.nx),
+            })
+        })
+        .collect()
+}
+
+/// A row of buckets' sites once lent (the owned pixels of the row, the frame's width).
+struct RowValues {
+    est: Vec<Estimate>,
+    borrowed: Vec<bool>,
+}
+
+impl RowValues {
+    fn new(layout: &Layout) -> Result<Self, MemoryError> {
+        let n = layout.width * layout.size;
+        Ok(Self {
+            est: try_vec(n, Estimate::default(), "the lent values")?,
+            borrowed: try_vec(n, false, "the sites that borrowed")?,
+        })
+    }
+}
+
+/// A step's work.
+enum Task {
+    Refine(usize),
+    Lend(usize),
+}
+
+/// What a [`Task`] gave.
+enum Done {
+    Rounds(usize, Option<Rounds>, Box<Tally>, f64),
+    Lent(usize, Vec<Estimate>, Vec<bool>, f64),
+}
+
+/// Which chunks lend and which buckets are refined for the buckets `wanted`.
+struct Plan {
+    chunks: Vec<Chunk>,
+    /// By chunk: whether it lends.
+    lent: Vec<bool>,
+    /// By bucket: whether it is refined.
+    traced: Vec<bool>,
+}
+
+impl Plan {
+    fn new(layout: &Layout, wanted: &[bool]) -> Self {
+        let chunks = chunks(layout);
+        // A wanted bucket reads its own row's values and the next row's (its closure's last
+        // row), in its own columns and the next one (its closure's last column).
+        let lent: Vec<bool> = (chunks.iter())
+            .map(|c| {
+                let rows = c.row.saturating_sub(1)..=c.row;
+                let cols = c.cols.start.saturating_sub(1)..c.cols.end;
+                rows.flat_map(|y| cols.clone().map(move |x| y * layout.nx + x))
+                    .any(|i| wanted[i])
+            })
+            .collect();
+        let mut traced = vec![false; layout.count()];
+        for c in chunks
+            .iter()
+            .zip(&lent)
+            .filter(|(_, l)| **l)
+            .map(|(c, _)| c)
+        {
+            let (xs, ys) = c.block(layout);
+            for y in ys {
+                for x in xs.clone() {
+                    traced[y * layout.nx + x] = true;
+                }
+            }
+        }
+        Self {
+            chunks,
+            lent,
+            traced,
+        }
+    }
+}
+
+/// The work of [`refine`] as it goes: what is held and how far each stage has come.
+struct Pipeline<'a> {
+    shader: &'a SiteShader<'a>,
+    maps: &'a Maps<'a>,
+    layout: &'a Layout,
+    plan: Plan,
+    /// By bucket: its rounds, from its refinement until nothing still to come reads them.
+    store: Vec<Option<Rounds>>,
+    /// By row of buckets: its sites' lent values, until the row is coloured.
+    values: Vec<Option<RowValues>>,
+    out: Finished,
+}
+
+/// Refines the buckets `wanted` (and those around them that their windows read), lends
+/// each window's sites, and colours the wanted buckets (see the module documentation).
+pub(super) fn refine(
+    shader: &SiteShader,
+    maps: &Maps,
+    layout: &Layout,
+    wanted: &[bool],
+    progress: &dyn Progress,
+    tally: &mut Tally,
+) -> Result<Finished, RenderError> {
+    let mut run = Pipeline {
+        shader,
+        maps,
+        layout,
+        plan: Plan::new(layout, wanted),
+        store: (0..layout.count()).map(|_| None).collect(),
+        values: (0..layout.ny).map(|_| None).collect(),
+        out: Finished {
+            buckets: Vec::new(),
+            work_seconds: 0.0,
+            lend_seconds: 0.0,
+        },
+    };
+    let band = (8 * rayon::current_num_threads().max(1))
+        .div_ceil(layout.nx)
+        .max(1);
+    let (mut refined_to, mut lent_to, mut coloured_to) = (0, 0, 0);
+    while coloured_to < layout.ny {
+        let refine_rows = refined_to..(refined_to + band).min(layout.ny);
+        // A row is lent once the row below it is refined, and coloured once the row below
+        // it is lent.
+        let lend_rows = lent_to..after(refined_to, lent_to, layout.ny);
+        run.step(refine_rows.clone(), lend_rows.clone(), progress, tally)?;
+        (refined_to, lent_to) = (refine_rows.end, lend_rows.end);
+        let colour_rows = coloured_to..after(lent_to, coloured_to, layout.ny);
+        run.colour(colour_rows.clone(), wanted, progress);
+        coloured_to = colour_rows.end;
+        // What no later step reads: samples of rows above the one before the next to lend
+        // (and not still to colour), values of rows already coloured.
+        for y in 0..lent_to.saturating_sub(1).min(coloured_to) {
+            run.store[y * layout.nx..(y + 1) * layout.nx].fill_with(|| None);
+        }
+        run.values[..coloured_to].fill_with(|| None);
+    }
+    Ok(run.out)
+}
+
+impl Pipeline<'_> {
+    /// Refines the rows `refine` and lends the rows `lend` (whose neighbours are refined),
+    /// in parallel.
+    fn step(
+        &mut self,
+        refine: Range<usize>,
+        lend: Range<usize>,
+        progress: &dyn Progress,
+        tally: &mut Tally,
+    ) -> Result<(), RenderError> {
+        let (layout, plan) = (self.layout, &self.plan);
+        let per_row = layout.nx.div_ceil(CHUNK);
+        let tasks: Vec<Task> = (refine.start * layout.nx..refine.end * layout.nx)
+            .filter(|&i| plan.traced[i])
+            .map(Task::Refine)
+            .chain(
+                (lend.start * per_row..lend.end * per_row)
+                    .filter(|&c| plan.lent[c])
+                    .map(Task::Lend),
+            )
+            .collect();
+        let s = self.shader.settings;
+        let done: Vec<Done> = tasks
+            .par_iter()
+            .map(|task| {
+                let started = Instant::now();
+                match *task {
+                    Task::Refine(i) => {
+                        let mut local = Tally::new(s.record_rays);
+                        let b = layout.bucket(i);
+                        let rounds =
+                            super::refine_bucket(self.shader, self.maps, &b, progress, &mut local);
+                        let seconds = started.elapsed().as_secs_f64();
+                        rounds.map(|r| Done::Rounds(i, r, Box::new(local), seconds))
+                    }
+                    Task::Lend(c) => {
+                        let chunk = &plan.chunks[c];
+                        let (est, borrowed) =
+                            lend_chunk(self.maps, layout, &self.store, chunk, s.transparent)?;
+                        Ok(Done::Lent(
+                            c,
+                            est,
+                            borrowed,
+                            started.elapsed().as_secs_f64(),
+                        ))
+                    }
+                }
+            })
+            .collect::<Result<_, MemoryError>>()?;
+        for d in done {
+            match d {
+                Done::Rounds(i, rounds, local, seconds) => {
+                    tally.merge(*local);
+                    let Some(rounds) = rounds else {
+                        return Err(RenderError::Cancelled);
+                    };
+                    self.store[i] = Some(rounds);
+                    self.out.work_seconds += seconds;
+                }
+                Done::Lent(c, est, borrowed, seconds) => {
+                    let chunk = &self.plan.chunks[c];
+                    let row = match &mut self.values[chunk.row] {
+                        Some(row) => row,
+                        empty => empty.insert(RowValues::new(layout)?),
+                    };
+                    place(layout, chunk, row, est, borrowed);
+                    self.out.work_seconds += seconds;
+                    self.out.lend_seconds += seconds;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Colours the buckets `wanted` in the rows `rows` (whose own and next rows are lent).
+    fn colour(&mut self, rows: Range<usize>, wanted: &[bool], progress: &dyn Progress) {
+        let layout = self.layout;
+        let started = Instant::now();
+        let (store, values) = (&self.store, &self.values);
+        let coloured: Vec<(Bucket, Refined)> = (rows.start * layout.nx..rows.end * layout.nx)
+            .filter(|&i| wanted[i])
+            .collect::<Vec<_>>()
+            .par_iter()
+            .map(|&i| {
+                let b = layout.bucket(i);
+                let row = b.y0 / layout.size;
+                let rounds = store[i].as_ref().expect("a coloured bucket is refined");
+                let own = values[row]
+                    .as_ref()
+                    .expect("a coloured bucket's row is lent");
+                let next = values.get(row + 1).and_then(Option::as_ref);
+                let refined = colour(layout, rounds, &b, (own, next));
+                progress.advance(1);
+                (b, refined)
+            })
+            .collect();
+        self.out.work_seconds += started.elapsed().as_secs_f64();
+        self.out.buckets.extend(coloured);
+    }
+}
+
+/// The end of the rows whose next row is done, given rows up to `done_to` are done and up
+/// to `from` were already taken, of `n`.
+fn after(done_to: usize, from: usize, n: usize) -> usize {
+    if done_to == n {
+        n
+    } else {
+        done_to.saturating_sub(1).max(from)
+    }
+}
+
+/// Copies a chunk's lent values (its owned pixels, row by row) into its row's.
+fn place(
+    layout: &Layout,
+    chunk: &Chunk,
+    row: &mut RowValues,
+    est: Vec<Estimate>,
+    borrowed: Vec<bool>,
+) {
+    let x0 = chunk.cols.start * layout.size;
+    let w = (chunk.cols.end * layout.size).min(layout.width) - x0;
+    for (y, (e, b)) in est.chunks(w).zip(borrowed.chunks(w)).enumerate() {
+        let at = y * layout.width + x0;
+        row.est[at..at + w].copy_from_slice(e);
+        row.borrowed[at..at + w].copy_from_slice(b);
+    }
+}
+
+/// Lends the sites of `chunk` the samples of every site of its window ([`reuse::lend`]):
+/// the values of the chunk's owned pixels (lent where they borrowed, their own samples'
+/// mean elsewhere, nothing where untraced) and which borrowed, row by row. Only blurred
+/// sites still noisier than the rule wanted borrow (the others' error is already within
+/// what the tolerance allows); where and how many samples were taken was decided on the
+/// sites' own samples alone.
+fn lend_chunk(
+    maps: &Maps,
+    layout: &Layout,
+    store: &[Option<Rounds>],
+    chunk: &Chunk,
+    transparent: bool,
+) -> Result<(Vec<Estimate>, Vec<bool>), MemoryError> {
+    let kernel = maps.kernel.as_ref().expect("lending has its kernel");
+    let size = layout.size;
+    let (xs, ys) = chunk.block(layout);
+    let (x0, y0) = (xs.start * size, ys.start * size);
+    let (w, h) = (
+        (xs.end * size).min(layout.width) - x0,
+        (ys.end * size).min(layout.height) - y0,
+    );
+    let at = |p: usize| site(layout, store, (&xs, &ys), (x0 + p % w, y0 + p / w));
+    let sites = try_collect((0..w * h).map(at), "a lending window's sites")?;
+    let records = try_collect(sites.iter().map(Site::records), "a lending window's sites")?;
+    let own = try_collect(sites.iter().map(|s| *s.est()), "a lending window's sites")?;
+    // The receivers: the chunk's owned pixels.
+    let (cx0, cy0) = (chunk.cols.start * size, chunk.row * size);
+    let cw = (chunk.cols.end * size).min(layout.width) - cx0;
+    let ch = ((chunk.row + 1) * size).min(layout.height) - cy0;
+    let index = |x: usize, y: usize| (cy0 + y - y0) * w + (cx0 + x - x0);
+    let limit = SAMPLING_SHARE * maps.tolerance;
+    let mut needy = try_vec(w * h, false, "the sites that borrow")?;
+    for y in 0..ch {
+        for x in 0..cw {
+            let p = index(x, y);
+            needy[p] = sites[p].noisier_than(limit, transparent);
+        }
+    }
+    let lent = reuse::lend(kernel, (x0, y0), (w, h), &records, &own, &needy)?;
+    let mut est = try_vec(cw * ch, Estimate::default(), "the lent values")?;
+    let mut borrowed = try_vec(cw * ch, false, "the sites that borrowed")?;
+    for y in 0..ch {
+        for x in 0..cw {
+            est[y * cw + x] = lent.estimates[index(x, y)];
+            borrowed[y * cw + x] = lent.borrowed[index(x, y)];
+        }
+    }
+    Ok((est, borrowed))
+}
+
+/// A site as one bucket traced it: that bucket's rounds and the site's index in its closure.
+#[derive(Clone, Copy)]
+struct Site<'a> {
+    rounds: &'a Rounds,
+    q: usize,
+}
+
+impl<'a> Site<'a> {
+    fn est(&self) -> &'a Estimate {
+        &self.rounds.traced.est[self.q]
+    }
+
+    fn records(&self) -> &'a SiteRecords {
+        &self
+            .rounds
+            .traced
+            .records
+            .as_ref()
+            .expect("lending records samples")[self.q]
+    }
+
+    /// Noisier than `limit` in colour or, with `transparent`, coverage (code values).
+    fn noisier_than(&self, limit: f32, transparent: bool) -> bool {
+        let t = &self.rounds.traced;
+        t.se[self.q] > limit || (transparent && t.se_alpha[self.q] > limit)
+    }
+}
+
+/// The site at pixel `(x, y)` as the bucket of the block `(xs, ys)` that took the most
+/// samples of it has it: its owner, or one whose closure's last column or row it lies on
+/// (the owner on a tie).
+fn site<'a>(
+    layout: &Layout,
+    store: &'a [Option<Rounds>],
+    (xs, ys): (&Range<usize>, &Range<usize>),
+    (x, y): (usize, usize),
+) -> Site<'a> {
+    let size = layout.size;
+    let (bx, by) = (x / size, y / size);
+    let (left, up) = (x % size == 0 && bx > 0, y % size == 0 && by > 0);
+    let candidates = [
+        (bx, by, true),
+        (bx.wrapping_sub(1), by, left),
+        (bx, by.wrapping_sub(1), up),
+        (bx.wrapping_sub(1), by.wrapping_sub(1), left && up),
+    ];
+    let mut best: Option<Site> = None;
+    for (cx, cy, _) in candidates
+        .into_iter()
+        .filter(|&(cx, cy, on)| on && xs.contains(&cx) && ys.contains(&cy))
+    {
+        let i = cy * layout.nx + cx;
+        let b = layout.bucket(i);
+        let rounds = store[i].as_ref().expect("a window's buckets are refined");
+        let found = Site {
+            rounds,
+            q: (y - b.y0) * b.w + (x - b.x0),
+        };
+        if best.is_none_or(|best| found.est().n > best.est().n) {
+            best = Some(found);
+        }
+    }
+    best.expect("every pixel of a window has its owner in it")
+}
+
+/// Bucket `b`'s colours from its sites' lent values: those of its own row, `rows.0`, and of
+/// the next, `rows.1` (its closure's last row lies there).
+fn colour(
+    layout: &Layout,
+    rounds: &Rounds,
+    b: &Bucket,
+    (own, next): (&RowValues, Option<&RowValues>),
+) -> Refined {
+    let row_y0 = b.y0 / layout.size * layout.size;
+    let mut est = rounds.traced.est.clone();
+    let mut borrowed = vec![false; b.w * b.h];
+    for y in 0..b.h {
+        let gy = b.y0 + y;
+        let (values, vy) = if gy < row_y0 + layout.size {
+            (own, gy - row_y0)
+        } else {
+            (
+                next.expect("a bucket's last closure row is lent"),
+                gy - row_y0 - layout.size,
+            )
+        };
+        for x in 0..b.w {
+            let (q, v) = (y * b.w + x, vy * layout.width + b.x0 + x);
+            // Pixels this bucket did not trace are interpolated from those it did.
+            if est[q].n > 0 {
+                est[q] = values.est[v];
+                borrowed[q] = values.borrowed[v];
+            }
+        }
+    }
+    Refined {
+        color: final_colour(&est, &rounds.interval, b),
+        interval: rounds.interval.clone(),
+        samples: rounds.traced.est.iter().map(|e| e.n).collect(),
+        borrowed,
+        rounds: rounds.rounds,
+        // Counted by the caller.
+        work_seconds: 0.0,
+        lend_seconds: 0.0,
+    }
+}
