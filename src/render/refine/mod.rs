@@ -81,13 +81,13 @@ pub struct Refined {
     pub interval: Vec<u32>,
     /// Samples traced per pixel (0: interpolated).
     pub samples: Vec<u32>,
-    /// The sites whose value rests on their neighbours' lent samples too ([`reuse`]).
+    /// The sites whose value rests on their neighbours' lent samples too ([`super::reuse`]).
     pub borrowed: Vec<bool>,
     /// Rounds of shading and checking.
     pub rounds: u32,
     /// Worker-thread seconds spent on the buckets, summed over threads.
     pub work_seconds: f64,
-    /// Of `work_seconds`, those spent lending samples between sites ([`reuse`]): their
+    /// Of `work_seconds`, those spent lending samples between sites ([`super::reuse`]): their
     /// ratio is lending's share of the work.
     pub lend_seconds: f64,
 }
@@ -226,7 +226,7 @@ fn interpolate_at(
 /// round: its standard error and its mean, in code values.
 struct Traced {
     est: Vec<Estimate>,
-    /// With sample reuse, each pixel's samples kept for lending ([`reuse`]).
+    /// With sample reuse, each pixel's samples kept for lending ([`super::reuse`]).
     records: Option<Vec<SiteRecords>>,
     /// [`Estimate::std_error_code`]: infinite while unknown (fewer than two samples).
     se: Vec<f32>,
@@ -521,8 +521,9 @@ struct Maps<'a> {
 /// left empty: colour 0, no samples).
 ///
 /// The image is worked on in buckets of `max_interval` pixels, each refined on its own (in
-/// parallel): a pixel's value depends only on the frame's depth pass and its bucket's
-/// samples, so any region of the image renders to the same pixels as the whole frame.
+/// parallel) from the frame's depth pass and its own samples; with sample reuse its sites
+/// then borrow from the buckets around it, in windows fixed by the frame (`lending`). So
+/// any region of the image renders to the same pixels as the whole frame.
 pub fn refine(
     shader: &SiteShader,
     tolerance: f32,
@@ -727,7 +728,7 @@ fn focus_budget(
     )
 }
 
-/// Whether adaptive sites lend samples ([`reuse`]): asked for, with paths (which say how
+/// Whether adaptive sites lend samples ([`super::reuse`]): asked for, with paths (which say how
 /// rough a surface is), the box lens filter, and a lens whose images move rigidly.
 fn reuses(shader: &SiteShader) -> bool {
     let s = shader.settings;

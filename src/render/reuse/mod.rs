@@ -26,7 +26,8 @@
 //! the blur (`spacing`), so about a dozen overlap any point however dense the sites) plus
 //! itself. The set depends on c alone, so each receiver's estimate stays unbiased; a
 //! lender's sample is offered to every site it reaches, any other sample only to its own.
-//! Work is per bucket (the rule's 64 px squares), so a region renders as in the full frame.
+//! Work is per window of the rule's buckets ([`crate::render::refine`]'s lending), fixed by the
+//! frame, so a region renders as in the full frame.
 //!
 //! **Where it does not hold, nothing is lent** (the site keeps its own mean, as without
 //! reuse):
