@@ -23,6 +23,14 @@
 //! them: a few rows of samples are held, not the frame's. Larger windows lend for less (a
 //! sample near a window's border is weighed once per window it reaches): on paper at 1920 px,
 //! 64 spp, 4 x 2 took the render from 8.98 to 7.37 s against 4 x 1, 4 x 3 to 7.06 s.
+//!
+//! **Where lending's time goes now.** Each window works out its sites' clusters and the
+//! occlusion test afresh for every site of its block, so a site's are worked out about three
+//! times. Paper at 640 px, 32 spp, one thread, windows of 4 x 1: clusters 0.09 s, occlusion
+//! 0.22 s, gathering the windows 0.09 s, the lending itself 0.38 s, against 0.02, 0.05, 0.03
+//! and 0.34 s when each bucket lent alone. Working the first two out once per bucket (from the
+//! buckets around it) would save most of that, for a row more of lag and of refined buckets
+//! around a region.
 
 use std::ops::Range;
 use std::time::Instant;
