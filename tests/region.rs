@@ -157,9 +157,9 @@ fn a_tile_grid_reassembles_into_the_full_render_at_any_thread_count() {
 #[test]
 fn a_region_costs_less_than_the_frame() {
     // With sample reuse a region also refines the buckets its lending windows read (up to
-    // 4 x 2 buckets and one more each way, see `refine::lending`): here a 4 x 4 grid's last
-    // tile (2 x 2 of the 8 x 6 buckets) refines 5 x 3 of them.
-    let (width, height) = (512, 384);
+    // 4 x 2 buckets and one more each way, see `refine::lending`) and those around them:
+    // here a 4 x 4 grid's last tile (3 x 2 of the 10 x 8 buckets) refines 8 x 4 of them.
+    let (width, height) = (640, 512);
     let (world, camera) = paper(width, height);
     let s = RenderSettings {
         spp: 16,

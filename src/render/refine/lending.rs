@@ -40,7 +40,7 @@ use rayon::prelude::*;
 use super::{Bucket, Finished, Layout, Maps, Refined, Rounds, SAMPLING_SHARE, final_colour};
 use crate::limits::{MemoryError, try_collect, try_vec};
 use crate::render::estimate::Estimate;
-use crate::render::reuse::{self, SiteRecords};
+use crate::render::reuse::{self, Site, SiteRecords};
 use crate::render::site::SiteShader;
 use crate::render::{Progress, RenderError, Tally};
 
@@ -96,24 +96,41 @@ impl RowValues {
     }
 }
 
+/// A bucket's owned pixels' sites, pixel by pixel ([`prepare`]).
+type BucketSites = Vec<Option<Site>>;
+
 /// A step's work.
 enum Task {
     Refine(usize),
+    Prepare(usize),
     Lend(usize),
 }
 
 /// What a [`Task`] gave.
 enum Done {
     Rounds(usize, Option<Rounds>, Box<Tally>, f64),
-    Lent(usize, Vec<Estimate>, Vec<bool>, f64),
+    Prepared(usize, BucketSites, f64),
+    Lent(usize, (Vec<Estimate>, Vec<bool>), f64),
 }
 
-/// Which chunks lend and which buckets are refined for the buckets `wanted`.
+/// How far each stage has come: the rows of buckets before these are done.
+#[derive(Debug, Default)]
+struct Stages {
+    refined: usize,
+    prepared: usize,
+    lent: usize,
+    coloured: usize,
+}
+
+/// Which chunks lend, and which buckets are prepared and refined, for the buckets `wanted`.
 struct Plan {
     chunks: Vec<Chunk>,
     /// By chunk: whether it lends.
     lent: Vec<bool>,
-    /// By bucket: whether it is refined.
+    /// By bucket: whether its sites are worked out ([`prepare`]): those of the lending
+    /// windows.
+    prepared: Vec<bool>,
+    /// By bucket: whether it is refined: those around the prepared ones.
     traced: Vec<bool>,
 }
 
@@ -130,23 +147,22 @@ impl Plan {
                     .any(|i| wanted[i])
             })
             .collect();
-        let mut traced = vec![false; layout.count()];
-        for c in chunks
-            .iter()
-            .zip(&lent)
-            .filter(|(_, l)| **l)
-            .map(|(c, _)| c)
-        {
+        let mut prepared = vec![false; layout.count()];
+        for c in (chunks.iter().zip(&lent)).filter_map(|(c, &l)| l.then_some(c)) {
             let (xs, ys) = c.block(layout);
             for y in ys {
                 for x in xs.clone() {
-                    traced[y * layout.nx + x] = true;
+                    prepared[y * layout.nx + x] = true;
                 }
             }
         }
+        let traced = (0..layout.count())
+            .map(|i| layout.around(i).any(|j| prepared[j]))
+            .collect();
         Self {
             chunks,
             lent,
+            prepared,
             traced,
         }
     }
@@ -160,6 +176,8 @@ struct Pipeline<'a> {
     plan: Plan,
     /// By bucket: its rounds, from its refinement until nothing still to come reads them.
     store: Vec<Option<Rounds>>,
+    /// By bucket: its owned pixels' sites ([`prepare`]), until its windows are lent.
+    sites: Vec<Option<BucketSites>>,
     /// By row of buckets: its sites' lent values, until the row is coloured.
     values: Vec<Option<RowValues>>,
     out: Finished,
@@ -181,6 +199,7 @@ pub(super) fn refine(
         layout,
         plan: Plan::new(layout, wanted),
         store: (0..layout.count()).map(|_| None).collect(),
+        sites: (0..layout.count()).map(|_| None).collect(),
         values: (0..layout.ny).map(|_| None).collect(),
         out: Finished {
             buckets: Vec::new(),
@@ -192,51 +211,57 @@ pub(super) fn refine(
         .div_ceil(layout.nx)
         .max(1);
     let down = CHUNK.1;
-    let (mut refined_to, mut lent_to, mut coloured_to) = (0, 0, 0);
-    while coloured_to < layout.ny {
-        let refine_rows = refined_to..(refined_to + band).min(layout.ny);
-        // A row of chunks is lent once the row of buckets below it is refined, a row of
-        // buckets coloured once the row below it is lent.
-        let mut lend_end = lent_to;
-        while lend_end < layout.ny && refined_to >= (lend_end + down + 1).min(layout.ny) {
+    let mut at = Stages::default();
+    while at.coloured < layout.ny {
+        let refine = at.refined..(at.refined + band).min(layout.ny);
+        // A row is prepared once the row below it is refined, a row of chunks lent once the
+        // row of buckets below it is prepared, a row of buckets coloured once the row below
+        // it is lent.
+        let prepare = at.prepared..after(at.refined, at.prepared, layout.ny);
+        let mut lend_end = at.lent;
+        while lend_end < layout.ny && at.prepared >= (lend_end + down + 1).min(layout.ny) {
             lend_end = (lend_end + down).min(layout.ny);
         }
-        let lend_rows = lent_to..lend_end;
-        run.step(refine_rows.clone(), lend_rows.clone(), progress, tally)?;
-        (refined_to, lent_to) = (refine_rows.end, lend_rows.end);
-        let colour_rows = coloured_to..after(lent_to, coloured_to, layout.ny);
-        run.colour(colour_rows.clone(), wanted, progress);
-        coloured_to = colour_rows.end;
-        // What no later step reads: samples of rows above the one before the next to lend
-        // (and not still to colour), values of rows already coloured.
-        for y in 0..lent_to.saturating_sub(1).min(coloured_to) {
-            run.store[y * layout.nx..(y + 1) * layout.nx].fill_with(|| None);
-        }
-        run.values[..coloured_to].fill_with(|| None);
+        let lend = at.lent..lend_end;
+        run.step(
+            [refine.clone(), prepare.clone(), lend.clone()],
+            progress,
+            tally,
+        )?;
+        (at.refined, at.prepared, at.lent) = (refine.end, prepare.end, lend.end);
+        let colour = at.coloured..after(at.lent, at.coloured, layout.ny);
+        run.colour(colour.clone(), wanted, progress);
+        at.coloured = colour.end;
+        run.drop_done(&at);
     }
     Ok(run.out)
 }
 
 impl Pipeline<'_> {
-    /// Refines the rows `refine` and lends the rows `lend` (whose neighbours are refined),
-    /// in parallel.
+    /// Refines, prepares and lends the rows of buckets `rows` (each stage's whose inputs
+    /// the earlier steps made), in parallel.
     fn step(
         &mut self,
-        refine: Range<usize>,
-        lend: Range<usize>,
+        [refine, to_prepare, lend]: [Range<usize>; 3],
         progress: &dyn Progress,
         tally: &mut Tally,
     ) -> Result<(), RenderError> {
         let (layout, plan) = (self.layout, &self.plan);
         let (across, down) = CHUNK;
         let per_row = layout.nx.div_ceil(across);
+        let buckets = |rows: Range<usize>| rows.start * layout.nx..rows.end * layout.nx;
         // The windows first: they are the longest tasks, and started last they would keep
         // the other threads waiting at the step's end.
         let tasks: Vec<Task> = (lend.start / down * per_row..lend.end.div_ceil(down) * per_row)
             .filter(|&c| plan.lent[c])
             .map(Task::Lend)
             .chain(
-                (refine.start * layout.nx..refine.end * layout.nx)
+                buckets(to_prepare)
+                    .filter(|&i| plan.prepared[i])
+                    .map(Task::Prepare),
+            )
+            .chain(
+                buckets(refine)
                     .filter(|&i| plan.traced[i])
                     .map(Task::Refine),
             )
@@ -247,25 +272,24 @@ impl Pipeline<'_> {
             .with_max_len(1)
             .map(|task| {
                 let started = Instant::now();
+                let seconds = || started.elapsed().as_secs_f64();
                 match *task {
                     Task::Refine(i) => {
                         let mut local = Tally::new(s.record_rays);
                         let b = layout.bucket(i);
                         let rounds =
                             super::refine_bucket(self.shader, self.maps, &b, progress, &mut local);
-                        let seconds = started.elapsed().as_secs_f64();
-                        rounds.map(|r| Done::Rounds(i, r, Box::new(local), seconds))
+                        rounds.map(|r| Done::Rounds(i, r, Box::new(local), seconds()))
+                    }
+                    Task::Prepare(i) => {
+                        let sites = prepare(self.maps, layout, &self.store, i)?;
+                        Ok(Done::Prepared(i, sites, seconds()))
                     }
                     Task::Lend(c) => {
                         let chunk = &plan.chunks[c];
-                        let (est, borrowed) =
-                            lend_chunk(self.maps, layout, &self.store, chunk, s.transparent)?;
-                        Ok(Done::Lent(
-                            c,
-                            est,
-                            borrowed,
-                            started.elapsed().as_secs_f64(),
-                        ))
+                        let window = (&self.store[..], &self.sites[..]);
+                        let lent = lend_chunk(self.maps, layout, window, chunk, s.transparent)?;
+                        Ok(Done::Lent(c, lent, seconds()))
                     }
                 }
             })
@@ -280,15 +304,39 @@ impl Pipeline<'_> {
                     self.store[i] = Some(rounds);
                     self.out.work_seconds += seconds;
                 }
-                Done::Lent(c, est, borrowed, seconds) => {
+                Done::Prepared(i, sites, seconds) => {
+                    self.sites[i] = Some(sites);
+                    self.out.work_seconds += seconds;
+                    self.out.lend_seconds += seconds;
+                }
+                Done::Lent(c, lent, seconds) => {
                     let chunk = &self.plan.chunks[c];
-                    place(layout, chunk, &mut self.values, (est, borrowed))?;
+                    place(layout, chunk, &mut self.values, lent)?;
                     self.out.work_seconds += seconds;
                     self.out.lend_seconds += seconds;
                 }
             }
         }
         Ok(())
+    }
+
+    /// Drops what no later step reads, given how far the stages have come.
+    fn drop_done(&mut self, at: &Stages) {
+        let nx = self.layout.nx;
+        // A row's samples are read by the preparing of the rows beside it, by the windows
+        // whose blocks hold it or the row below it (a site on a block's first row may be
+        // the row above's), and by its colouring; its sites by the windows whose blocks hold
+        // it; its values by its own and the row above's colouring.
+        let samples = (at.prepared.saturating_sub(1))
+            .min(at.lent.saturating_sub(2))
+            .min(at.coloured);
+        for y in 0..samples {
+            self.store[y * nx..(y + 1) * nx].fill_with(|| None);
+        }
+        for y in 0..at.lent.saturating_sub(1) {
+            self.sites[y * nx..(y + 1) * nx].fill_with(|| None);
+        }
+        self.values[..at.coloured].fill_with(|| None);
     }
 
     /// Colours the buckets `wanted` in the rows `rows` (whose own and next rows are lent).
@@ -353,16 +401,52 @@ fn place(
     Ok(())
 }
 
-/// Lends the sites of `chunk` the samples of every site of its window ([`reuse::lend`]):
-/// the values of the chunk's owned pixels (lent where they borrowed, their own samples'
-/// mean elsewhere, nothing where untraced) and which borrowed, row by row. Only blurred
-/// sites still noisier than the rule wanted borrow (the others' error is already within
-/// what the tolerance allows); where and how many samples were taken was decided on the
-/// sites' own samples alone.
-fn lend_chunk(
+/// Bucket `i`'s owned pixels' sites as they take part in lending ([`reuse::sites`]), their
+/// coverage tested against every sample of the 3 x 3 block of buckets around it
+/// ([`reuse::mark_covered`]): worked out once, read by every window that holds the bucket.
+fn prepare(
     maps: &Maps,
     layout: &Layout,
     store: &[Option<Rounds>],
+    i: usize,
+) -> Result<BucketSites, MemoryError> {
+    let kernel = maps.kernel.as_ref().expect("lending has its kernel");
+    let b = layout.bucket(i);
+    let (w, h) = (b.owned_w, b.owned_h);
+    let at = |p: usize| canonical(layout, store, (b.x0 + p % w, b.y0 + p / w));
+    let own = try_collect((0..w * h).map(at), "a bucket's sites")?;
+    let records = try_collect(own.iter().map(Canonical::records), "a bucket's sites")?;
+    let mut sites = reuse::sites((b.x0, b.y0), w, &records);
+    // Every sample of the buckets around (a site two buckets traced twice: its samples
+    // count once for coverage as twice).
+    let around: Vec<&SiteRecords> = layout
+        .around(i)
+        .flat_map(|j| {
+            let rounds = store[j]
+                .as_ref()
+                .expect("a prepared bucket's neighbours are refined");
+            rounds
+                .traced
+                .records
+                .as_ref()
+                .expect("lending records samples")
+        })
+        .collect();
+    reuse::mark_covered(kernel, (b.x0, b.y0), (w, h), &mut sites, &around);
+    Ok(sites)
+}
+
+/// Lends the sites of `chunk` the samples of every site of its window
+/// ([`reuse::lend_sites`]), given each bucket's `rounds` and `sites` ([`prepare`]): the
+/// values of the chunk's owned pixels (lent where they borrowed, their own samples' mean
+/// elsewhere, nothing where untraced) and which borrowed, row by row. Only blurred sites
+/// still noisier than the rule wanted borrow (the others' error is already within what the
+/// tolerance allows); where and how many samples were taken was decided on the sites' own
+/// samples alone.
+fn lend_chunk(
+    maps: &Maps,
+    layout: &Layout,
+    (store, prepared): (&[Option<Rounds>], &[Option<BucketSites>]),
     chunk: &Chunk,
     transparent: bool,
 ) -> Result<(Vec<Estimate>, Vec<bool>), MemoryError> {
@@ -374,10 +458,24 @@ fn lend_chunk(
         (xs.end * size).min(layout.width) - x0,
         (ys.end * size).min(layout.height) - y0,
     );
-    let at = |p: usize| site(layout, store, (&xs, &ys), (x0 + p % w, y0 + p / w));
-    let sites = try_collect((0..w * h).map(at), "a lending window's sites")?;
-    let records = try_collect(sites.iter().map(Site::records), "a lending window's sites")?;
-    let own = try_collect(sites.iter().map(|s| *s.est()), "a lending window's sites")?;
+    let pixel = |p: usize| (x0 + p % w, y0 + p / w);
+    let at = |p: usize| canonical(layout, store, pixel(p));
+    let traced = try_collect((0..w * h).map(at), "a lending window's sites")?;
+    let records = try_collect(
+        traced.iter().map(Canonical::records),
+        "a lending window's sites",
+    )?;
+    let own = try_collect(traced.iter().map(|s| *s.est()), "a lending window's sites")?;
+    let site = |p: usize| {
+        let (x, y) = pixel(p);
+        let i = (y / size) * layout.nx + x / size;
+        let b = layout.bucket(i);
+        let sites = prepared[i]
+            .as_ref()
+            .expect("a window's buckets are prepared");
+        sites[(y - b.y0) * b.owned_w + (x - b.x0)]
+    };
+    let sites = try_collect((0..w * h).map(site), "a lending window's sites")?;
     // The receivers: the chunk's owned pixels.
     let (cx0, cy0) = (chunk.cols.start * size, chunk.rows.start * size);
     let cw = (chunk.cols.end * size).min(layout.width) - cx0;
@@ -388,10 +486,11 @@ fn lend_chunk(
     for y in 0..ch {
         for x in 0..cw {
             let p = index(x, y);
-            needy[p] = sites[p].noisier_than(limit, transparent);
+            needy[p] = traced[p].noisier_than(limit, transparent);
         }
     }
-    let lent = reuse::lend(kernel, (x0, y0), (w, h), &records, &own, &needy)?;
+    let window = (&records[..], &sites[..]);
+    let lent = reuse::lend_sites(kernel, (x0, y0), (w, h), window, &own, &needy)?;
     let mut est = try_vec(cw * ch, Estimate::default(), "the lent values")?;
     let mut borrowed = try_vec(cw * ch, false, "the sites that borrowed")?;
     for y in 0..ch {
@@ -405,12 +504,12 @@ fn lend_chunk(
 
 /// A site as one bucket traced it: that bucket's rounds and the site's index in its closure.
 #[derive(Clone, Copy)]
-struct Site<'a> {
+struct Canonical<'a> {
     rounds: &'a Rounds,
     q: usize,
 }
 
-impl<'a> Site<'a> {
+impl<'a> Canonical<'a> {
     fn est(&self) -> &'a Estimate {
         &self.rounds.traced.est[self.q]
     }
@@ -431,15 +530,13 @@ impl<'a> Site<'a> {
     }
 }
 
-/// The site at pixel `(x, y)` as the bucket of the block `(xs, ys)` that took the most
-/// samples of it has it: its owner, or one whose closure's last column or row it lies on
-/// (the owner on a tie).
-fn site<'a>(
+/// The site at pixel `(x, y)` as the bucket that took the most samples of it has it: its
+/// owner, or one whose closure's last column or row it lies on (the owner on a tie).
+fn canonical<'a>(
     layout: &Layout,
     store: &'a [Option<Rounds>],
-    (xs, ys): (&Range<usize>, &Range<usize>),
     (x, y): (usize, usize),
-) -> Site<'a> {
+) -> Canonical<'a> {
     let size = layout.size;
     let (bx, by) = (x / size, y / size);
     let (left, up) = (x % size == 0 && bx > 0, y % size == 0 && by > 0);
@@ -449,15 +546,14 @@ fn site<'a>(
         (bx, by.wrapping_sub(1), up),
         (bx.wrapping_sub(1), by.wrapping_sub(1), left && up),
     ];
-    let mut best: Option<Site> = None;
-    for (cx, cy, _) in candidates
-        .into_iter()
-        .filter(|&(cx, cy, on)| on && xs.contains(&cx) && ys.contains(&cy))
-    {
+    let mut best: Option<Canonical> = None;
+    for (cx, cy, _) in candidates.into_iter().filter(|&(.., on)| on) {
         let i = cy * layout.nx + cx;
         let b = layout.bucket(i);
-        let rounds = store[i].as_ref().expect("a window's buckets are refined");
-        let found = Site {
+        let rounds = store[i]
+            .as_ref()
+            .expect("the buckets that may have traced a site are refined");
+        let found = Canonical {
             rounds,
             q: (y - b.y0) * b.w + (x - b.x0),
         };
@@ -465,7 +561,7 @@ fn site<'a>(
             best = Some(found);
         }
     }
-    best.expect("every pixel of a window has its owner in it")
+    best.expect("a pixel's own bucket is a candidate")
 }
 
 /// Bucket `b`'s colours from its sites' lent values: those of its own row, `rows.0`, and of

@@ -658,6 +658,14 @@ impl Layout {
         self.nx * self.ny
     }
 
+    /// The buckets of the 3 x 3 block around bucket `i` that lie in the frame.
+    fn around(&self, i: usize) -> impl Iterator<Item = usize> + '_ {
+        let (bx, by) = (i % self.nx, i / self.nx);
+        let xs = bx.saturating_sub(1)..(bx + 2).min(self.nx);
+        (by.saturating_sub(1)..(by + 2).min(self.ny))
+            .flat_map(move |y| xs.clone().map(move |x| y * self.nx + x))
+    }
+
     /// Bucket `i` (row by row).
     fn bucket(&self, i: usize) -> Bucket {
         let (bx, by) = (i % self.nx, i / self.nx);

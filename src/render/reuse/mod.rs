@@ -878,35 +878,90 @@ fn covered<R: Borrow<SiteRecords>>(
 /// The sites of a window `width` wide whose top left pixel is `(x0, y0)` that take part in
 /// reuse (those with a cluster that lends), in pixel order.
 fn members<R: Borrow<SiteRecords>>(
-    (x0, y0): (usize, usize),
+    origin: (usize, usize),
     width: usize,
     records: &[R],
     needy: &[bool],
-    taking_part: impl Fn(usize) -> bool,
+    taking_part: impl Fn(Vec2) -> bool,
 ) -> Vec<Member> {
     let mut members = Vec::new();
     for (p, r) in records.iter().map(Borrow::borrow).enumerate() {
-        if !taking_part(p) {
+        if !taking_part(at(origin, width, p)) {
             continue;
         }
-        let (x, y) = (x0 + p % width, y0 + p / width);
-        let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-        let gradient = mean_gradient(&r.list);
-        if let Some((lo, hi)) = cluster(r, at, gradient) {
-            members.push(Member {
-                p,
-                at,
-                lattice: x | y,
-                n: r.list.len() as f32,
-                lo,
-                hi,
-                gradient,
-                needy: needy[p],
-                covered: false,
-            });
+        if let Some(Site(mut m)) = site(origin, width, p, r) {
+            m.needy = needy[p];
+            members.push(m);
         }
     }
     members
+}
+
+/// The centre of pixel `p` of an area `width` wide whose top left pixel is `(x0, y0)`.
+fn at((x0, y0): (usize, usize), width: usize, p: usize) -> Vec2 {
+    Vec2::new((x0 + p % width) as f32 + 0.5, (y0 + p / width) as f32 + 0.5)
+}
+
+/// A site as it takes part in reuse, from its own samples (its cluster) and, once
+/// [`mark_covered`] has seen the samples around it, whether a nearer one covers it.
+#[derive(Debug, Clone, Copy)]
+pub struct Site(Member);
+
+/// Pixel `p`'s site (of an area `width` wide whose top left pixel is `origin`) with samples
+/// `r`, if it takes part in reuse (it has a cluster that lends).
+fn site(origin: (usize, usize), width: usize, p: usize, r: &SiteRecords) -> Option<Site> {
+    let at = at(origin, width, p);
+    let (x, y) = (origin.0 + p % width, origin.1 + p / width);
+    let gradient = mean_gradient(&r.list);
+    let (lo, hi) = cluster(r, at, gradient)?;
+    Some(Site(Member {
+        p,
+        at,
+        lattice: x | y,
+        n: r.list.len() as f32,
+        lo,
+        hi,
+        gradient,
+        needy: false,
+        covered: false,
+    }))
+}
+
+/// The sites of an area `width` wide whose top left pixel is `origin`, pixel by pixel, from
+/// their samples `records` (None where a site takes no part in reuse).
+pub fn sites<R: Borrow<SiteRecords>>(
+    origin: (usize, usize),
+    width: usize,
+    records: &[R],
+) -> Vec<Option<Site>> {
+    (records.iter().map(Borrow::borrow).enumerate())
+        .map(|(p, r)| site(origin, width, p, r))
+        .collect()
+}
+
+/// Marks the `sites` of the `width` x `height` area whose top left pixel is `origin` that a
+/// sample of `records` (the sites around them, in any order) nearer than their cluster
+/// crosses: they neither lend nor borrow (see [`covered`]).
+pub fn mark_covered<R: Borrow<SiteRecords>>(
+    kernel: &Kernel,
+    origin: (usize, usize),
+    (width, height): (usize, usize),
+    sites: &mut [Option<Site>],
+    records: &[R],
+) {
+    let members: Vec<Member> = sites.iter().flatten().map(|s| s.0).collect();
+    if members.is_empty() {
+        return;
+    }
+    let area = Bounds::around(members.iter().map(|m| m.at));
+    let corner = Vec2::new(origin.0 as f32, origin.1 as f32);
+    let grid = Grid::new(corner, (width, height), members);
+    let covered = covered(&grid, records, kernel.reach(), &area);
+    for (m, c) in grid.members.iter().zip(covered) {
+        if let Some(site) = &mut sites[m.p] {
+            site.0.covered = c;
+        }
+    }
 }
 
 /// A box of pixel positions, to skip what lies too far from the sites that borrow.
@@ -969,35 +1024,96 @@ pub fn lend<R: Borrow<SiteRecords>>(
     own: &[Estimate],
     needy: &[bool],
 ) -> Result<Lent, MemoryError> {
+    let taking_part = taking_part(kernel, ((x0, y0), width), records, needy);
+    let members = members((x0, y0), width, records, needy, |at| {
+        taking_part.distance(at) == 0.0
+    });
+    if !members.iter().any(|m| m.needy) {
+        return unlent(own);
+    }
+    let origin = Vec2::new(x0 as f32, y0 as f32);
+    let mut grid = Grid::new(origin, (width, height), members);
+    let covered = covered(&grid, records, kernel.reach(), &taking_part);
+    grid.set_covered(&covered);
+    lend_within(kernel, &grid, records, own)
+}
+
+/// [`lend`] with each pixel's site worked out beforehand, `sites[p]` ([`sites`], its
+/// coverage marked by [`mark_covered`]): where windows overlap, each site is worked out once
+/// rather than once per window.
+pub fn lend_sites<R: Borrow<SiteRecords>>(
+    kernel: &Kernel,
+    (x0, y0): (usize, usize),
+    (width, height): (usize, usize),
+    (records, sites): (&[R], &[Option<Site>]),
+    own: &[Estimate],
+    needy: &[bool],
+) -> Result<Lent, MemoryError> {
+    let taking_part = taking_part(kernel, ((x0, y0), width), records, needy);
+    let members: Vec<Member> = (sites.iter().enumerate())
+        .filter_map(|(p, site)| {
+            let mut m = site.as_ref()?.0;
+            (taking_part.distance(m.at) == 0.0).then(|| {
+                m.p = p;
+                m.needy = needy[p];
+                m
+            })
+        })
+        .collect();
+    if !members.iter().any(|m| m.needy) {
+        return unlent(own);
+    }
+    let grid = Grid::new(Vec2::new(x0 as f32, y0 as f32), (width, height), members);
+    lend_within(kernel, &grid, records, own)
+}
+
+/// Every site's own estimate: nothing lent.
+fn unlent(own: &[Estimate]) -> Result<Lent, MemoryError> {
     let mut out = Lent {
         estimates: try_vec(own.len(), Estimate::default(), "the lent estimates")?,
         borrowed: try_vec(own.len(), false, "the sites that borrowed")?,
     };
     out.estimates.copy_from_slice(own);
+    Ok(out)
+}
+
+/// The box of the sites that take part in lending to the window's needy sites (`origin` and
+/// `width` place the window's pixels): where only part of the window may borrow (a bucket
+/// among its neighbours), only the sites within two footprints of it take part, as a sample
+/// lent to a receiver lies within its footprint of it, and so do its site and the sites
+/// whose density it is weighed by (their own coverage is tested against every sample that
+/// reaches them).
+fn taking_part<R: Borrow<SiteRecords>>(
+    kernel: &Kernel,
+    (origin, width): ((usize, usize), usize),
+    records: &[R],
+    needy: &[bool],
+) -> Bounds {
     let reach = kernel.reach();
-    let at = |p: usize| Vec2::new((x0 + p % width) as f32 + 0.5, (y0 + p / width) as f32 + 0.5);
-    // Where only part of the window may borrow (a bucket among its neighbours), only the
-    // sites within two footprints of it take part: a sample lent to a receiver lies within
-    // its footprint of it, and so do its site and the sites whose density it is weighed by
-    // (their own coverage is tested against every sample that reaches them).
-    let receivers = Bounds::around((0..own.len()).filter(|&p| needy[p]).map(at));
+    let receivers = Bounds::around(
+        (0..needy.len())
+            .filter(|&p| needy[p])
+            .map(|p| at(origin, width, p)),
+    );
     let lent_extent = records
         .iter()
         .flat_map(|r| &r.borrow().list)
         .filter(|r| r.lends)
         .map(|r| r.extent(reach))
         .fold(0.0, f32::max);
-    let taking_part = receivers.grown(2.0 * lent_extent + 2.0);
-    let members = members((x0, y0), width, records, needy, |p| {
-        taking_part.distance(at(p)) == 0.0
-    });
-    if !members.iter().any(|m| m.needy) {
-        return Ok(out);
-    }
-    let origin = Vec2::new(x0 as f32, y0 as f32);
-    let mut grid = Grid::new(origin, (width, height), members);
-    let covered = covered(&grid, records, reach, &taking_part);
-    grid.set_covered(&covered);
+    receivers.grown(2.0 * lent_extent + 2.0)
+}
+
+/// The lending of [`lend`] once the members of the window are known, in `grid`, their
+/// coverage marked.
+fn lend_within<R: Borrow<SiteRecords>>(
+    kernel: &Kernel,
+    grid: &Grid,
+    records: &[R],
+    own: &[Estimate],
+) -> Result<Lent, MemoryError> {
+    let mut out = unlent(own)?;
+    let reach = kernel.reach();
     let mut pooled = vec![Estimate::default(); grid.members.len()];
     // Scratch for the receivers of one sample: at most every member.
     let mut near = vec![(0.0, 0, 0.0); grid.members.len()];
@@ -1016,7 +1132,7 @@ pub fn lend<R: Borrow<SiteRecords>>(
         }
         let samples = records[member.p].borrow().list.iter();
         for r in samples.filter(|r| member.lends(r) && receivers.reached_by(r, reach)) {
-            lend_one(kernel, &grid, (m, r), &mut near, &mut pooled);
+            lend_one(kernel, grid, (m, r), &mut near, &mut pooled);
         }
     }
     for (member, lent) in grid.members.iter().zip(pooled) {
