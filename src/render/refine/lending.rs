@@ -5,12 +5,18 @@
 //! Here a site borrows from its own bucket's sites and its neighbours', so one near a
 //! border draws on both sides of it, as one inside draws on all around it.
 //!
+//! **Sites, once.** Once the 3 x 3 block of buckets around a bucket is refined, its sites are
+//! worked out ([`prepare`]): each one's cluster of shifts from its own samples, and whether a
+//! nearer sample of any site of that block crosses it (it then neither lends nor borrows).
+//! Every window that holds the bucket reads them.
+//!
 //! **Windows.** A block of up to [`CHUNK`] buckets (4 across, 2 down) lends as one
 //! *window*: its sites receive, and every site of the block one bucket larger each way lends
 //! (a sample reaches receivers within its blur plus the filter's reach of it, and its
 //! density counts the sites within that of it again: a bucket's width covers both but for
 //! the largest blurs, which lose the lenders beyond it). The windows are fixed by the frame,
-//! so a region renders as in the full frame: the buckets its windows read are refined too.
+//! so a region renders as in the full frame: the buckets its windows read are prepared, and
+//! those around them refined, too.
 //!
 //! **One value a site.** A site on a bucket's last column or row (a cell's corner there) may
 //! be traced by two to four buckets; their samples are the same up to the fewer's count, so
@@ -18,19 +24,19 @@
 //! own bucket's window gives it. Every bucket that interpolates from it uses that value.
 //!
 //! **Order and memory.** Buckets are refined a band of rows at a time (enough for the
-//! threads); each step also lends the windows whose blocks are refined and colours the rows
-//! whose next row is lent, and a row's samples are dropped once nothing still to come reads
-//! them: a few rows of samples are held, not the frame's. Larger windows lend for less (a
-//! sample near a window's border is weighed once per window it reaches): on paper at 1920 px,
-//! 64 spp, 4 x 2 took the render from 8.98 to 7.37 s against 4 x 1, 4 x 3 to 7.06 s.
+//! threads); each step also prepares the rows whose neighbours are refined, lends the
+//! windows whose blocks are prepared and colours the rows whose next row is lent, and a
+//! row's samples are dropped once nothing still to come reads them: a few rows of samples
+//! are held, not the frame's.
 //!
-//! **Where lending's time goes now.** Each window works out its sites' clusters and the
-//! occlusion test afresh for every site of its block, so a site's are worked out about three
-//! times. Paper at 640 px, 32 spp, one thread, windows of 4 x 1: clusters 0.09 s, occlusion
-//! 0.22 s, gathering the windows 0.09 s, the lending itself 0.38 s, against 0.02, 0.05, 0.03
-//! and 0.34 s when each bucket lent alone. Working the first two out once per bucket (from the
-//! buckets around it) would save most of that, for a row more of lag and of refined buckets
-//! around a region.
+//! **What it costs.** A sample near a window's border is weighed once per window it reaches,
+//! so larger windows lend for less: on paper at 1920 px, 64 spp, 4 x 2 took the render from
+//! 8.98 to 7.37 s against 4 x 1, 4 x 3 to 7.06 s. Working each window's sites out afresh (a
+//! site about three times) took, on paper at 640 px, 32 spp, one thread, windows of 4 x 1:
+//! clusters 0.09 s, occlusion 0.22 s, gathering the windows 0.09 s, the lending itself 0.38 s,
+//! against 0.02, 0.05, 0.03 and 0.34 s when each bucket lent alone; preparing them once took
+//! lending from 0.40 to 0.34 s on two threads (the render 1.13 to 1.02 s), 1920 px from 7.23
+//! to 6.76 s, for a row more held and a ring more of buckets refined around a region.
 
 use std::ops::Range;
 use std::time::Instant;
