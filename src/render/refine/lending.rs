@@ -43,7 +43,7 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::{Bucket, Finished, Layout, Maps, Refined, Rounds, SAMPLING_SHARE, final_colour};
+use super::{Bucket, Finished, Layout, Maps, Refined, Rounds, SAMPLING_SHARE};
 use crate::limits::{MemoryError, try_collect, try_vec};
 use crate::render::estimate::Estimate;
 use crate::render::reuse::{self, Site, SiteRecords};
@@ -600,14 +600,5 @@ fn colour(
             }
         }
     }
-    Refined {
-        color: final_colour(&est, &rounds.interval, b),
-        interval: rounds.interval.clone(),
-        samples: rounds.traced.est.iter().map(|e| e.n).collect(),
-        borrowed,
-        rounds: rounds.rounds,
-        // Counted by the caller.
-        work_seconds: 0.0,
-        lend_seconds: 0.0,
-    }
+    rounds.result(b, &est, borrowed)
 }

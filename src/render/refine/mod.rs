@@ -141,6 +141,19 @@ impl Cell {
             .then(|| ((self.x0 + self.x1) / 2, (self.y0 + self.y1) / 2))
     }
 
+    /// The pixels (indices in a window `width` wide) the interpolation at (x, y) blends,
+    /// with their weights, those of weight zero left out ([`Cell::weights`]).
+    fn points(
+        &self,
+        width: usize,
+        (x, y): (usize, usize),
+        centre: Option<(usize, usize)>,
+    ) -> impl Iterator<Item = (usize, f32)> {
+        (self.weights(x, y, centre).into_iter())
+            .filter(|&(_, w)| w != 0.0)
+            .map(move |((px, py), w)| (py * width + px, w))
+    }
+
     /// The points the interpolation at (x, y) blends and their weights: bilinear over the
     /// corners, or with `centre` the linear interpolation on the triangle of the cell's fan
     /// around it that holds (x, y).
@@ -205,11 +218,7 @@ fn interpolate_at(
 ) -> Option<(Vec4, f32, f32)> {
     let mut value = Vec4::ZERO;
     let (mut var, mut var_alpha) = (0.0, 0.0);
-    for ((px, py), w) in cell.weights(x, y, centre) {
-        if w == 0.0 {
-            continue;
-        }
-        let p = py * width + px;
+    for (p, w) in cell.points(width, (x, y), centre) {
         let e = &traced.est[p];
         if e.n == 0 {
             return None;
@@ -688,13 +697,17 @@ struct Rounds {
 
 impl Rounds {
     /// The result without lending: every site keeps its own samples' mean.
-    fn finish(self, b: &Bucket) -> Refined {
-        let samples = self.traced.est.iter().map(|e| e.n).collect();
+    fn finish(&self, b: &Bucket) -> Refined {
+        self.result(b, &self.traced.est, vec![false; b.w * b.h])
+    }
+
+    /// Bucket `b`'s result with its sites' values `est`, those in `borrowed` lent.
+    fn result(&self, b: &Bucket, est: &[Estimate], borrowed: Vec<bool>) -> Refined {
         Refined {
-            color: final_colour(&self.traced.est, &self.interval, b),
-            samples,
-            borrowed: vec![false; b.w * b.h],
-            interval: self.interval,
+            color: final_colour(est, &self.interval, b),
+            interval: self.interval.clone(),
+            samples: self.traced.est.iter().map(|e| e.n).collect(),
+            borrowed,
             rounds: self.rounds,
             // Counted by the caller.
             work_seconds: 0.0,
@@ -972,11 +985,8 @@ fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
             }
             let cell = Cell::of(x, y, interval[p], width, height);
             let mut value = Vec4::ZERO;
-            for ((px, py), w) in cell.weights(x, y, cell.centre()) {
-                if w == 0.0 {
-                    continue;
-                }
-                let e = &est[py * width + px];
+            for (q, w) in cell.points(width, (x, y), cell.centre()) {
+                let e = &est[q];
                 assert!(
                     e.n > 0,
                     "every corner and centre of every cell is traced before the loop ends"

@@ -70,13 +70,6 @@ impl Columns {
             f32x8::splat(shift) - (load(&self.gx, start) * dx + load(&self.gy, start) * dy);
         ((dx, dy), d2, carried)
     }
-
-    /// Marks the members covered (see [`super::covered`]).
-    pub(super) fn set_covered(&mut self, covered: &[bool]) {
-        for (c, &is) in self.covered.iter_mut().zip(covered) {
-            *c = f32::from(u8::from(is));
-        }
-    }
 }
 
 /// Of members `start..start + valid` (`valid` at most [`LANES`]), those within `extent` of

@@ -516,14 +516,6 @@ impl Grid {
         grid
     }
 
-    /// Marks the members that [`covered`] found covered.
-    fn set_covered(&mut self, covered: &[bool]) {
-        for (member, &covered) in self.members.iter_mut().zip(covered) {
-            member.covered = covered;
-        }
-        self.columns.set_covered(covered);
-    }
-
     /// Whether every sample of `list` is certainly nearer than none of the members within its
     /// reach (its `|shift|`, at least [`MIN_SHIFT`], plus `reach`): for each such member m,
     /// `shift - m.gradient . (c - m.at) >= m.lo`. With a cell's plane (mean gradient G,
@@ -875,28 +867,6 @@ fn covered<R: Borrow<SiteRecords>>(
     covered
 }
 
-/// The sites of a window `width` wide whose top left pixel is `(x0, y0)` that take part in
-/// reuse (those with a cluster that lends), in pixel order.
-fn members<R: Borrow<SiteRecords>>(
-    origin: (usize, usize),
-    width: usize,
-    records: &[R],
-    needy: &[bool],
-    taking_part: impl Fn(Vec2) -> bool,
-) -> Vec<Member> {
-    let mut members = Vec::new();
-    for (p, r) in records.iter().map(Borrow::borrow).enumerate() {
-        if !taking_part(at(origin, width, p)) {
-            continue;
-        }
-        if let Some(Site(mut m)) = site(origin, width, p, r) {
-            m.needy = needy[p];
-            members.push(m);
-        }
-    }
-    members
-}
-
 /// The centre of pixel `p` of an area `width` wide whose top left pixel is `(x0, y0)`.
 fn at((x0, y0): (usize, usize), width: usize, p: usize) -> Vec2 {
     Vec2::new((x0 + p % width) as f32 + 0.5, (y0 + p / width) as f32 + 0.5)
@@ -1024,18 +994,10 @@ pub fn lend<R: Borrow<SiteRecords>>(
     own: &[Estimate],
     needy: &[bool],
 ) -> Result<Lent, MemoryError> {
-    let taking_part = taking_part(kernel, ((x0, y0), width), records, needy);
-    let members = members((x0, y0), width, records, needy, |at| {
-        taking_part.distance(at) == 0.0
-    });
-    if !members.iter().any(|m| m.needy) {
-        return unlent(own);
-    }
-    let origin = Vec2::new(x0 as f32, y0 as f32);
-    let mut grid = Grid::new(origin, (width, height), members);
-    let covered = covered(&grid, records, kernel.reach(), &taking_part);
-    grid.set_covered(&covered);
-    lend_within(kernel, &grid, records, own)
+    let mut sites = sites((x0, y0), width, records);
+    mark_covered(kernel, (x0, y0), (width, height), &mut sites, records);
+    let window = (records, &sites[..]);
+    lend_sites(kernel, (x0, y0), (width, height), window, own, needy)
 }
 
 /// [`lend`] with each pixel's site worked out beforehand, `sites[p]` ([`sites`], its
@@ -1315,7 +1277,10 @@ mod tests {
                 let (centre, shift) = on_plane(4.0, far, film, r);
                 matte(centre, shift, far, 0.8)
             });
-            let members = members((0, 0), size, &records, &vec![true; size * size], |_| true);
+            let members: Vec<Member> = (sites((0, 0), size, &records).into_iter())
+                .flatten()
+                .map(|s| s.0)
+                .collect();
             let grid = Grid::new(Vec2::ZERO, (size, size), members);
             let everywhere = Bounds::around([Vec2::ZERO, Vec2::splat(size as f32)].into_iter());
             let found = covered(&grid, &records, reach, &everywhere);
