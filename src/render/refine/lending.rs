@@ -27,7 +27,8 @@
 //! threads); each step also prepares the rows whose neighbours are refined, lends the
 //! windows whose blocks are prepared and colours the rows whose next row is lent, and a
 //! row's samples are dropped once nothing still to come reads them: a few rows of samples
-//! are held, not the frame's.
+//! are held, not the frame's, and at most [`reuse::RECORDS_PER_PIXEL`] records per pixel of
+//! them; each band is checked against the memory budget before it is refined.
 //!
 //! **What it costs.** A sample near a window's border is weighed once per window it reaches,
 //! so larger windows lend for less: on paper at 1920 px, 64 spp, 4 x 2 took the render from
@@ -44,7 +45,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::{Bucket, Finished, Layout, Maps, Refined, Rounds, SAMPLING_SHARE};
-use crate::limits::{MemoryError, try_collect, try_vec};
+use crate::limits::{MemoryError, check_budget, try_collect, try_vec};
 use crate::render::estimate::Estimate;
 use crate::render::reuse::{self, Site, SiteRecords};
 use crate::render::site::SiteShader;
@@ -186,6 +187,8 @@ struct Pipeline<'a> {
     sites: Vec<Option<BucketSites>>,
     /// By row of buckets: its sites' lent values, until the row is coloured.
     values: Vec<Option<RowValues>>,
+    /// The most bytes of records a row of buckets has held ([`Rounds::record_bytes`]).
+    row_bytes: usize,
     out: Finished,
 }
 
@@ -207,6 +210,7 @@ pub(super) fn refine(
         store: (0..layout.count()).map(|_| None).collect(),
         sites: (0..layout.count()).map(|_| None).collect(),
         values: (0..layout.ny).map(|_| None).collect(),
+        row_bytes: 0,
         out: Finished {
             buckets: Vec::new(),
             work_seconds: 0.0,
@@ -229,11 +233,22 @@ pub(super) fn refine(
             lend_end = (lend_end + down).min(layout.ny);
         }
         let lend = at.lent..lend_end;
+        // A cgroup grants memory and then kills the process that takes too much: each band's
+        // records are checked first against the budget, at the most a row has held so far.
+        if !refine.is_empty() && run.row_bytes > 0 {
+            let bytes = run.row_bytes as u128 * refine.len() as u128;
+            check_budget(reuse::RECORDS_HELD, bytes)?;
+        }
         run.step(
             [refine.clone(), prepare.clone(), lend.clone()],
             progress,
             tally,
         )?;
+        for row in refine.clone() {
+            let buckets = run.store[row * layout.nx..(row + 1) * layout.nx].iter();
+            let bytes = buckets.flatten().map(Rounds::record_bytes).sum();
+            run.row_bytes = run.row_bytes.max(bytes);
+        }
         (at.refined, at.prepared, at.lent) = (refine.end, prepare.end, lend.end);
         let colour = at.coloured..after(at.lent, at.coloured, layout.ny);
         run.colour(colour.clone(), wanted, progress);

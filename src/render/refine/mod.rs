@@ -265,6 +265,23 @@ impl Traced {
         }
     }
 
+    /// With reuse, room for the samples each site takes next (`from` -> `to`) in a cell
+    /// `interval` across ([`SiteRecords::reserve`]).
+    fn make_room(&mut self, from: &[u32], to: &[u32], interval: &[u32]) -> Result<(), MemoryError> {
+        for (p, site) in self.records.iter_mut().flatten().enumerate() {
+            site.reserve(to[p].saturating_sub(from[p]) as usize, interval[p])?;
+        }
+        Ok(())
+    }
+
+    /// With reuse, what each site keeps of its records in its cell, now `interval` across
+    /// ([`SiteRecords::keep`]).
+    fn keep_records(&mut self, interval: &[u32]) {
+        for (site, &i) in self.records.iter_mut().flatten().zip(interval) {
+            site.keep(i);
+        }
+    }
+
     /// Recomputes the cached values of the pixels in `changed`.
     fn update(&mut self, changed: &[usize]) {
         for &p in changed {
@@ -696,6 +713,12 @@ struct Rounds {
 }
 
 impl Rounds {
+    /// The bytes its sites' records hold (none without reuse).
+    fn record_bytes(&self) -> usize {
+        let records = self.traced.records.iter().flatten();
+        records.map(SiteRecords::bytes).sum()
+    }
+
     /// The result without lending: every site keeps its own samples' mean.
     fn finish(&self, b: &Bucket) -> Refined {
         self.result(b, &self.traced.est, vec![false; b.w * b.h])
@@ -833,6 +856,7 @@ fn refine_bucket(
             break;
         }
         rounds += 1;
+        traced.make_room(&from, &to, &interval)?;
         shade_changed_rows(shader, b, &from, &to, &mut traced, &mut scratch, tally);
         traced.update(&work);
         // Check every cell a new sample or a split touched.
@@ -852,6 +876,7 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
+    traced.keep_records(&interval);
     Ok(Some(Rounds {
         traced,
         interval,
