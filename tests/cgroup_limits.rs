@@ -170,5 +170,44 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
         "{err}"
     );
     assert!(!out.exists(), "nothing is written");
+
+    // Sample reuse keeps every blurred site's samples for a few rows of buckets: a plane just
+    // out of focus at 64 spp holds about 400 MB of them at 600 x 600 (46 MB of buffers). Each
+    // bucket asks the budget for room first, so the render is refused, never killed.
+    let plane = dir.join("plane.obj");
+    std::fs::write(
+        &plane,
+        "v -10 -10 0\nv 10 -10 0\nv 10 10 0\nv -10 10 0\nf 1 2 3\nf 1 3 4\n",
+    )
+    .unwrap();
+    let out = dir.join("plane.png");
+    let refused = cgroup.dofray(&[
+        "render",
+        plane.to_str().unwrap(),
+        "--focus-distance",
+        "38",
+        "--width",
+        "600",
+        "--height",
+        "600",
+        "--spp",
+        "64",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let err = text(&refused.stderr);
+    assert_eq!(
+        refused.status.code(),
+        Some(5),
+        "{:?}: {err}",
+        refused.status
+    );
+    assert!(
+        err.contains("the samples kept for sample reuse (--reuse off keeps none)")
+            && err.contains("cgroup memory limit"),
+        "{err}"
+    );
+    assert!(!out.exists(), "nothing is written");
     drop(cgroup);
 }

@@ -27,8 +27,8 @@
 //! threads); each step also prepares the rows whose neighbours are refined, lends the
 //! windows whose blocks are prepared and colours the rows whose next row is lent, and a
 //! row's samples are dropped once nothing still to come reads them: a few rows of samples
-//! are held, not the frame's, and at most [`reuse::RECORDS_PER_PIXEL`] records per pixel of
-//! them; each band is checked against the memory budget before it is refined.
+//! are held, not the frame's; each band is checked against the memory budget before it is
+//! refined.
 //!
 //! **What it costs.** A sample near a window's border is weighed once per window it reaches,
 //! so larger windows lend for less: on paper at 1920 px, 64 spp, 4 x 2 took the render from
@@ -141,7 +141,21 @@ struct Plan {
     traced: Vec<bool>,
 }
 
+/// Units of progress a bucket's refinement counts, against one per bucket a window lends to:
+/// tracing is most of a render's work, lending about a third of it (paper at 640 px).
+const REFINE_UNITS: u64 = 2;
+
 impl Plan {
+    /// The units of progress of the whole plan: its refinements and its windows' buckets.
+    fn units(&self) -> u64 {
+        let refined = self.traced.iter().filter(|&&t| t).count() as u64;
+        let lent = (self.chunks.iter().zip(&self.lent))
+            .filter(|(_, l)| **l)
+            .map(|(c, _)| (c.cols.len() * c.rows.len()) as u64)
+            .sum::<u64>();
+        REFINE_UNITS * refined + lent
+    }
+
     fn new(layout: &Layout, wanted: &[bool]) -> Self {
         let chunks = chunks(layout);
         // A wanted bucket reads its own row's values and the next row's (its closure's last
@@ -187,8 +201,8 @@ struct Pipeline<'a> {
     sites: Vec<Option<BucketSites>>,
     /// By row of buckets: its sites' lent values, until the row is coloured.
     values: Vec<Option<RowValues>>,
-    /// The most bytes of records a row of buckets has held ([`Rounds::record_bytes`]).
-    row_bytes: usize,
+    /// The most bytes of records a bucket has held ([`Rounds::record_bytes`]).
+    bucket_bytes: usize,
     out: Finished,
 }
 
@@ -210,13 +224,14 @@ pub(super) fn refine(
         store: (0..layout.count()).map(|_| None).collect(),
         sites: (0..layout.count()).map(|_| None).collect(),
         values: (0..layout.ny).map(|_| None).collect(),
-        row_bytes: 0,
+        bucket_bytes: 0,
         out: Finished {
             buckets: Vec::new(),
             work_seconds: 0.0,
             lend_seconds: 0.0,
         },
     };
+    progress.start("adaptive", run.plan.units());
     let band = (8 * rayon::current_num_threads().max(1))
         .div_ceil(layout.nx)
         .max(1);
@@ -233,25 +248,14 @@ pub(super) fn refine(
             lend_end = (lend_end + down).min(layout.ny);
         }
         let lend = at.lent..lend_end;
-        // A cgroup grants memory and then kills the process that takes too much: each band's
-        // records are checked first against the budget, at the most a row has held so far.
-        if !refine.is_empty() && run.row_bytes > 0 {
-            let bytes = run.row_bytes as u128 * refine.len() as u128;
-            check_budget(reuse::RECORDS_HELD, bytes)?;
-        }
         run.step(
             [refine.clone(), prepare.clone(), lend.clone()],
             progress,
             tally,
         )?;
-        for row in refine.clone() {
-            let buckets = run.store[row * layout.nx..(row + 1) * layout.nx].iter();
-            let bytes = buckets.flatten().map(Rounds::record_bytes).sum();
-            run.row_bytes = run.row_bytes.max(bytes);
-        }
         (at.refined, at.prepared, at.lent) = (refine.end, prepare.end, lend.end);
         let colour = at.coloured..after(at.lent, at.coloured, layout.ny);
-        run.colour(colour.clone(), wanted, progress);
+        run.colour(colour.clone(), wanted);
         at.coloured = colour.end;
         run.drop_done(&at);
     }
@@ -288,6 +292,7 @@ impl Pipeline<'_> {
             )
             .collect();
         let s = self.shader.settings;
+        let room = self.room_to_refine();
         let done: Vec<Done> = tasks
             .par_iter()
             .with_max_len(1)
@@ -296,10 +301,14 @@ impl Pipeline<'_> {
                 let seconds = || started.elapsed().as_secs_f64();
                 match *task {
                     Task::Refine(i) => {
+                        if room > 0 {
+                            check_budget(reuse::RECORDS_HELD, room)?;
+                        }
                         let mut local = Tally::new(s.record_rays);
                         let b = layout.bucket(i);
                         let rounds =
                             super::refine_bucket(self.shader, self.maps, &b, progress, &mut local);
+                        progress.advance(REFINE_UNITS);
                         rounds.map(|r| Done::Rounds(i, r, Box::new(local), seconds()))
                     }
                     Task::Prepare(i) => {
@@ -310,6 +319,7 @@ impl Pipeline<'_> {
                         let chunk = &plan.chunks[c];
                         let window = (&self.store[..], &self.sites[..]);
                         let lent = lend_chunk(self.maps, layout, window, chunk, s.transparent)?;
+                        progress.advance((chunk.cols.len() * chunk.rows.len()) as u64);
                         Ok(Done::Lent(c, lent, seconds()))
                     }
                 }
@@ -322,6 +332,7 @@ impl Pipeline<'_> {
                     let Some(rounds) = rounds else {
                         return Err(RenderError::Cancelled);
                     };
+                    self.bucket_bytes = self.bucket_bytes.max(rounds.record_bytes());
                     self.store[i] = Some(rounds);
                     self.out.work_seconds += seconds;
                 }
@@ -339,6 +350,17 @@ impl Pipeline<'_> {
             }
         }
         Ok(())
+    }
+
+    /// The memory a bucket checks is left before it is refined: under a cgroup no allocation
+    /// fails (the kernel grants it, then its OOM killer ends the process), so each bucket
+    /// first asks the budget for room for twice the records the largest so far held, for
+    /// every thread (buckets grow down a frame, and windows take their share). Nothing
+    /// (0) while that is under a megabyte: reading the budget costs about 0.1 ms, a bucket
+    /// that records a megabyte takes far longer to trace.
+    fn room_to_refine(&self) -> u128 {
+        let room = 2 * self.bucket_bytes as u128 * rayon::current_num_threads() as u128;
+        if room < 1 << 20 { 0 } else { room }
     }
 
     /// Drops what no later step reads, given how far the stages have come.
@@ -361,7 +383,7 @@ impl Pipeline<'_> {
     }
 
     /// Colours the buckets `wanted` in the rows `rows` (whose own and next rows are lent).
-    fn colour(&mut self, rows: Range<usize>, wanted: &[bool], progress: &dyn Progress) {
+    fn colour(&mut self, rows: Range<usize>, wanted: &[bool]) {
         let layout = self.layout;
         let started = Instant::now();
         let (store, values) = (&self.store, &self.values);
@@ -378,7 +400,6 @@ impl Pipeline<'_> {
                     .expect("a coloured bucket's row is lent");
                 let next = values.get(row + 1).and_then(Option::as_ref);
                 let refined = colour(layout, rounds, &b, (own, next));
-                progress.advance(1);
                 (b, refined)
             })
             .collect();

@@ -265,21 +265,13 @@ impl Traced {
         }
     }
 
-    /// With reuse, room for the samples each site takes next (`from` -> `to`) in a cell
-    /// `interval` across ([`SiteRecords::reserve`]).
-    fn make_room(&mut self, from: &[u32], to: &[u32], interval: &[u32]) -> Result<(), MemoryError> {
+    /// With reuse, room for the samples each site takes next (`from` -> `to`;
+    /// [`SiteRecords::reserve`]).
+    fn make_room(&mut self, from: &[u32], to: &[u32]) -> Result<(), MemoryError> {
         for (p, site) in self.records.iter_mut().flatten().enumerate() {
-            site.reserve(to[p].saturating_sub(from[p]) as usize, interval[p])?;
+            site.reserve(to[p].saturating_sub(from[p]) as usize)?;
         }
         Ok(())
-    }
-
-    /// With reuse, what each site keeps of its records in its cell, now `interval` across
-    /// ([`SiteRecords::keep`]).
-    fn keep_records(&mut self, interval: &[u32]) {
-        for (site, &i) in self.records.iter_mut().flatten().zip(interval) {
-            site.keep(i);
-        }
     }
 
     /// Recomputes the cached values of the pixels in `changed`.
@@ -580,7 +572,6 @@ pub fn refine(
     let wanted: Vec<bool> = (0..layout.count())
         .map(|i| region.overlaps(&layout.bucket(i).region(false)))
         .collect();
-    progress.start("adaptive", wanted.iter().filter(|&&w| w).count() as u64);
     let done = if maps.kernel.is_some() {
         lending::refine(shader, &maps, &layout, &wanted, progress, tally)?
     } else {
@@ -634,6 +625,7 @@ fn refine_alone(
         .filter(|&i| wanted[i])
         .map(|i| layout.bucket(i))
         .collect();
+    progress.start("adaptive", buckets.len() as u64);
     let done: Vec<_> = buckets
         .par_iter()
         .map(|b| {
@@ -856,7 +848,7 @@ fn refine_bucket(
             break;
         }
         rounds += 1;
-        traced.make_room(&from, &to, &interval)?;
+        traced.make_room(&from, &to)?;
         shade_changed_rows(shader, b, &from, &to, &mut traced, &mut scratch, tally);
         traced.update(&work);
         // Check every cell a new sample or a split touched.
@@ -876,7 +868,6 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
-    traced.keep_records(&interval);
     Ok(Some(Rounds {
         traced,
         interval,

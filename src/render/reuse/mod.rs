@@ -105,12 +105,6 @@ pub const MAX_TILT: f32 = 0.5;
 /// ([`SiteRecords::later`]), which its value weighs in as an estimate of its own.
 pub const MAX_RECORDS: usize = 256;
 
-/// A site keeps at most this many records for each pixel of its cell's area (its interval
-/// squared; [`SiteRecords::keep`]), so the records a band of buckets holds are bounded by its
-/// pixels, whatever the sample count: dense sites (little blur, where a sample reaches few
-/// receivers) at high counts would otherwise keep [`MAX_RECORDS`] each.
-pub const RECORDS_PER_PIXEL: usize = 64;
-
 /// What the records are, in memory errors.
 pub const RECORDS_HELD: &str = "the samples kept for sample reuse (--reuse off keeps none)";
 
@@ -187,35 +181,15 @@ impl Record {
 }
 
 /// The samples one site recorded.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct SiteRecords {
-    /// Its samples, in the order traced: the first [`SiteRecords::most`] of them.
+    /// Its samples, in the order traced: the first [`MAX_RECORDS`] of them.
     pub list: Vec<Record>,
     /// The samples it took after those, summed: an estimate of its pixel independent of
     /// everything lent to it.
     later: Estimate,
-    /// The most it records: [`MAX_RECORDS`], or fewer for a small cell ([`records_for`]).
-    most: usize,
     /// It takes no part in reuse ([`SiteRecords::unlent`]): it records nothing.
     unlent: bool,
-}
-
-impl Default for SiteRecords {
-    fn default() -> Self {
-        Self {
-            list: Vec::new(),
-            later: Estimate::default(),
-            most: MAX_RECORDS,
-            unlent: false,
-        }
-    }
-}
-
-/// The most records a site keeps whose cell is `interval` pixels across:
-/// [`RECORDS_PER_PIXEL`] for each pixel of it, and at most [`MAX_RECORDS`].
-pub fn records_for(interval: u32) -> usize {
-    let area = (interval as usize).saturating_mul(interval as usize);
-    RECORDS_PER_PIXEL.saturating_mul(area).min(MAX_RECORDS)
 }
 
 impl SiteRecords {
@@ -227,35 +201,18 @@ impl SiteRecords {
         }
     }
 
-    /// Makes room, exactly, for `more` samples of a site whose cell is now `interval` pixels
-    /// across (what it keeps of them: [`SiteRecords::keep`]). Records are most of what a
-    /// band of buckets holds, so none is doubled by a vector's growth, and an allocation the
-    /// system refuses is an error, not an abort.
-    pub fn reserve(&mut self, more: usize, interval: u32) -> Result<(), MemoryError> {
+    /// Makes room, exactly, for `more` samples (up to [`MAX_RECORDS`] in all). Records are
+    /// most of what a band of buckets holds, so none is doubled by a vector's growth, and an
+    /// allocation the system refuses is an error, not an abort.
+    pub fn reserve(&mut self, more: usize) -> Result<(), MemoryError> {
         if self.unlent {
             return Ok(());
         }
-        self.keep(interval);
-        let room = (self.list.len() + more).min(self.most) - self.list.len();
+        let room = (self.list.len() + more).min(MAX_RECORDS) - self.list.len();
         self.list.try_reserve_exact(room).map_err(|_| {
             let bytes = (self.list.len() + room) * size_of::<Record>();
             MemoryError::allocation(RECORDS_HELD, bytes as u128)
         })
-    }
-
-    /// Keeps at most [`records_for`] `interval` records: a site's cell only shrinks as
-    /// refinement splits it, and a smaller one keeps fewer. Those past it are added to
-    /// [`SiteRecords::later`], as if it had recorded no more: the first samples of its
-    /// stratified sequence are still a valid set on their own.
-    pub fn keep(&mut self, interval: u32) {
-        self.most = self.most.min(records_for(interval));
-        if self.list.len() <= self.most {
-            return;
-        }
-        for r in self.list.drain(self.most..) {
-            self.later.add(r.radiance, 1.0, r.hit);
-        }
-        self.list.shrink_to_fit();
     }
 
     /// The bytes its records hold.
@@ -263,22 +220,22 @@ impl SiteRecords {
         self.list.capacity() * size_of::<Record>()
     }
 
-    /// Keeps `r`, up to [`SiteRecords::most`], and adds any later one to
-    /// [`SiteRecords::later`] (nothing for a site that takes no part,
-    /// [`SiteRecords::unlent`]). The first samples of a stratified sequence are a valid set
-    /// of samples on their own, so lending only those stays unbiased.
+    /// Keeps `r`, up to [`MAX_RECORDS`], and adds any later one to [`SiteRecords::later`]
+    /// (nothing for a site that takes no part, [`SiteRecords::unlent`]). The first samples
+    /// of a stratified sequence are a valid set of samples on their own, so lending only
+    /// those stays unbiased.
     pub fn push(&mut self, r: Record) {
         if self.unlent {
             return;
         }
-        if self.list.len() < self.most {
+        if self.list.len() < MAX_RECORDS {
             self.list.push(r);
         } else {
             self.later.add(r.radiance, 1.0, r.hit);
         }
     }
 
-    /// The samples it took past the records it keeps, as one estimate (empty when
+    /// The samples it took past the [`MAX_RECORDS`] it keeps, as one estimate (empty when
     /// it took no more).
     pub fn later(&self) -> &Estimate {
         &self.later
@@ -1752,38 +1709,31 @@ mod tests {
     }
 
     #[test]
-    fn a_small_cell_keeps_few_records_and_sums_the_rest() {
-        assert_eq!(records_for(1), RECORDS_PER_PIXEL);
-        assert_eq!(records_for(2), (4 * RECORDS_PER_PIXEL).min(MAX_RECORDS));
-        assert_eq!(records_for(64), MAX_RECORDS);
-        assert_eq!(records_for(u32::MAX), MAX_RECORDS);
+    fn records_take_exactly_the_room_made_and_the_rest_is_summed() {
         let sample = |i: usize| matte(Vec2::ZERO, 3.0, Vec2::ZERO, i as f32);
         let mut site = SiteRecords::default();
-        // Refined at interval 8, room for 100: all recorded, in exactly the room made.
-        site.reserve(100, 8).unwrap();
+        site.reserve(100).unwrap();
         (0..100).for_each(|i| site.push(sample(i)));
         assert_eq!((site.list.len(), site.later().n), (100, 0));
         assert_eq!(site.bytes(), 100 * size_of::<Record>());
-        // Its cell split to one pixel: it keeps the first records_for(1), and every sample
-        // it took, kept or not, still counts once.
-        site.reserve(200, 1).unwrap();
-        (100..300).for_each(|i| site.push(sample(i)));
-        let kept = records_for(1);
-        assert_eq!(site.list.len(), kept);
+        // Room past MAX_RECORDS is not made; the samples past it are summed, each once.
+        site.reserve(300).unwrap();
+        assert_eq!(site.bytes(), MAX_RECORDS * size_of::<Record>());
+        (100..400).for_each(|i| site.push(sample(i)));
+        assert_eq!(site.list.len(), MAX_RECORDS);
         assert!(
             site.list
                 .iter()
                 .enumerate()
                 .all(|(i, r)| r.radiance.x == i as f32)
         );
-        assert_eq!(site.later().n as usize, 300 - kept);
-        let sum: f32 = (kept..300).map(|i| i as f32).sum();
-        let later = site.later().mean().x * (300 - kept) as f32;
+        assert_eq!(site.later().n as usize, 400 - MAX_RECORDS);
+        let sum: f32 = (MAX_RECORDS..400).map(|i| i as f32).sum();
+        let later = site.later().mean().x * (400 - MAX_RECORDS) as f32;
         assert!((later - sum).abs() <= 1e-5 * sum, "{later} {sum}");
-        assert_eq!(site.bytes(), kept * size_of::<Record>());
         // A site that takes no part keeps nothing.
         let mut none = SiteRecords::unlent();
-        none.reserve(100, 8).unwrap();
+        none.reserve(100).unwrap();
         none.push(sample(0));
         assert_eq!((none.list.len(), none.later().n, none.bytes()), (0, 0, 0));
     }
