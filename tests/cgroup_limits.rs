@@ -23,9 +23,9 @@ struct Cgroup {
 }
 
 impl Cgroup {
-    /// A new cgroup limited to `bytes`, v1 or v2, or why none can be made.
-    fn new(bytes: u64) -> Result<Self, String> {
-        let name = format!("dofray-test-{}", std::process::id());
+    /// A new cgroup `tag` limited to `bytes`, v1 or v2, or why none can be made.
+    fn new(bytes: u64, tag: &str) -> Result<Self, String> {
+        let name = format!("dofray-test-{}-{tag}", std::process::id());
         let v1 = Path::new("/sys/fs/cgroup/memory");
         let v2 = Path::new("/sys/fs/cgroup");
         let (dir, limit_file) = if v1.join("memory.limit_in_bytes").exists() {
@@ -72,18 +72,21 @@ impl Drop for Cgroup {
     }
 }
 
+/// A cgroup limited to [`LIMIT`], or None (saying why) where none can be made.
+fn cgroup(tag: &str) -> Option<Cgroup> {
+    Cgroup::new(LIMIT, tag)
+        .map_err(|why| println!("not run: {why}"))
+        .ok()
+}
+
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
 #[test]
 fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
-    let cgroup = match Cgroup::new(LIMIT) {
-        Ok(c) => c,
-        Err(why) => {
-            println!("not run: {why}");
-            return;
-        }
+    let Some(cgroup) = cgroup("images") else {
+        return;
     };
     let dir = Scratch::new("cgroup");
 
@@ -170,7 +173,15 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
         "{err}"
     );
     assert!(!out.exists(), "nothing is written");
+    drop(cgroup);
+}
 
+#[test]
+fn samples_kept_for_reuse_that_outgrow_a_cgroup_are_refused_not_killed() {
+    let Some(cgroup) = cgroup("reuse") else {
+        return;
+    };
+    let dir = Scratch::new("cgroup-reuse");
     // Sample reuse keeps every blurred site's samples for a few rows of buckets: a plane just
     // out of focus at 64 spp holds about 400 MB of them at 600 x 600 (46 MB of buffers). Each
     // bucket asks the budget for room first, so the render is refused, never killed.
