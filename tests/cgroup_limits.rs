@@ -148,19 +148,18 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
     // a machine with less left, before the OBJ is parsed): exit 5, never SIGKILL.
     let model = crate::memory_limits::emissive_grid(&dir, 707);
     let out = dir.join("emissive.png");
-    let refused = cgroup.dofray(&[
-        "render",
-        model.to_str().unwrap(),
-        "--spp",
-        "1",
-        "--width",
-        "32",
-        "--threads",
-        "1",
-        "--quiet",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
+    let args = ["--spp", "1", "--width", "32", "--threads", "1"];
+    assert_refused(&cgroup, &model, &args, &out, "out of memory");
+    drop(cgroup);
+}
+
+/// `dofray render scene args... --quiet -o out` in `cgroup` exits 5 (not killed), its message
+/// naming `what` and the cgroup's limit, and writes nothing.
+fn assert_refused(cgroup: &Cgroup, scene: &Path, args: &[&str], out: &Path, what: &str) {
+    let mut all = vec!["render", scene.to_str().unwrap()];
+    all.extend(args);
+    all.extend(["--quiet", "-o", out.to_str().unwrap()]);
+    let refused = cgroup.dofray(&all);
     let err = text(&refused.stderr);
     assert_eq!(
         refused.status.code(),
@@ -169,11 +168,10 @@ fn a_real_cgroup_limit_refuses_what_cannot_fit_and_admits_what_can() {
         refused.status
     );
     assert!(
-        err.contains("out of memory") && err.contains("cgroup memory limit"),
+        err.contains(what) && err.contains("cgroup memory limit"),
         "{err}"
     );
     assert!(!out.exists(), "nothing is written");
-    drop(cgroup);
 }
 
 #[test]
@@ -192,9 +190,7 @@ fn samples_kept_for_reuse_that_outgrow_a_cgroup_are_refused_not_killed() {
     )
     .unwrap();
     let out = dir.join("plane.png");
-    let refused = cgroup.dofray(&[
-        "render",
-        plane.to_str().unwrap(),
+    let args = [
         "--focus-distance",
         "38",
         "--width",
@@ -203,22 +199,8 @@ fn samples_kept_for_reuse_that_outgrow_a_cgroup_are_refused_not_killed() {
         "600",
         "--spp",
         "64",
-        "--quiet",
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    let err = text(&refused.stderr);
-    assert_eq!(
-        refused.status.code(),
-        Some(5),
-        "{:?}: {err}",
-        refused.status
-    );
-    assert!(
-        err.contains("the samples kept for sample reuse (--reuse off keeps none)")
-            && err.contains("cgroup memory limit"),
-        "{err}"
-    );
-    assert!(!out.exists(), "nothing is written");
+    ];
+    let what = "the samples kept for sample reuse (--reuse off keeps none)";
+    assert_refused(&cgroup, &plane, &args, &out, what);
     drop(cgroup);
 }
