@@ -182,7 +182,8 @@ fn samples_kept_for_reuse_that_outgrow_a_cgroup_are_refused_not_killed() {
     let dir = Scratch::new("cgroup-reuse");
     // Sample reuse keeps every blurred site's samples for a few rows of buckets: a plane just
     // out of focus at 64 spp holds about 400 MB of them at 600 x 600 (46 MB of buffers). Each
-    // bucket asks the budget for room first, so the render is refused, never killed.
+    // bucket asks the budget for room first, so the render is refused, never killed (the
+    // build before was killed in both cases below).
     let plane = dir.join("plane.obj");
     std::fs::write(
         &plane,
@@ -190,17 +191,13 @@ fn samples_kept_for_reuse_that_outgrow_a_cgroup_are_refused_not_killed() {
     )
     .unwrap();
     let out = dir.join("plane.png");
-    let args = [
-        "--focus-distance",
-        "38",
-        "--width",
-        "600",
-        "--height",
-        "600",
-        "--spp",
-        "64",
-    ];
     let what = "the samples kept for sample reuse (--reuse off keeps none)";
-    assert_refused(&cgroup, &plane, &args, &out, what);
+    // Many rows of buckets; then one frame-wide row of them, refined in one step (each
+    // bucket sees the largest that the others before it held).
+    for (width, height) in [("600", "600"), ("8000", "128")] {
+        let args = ["--focus-distance", "38", "--spp", "64"];
+        let args = [&args[..], &["--width", width, "--height", height]].concat();
+        assert_refused(&cgroup, &plane, &args, &out, what);
+    }
     drop(cgroup);
 }

@@ -40,6 +40,7 @@
 //! to 6.76 s, for a row more held and a ring more of buckets refined around a region.
 
 use std::ops::Range;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use rayon::prelude::*;
@@ -202,7 +203,8 @@ struct Pipeline<'a> {
     /// By row of buckets: its sites' lent values, until the row is coloured.
     values: Vec<Option<RowValues>>,
     /// The most bytes of records a bucket has held ([`Rounds::record_bytes`]).
-    bucket_bytes: usize,
+    /// Updated as each bucket is refined, so the buckets of the same step see it too.
+    bucket_bytes: AtomicUsize,
     out: Finished,
 }
 
@@ -224,7 +226,7 @@ pub(super) fn refine(
         store: (0..layout.count()).map(|_| None).collect(),
         sites: (0..layout.count()).map(|_| None).collect(),
         values: (0..layout.ny).map(|_| None).collect(),
-        bucket_bytes: 0,
+        bucket_bytes: AtomicUsize::new(0),
         out: Finished {
             buckets: Vec::new(),
             work_seconds: 0.0,
@@ -292,7 +294,6 @@ impl Pipeline<'_> {
             )
             .collect();
         let s = self.shader.settings;
-        let room = self.room_to_refine();
         let done: Vec<Done> = tasks
             .par_iter()
             .with_max_len(1)
@@ -301,6 +302,7 @@ impl Pipeline<'_> {
                 let seconds = || started.elapsed().as_secs_f64();
                 match *task {
                     Task::Refine(i) => {
+                        let room = self.room_to_refine();
                         if room > 0 {
                             check_budget(reuse::RECORDS_HELD, room)?;
                         }
@@ -309,6 +311,10 @@ impl Pipeline<'_> {
                         let rounds =
                             super::refine_bucket(self.shader, self.maps, &b, progress, &mut local);
                         progress.advance(REFINE_UNITS);
+                        if let Ok(Some(r)) = &rounds {
+                            self.bucket_bytes
+                                .fetch_max(r.record_bytes(), Ordering::Relaxed);
+                        }
                         rounds.map(|r| Done::Rounds(i, r, Box::new(local), seconds()))
                     }
                     Task::Prepare(i) => {
@@ -332,7 +338,6 @@ impl Pipeline<'_> {
                     let Some(rounds) = rounds else {
                         return Err(RenderError::Cancelled);
                     };
-                    self.bucket_bytes = self.bucket_bytes.max(rounds.record_bytes());
                     self.store[i] = Some(rounds);
                     self.out.work_seconds += seconds;
                 }
@@ -359,7 +364,8 @@ impl Pipeline<'_> {
     /// (0) while that is under a megabyte: reading the budget costs about 0.1 ms, a bucket
     /// that records a megabyte takes far longer to trace.
     fn room_to_refine(&self) -> u128 {
-        let room = 2 * self.bucket_bytes as u128 * rayon::current_num_threads() as u128;
+        let most = self.bucket_bytes.load(Ordering::Relaxed) as u128;
+        let room = 2 * most * rayon::current_num_threads() as u128;
         if room < 1 << 20 { 0 } else { room }
     }
 
