@@ -27,8 +27,8 @@
 //! threads); each step also prepares the rows whose neighbours are refined, lends the
 //! windows whose blocks are prepared and colours the rows whose next row is lent, and a
 //! row's samples are dropped once nothing still to come reads them: a few rows of samples
-//! are held, not the frame's; each band is checked against the memory budget before it is
-//! refined.
+//! are held, not the frame's, and each bucket asks the memory budget for room before it is
+//! refined ([`Pipeline::room_to_refine`]).
 //!
 //! **What it costs.** A sample near a window's border is weighed once per window it reaches,
 //! so larger windows lend for less: on paper at 1920 px, 64 spp, 4 x 2 took the render from
