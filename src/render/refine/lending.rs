@@ -65,6 +65,11 @@ struct Chunk {
 }
 
 impl Chunk {
+    /// How many buckets receive.
+    fn count(&self) -> usize {
+        self.cols.len() * self.rows.len()
+    }
+
     /// The window's buckets (columns, rows): the chunk's and one more each way.
     fn block(&self, layout: &Layout) -> (Range<usize>, Range<usize>) {
         (
@@ -151,8 +156,7 @@ impl Plan {
     fn units(&self) -> u64 {
         let refined = self.traced.iter().filter(|&&t| t).count() as u64;
         let lent = (self.chunks.iter().zip(&self.lent))
-            .filter(|(_, l)| **l)
-            .map(|(c, _)| (c.cols.len() * c.rows.len()) as u64)
+            .filter_map(|(c, &l)| l.then_some(c.count() as u64))
             .sum::<u64>();
         REFINE_UNITS * refined + lent
     }
@@ -325,7 +329,7 @@ impl Pipeline<'_> {
                         let chunk = &plan.chunks[c];
                         let window = (&self.store[..], &self.sites[..]);
                         let lent = lend_chunk(self.maps, layout, window, chunk, s.transparent)?;
-                        progress.advance((chunk.cols.len() * chunk.rows.len()) as u64);
+                        progress.advance(chunk.count() as u64);
                         Ok(Done::Lent(c, lent, seconds()))
                     }
                 }
@@ -473,11 +477,7 @@ fn prepare(
             let rounds = store[j]
                 .as_ref()
                 .expect("a prepared bucket's neighbours are refined");
-            rounds
-                .traced
-                .records
-                .as_ref()
-                .expect("lending records samples")
+            rounds.records()
         })
         .collect();
     reuse::mark_covered(kernel, (b.x0, b.y0), (w, h), &mut sites, &around);
@@ -563,12 +563,7 @@ impl<'a> Canonical<'a> {
     }
 
     fn records(&self) -> &'a SiteRecords {
-        &self
-            .rounds
-            .traced
-            .records
-            .as_ref()
-            .expect("lending records samples")[self.q]
+        &self.rounds.records()[self.q]
     }
 
     /// Noisier than `limit` in colour or, with `transparent`, coverage (code values).

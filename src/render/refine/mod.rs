@@ -705,6 +705,14 @@ struct Rounds {
 }
 
 impl Rounds {
+    /// Its sites' records, with reuse (lending reads them only then).
+    fn records(&self) -> &[SiteRecords] {
+        self.traced
+            .records
+            .as_ref()
+            .expect("lending records samples")
+    }
+
     /// The bytes its sites' records hold (none without reuse).
     fn record_bytes(&self) -> usize {
         let records = self.traced.records.iter().flatten();
