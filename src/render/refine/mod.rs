@@ -14,7 +14,10 @@
 //!    compared with the cell's interpolation at that pixel; a difference beyond the tolerance
 //!    plus the noise both carry (from the sites' sample variance) halves the cell, whose new
 //!    corners and centres are traced in the next round. Cells that pass are interpolated
-//!    through their centre too (four triangles), so the centre's information is not wasted.
+//!    through their centre too, and through their edges' middles where a finer neighbour
+//!    traced them ([`Cell::weights`]: a biquadratic, the corners' line on an edge without a
+//!    middle, clamped to the values it blends), so no traced point's information is wasted
+//!    and a blurred edge crossing a cell curves through it smoothly.
 //! 3. **Samples where variance is.** A site that blur reaches starts with `max(aa, 16,
 //!    spp / 4)` samples (at most `spp`) and doubles them, up to `spp`, while the standard
 //!    error of its mean exceeds half the tolerance: bright bokeh and edges behind blur get
@@ -142,68 +145,120 @@ impl Cell {
     }
 
     /// The pixels (indices in a window `width` wide) the interpolation at (x, y) blends,
-    /// with their weights, those of weight zero left out ([`Cell::weights`]).
+    /// with their weights, those of weight zero left out ([`Cell::weights`]); `known` says
+    /// which pixels are traced.
     fn points(
         &self,
         width: usize,
         (x, y): (usize, usize),
         centre: Option<(usize, usize)>,
+        known: impl Fn(usize) -> bool,
     ) -> impl Iterator<Item = (usize, f32)> {
-        (self.weights(x, y, centre).into_iter())
+        let known = |(px, py): (usize, usize)| known(py * width + px);
+        (self.weights(x, y, centre, known).into_iter())
             .filter(|&(_, w)| w != 0.0)
             .map(move |((px, py), w)| (py * width + px, w))
     }
 
-    /// The points the interpolation at (x, y) blends and their weights: bilinear over the
-    /// corners, or with `centre` the linear interpolation on the triangle of the cell's fan
-    /// around it that holds (x, y).
+    /// The points the interpolation at (x, y) blends and their weights. Without `centre`,
+    /// bilinear over the corners. With it, the biquadratic through the 3 x 3 nodes of the
+    /// corners, the centre and the edges' middles (at the centre's column and row), where
+    /// an edge's middle is its traced value when `known` (a finer neighbour's corner) and
+    /// else the corners' line there. So on an edge it is the line, or the parabola through
+    /// the traced middle, that the cell's neighbour meets; inside, a value that curves
+    /// across the cell (a blurred edge) follows the centre smoothly, where a fan of
+    /// triangles through it left teeth along the edge. It is exact for bilinear functions
+    /// plus any multiple of the centre's bump. Weights sum to 1 but the far nodes' may be
+    /// negative: see [`blend`].
     fn weights(
         &self,
         x: usize,
         y: usize,
         centre: Option<(usize, usize)>,
-    ) -> [((usize, usize), f32); 4] {
-        let (px, py) = (x as f32, y as f32);
-        let corners = [
-            (self.x0, self.y0),
-            (self.x1, self.y0),
-            (self.x1, self.y1),
-            (self.x0, self.y1),
-        ];
-        if let Some(c) = centre {
-            let (cx, cy) = (c.0 as f32, c.1 as f32);
-            for i in 0..4 {
-                let (a, b) = (corners[i], corners[(i + 1) % 4]);
-                let (ax, ay) = (a.0 as f32 - cx, a.1 as f32 - cy);
-                let (bx, by) = (b.0 as f32 - cx, b.1 as f32 - cy);
-                let det = ax * by - ay * bx;
-                if det == 0.0 {
-                    continue;
+        known: impl Fn((usize, usize)) -> bool,
+    ) -> [((usize, usize), f32); 9] {
+        let (x0, y0, x1, y1) = (self.x0, self.y0, self.x1, self.y1);
+        let mut out = [((x0, y0), 0.0); 9];
+        let Some((cx, cy)) = centre else {
+            let fraction = |p: usize, lo: usize, hi: usize| {
+                if hi > lo {
+                    (p - lo) as f32 / (hi - lo) as f32
+                } else {
+                    0.0
                 }
-                let (dx, dy) = (px - cx, py - cy);
-                let s = (dx * by - dy * bx) / det;
-                let t = (ax * dy - ay * dx) / det;
-                const EPS: f32 = -1e-5;
-                if s >= EPS && t >= EPS && s + t <= 1.0 - EPS {
-                    return [(c, 1.0 - s - t), (a, s), (b, t), (a, 0.0)];
+            };
+            let (tx, ty) = (fraction(x, x0, x1), fraction(y, y0, y1));
+            out[0] = ((x0, y0), (1.0 - tx) * (1.0 - ty));
+            out[1] = ((x1, y0), tx * (1.0 - ty));
+            out[2] = ((x1, y1), tx * ty);
+            out[3] = ((x0, y1), (1.0 - tx) * ty);
+            return out;
+        };
+        // Each axis's quadratic Lagrange weights at p for the nodes lo < c < hi.
+        let lagrange = |p: usize, lo: usize, c: usize, hi: usize| {
+            let (p, lo, c, hi) = (p as f32, lo as f32, c as f32, hi as f32);
+            [
+                (p - c) * (p - hi) / ((lo - c) * (lo - hi)),
+                (p - lo) * (p - hi) / ((c - lo) * (c - hi)),
+                (p - lo) * (p - c) / ((hi - lo) * (hi - c)),
+            ]
+        };
+        let (wx, wy) = (lagrange(x, x0, cx, x1), lagrange(y, y0, cy, y1));
+        let (xs, ys) = ([x0, cx, x1], [y0, cy, y1]);
+        // Where the line between an untraced middle's corners crosses it.
+        let (tx, ty) = (
+            (cx - x0) as f32 / (x1 - x0) as f32,
+            (cy - y0) as f32 / (y1 - y0) as f32,
+        );
+        for j in 0..3 {
+            for i in 0..3 {
+                let (node, w) = ((xs[i], ys[j]), wx[i] * wy[j]);
+                let slot = &mut out[j * 3 + i];
+                slot.0 = node;
+                slot.1 += w;
+                // An edge's middle not traced: its weight goes to the edge's corners.
+                let middle_of = match (i, j) {
+                    (1, 0) | (1, 2) => Some((tx, j * 3, j * 3 + 2)),
+                    (0, 1) | (2, 1) => Some((ty, i, 6 + i)),
+                    _ => None,
+                };
+                if let Some((t, a, b)) = middle_of.filter(|_| !known(node)) {
+                    out[j * 3 + i].1 -= w;
+                    out[a].1 += w * (1.0 - t);
+                    out[b].1 += w * t;
                 }
             }
         }
-        let fraction = |p: usize, lo: usize, hi: usize| {
-            if hi > lo {
-                (p - lo) as f32 / (hi - lo) as f32
-            } else {
-                0.0
-            }
-        };
-        let (tx, ty) = (fraction(x, self.x0, self.x1), fraction(y, self.y0, self.y1));
-        [
-            (corners[0], (1.0 - tx) * (1.0 - ty)),
-            (corners[1], tx * (1.0 - ty)),
-            (corners[2], tx * ty),
-            (corners[3], (1.0 - tx) * ty),
-        ]
+        out
     }
+}
+
+/// The interpolation `Σ w v` of `points` (pixel, weight), with `value` each point's, clamped
+/// channel by channel to the points' range: the biquadratic's far corners weigh negatively,
+/// so next to one bright corner (a bokeh disc's rim) it would dip below its darkest point,
+/// below zero on black. Clamped, it never leaves the values it blends (none of a flat
+/// region's, nor a linear one's, which it reproduces). None when `value` gives None.
+fn blend(
+    points: impl Iterator<Item = (usize, f32)>,
+    mut value: impl FnMut(usize) -> Option<Vec4>,
+) -> Option<Vec4> {
+    let (mut sum, mut lo, mut hi) = (
+        Vec4::ZERO,
+        Vec4::splat(f32::INFINITY),
+        Vec4::splat(f32::NEG_INFINITY),
+    );
+    for (p, w) in points {
+        let v = value(p)?;
+        sum += v * w;
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    // `max` then `min`, not `clamp`: with no points (lo above hi) the sum, 0, is kept.
+    Some(if lo.x <= hi.x {
+        sum.max(lo).min(hi)
+    } else {
+        sum
+    })
 }
 
 /// The interpolation (colour and coverage) at (x, y) from the traced points, with the
@@ -216,14 +271,16 @@ fn interpolate_at(
     (x, y): (usize, usize),
     centre: Option<(usize, usize)>,
 ) -> Option<(Vec4, f32, f32)> {
-    let mut value = Vec4::ZERO;
-    let (mut var, mut var_alpha) = (0.0, 0.0);
-    for (p, w) in cell.points(width, (x, y), centre) {
+    // The point compared is never one of the nodes it is compared with.
+    let q = y * width + x;
+    let known = |p: usize| p != q && traced.est[p].n > 0;
+    let points = || cell.points(width, (x, y), centre, known);
+    let value = blend(points(), |p| {
         let e = &traced.est[p];
-        if e.n == 0 {
-            return None;
-        }
-        value += e.mean_rgba() * w;
+        (e.n > 0).then(|| e.mean_rgba())
+    })?;
+    let (mut var, mut var_alpha) = (0.0, 0.0);
+    for (p, w) in points() {
         let (se, se_alpha) = traced.noise(p);
         var += w * w * se * se;
         var_alpha += w * w * se_alpha * se_alpha;
@@ -1008,16 +1065,16 @@ fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
                 return e.mean_rgba();
             }
             let cell = Cell::of(x, y, interval[p], width, height);
-            let mut value = Vec4::ZERO;
-            for (q, w) in cell.points(width, (x, y), cell.centre()) {
+            let points = cell.points(width, (x, y), cell.centre(), |q| est[q].n > 0);
+            let value = blend(points, |q| {
                 let e = &est[q];
                 assert!(
                     e.n > 0,
                     "every corner and centre of every cell is traced before the loop ends"
                 );
-                value += e.mean_rgba() * w;
-            }
-            value
+                Some(e.mean_rgba())
+            });
+            value.expect("every point is traced")
         })
         .collect()
 }
@@ -1026,31 +1083,86 @@ fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
 mod tests {
     use super::*;
 
+    /// The interpolation's value at (x, y) of `f` over `cell`'s nodes, unclamped.
+    fn interpolated(
+        cell: &Cell,
+        (x, y): (usize, usize),
+        known: impl Fn((usize, usize)) -> bool,
+        f: impl Fn(usize, usize) -> f32,
+    ) -> f32 {
+        let ws = cell.weights(x, y, cell.centre(), known);
+        let sum: f32 = ws.iter().map(|w| w.1).sum();
+        assert!((sum - 1.0).abs() < 1e-5, "({x},{y}) sums to {sum}");
+        ws.iter().map(|&((px, py), w)| f(px, py) * w).sum()
+    }
+
     #[test]
-    fn fan_weights_reproduce_linear_functions_and_sum_to_one() {
-        let cell = Cell::of(5, 6, 8, 40, 40);
-        assert_eq!((cell.x0, cell.y0, cell.x1, cell.y1), (0, 0, 8, 8));
-        let f = |x: usize, y: usize| 0.25 * x as f32 - 0.5 * y as f32 + 3.0;
-        for centre in [None, cell.centre()] {
-            for y in 0..=8 {
-                for x in 0..=8 {
-                    let ws = cell.weights(x, y, centre);
-                    let sum: f32 = ws.iter().map(|w| w.1).sum();
-                    assert!((sum - 1.0).abs() < 1e-5, "({x},{y}) sums to {sum}");
-                    assert!(ws.iter().all(|w| w.1 >= -1e-5));
-                    let v: f32 = ws.iter().map(|((px, py), w)| f(*px, *py) * w).sum();
-                    assert!((v - f(x, y)).abs() < 1e-4, "({x},{y}): {v} vs {}", f(x, y));
+    fn the_biquadratic_reproduces_what_its_nodes_determine() {
+        // A whole cell, and one clipped by the image's border (its centre off the middle).
+        for (cell, size) in [
+            (Cell::of(5, 6, 8, 40, 40), 8),
+            (Cell::of(33, 2, 8, 39, 40), 6),
+        ] {
+            let (x0, y0, x1, y1) = (cell.x0, cell.y0, cell.x1, cell.y1);
+            assert_eq!(x1 - x0, size);
+            let bump = |x: usize, y: usize| {
+                let (x, y) = (x as f32, y as f32);
+                (x - x0 as f32) * (x1 as f32 - x) * (y - y0 as f32) * (y1 as f32 - y)
+            };
+            // Bilinear plus the bump, from the corners and the centre alone.
+            let f = |x: usize, y: usize| {
+                let (xf, yf) = (x as f32, y as f32);
+                0.25 * xf - 0.5 * yf + 0.03 * xf * yf + 3.0 + 0.2 * bump(x, y)
+            };
+            // Any biquadratic, once the edges' middles are traced too.
+            let g = |x: usize, y: usize| {
+                let (x, y) = (x as f32 - 30.0, y as f32 - 5.0);
+                1.0 + 0.3 * x - 0.2 * y + 0.05 * x * x - 0.07 * y * y + 0.01 * x * x * y * y
+            };
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let v = interpolated(&cell, (x, y), |_| false, f);
+                    assert!((v - f(x, y)).abs() < 1e-3, "({x},{y}): {v} vs {}", f(x, y));
+                    let v = interpolated(&cell, (x, y), |_| true, g);
+                    assert!((v - g(x, y)).abs() < 1e-2, "({x},{y}): {v} vs {}", g(x, y));
+                }
+            }
+            // On an edge only that edge's nodes count, so the neighbour meets it there.
+            let (cx, _) = cell.centre().unwrap();
+            for x in x0..=x1 {
+                for known in [false, true] {
+                    let ws = cell.weights(x, y0, cell.centre(), |_| known);
+                    let on_edge =
+                        |p: (usize, usize)| p == (x0, y0) || p == (x1, y0) || p == (cx, y0);
+                    assert!(
+                        ws.iter().all(|&(p, w)| on_edge(p) || w.abs() < 1e-6),
+                        "{ws:?}"
+                    );
                 }
             }
         }
-        // The fan passes through the centre; on the edges it is the corners' line.
-        let ws = cell.weights(4, 4, cell.centre());
-        assert!(
-            ws.iter()
-                .any(|&(p, w)| p == (4, 4) && (w - 1.0).abs() < 1e-6)
-        );
-        let ws = cell.weights(3, 0, cell.centre());
-        assert!(ws.iter().all(|&(p, w)| p != (4, 4) || w.abs() < 1e-6));
+    }
+
+    #[test]
+    fn the_interpolation_never_leaves_the_values_it_blends() {
+        // One bright corner on black: the far corner's weight is negative, and unclamped
+        // the far quarter of the cell would go below zero.
+        let cell = Cell::of(1, 1, 8, 40, 40);
+        let bright = |x: usize, y: usize| if (x, y) == (0, 0) { 100.0 } else { 0.0 };
+        let raw = interpolated(&cell, (6, 6), |_| false, bright);
+        assert!(raw < 0.0, "{raw}");
+        let width = 40;
+        for y in 0..=8 {
+            for x in 0..=8 {
+                let points = cell.points(width, (x, y), cell.centre(), |_| false);
+                let value =
+                    blend(points, |p| Some(Vec4::splat(bright(p % width, p / width)))).unwrap();
+                assert!((0.0..=100.0).contains(&value.x), "({x},{y}): {value}");
+            }
+        }
+        // A point it needs that is not traced gives nothing.
+        let points = cell.points(width, (3, 3), cell.centre(), |_| false);
+        assert_eq!(blend(points, |p| (p != 0).then_some(Vec4::ONE)), None);
     }
 
     #[test]
