@@ -15,7 +15,7 @@
 //!    plus the noise both carry (from the sites' sample variance) halves the cell, whose new
 //!    corners and centres are traced in the next round. Cells that pass are interpolated
 //!    through their centre too, and through their edges' middles where a finer neighbour
-//!    traced them ([`Cell::weights`]: a biquadratic, the corners' line on an edge without a
+//!    traced them (a biquadratic, `Cell::weights`: the corners' line on an edge without a
 //!    middle, clamped to the values it blends), so no traced point's information is wasted
 //!    and a blurred edge crossing a cell curves through it smoothly.
 //! 3. **Samples where variance is.** A site that blur reaches starts with `max(aa, 16,
