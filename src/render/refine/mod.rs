@@ -1054,7 +1054,8 @@ fn shade_changed_rows(
 }
 
 /// The bucket's colours once refinement ends, from its sites' values `est`: sites keep
-/// them, the owned pixels between them are interpolated from their cells.
+/// them, the owned pixels between them are interpolated from their cells, through the
+/// middles of their edges too where [`estimated_middles`] finds them.
 fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
     let (width, height) = (b.w, b.h);
     (0..width * height)
@@ -1065,18 +1066,158 @@ fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
                 return e.mean_rgba();
             }
             let cell = Cell::of(x, y, interval[p], width, height);
-            let points = cell.points(width, (x, y), cell.centre(), |q| est[q].n > 0);
-            let value = blend(points, |q| {
-                let e = &est[q];
-                assert!(
-                    e.n > 0,
-                    "every corner and centre of every cell is traced before the loop ends"
-                );
-                Some(e.mean_rgba())
+            if let Some(value) = along_edge(est, b, &cell, (x, y)) {
+                return value;
+            }
+            let middles = estimated_middles(est, b, &cell);
+            let middle = |q: usize| middles.iter().flatten().find(|m| m.0 == q).map(|m| m.1);
+            let traced = |q: usize| est[q].n > 0;
+            let points = cell.points(width, (x, y), cell.centre(), |q| {
+                traced(q) || middle(q).is_some()
             });
-            value.expect("every point is traced")
+            let value = blend(points, |q| {
+                if traced(q) {
+                    Some(est[q].mean_rgba())
+                } else {
+                    middle(q)
+                }
+            });
+            value.expect("every corner and centre of every cell is traced before the loop ends")
         })
         .collect()
+}
+
+/// The value at (x, y) of a pixel on a lattice line (its cell a segment one pixel thick,
+/// between two corners `size` apart): the parabola through the corners and the segment's
+/// middle, traced or estimated from the squares either side ([`middle_between`]), as the
+/// cells either side see their shared edge; clamped to the three. None when the middle is
+/// neither, or the pixel is not on such a segment (the corners' line then serves).
+fn along_edge(est: &[Estimate], b: &Bucket, cell: &Cell, (x, y): (usize, usize)) -> Option<Vec4> {
+    let s = cell.size as usize;
+    let (x0, y0) = (cell.x0 as isize, cell.y0 as isize);
+    let size = cell.size as isize;
+    let (across, t, middle, sides) = if cell.y0 == cell.y1 && cell.x1 == cell.x0 + s {
+        let sides = ((x0, y0 - size), (x0, y0));
+        (false, x - cell.x0, (cell.x0 + s / 2, cell.y0), sides)
+    } else if cell.x0 == cell.x1 && cell.y1 == cell.y0 + s {
+        let sides = ((x0 - size, y0), (x0, y0));
+        (true, y - cell.y0, (cell.x0, cell.y0 + s / 2), sides)
+    } else {
+        return None;
+    };
+    if s < 2 {
+        return None;
+    }
+    let v = |(px, py): (usize, usize)| est[py * b.w + px].mean_rgba();
+    let m = middle.1 * b.w + middle.0;
+    let mid = if est[m].n > 0 {
+        v(middle)
+    } else {
+        let first = traced_square(est, b, sides.0, cell.size)?;
+        let second = traced_square(est, b, sides.1, cell.size)?;
+        middle_between(est, b.w, &first, &second, across)
+    };
+    let (a, c) = (v((cell.x0, cell.y0)), v((cell.x1, cell.y1)));
+    // The quadratic Lagrange weights at t of nodes 0, s / 2 and s.
+    let u = t as f32 / s as f32;
+    let w = [
+        (1.0 - u) * (1.0 - 2.0 * u),
+        4.0 * u * (1.0 - u),
+        u * (2.0 * u - 1.0),
+    ];
+    let value = a * w[0] + mid * w[1] + c * w[2];
+    Some(value.max(a.min(mid).min(c)).min(a.max(mid).max(c)))
+}
+
+/// The square of `size` pixels whose top left is (x0, y0), as a cell, when it lies in the
+/// bucket's closure and its corners and centre are traced (`est`).
+fn traced_square(
+    est: &[Estimate],
+    b: &Bucket,
+    (x0, y0): (isize, isize),
+    size: u32,
+) -> Option<Cell> {
+    let s = size as isize;
+    if size < 2 || x0 < 0 || y0 < 0 || x0 + s >= b.w as isize || y0 + s >= b.h as isize {
+        return None;
+    }
+    let (x0, y0, s) = (x0 as usize, y0 as usize, size as usize);
+    let cell = Cell {
+        size,
+        x0,
+        y0,
+        x1: x0 + s,
+        y1: y0 + s,
+    };
+    let corners = [(x0, y0), (x0 + s, y0), (x0, y0 + s), (x0 + s, y0 + s)];
+    let traced = corners
+        .into_iter()
+        .chain(cell.centre())
+        .all(|(x, y)| est[y * b.w + x].n > 0);
+    traced.then_some(cell)
+}
+
+/// The middles of `cell`'s edges that no site traced but that the square of its size across
+/// the edge lets be estimated ([`middle_between`]) where its corners and centre are traced
+/// too, in the bucket's closure: each as (pixel, value). Either cell estimates the same
+/// value, so they still meet without a seam; at the bucket's border, where the other square
+/// is not at hand, the edge stays the corners' line on both sides of it. A cell clipped by
+/// the image has none.
+fn estimated_middles(est: &[Estimate], b: &Bucket, cell: &Cell) -> [Option<(usize, Vec4)>; 4] {
+    let mut out = [None; 4];
+    let size = cell.size;
+    let (s, x0, y0) = (size as isize, cell.x0 as isize, cell.y0 as isize);
+    let Some((cx, cy)) = cell.centre() else {
+        return out;
+    };
+    if cell.x1 - cell.x0 != size as usize || cell.y1 - cell.y0 != size as usize {
+        return out;
+    }
+    let neighbour = |dx: isize, dy: isize| traced_square(est, b, (x0 + dx * s, y0 + dy * s), size);
+    // (node, the cell left of or above the edge, the one right of or below it, across).
+    let edges = [
+        ((cell.x0, cy), neighbour(-1, 0).map(|n| (n, *cell)), true),
+        ((cell.x1, cy), neighbour(1, 0).map(|n| (*cell, n)), true),
+        ((cx, cell.y0), neighbour(0, -1).map(|n| (n, *cell)), false),
+        ((cx, cell.y1), neighbour(0, 1).map(|n| (*cell, n)), false),
+    ];
+    for (o, ((x, y), pair, across)) in out.iter_mut().zip(edges) {
+        let q = y * b.w + x;
+        if est[q].n == 0 {
+            *o = pair.map(|(first, second)| (q, middle_between(est, b.w, &first, &second, across)));
+        }
+    }
+    out
+}
+
+/// The middle of the edge between two squares of one size, `a` left of (`across`) or
+/// above `b`: `(S1 + S2) / 8 + (ca + cb) / 2 - (F1 + F2 + F3 + F4) / 16` from the edge's
+/// corners S, the cells' centres c and their far corners F, exact wherever the image is
+/// quadratic over both cells (the corners' line alone is off by the curvature along the
+/// edge, which the centres' departure from their corners' mean gives), clamped to the values
+/// it is made of.
+fn middle_between(est: &[Estimate], width: usize, a: &Cell, b: &Cell, across: bool) -> Vec4 {
+    let v = |(x, y): (usize, usize)| est[y * width + x].mean_rgba();
+    let (shared, far) = if across {
+        (
+            [(a.x1, a.y0), (a.x1, a.y1)],
+            [(a.x0, a.y0), (a.x0, a.y1), (b.x1, b.y0), (b.x1, b.y1)],
+        )
+    } else {
+        (
+            [(a.x0, a.y1), (a.x1, a.y1)],
+            [(a.x0, a.y0), (a.x1, a.y0), (b.x0, b.y1), (b.x1, b.y1)],
+        )
+    };
+    let centres = [a.centre(), b.centre()].map(|c| c.expect("squares of 2 or more have centres"));
+    let sum = |points: &[(usize, usize)]| points.iter().map(|&p| v(p)).sum::<Vec4>();
+    let value = sum(&shared) / 8.0 + sum(&centres) / 2.0 - sum(&far) / 16.0;
+    let all = shared.iter().chain(&centres).chain(&far).map(|&p| v(p));
+    let (lo, hi) = all.fold(
+        (Vec4::splat(f32::INFINITY), Vec4::splat(f32::NEG_INFINITY)),
+        |(lo, hi), v| (lo.min(v), hi.max(v)),
+    );
+    value.max(lo).min(hi)
 }
 
 #[cfg(test)]
@@ -1141,6 +1282,85 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A bucket's sites on a lattice of 8 (corners and centres) with the values of `f`.
+    fn lattice_of(f: impl Fn(usize, usize) -> f32) -> (Vec<Estimate>, Vec<u32>, Bucket) {
+        let b = Bucket::new(0, 0, 64, 65, 65);
+        let (w, h) = (b.w, b.h);
+        let mut est = vec![Estimate::default(); w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let corner = x % 8 == 0 && y % 8 == 0;
+                if corner || (x % 8 == 4 && y % 8 == 4) {
+                    est[y * w + x].add(Vec3::splat(f(x, y)), 1.0, true);
+                }
+            }
+        }
+        (est, vec![8; w * h], b)
+    }
+
+    #[test]
+    fn cells_of_one_size_reproduce_any_quadratic_between_their_sites() {
+        // Rising across the bucket, so every value lies between its nodes' (the clamp's).
+        let f = |x: usize, y: usize| {
+            let (x, y) = (x as f32, y as f32);
+            1.0 + 0.01 * x + 0.02 * y + 1e-4 * x * x + 2e-4 * x * y + 5e-5 * y * y
+        };
+        let (est, interval, b) = lattice_of(f);
+        let colour = final_colour(&est, &interval, &b);
+        // Away from the bucket's border (where edges keep the corners' line), exactly: the
+        // edges' middles are estimated from the cells either side, inside and along them.
+        let mut worst = 0.0f32;
+        for y in 8..=56 {
+            for x in 8..=56 {
+                worst = worst.max((colour[y * b.w + x].x - f(x, y)).abs());
+            }
+        }
+        assert!(worst < 1e-4, "{worst}");
+        // At the border's cells the edge's middle is not at hand: the corners' line there.
+        let (x, y) = (2, 4);
+        let line = f(0, 0) + (f(0, 8) - f(0, 0)) * 0.5;
+        let off = (colour[4 * b.w].x - line).abs();
+        assert!(off < 1e-5, "{off}");
+        assert!((colour[y * b.w + x].x - f(x, y)).abs() > 1e-5);
+    }
+
+    #[test]
+    fn an_edge_middle_is_the_same_seen_from_either_side() {
+        let f = |x: usize, y: usize| ((x * 7 + y * 13) % 11) as f32;
+        let (est, _, b) = lattice_of(f);
+        let square = |x0, y0| traced_square(&est, &b, (x0, y0), 8).unwrap();
+        let (left, right, below) = (square(8, 8), square(16, 8), square(8, 16));
+        let across = middle_between(&est, b.w, &left, &right, true);
+        let down = middle_between(&est, b.w, &left, &below, false);
+        // From the right cell's side its left edge, from the left cell's its right edge.
+        assert_eq!(
+            estimated_middles(&est, &b, &right)[0],
+            Some((12 * b.w + 16, across))
+        );
+        assert_eq!(
+            estimated_middles(&est, &b, &left)[1],
+            Some((12 * b.w + 16, across))
+        );
+        assert_eq!(
+            estimated_middles(&est, &b, &below)[2],
+            Some((16 * b.w + 12, down))
+        );
+        assert_eq!(
+            estimated_middles(&est, &b, &left)[3],
+            Some((16 * b.w + 12, down))
+        );
+        // A pixel on that edge follows the same parabola.
+        let on_edge = Cell::of(16, 13, 8, b.w, b.h);
+        let v = along_edge(&est, &b, &on_edge, (16, 12)).unwrap();
+        assert_eq!(v, across);
+        // Its values stay within the values it is made of.
+        let lo = (0..b.w * b.h)
+            .filter(|&p| est[p].n > 0)
+            .map(|p| est[p].mean_rgba().x);
+        assert!(lo.fold(f32::INFINITY, f32::min) <= across.x.min(down.x));
+        assert!(across.x.max(down.x) <= 10.0);
     }
 
     #[test]
