@@ -1058,6 +1058,8 @@ fn shade_changed_rows(
 /// middles of their edges too where [`estimated_middles`] finds them.
 fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
     let (width, height) = (b.w, b.h);
+    // The last cell's middles: a row's pixels in one cell come one after another.
+    let mut last: Option<(Cell, [Option<(usize, Vec4)>; 4])> = None;
     (0..width * height)
         .map(|p| {
             let e = &est[p];
@@ -1069,7 +1071,11 @@ fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
             if let Some(value) = along_edge(est, b, &cell, (x, y)) {
                 return value;
             }
-            let middles = estimated_middles(est, b, &cell);
+            let middles = match last {
+                Some((c, middles)) if c == cell => middles,
+                _ => estimated_middles(est, b, &cell),
+            };
+            last = Some((cell, middles));
             let middle = |q: usize| middles.iter().flatten().find(|m| m.0 == q).map(|m| m.1);
             let traced = |q: usize| est[q].n > 0;
             let points = cell.points(width, (x, y), cell.centre(), |q| {
