@@ -1059,7 +1059,7 @@ fn shade_changed_rows(
 fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
     let (width, height) = (b.w, b.h);
     // The last cell's middles: a row's pixels in one cell come one after another.
-    let mut last: Option<(Cell, [Option<(usize, Vec4)>; 4])> = None;
+    let mut last: Option<(Cell, Middles)> = None;
     (0..width * height)
         .map(|p| {
             let e = &est[p];
@@ -1163,13 +1163,16 @@ fn traced_square(
     traced.then_some(cell)
 }
 
+/// A cell's edges' middles as (pixel, value), left, right, top and bottom, where known.
+type Middles = [Option<(usize, Vec4)>; 4];
+
 /// The middles of `cell`'s edges that no site traced but that the square of its size across
 /// the edge lets be estimated ([`middle_between`]) where its corners and centre are traced
 /// too, in the bucket's closure: each as (pixel, value). Either cell estimates the same
 /// value, so they still meet without a seam; at the bucket's border, where the other square
 /// is not at hand, the edge stays the corners' line on both sides of it. A cell clipped by
 /// the image has none.
-fn estimated_middles(est: &[Estimate], b: &Bucket, cell: &Cell) -> [Option<(usize, Vec4)>; 4] {
+fn estimated_middles(est: &[Estimate], b: &Bucket, cell: &Cell) -> Middles {
     let mut out = [None; 4];
     let size = cell.size;
     let (s, x0, y0) = (size as isize, cell.x0 as isize, cell.y0 as isize);
