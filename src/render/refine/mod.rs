@@ -13,11 +13,12 @@
 //!    pixel inside a cell (its centre, or a corner of a finer neighbour on its edge) is
 //!    compared with the cell's interpolation at that pixel; a difference beyond the tolerance
 //!    plus the noise both carry (from the sites' sample variance) halves the cell, whose new
-//!    corners and centres are traced in the next round. Cells that pass are interpolated
-//!    through their centre too, and through their edges' middles where a finer neighbour
-//!    traced them (a biquadratic, `Cell::weights`: the corners' line on an edge without a
-//!    middle, clamped to the values it blends), so no traced point's information is wasted
-//!    and a blurred edge crossing a cell curves through it smoothly.
+//!    corners and centres are traced in the next round. Cells that pass are interpolated as
+//!    a biquadratic (`Cell::weights`) through their corners, centre and edges' middles,
+//!    traced by a finer neighbour or estimated from the cells of their size either side
+//!    (`middle_between`, exact for quadratics; the corners' line at a bucket's border),
+//!    clamped to the values it blends: a blurred edge crossing a cell curves through it
+//!    smoothly, where the fan of triangles through the centre it replaced left teeth.
 //! 3. **Samples where variance is.** A site that blur reaches starts with `max(aa, 16,
 //!    spp / 4)` samples (at most `spp`) and doubles them, up to `spp`, while the standard
 //!    error of its mean exceeds half the tolerance: bright bokeh and edges behind blur get
