@@ -1344,23 +1344,17 @@ mod tests {
         let (left, right, below) = (square(8, 8), square(16, 8), square(8, 16));
         let across = middle_between(&est, b.w, &left, &right, true);
         let down = middle_between(&est, b.w, &left, &below, false);
-        // From the right cell's side its left edge, from the left cell's its right edge.
-        assert_eq!(
-            estimated_middles(&est, &b, &right)[0],
-            Some((12 * b.w + 16, across))
-        );
-        assert_eq!(
-            estimated_middles(&est, &b, &left)[1],
-            Some((12 * b.w + 16, across))
-        );
-        assert_eq!(
-            estimated_middles(&est, &b, &below)[2],
-            Some((16 * b.w + 12, down))
-        );
-        assert_eq!(
-            estimated_middles(&est, &b, &left)[3],
-            Some((16 * b.w + 12, down))
-        );
+        // From the right cell's side its left edge, from the left cell's its right edge; from
+        // the lower cell's its top edge, from the upper cell's its bottom edge.
+        let (vertical, horizontal) = ((12 * b.w + 16, across), (16 * b.w + 12, down));
+        for (cell, side, middle) in [
+            (right, 0, vertical),
+            (left, 1, vertical),
+            (below, 2, horizontal),
+            (left, 3, horizontal),
+        ] {
+            assert_eq!(estimated_middles(&est, &b, &cell)[side], Some(middle));
+        }
         // A pixel on that edge follows the same parabola.
         let on_edge = Cell::of(16, 13, 8, b.w, b.h);
         let v = along_edge(&est, &b, &on_edge, (16, 12)).unwrap();
