@@ -234,32 +234,58 @@ impl Cell {
     }
 }
 
-/// The interpolation `Σ w v` of `points` (pixel, weight), with `value` each point's, clamped
-/// channel by channel to the points' range: the biquadratic's far corners weigh negatively,
-/// so next to one bright corner (a bokeh disc's rim) it would dip below its darkest point,
-/// below zero on black. Clamped, it never leaves the values it blends (none of a flat
-/// region's, nor a linear one's, which it reproduces). None when `value` gives None.
+/// The least and greatest of some values, channel by channel.
+#[derive(Debug, Clone, Copy)]
+struct Span {
+    lo: Vec4,
+    hi: Vec4,
+}
+
+impl Span {
+    /// No value yet.
+    const EMPTY: Self = Self {
+        lo: Vec4::splat(f32::INFINITY),
+        hi: Vec4::splat(f32::NEG_INFINITY),
+    };
+
+    fn of(values: impl IntoIterator<Item = Vec4>) -> Self {
+        values.into_iter().fold(Self::EMPTY, Self::with)
+    }
+
+    fn with(self, v: Vec4) -> Self {
+        Self {
+            lo: self.lo.min(v),
+            hi: self.hi.max(v),
+        }
+    }
+
+    /// `v` clamped into the span (`max` then `min`, not `clamp`); an empty span keeps it.
+    fn clamp(self, v: Vec4) -> Vec4 {
+        if self.lo.x <= self.hi.x {
+            v.max(self.lo).min(self.hi)
+        } else {
+            v
+        }
+    }
+}
+
+/// The interpolation `Σ w v` of `points` (pixel, weight), with `value` each point's (given
+/// its weight too), clamped channel by channel to the points' [`Span`]: the biquadratic's far
+/// corners weigh negatively, so next to one bright corner (a bokeh disc's rim) it would dip
+/// below its darkest point, below zero on black. Clamped, it never leaves the values it
+/// blends (none of a flat region's, nor a linear one's, which it reproduces). None when
+/// `value` gives None.
 fn blend(
     points: impl Iterator<Item = (usize, f32)>,
-    mut value: impl FnMut(usize) -> Option<Vec4>,
+    mut value: impl FnMut(usize, f32) -> Option<Vec4>,
 ) -> Option<Vec4> {
-    let (mut sum, mut lo, mut hi) = (
-        Vec4::ZERO,
-        Vec4::splat(f32::INFINITY),
-        Vec4::splat(f32::NEG_INFINITY),
-    );
+    let (mut sum, mut span) = (Vec4::ZERO, Span::EMPTY);
     for (p, w) in points {
-        let v = value(p)?;
+        let v = value(p, w)?;
         sum += v * w;
-        lo = lo.min(v);
-        hi = hi.max(v);
+        span = span.with(v);
     }
-    // `max` then `min`, not `clamp`: with no points (lo above hi) the sum, 0, is kept.
-    Some(if lo.x <= hi.x {
-        sum.max(lo).min(hi)
-    } else {
-        sum
-    })
+    Some(span.clamp(sum))
 }
 
 /// The interpolation (colour and coverage) at (x, y) from the traced points, with the
@@ -275,17 +301,18 @@ fn interpolate_at(
     // The point compared is never one of the nodes it is compared with.
     let q = y * width + x;
     let known = |p: usize| p != q && traced.est[p].n > 0;
-    let points = || cell.points(width, (x, y), centre, known);
-    let value = blend(points(), |p| {
-        let e = &traced.est[p];
-        (e.n > 0).then(|| e.mean_rgba())
-    })?;
     let (mut var, mut var_alpha) = (0.0, 0.0);
-    for (p, w) in points() {
+    let points = cell.points(width, (x, y), centre, known);
+    let value = blend(points, |p, w| {
+        let e = &traced.est[p];
+        if e.n == 0 {
+            return None;
+        }
         let (se, se_alpha) = traced.noise(p);
         var += w * w * se * se;
         var_alpha += w * w * se_alpha * se_alpha;
-    }
+        Some(e.mean_rgba())
+    })?;
     Some((value, var.sqrt(), var_alpha.sqrt()))
 }
 
@@ -1082,7 +1109,7 @@ fn final_colour(est: &[Estimate], interval: &[u32], b: &Bucket) -> Vec<Vec4> {
             let points = cell.points(width, (x, y), cell.centre(), |q| {
                 traced(q) || middle(q).is_some()
             });
-            let value = blend(points, |q| {
+            let value = blend(points, |q, _| {
                 if traced(q) {
                     Some(est[q].mean_rgba())
                 } else {
@@ -1133,7 +1160,7 @@ fn along_edge(est: &[Estimate], b: &Bucket, cell: &Cell, (x, y): (usize, usize))
         u * (2.0 * u - 1.0),
     ];
     let value = a * w[0] + mid * w[1] + c * w[2];
-    Some(value.max(a.min(mid).min(c)).min(a.max(mid).max(c)))
+    Some(Span::of([a, mid, c]).clamp(value))
 }
 
 /// The square of `size` pixels whose top left is (x0, y0), as a cell, when it lies in the
@@ -1222,12 +1249,7 @@ fn middle_between(est: &[Estimate], width: usize, a: &Cell, b: &Cell, across: bo
     let centres = [a.centre(), b.centre()].map(|c| c.expect("squares of 2 or more have centres"));
     let sum = |points: &[(usize, usize)]| points.iter().map(|&p| v(p)).sum::<Vec4>();
     let value = sum(&shared) / 8.0 + sum(&centres) / 2.0 - sum(&far) / 16.0;
-    let all = shared.iter().chain(&centres).chain(&far).map(|&p| v(p));
-    let (lo, hi) = all.fold(
-        (Vec4::splat(f32::INFINITY), Vec4::splat(f32::NEG_INFINITY)),
-        |(lo, hi), v| (lo.min(v), hi.max(v)),
-    );
-    value.max(lo).min(hi)
+    Span::of(shared.iter().chain(&centres).chain(&far).map(|&p| v(p))).clamp(value)
 }
 
 #[cfg(test)]
@@ -1379,14 +1401,16 @@ mod tests {
         for y in 0..=8 {
             for x in 0..=8 {
                 let points = cell.points(width, (x, y), cell.centre(), |_| false);
-                let value =
-                    blend(points, |p| Some(Vec4::splat(bright(p % width, p / width)))).unwrap();
+                let value = blend(points, |p, _| {
+                    Some(Vec4::splat(bright(p % width, p / width)))
+                })
+                .unwrap();
                 assert!((0.0..=100.0).contains(&value.x), "({x},{y}): {value}");
             }
         }
         // A point it needs that is not traced gives nothing.
         let points = cell.points(width, (3, 3), cell.centre(), |_| false);
-        assert_eq!(blend(points, |p| (p != 0).then_some(Vec4::ONE)), None);
+        assert_eq!(blend(points, |p, _| (p != 0).then_some(Vec4::ONE)), None);
     }
 
     #[test]
