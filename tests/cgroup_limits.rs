@@ -12,6 +12,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use dofray::render::reuse::RECORDS_HELD;
+
 use crate::scratch::Scratch;
 
 /// The cgroup's limit: 320 MiB.
@@ -191,13 +193,12 @@ fn samples_kept_for_reuse_that_outgrow_a_cgroup_are_refused_not_killed() {
     )
     .unwrap();
     let out = dir.join("plane.png");
-    let what = "the samples kept for sample reuse (--reuse off keeps none)";
     // Many rows of buckets; then one frame-wide row of them, refined in one step (each
     // bucket sees the largest that the others before it held).
     for (width, height) in [("600", "600"), ("8000", "128")] {
         let args = ["--focus-distance", "38", "--spp", "64"];
         let args = [&args[..], &["--width", width, "--height", height]].concat();
-        assert_refused(&cgroup, &plane, &args, &out, what);
+        assert_refused(&cgroup, &plane, &args, &out, RECORDS_HELD);
     }
     drop(cgroup);
 }
