@@ -1137,11 +1137,9 @@ fn along_edge(est: &[Estimate], b: &Bucket, cell: &Cell, (x, y): (usize, usize))
         let sides = ((x0 - size, y0), (x0, y0));
         (true, y - cell.y0, (cell.x0, cell.y0 + s / 2), sides)
     } else {
+        // A cell of interval 1 is a point: never a segment.
         return None;
     };
-    if s < 2 {
-        return None;
-    }
     let v = |(px, py): (usize, usize)| est[py * b.w + px].mean_rgba();
     let m = middle.1 * b.w + middle.0;
     let mid = if est[m].n > 0 {
