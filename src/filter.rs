@@ -171,6 +171,23 @@ impl FilterSampler {
         let (lo, hi) = (self.inverse[i], self.inverse[i + 1]);
         lo + (hi - lo) * (x - i as f32)
     }
+
+    /// The density of [`FilterSampler::offset`]'s draws at offset `d` (pixels): exactly the
+    /// table's (each of its intervals holds 1 / INVERSE_TABLE of them, evenly), which a
+    /// weight must use to cancel the density it was drawn with; 0 outside the support.
+    pub fn density(&self, d: f32) -> f32 {
+        let inv = &self.inverse;
+        if !(d >= inv[0] && d < inv[INVERSE_TABLE]) {
+            return 0.0;
+        }
+        let k = inv.partition_point(|&x| x <= d).clamp(1, INVERSE_TABLE) - 1;
+        let span = inv[k + 1] - inv[k];
+        if span > 0.0 {
+            1.0 / (INVERSE_TABLE as f32 * span)
+        } else {
+            0.0
+        }
+    }
 }
 
 #[cfg(test)]

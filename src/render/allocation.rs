@@ -278,6 +278,7 @@ pub fn pilot(
                     &to,
                     &mut row,
                     None,
+                    None,
                     scratch,
                     &mut local,
                 );

@@ -23,6 +23,7 @@
 pub mod allocation;
 pub mod estimate;
 pub mod film;
+pub mod gather;
 pub mod glossy_light;
 pub mod interpolate;
 pub mod light_choice;

@@ -17,6 +17,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::estimate::Estimate;
+use super::gather::{Gather, Slots};
 use super::light_choice::LightTraced;
 use super::reuse::{Record, SiteRecords};
 use super::trace::{self, RayKind, Tally};
@@ -60,6 +61,15 @@ impl SiteScratch {
     }
 }
 
+/// Where a batch's samples go: a row run (whose first pixel is `origin`) of estimates, and
+/// optionally of records for lending and of slots for gathering.
+struct Sinks<'s> {
+    origin: (usize, usize),
+    estimates: &'s mut [Estimate],
+    records: Option<&'s mut [SiteRecords]>,
+    gather: Option<(&'s Gather<'s>, &'s mut [Slots])>,
+}
+
 /// Up to 16 samples waiting to be traced together.
 #[derive(Default)]
 struct Batch {
@@ -96,7 +106,7 @@ impl SiteShader<'_> {
             .map_init(SiteScratch::new, |scratch, (y, (row, (from, to)))| {
                 let mut local = Tally::new(record);
                 if from != to && !progress.cancelled() {
-                    self.shade_row((0, y), from, to, row, None, scratch, &mut local);
+                    self.shade_row((0, y), from, to, row, None, None, scratch, &mut local);
                 }
                 progress.advance(1);
                 local
@@ -113,7 +123,8 @@ impl SiteShader<'_> {
     /// samples are the same whichever call takes them, so an estimate refined in several calls
     /// (or in a window of the image) equals one made in a single call. With `records`
     /// (indexed as `estimates`), each path-traced sample is also recorded there for lending
-    /// ([`super::reuse`]).
+    /// ([`super::reuse`]); with `gather` (its slots indexed as `estimates`), each sample of a
+    /// site that takes part adds to its slots ([`super::gather`]).
     #[allow(clippy::too_many_arguments)]
     pub fn shade_row(
         &self,
@@ -122,6 +133,7 @@ impl SiteShader<'_> {
         to: &[u32],
         estimates: &mut [Estimate],
         mut records: Option<&mut [SiteRecords]>,
+        mut gather: Option<(&Gather, &mut [Slots])>,
         scratch: &mut SiteScratch,
         tally: &mut Tally,
     ) {
@@ -141,7 +153,13 @@ impl SiteShader<'_> {
                 if count == LANES {
                     // A whole packet of one pixel's coherent rays: traced at once, while any
                     // queued samples of smaller sites wait for more company.
-                    self.trace_batch(&chunk, scratch, estimates, records.as_deref_mut(), tally);
+                    let sinks = Sinks {
+                        origin: (x0, y),
+                        estimates: &mut *estimates,
+                        records: records.as_deref_mut(),
+                        gather: gather.as_mut().map(|(g, s)| (*g, &mut **s)),
+                    };
+                    self.trace_batch(&chunk, scratch, sinks, tally);
                     continue;
                 }
                 for lane in 0..count {
@@ -155,13 +173,25 @@ impl SiteShader<'_> {
                     b.key[slot] = chunk.key[lane];
                     b.len += 1;
                     if b.len == LANES {
-                        self.flush(scratch, estimates, records.as_deref_mut(), tally);
+                        let sinks = Sinks {
+                            origin: (x0, y),
+                            estimates: &mut *estimates,
+                            records: records.as_deref_mut(),
+                            gather: gather.as_mut().map(|(g, s)| (*g, &mut **s)),
+                        };
+                        self.flush(scratch, sinks, tally);
                     }
                 }
             }
         }
         if scratch.batch.len > 0 {
-            self.flush(scratch, estimates, records, tally);
+            let sinks = Sinks {
+                origin: (x0, y),
+                estimates,
+                records,
+                gather,
+            };
+            self.flush(scratch, sinks, tally);
         }
     }
 
@@ -199,26 +229,19 @@ impl SiteShader<'_> {
     }
 
     /// Traces the queued samples and empties the queue.
-    fn flush(
-        &self,
-        scratch: &mut SiteScratch,
-        estimates: &mut [Estimate],
-        records: Option<&mut [SiteRecords]>,
-        tally: &mut Tally,
-    ) {
+    fn flush(&self, scratch: &mut SiteScratch, sinks: Sinks, tally: &mut Tally) {
         let batch = std::mem::take(&mut scratch.batch);
-        self.trace_batch(&batch, scratch, estimates, records, tally);
+        self.trace_batch(&batch, scratch, sinks, tally);
     }
 
     /// Traces and shades a batch, adding each sample to its pixel's estimate (and record).
-    fn trace_batch(
-        &self,
-        b: &Batch,
-        scratch: &mut SiteScratch,
-        estimates: &mut [Estimate],
-        records: Option<&mut [SiteRecords]>,
-        tally: &mut Tally,
-    ) {
+    fn trace_batch(&self, b: &Batch, scratch: &mut SiteScratch, sinks: Sinks, tally: &mut Tally) {
+        let Sinks {
+            origin: run,
+            estimates,
+            records,
+            mut gather,
+        } = sinks;
         let SiteScratch {
             packet,
             trace,
@@ -288,11 +311,25 @@ impl SiteShader<'_> {
             };
             // A real lens's ray carries its irradiance (vignetting); a blocked one brings
             // no light and says nothing of the coverage.
-            if wanted & (1 << lane) == 0 {
+            let blocked = wanted & (1 << lane) == 0;
+            let value = radiance[lane] * (scale * lens_weight[lane]);
+            if blocked {
                 estimates[b.pixel[lane]].add_blocked(w);
-                continue;
+            } else {
+                estimates[b.pixel[lane]].add(value, w, hit);
             }
-            estimates[b.pixel[lane]].add(radiance[lane] * (scale * lens_weight[lane]), w, hit);
+            if let Some((g, slots)) = gather.as_mut() {
+                let at = (run.0 + b.pixel[lane], run.1);
+                if g.takes_part(at) {
+                    let film = Vec2::new(b.film_x[lane], b.film_y[lane]);
+                    let (value, hit) = if blocked {
+                        (Vec3::ZERO, None)
+                    } else {
+                        (value, Some(hit))
+                    };
+                    g.add(&mut slots[b.pixel[lane]], at, film, (value, w, hit));
+                }
+            }
         }
         if let Some(records) = records {
             self.record(b, (&origin, &dir), &radiance, &first, records);

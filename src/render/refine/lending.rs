@@ -235,6 +235,14 @@ pub(super) fn refine(
             buckets: Vec::new(),
             work_seconds: 0.0,
             lend_seconds: 0.0,
+            gathered: match maps.gather {
+                Some(_) => Some(try_vec(
+                    layout.width * layout.height,
+                    crate::render::gather::Slot::default(),
+                    "the gathered samples",
+                )?),
+                None => None,
+            },
         },
     };
     progress.start("adaptive", run.plan.units());
@@ -339,9 +347,15 @@ impl Pipeline<'_> {
             match d {
                 Done::Rounds(i, rounds, local, seconds) => {
                     tally.merge(*local);
-                    let Some(rounds) = rounds else {
+                    let Some(mut rounds) = rounds else {
                         return Err(RenderError::Cancelled);
                     };
+                    // Added in the order buckets are refined (by index), whatever the region.
+                    if let (Some(layer), Some(frame)) =
+                        (rounds.layer.take(), &mut self.out.gathered)
+                    {
+                        layer.add_to(frame, layout.width);
+                    }
                     self.store[i] = Some(rounds);
                     self.out.work_seconds += seconds;
                 }

@@ -51,6 +51,7 @@ use rayon::prelude::*;
 
 use super::allocation::{self, FocusBudget};
 use super::estimate::{Estimate, code3};
+use super::gather::{Gather, Layer, SLOTS, Slot, Slots};
 use super::maps;
 use super::reuse::{Kernel, SiteRecords};
 use super::site::SiteShader;
@@ -322,6 +323,8 @@ struct Traced {
     est: Vec<Estimate>,
     /// With sample reuse, each pixel's samples kept for lending ([`super::reuse`]).
     records: Option<Vec<SiteRecords>>,
+    /// With gathering, what each in-focus site's samples give the pixels around it.
+    slots: Option<Vec<Slots>>,
     /// [`Estimate::std_error_code`]: infinite while unknown (fewer than two samples).
     se: Vec<f32>,
     /// [`Estimate::coverage_error_code`], likewise.
@@ -331,8 +334,9 @@ struct Traced {
 
 impl Traced {
     /// For the pixels of a window, `blurred` or not; with `reuse`, the blurred ones keep
-    /// their samples (the others take no part in it).
-    fn new(blurred: &[bool], reuse: bool) -> Self {
+    /// their samples (the others take no part in it); with `gather`, the others gather
+    /// theirs ([`super::gather`]).
+    fn new(blurred: &[bool], reuse: bool, gather: bool) -> Result<Self, MemoryError> {
         let n = blurred.len();
         let records = |&b: &bool| {
             if b {
@@ -341,13 +345,20 @@ impl Traced {
                 SiteRecords::unlent()
             }
         };
-        Self {
+        let slots = if gather && blurred.iter().any(|&b| !b) {
+            let empty = [Slot::default(); SLOTS];
+            Some(try_vec(n, empty, "the gathered samples")?)
+        } else {
+            None
+        };
+        Ok(Self {
             est: vec![Estimate::default(); n],
             records: reuse.then(|| blurred.iter().map(records).collect()),
+            slots,
             se: vec![f32::INFINITY; n],
             se_alpha: vec![f32::INFINITY; n],
             code: vec![Vec3::ZERO; n],
-        }
+        })
     }
 
     /// With reuse, room for the samples each site takes next (`from` -> `to`;
@@ -617,6 +628,8 @@ struct Maps<'a> {
     /// With paths, how many samples the sites of one pixel's interval take by their noise
     /// ([`allocation`]).
     focus: Option<FocusBudget>,
+    /// With sample reuse, the in-focus sites' gathering ([`super::gather`]).
+    gather: Option<Gather<'a>>,
 }
 
 /// Renders with the error-controlled rule at `tolerance`, given the blur that reaches each pixel,
@@ -645,13 +658,22 @@ pub fn refine(
         s.max_interval,
     )?;
     let focus = focus_budget(shader, blur, &start, tally);
+    let lends = reuses(shader);
+    // The sites no blur reaches gather each other's samples.
+    let techniques = try_collect(blur.blurred.iter().map(|&b| !b), "the in-focus sites")?;
+    let density = s.pixel_filter.density();
     let maps = Maps {
         tolerance,
         blur,
         start,
         reach: reach_levels(&blur.widest, s.max_interval)?,
-        kernel: reuses(shader).then(|| Kernel::new(&s.pixel_filter.density())),
+        kernel: lends.then(|| Kernel::new(&density)),
         focus,
+        gather: Gather::new(
+            &techniques,
+            (width, height),
+            (shader.pixel_filter, density.reach()),
+        ),
     };
     let layout = Layout::new(s.max_interval as usize, width, height);
     let wanted: Vec<bool> = (0..layout.count())
@@ -676,7 +698,10 @@ pub fn refine(
         for y in 0..b.owned_h {
             for x in 0..b.owned_w {
                 let (p, q) = ((b.y0 + y) * width + b.x0 + x, y * b.w + x);
-                out.color[p] = refined.color[q];
+                let gathered = (done.gathered.as_ref())
+                    .filter(|_| techniques[p])
+                    .and_then(|g| g[p].value());
+                out.color[p] = gathered.unwrap_or(refined.color[q]);
                 out.interval[p] = refined.interval[q];
                 out.samples[p] = refined.samples[q];
                 out.borrowed[p] = refined.borrowed[q];
@@ -694,6 +719,9 @@ struct Finished {
     work_seconds: f64,
     /// Of `work_seconds`, those spent lending.
     lend_seconds: f64,
+    /// With gathering, the frame's pixels' gathered values (those of the sites that take
+    /// part, in the wanted buckets, are final; [`super::gather`]).
+    gathered: Option<Vec<Slot>>,
 }
 
 /// [`refine`] without sample reuse: each bucket on its own, all in parallel.
@@ -706,32 +734,48 @@ fn refine_alone(
     tally: &mut Tally,
 ) -> Result<Finished, super::RenderError> {
     let record_rays = shader.settings.record_rays;
-    let buckets: Vec<Bucket> = (0..layout.count())
-        .filter(|&i| wanted[i])
-        .map(|i| layout.bucket(i))
+    // With gathering, the buckets around the wanted ones are refined too: their in-focus
+    // sites' samples reach the wanted pixels by their borders.
+    let refined: Vec<usize> = (0..layout.count())
+        .filter(|&i| wanted[i] || (maps.gather.is_some() && layout.around(i).any(|j| wanted[j])))
         .collect();
-    progress.start("adaptive", buckets.len() as u64);
-    let done: Vec<_> = buckets
+    progress.start("adaptive", refined.len() as u64);
+    let done: Vec<_> = refined
         .par_iter()
-        .map(|b| {
+        .map(|&i| {
+            let b = layout.bucket(i);
             let mut local = Tally::new(record_rays);
             let started = Instant::now();
-            let rounds = refine_bucket(shader, maps, b, progress, &mut local);
+            let rounds = refine_bucket(shader, maps, &b, progress, &mut local);
             progress.advance(1);
-            (*b, rounds, local, started.elapsed().as_secs_f64())
+            (i, b, rounds, local, started.elapsed().as_secs_f64())
         })
         .collect();
     let mut out = Finished {
         buckets: Vec::with_capacity(done.len()),
         work_seconds: 0.0,
         lend_seconds: 0.0,
+        gathered: match maps.gather {
+            Some(_) => Some(try_vec(
+                layout.width * layout.height,
+                Slot::default(),
+                "the gathered samples",
+            )?),
+            None => None,
+        },
     };
-    for (b, rounds, local, seconds) in done {
+    for (i, b, rounds, local, seconds) in done {
         tally.merge(local);
-        let Some(rounds) = rounds? else {
+        let Some(mut rounds) = rounds? else {
             return Err(super::RenderError::Cancelled);
         };
-        out.buckets.push((b, rounds.finish(&b)));
+        // Added in bucket order, whatever the region.
+        if let (Some(layer), Some(frame)) = (rounds.layer.take(), &mut out.gathered) {
+            layer.add_to(frame, layout.width);
+        }
+        if wanted[i] {
+            out.buckets.push((b, rounds.finish(&b)));
+        }
         out.work_seconds += seconds;
     }
     Ok(out)
@@ -787,6 +831,8 @@ struct Rounds {
     traced: Traced,
     interval: Vec<u32>,
     rounds: u32,
+    /// With gathering, what its in-focus sites give the pixels around them.
+    layer: Option<Layer>,
 }
 
 impl Rounds {
@@ -885,8 +931,7 @@ fn refine_bucket(
     let blurred = b.slice(&maps.blur.blurred, full_width);
     let (mut allot, mut interval) = allotment(s, maps, b, full_width);
     let reach = b.slice(&maps.reach, full_width);
-    let top_reach = reach.iter().copied().max().unwrap_or(1);
-    let mut traced = Traced::new(&blurred, maps.kernel.is_some());
+    let mut traced = Traced::new(&blurred, maps.kernel.is_some(), maps.gather.is_some())?;
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
     let (mut need, mut pending) = first_sites(&interval, b);
     // Samples per pixel before and after this round's shading.
@@ -902,47 +947,23 @@ fn refine_bucket(
         pending.sort_unstable();
         pending.dedup();
         allot.settle(&pending, &traced.est);
-        let (first, target) = (|p: usize| allot.first[p], |p: usize| allot.most[p]);
-        let limit = SAMPLING_SHARE * tolerance;
-        // A site that looks converged by its variance must also not be missing a highlight
-        // seen nearby; the peaks map is only built when some site is in that position.
-        // Noisier than the limit: the colour, or with transparency the coverage.
-        let noisy =
-            |p: usize| traced.se[p] > limit || (s.transparent && traced.se_alpha[p] > limit);
-        let calm = |p: usize| {
-            let n = traced.est[p].n;
-            n > 0 && n < target(p) && !noisy(p)
-        };
-        let peaks = pending
-            .iter()
-            .any(|&p| calm(p))
-            .then(|| Peaks::new(&traced.est, width, height, top_reach))
-            .transpose()?;
-        let mut work = Vec::new();
-        for p in pending.drain(..) {
-            let e = &traced.est[p];
-            let unsure = || {
-                noisy(p)
-                    || peaks
-                        .as_ref()
-                        .is_some_and(|k| e.unseen_code(k.near(p, reach[p])) > limit)
-            };
-            let want = if e.n == 0 {
-                first(p)
-            } else if e.n < target(p) && unsure() {
-                (2 * e.n).min(target(p))
-            } else {
-                continue;
-            };
-            to[p] = want;
-            work.push(p);
-        }
+        let target = |p: usize| allot.most[p];
+        let sampling = (s.transparent, SAMPLING_SHARE * tolerance);
+        let window = (&reach[..], (width, height));
+        let work = round_work(&allot, &traced, (&mut pending, &mut to), window, sampling)?;
         if work.is_empty() && resized.is_empty() {
             break;
         }
         rounds += 1;
         traced.make_room(&from, &to)?;
-        shade_changed_rows(shader, b, &from, &to, &mut traced, &mut scratch, tally);
+        shade_changed_rows(
+            (shader, maps),
+            b,
+            (&from, &to),
+            &mut traced,
+            &mut scratch,
+            tally,
+        );
         traced.update(&work);
         // Check every cell a new sample or a split touched.
         let mut dirty = std::mem::take(&mut resized);
@@ -961,11 +982,62 @@ fn refine_bucket(
         resized = split(&mut interval, &mut need, &mut pending, &failed, b);
     }
 
+    let layer = gathered(maps, b, &mut traced, shader.camera)?;
     Ok(Some(Rounds {
         traced,
         interval,
         rounds,
+        layer,
     }))
+}
+
+/// This round's work in a bucket (`width` x `height`, each pixel's highlight reach
+/// `reach`): the `pending` sites (drained) that want samples, each's new count in `to`. A
+/// site starts with its first samples, then doubles them up to its most while its noise
+/// (with `transparent`, its coverage's too) is above `limit`, or while a highlight seen
+/// within its reach could move it that far.
+fn round_work(
+    allot: &allocation::Allotment,
+    traced: &Traced,
+    (pending, to): (&mut Vec<usize>, &mut [u32]),
+    (reach, (width, height)): (&[u8], (usize, usize)),
+    (transparent, limit): (bool, f32),
+) -> Result<Vec<usize>, MemoryError> {
+    let (first, target) = (|p: usize| allot.first[p], |p: usize| allot.most[p]);
+    // A site that looks converged by its variance must also not be missing a highlight
+    // seen nearby; the peaks map is only built when some site is in that position.
+    // Noisier than the limit: the colour, or with transparency the coverage.
+    let noisy = |p: usize| traced.se[p] > limit || (transparent && traced.se_alpha[p] > limit);
+    let calm = |p: usize| {
+        let n = traced.est[p].n;
+        n > 0 && n < target(p) && !noisy(p)
+    };
+    let top_reach = reach.iter().copied().max().unwrap_or(1);
+    let peaks = pending
+        .iter()
+        .any(|&p| calm(p))
+        .then(|| Peaks::new(&traced.est, width, height, top_reach))
+        .transpose()?;
+    let mut work = Vec::new();
+    for p in pending.drain(..) {
+        let e = &traced.est[p];
+        let unsure = || {
+            noisy(p)
+                || peaks
+                    .as_ref()
+                    .is_some_and(|k| e.unseen_code(k.near(p, reach[p])) > limit)
+        };
+        let want = if e.n == 0 {
+            first(p)
+        } else if e.n < target(p) && unsure() {
+            (2 * e.n).min(target(p))
+        } else {
+            continue;
+        };
+        to[p] = want;
+        work.push(p);
+    }
+    Ok(work)
 }
 
 /// Each site's first and most samples in bucket `b` of a frame `full_width` wide, and its
@@ -1056,10 +1128,9 @@ fn first_sites(interval: &[u32], b: &Bucket) -> (Vec<bool>, Vec<usize>) {
 
 /// Shades the rows of bucket `b` whose sample counts grow this round (`from` -> `to`).
 fn shade_changed_rows(
-    shader: &SiteShader,
+    (shader, maps): (&SiteShader, &Maps),
     b: &Bucket,
-    from: &[u32],
-    to: &[u32],
+    (from, to): (&[u32], &[u32]),
     traced: &mut Traced,
     scratch: &mut super::SiteScratch,
     tally: &mut Tally,
@@ -1073,12 +1144,41 @@ fn shade_changed_rows(
                 &from[row.clone()],
                 &to[row.clone()],
                 &mut traced.est[row.clone()],
-                traced.records.as_mut().map(|r| &mut r[row]),
+                traced.records.as_mut().map(|r| &mut r[row.clone()]),
+                (maps.gather.as_ref())
+                    .zip(traced.slots.as_mut())
+                    .map(|(g, s)| (g, &mut s[row])),
                 scratch,
                 tally,
             );
         }
     }
+}
+
+/// With gathering, the layer of bucket `b`: what its own in-focus sites' samples (their
+/// slots, over their estimates' weights) give the pixels around them ([`super::gather`]).
+/// The slots are dropped.
+fn gathered(
+    maps: &Maps,
+    b: &Bucket,
+    traced: &mut Traced,
+    camera: &crate::camera::Camera,
+) -> Result<Option<Layer>, MemoryError> {
+    let (Some(gather), Some(slots)) = (&maps.gather, traced.slots.take()) else {
+        return Ok(None);
+    };
+    let frame = (camera.width as usize, camera.height as usize);
+    let mut layer = Layer::new((b.x0, b.y0), (b.owned_w, b.owned_h), frame)?;
+    for y in 0..b.owned_h {
+        for x in 0..b.owned_w {
+            let at = (b.x0 + x, b.y0 + y);
+            let e = &traced.est[y * b.w + x];
+            if gather.takes_part(at) && e.n > 0 {
+                layer.spread(gather, &slots[y * b.w + x], e.weight(), at);
+            }
+        }
+    }
+    Ok(Some(layer))
 }
 
 /// The bucket's colours once refinement ends, from its sites' values `est`: sites keep
