@@ -124,7 +124,9 @@ pub struct PathLimits {
     /// takes its neighbours' too, which cuts noise where blurred matte or glossy surfaces
     /// carry it (1 to 4 dB at the same samples) for 20-90% more time; mirrors and glass gain
     /// nothing. On by default: at equal error it is faster on every blurred scene measured
-    /// (README, "Sample reuse"); off gives the images of the sites' own samples alone.
+    /// (README, "Sample reuse"); off gives the images of the sites' own samples alone. It
+    /// also lets in-focus sites gather their neighbours' samples through the pixel filter
+    /// (any integrator; [`crate::render::gather`]).
     pub reuse: bool,
 }
 

@@ -257,7 +257,10 @@ pub(crate) struct RenderArgs {
     /// counts that is gigabytes (1920 px wide at 256 spp: about 6 GB), and a render that would
     /// outgrow the memory limit stops with exit 5 instead. `off` shows the sites' own
     /// samples alone and keeps none (for comparisons, for a shot whose blur is all mirrors
-    /// and glass, or for less memory) [default: the scene's, else on].
+    /// and glass, or for less memory). In adaptive mode, with either integrator and any lens,
+    /// the sites that no blur reaches also gather their neighbours' samples through the
+    /// pixel filter (in-focus noise about 1.6 times lower; `off` stops that too) [default:
+    /// the scene's, else on].
     #[arg(long, value_name = "on|off")]
     pub(crate) reuse: Option<Switch>,
     /// Adaptive mode with the seed's fixed rule instead of the error-controlled one: sample

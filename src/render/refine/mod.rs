@@ -669,11 +669,15 @@ pub fn refine(
         reach: reach_levels(&blur.widest, s.max_interval)?,
         kernel: lends.then(|| Kernel::new(&density)),
         focus,
-        gather: Gather::new(
-            &techniques,
-            (width, height),
-            (shader.pixel_filter, density.reach()),
-        ),
+        gather: (s.path.reuse)
+            .then(|| {
+                Gather::new(
+                    &techniques,
+                    (width, height),
+                    (shader.pixel_filter, density.reach()),
+                )
+            })
+            .flatten(),
     };
     let layout = Layout::new(s.max_interval as usize, width, height);
     let wanted: Vec<bool> = (0..layout.count())
