@@ -34,6 +34,9 @@
 //!    frame-wide scale ([`allocation`]), at most the larger of `spp` and `aa` in focus and
 //!    `spp` in the blur: quiet pixels stop early, noisy ones take it all, for about the image
 //!    error of that many samples everywhere.
+//! 5. **In-focus sites gather.** With reuse, a site that no blur reaches also adds its
+//!    samples to its neighbours through their pixel filters ([`super::gather`]): a layer per
+//!    bucket, summed over the frame in bucket order, replaces those sites' own means.
 //!
 //! With [`super::RenderSettings::transparent`] the coverage (alpha) takes part in both
 //! checks like a colour channel, 255 code values from empty to opaque, its noise from the
