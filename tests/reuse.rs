@@ -258,8 +258,11 @@ fn the_statistics_count_the_sites_that_borrowed() {
     assert_eq!(on.sample_sites, off.sample_sites);
 }
 
+/// Where nothing can be lent (the direct integrator, a lens filter other than the box)
+/// reuse changes no pixel that blur reaches; the in-focus sites still gather their
+/// neighbours' samples, and so change.
 #[test]
-fn settings_it_cannot_serve_change_nothing() {
+fn settings_it_cannot_lend_for_change_only_the_in_focus_pixels() {
     let desc = scene();
     let base = settings(Mode::Adaptive, 16, false);
     for change in [
@@ -269,7 +272,22 @@ fn settings_it_cannot_serve_change_nothing() {
         let (mut off, mut on) = (base.clone(), settings(Mode::Adaptive, 16, true));
         change(&mut off);
         change(&mut on);
-        assert_eq!(render(&desc, &off).color, render(&desc, &on).color);
+        let (off, on) = (render(&desc, &off), render(&desc, &on));
+        let blurred = |p: usize| off.coc[p] > 1.0;
+        let (mut sharp, mut changed) = (0, 0);
+        for p in 0..off.color.len() {
+            if blurred(p) {
+                assert_eq!(off.color[p], on.color[p], "pixel {p}, CoC {}", off.coc[p]);
+            } else {
+                sharp += 1;
+                changed += usize::from(off.color[p] != on.color[p]);
+            }
+        }
+        // In-focus pixels that a blurred neighbour's disc reaches do not gather.
+        assert!(
+            changed * 4 > sharp,
+            "{changed} of {sharp} in-focus pixels gathered"
+        );
     }
 }
 
