@@ -3,7 +3,8 @@
 //! the wall's edge (a depth edge: only the sphere's samples may be lent across it), lending
 //! brings the adaptive image closer to a dense reference than the same render without it, keeps
 //! its mean (unbiased), is no worse anywhere near the depth edge and better there overall.
-//! Settings it cannot serve leave the image as it was.
+//! Settings lending cannot serve leave every blurred pixel as it was (in-focus sites still
+//! gather their neighbours' samples).
 
 use std::path::Path;
 

@@ -70,6 +70,18 @@ struct Sinks<'s> {
     gather: Option<(&'s Gather<'s>, &'s mut [Slots])>,
 }
 
+impl Sinks<'_> {
+    /// The same sinks, borrowed for one batch.
+    fn reborrow(&mut self) -> Sinks<'_> {
+        Sinks {
+            origin: self.origin,
+            estimates: &mut *self.estimates,
+            records: self.records.as_deref_mut(),
+            gather: self.gather.as_mut().map(|(g, s)| (*g, &mut **s)),
+        }
+    }
+}
+
 /// Up to 16 samples waiting to be traced together.
 #[derive(Default)]
 struct Batch {
@@ -132,11 +144,17 @@ impl SiteShader<'_> {
         from: &[u32],
         to: &[u32],
         estimates: &mut [Estimate],
-        mut records: Option<&mut [SiteRecords]>,
-        mut gather: Option<(&Gather, &mut [Slots])>,
+        records: Option<&mut [SiteRecords]>,
+        gather: Option<(&Gather, &mut [Slots])>,
         scratch: &mut SiteScratch,
         tally: &mut Tally,
     ) {
+        let mut sinks = Sinks {
+            origin: (x0, y),
+            estimates,
+            records,
+            gather,
+        };
         let width = self.camera.width as usize;
         scratch.batch.len = 0;
         for (i, (&start, &end)) in from.iter().zip(to).enumerate() {
@@ -153,13 +171,7 @@ impl SiteShader<'_> {
                 if count == LANES {
                     // A whole packet of one pixel's coherent rays: traced at once, while any
                     // queued samples of smaller sites wait for more company.
-                    let sinks = Sinks {
-                        origin: (x0, y),
-                        estimates: &mut *estimates,
-                        records: records.as_deref_mut(),
-                        gather: gather.as_mut().map(|(g, s)| (*g, &mut **s)),
-                    };
-                    self.trace_batch(&chunk, scratch, sinks, tally);
+                    self.trace_batch(&chunk, scratch, sinks.reborrow(), tally);
                     continue;
                 }
                 for lane in 0..count {
@@ -173,24 +185,12 @@ impl SiteShader<'_> {
                     b.key[slot] = chunk.key[lane];
                     b.len += 1;
                     if b.len == LANES {
-                        let sinks = Sinks {
-                            origin: (x0, y),
-                            estimates: &mut *estimates,
-                            records: records.as_deref_mut(),
-                            gather: gather.as_mut().map(|(g, s)| (*g, &mut **s)),
-                        };
-                        self.flush(scratch, sinks, tally);
+                        self.flush(scratch, sinks.reborrow(), tally);
                     }
                 }
             }
         }
         if scratch.batch.len > 0 {
-            let sinks = Sinks {
-                origin: (x0, y),
-                estimates,
-                records,
-                gather,
-            };
             self.flush(scratch, sinks, tally);
         }
     }
