@@ -14,10 +14,17 @@
 //! over the techniques r, where `w_i` is a sample's lens-filter weight and `W_q` their sum
 //! over q's samples. Its expectation is p's filtered radiance whatever the sites' sample
 //! counts (`P` does not depend on them), so a quiet site that stops early ([`super::allocation`])
-//! weighs its neighbours as much as a noisy one. A 3 px Blackman-Harris filter covers about
-//! 2.2 pixels' samples (`1 / ∫ f²`): light noise there falls by about that factor, for a
-//! few filter evaluations per sample. The noise of neighbouring pixels becomes correlated
-//! (finer grain), as with any splatting film.
+//! weighs its neighbours as much as a noisy one. The value is then divided by the same
+//! weights' sum (`Σ_q (1 / W_q) Σ_i w_i f(x_i - p) / P(x_i)`, whose expectation is 1): exact
+//! on a flat region, as a site's own mean is, for a ratio's bias of order 1 / samples. The
+//! weights use the sampler's own tabulated density ([`FilterSampler::density`]), so they
+//! cancel the density each sample was drawn with exactly.
+//!
+//! A 3 px Blackman-Harris filter covers about 2.2 pixels' samples (`1 / ∫ f²`): light noise
+//! there falls by up to that factor (a site's own samples are stratified, the gathered ones
+//! are not: 1.6 times on the in-focus pixels of `scenes/gallery.toml`), for a few filter
+//! evaluations per sample. The noise of neighbouring pixels becomes correlated (finer
+//! grain), as with any splatting film. Filters wider than 3 px take no part.
 //!
 //! The techniques are the frame's pixels that no blur reaches ([`super::maps::Blur::blurred`]):
 //! a property of the depth pass, so a sample's `P` is known as it is traced, and a region
