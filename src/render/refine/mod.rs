@@ -938,6 +938,7 @@ fn refine_bucket(
     let blurred = b.slice(&maps.blur.blurred, full_width);
     let (mut allot, mut interval) = allotment(s, maps, b, full_width);
     let reach = b.slice(&maps.reach, full_width);
+    let top_reach = reach.iter().copied().max().unwrap_or(1);
     let mut traced = Traced::new(&blurred, maps.kernel.is_some(), maps.gather.is_some())?;
     // Pixels whose sample count may have to grow: newly needed ones and unconverged sites.
     let (mut need, mut pending) = first_sites(&interval, b);
@@ -956,7 +957,7 @@ fn refine_bucket(
         allot.settle(&pending, &traced.est);
         let target = |p: usize| allot.most[p];
         let sampling = (s.transparent, SAMPLING_SHARE * tolerance);
-        let window = (&reach[..], (width, height));
+        let window = ((&reach[..], top_reach), (width, height));
         let work = round_work(&allot, &traced, (&mut pending, &mut to), window, sampling)?;
         if work.is_empty() && resized.is_empty() {
             break;
@@ -999,7 +1000,7 @@ fn refine_bucket(
 }
 
 /// This round's work in a bucket (`width` x `height`, each pixel's highlight reach
-/// `reach`): the `pending` sites (drained) that want samples, each's new count in `to`. A
+/// `reach`, the greatest `top_reach`): the `pending` sites (drained) that want samples, each's new count in `to`. A
 /// site starts with its first samples, then doubles them up to its most while its noise
 /// (with `transparent`, its coverage's too) is above `limit`, or while a highlight seen
 /// within its reach could move it that far.
@@ -1007,7 +1008,7 @@ fn round_work(
     allot: &allocation::Allotment,
     traced: &Traced,
     (pending, to): (&mut Vec<usize>, &mut [u32]),
-    (reach, (width, height)): (&[u8], (usize, usize)),
+    ((reach, top_reach), (width, height)): ((&[u8], u8), (usize, usize)),
     (transparent, limit): (bool, f32),
 ) -> Result<Vec<usize>, MemoryError> {
     let (first, target) = (|p: usize| allot.first[p], |p: usize| allot.most[p]);
@@ -1019,7 +1020,6 @@ fn round_work(
         let n = traced.est[p].n;
         n > 0 && n < target(p) && !noisy(p)
     };
-    let top_reach = reach.iter().copied().max().unwrap_or(1);
     let peaks = pending
         .iter()
         .any(|&p| calm(p))
