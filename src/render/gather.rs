@@ -143,19 +143,17 @@ impl<'a> Gather<'a> {
             })
         };
         let (fx, fy) = (along(x, self.width, film.x), along(y, self.height, film.y));
-        // The weight of receiver (i, j), none where it is no technique (or outside).
-        let weight = |i: usize, j: usize| {
+        // The weight of each receiver, row by row: none where it is no technique (or outside).
+        let weights: [f32; SLOTS] = std::array::from_fn(|k| {
+            let (i, j) = (k % SIDE, k / SIDE);
             let f = fx[i] * fy[j];
             if f > 0.0 && self.takes_part((x + i - REACH, y + j - REACH)) {
                 f
             } else {
                 0.0
             }
-        };
-        let total: f32 = (0..SIDE)
-            .flat_map(|j| (0..SIDE).map(move |i| (i, j)))
-            .map(|(i, j)| weight(i, j))
-            .sum();
+        });
+        let total: f32 = weights.iter().sum();
         // The site's own pixel always weighs the sample (it drew it from its filter).
         if total.is_nan() || total <= 0.0 {
             return;
@@ -166,12 +164,9 @@ impl<'a> Gather<'a> {
             light: (value * w).extend(w),
             cover: Vec2::new(hits, seen),
         } * (1.0 / total);
-        for j in 0..SIDE {
-            for i in 0..SIDE {
-                let f = weight(i, j);
-                if f > 0.0 {
-                    slots[j * SIDE + i] += sample * f;
-                }
+        for (slot, &f) in slots.iter_mut().zip(&weights) {
+            if f > 0.0 {
+                *slot += sample * f;
             }
         }
     }

@@ -231,19 +231,7 @@ pub(super) fn refine(
         sites: (0..layout.count()).map(|_| None).collect(),
         values: (0..layout.ny).map(|_| None).collect(),
         bucket_bytes: AtomicUsize::new(0),
-        out: Finished {
-            buckets: Vec::new(),
-            work_seconds: 0.0,
-            lend_seconds: 0.0,
-            gathered: match maps.gather {
-                Some(_) => Some(try_vec(
-                    layout.width * layout.height,
-                    crate::render::gather::Slot::default(),
-                    "the gathered samples",
-                )?),
-                None => None,
-            },
-        },
+        out: Finished::new(maps, layout)?,
     };
     progress.start("adaptive", run.plan.units());
     let band = (8 * rayon::current_num_threads().max(1))
@@ -350,12 +338,7 @@ impl Pipeline<'_> {
                     let Some(mut rounds) = rounds else {
                         return Err(RenderError::Cancelled);
                     };
-                    // Added in the order buckets are refined (by index), whatever the region.
-                    if let (Some(layer), Some(frame)) =
-                        (rounds.layer.take(), &mut self.out.gathered)
-                    {
-                        layer.add_to(frame, layout.width);
-                    }
+                    self.out.gather(&mut rounds, layout.width);
                     self.store[i] = Some(rounds);
                     self.out.work_seconds += seconds;
                 }

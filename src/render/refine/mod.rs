@@ -731,6 +731,30 @@ struct Finished {
     gathered: Option<Vec<Slot>>,
 }
 
+impl Finished {
+    /// Nothing finished yet, with room for the frame's gathered values where `maps` gathers.
+    fn new(maps: &Maps, layout: &Layout) -> Result<Self, MemoryError> {
+        let frame = layout.width * layout.height;
+        let gathered = (maps.gather.as_ref())
+            .map(|_| try_vec(frame, Slot::default(), "the gathered samples"))
+            .transpose()?;
+        Ok(Self {
+            buckets: Vec::new(),
+            work_seconds: 0.0,
+            lend_seconds: 0.0,
+            gathered,
+        })
+    }
+
+    /// Adds what a bucket's refinement gathered (`rounds`' layer, taken) into the frame.
+    /// Called in the order buckets are refined, by index, whatever the region.
+    fn gather(&mut self, rounds: &mut Rounds, frame_width: usize) {
+        if let (Some(layer), Some(frame)) = (rounds.layer.take(), &mut self.gathered) {
+            layer.add_to(frame, frame_width);
+        }
+    }
+}
+
 /// [`refine`] without sample reuse: each bucket on its own, all in parallel.
 fn refine_alone(
     shader: &SiteShader,
@@ -758,28 +782,13 @@ fn refine_alone(
             (i, b, rounds, local, started.elapsed().as_secs_f64())
         })
         .collect();
-    let mut out = Finished {
-        buckets: Vec::with_capacity(done.len()),
-        work_seconds: 0.0,
-        lend_seconds: 0.0,
-        gathered: match maps.gather {
-            Some(_) => Some(try_vec(
-                layout.width * layout.height,
-                Slot::default(),
-                "the gathered samples",
-            )?),
-            None => None,
-        },
-    };
+    let mut out = Finished::new(maps, layout)?;
     for (i, b, rounds, local, seconds) in done {
         tally.merge(local);
         let Some(mut rounds) = rounds? else {
             return Err(super::RenderError::Cancelled);
         };
-        // Added in bucket order, whatever the region.
-        if let (Some(layer), Some(frame)) = (rounds.layer.take(), &mut out.gathered) {
-            layer.add_to(frame, layout.width);
-        }
+        out.gather(&mut rounds, layout.width);
         if wanted[i] {
             out.buckets.push((b, rounds.finish(&b)));
         }
