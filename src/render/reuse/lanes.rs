@@ -111,8 +111,10 @@ pub(super) struct Block {
     /// What the member's own technique adds to the density for it as a receiver (0 for a
     /// lender: it is counted among them).
     pub own: [f32; LANES],
-    /// Whether the member takes the sample.
-    pub receives: [bool; LANES],
+    /// Bit j: member `start + j` is a technique (the others' `technique` is 0).
+    pub techniques: u32,
+    /// Bit j: member `start + j` takes the sample.
+    pub receives: u32,
 }
 
 impl Sample<'_> {
@@ -139,7 +141,8 @@ impl Sample<'_> {
         // Where sites are dense and few borrow, whole blocks neither count nor take it.
         if (technique | receiver).move_mask() == 0 {
             out.technique = [0.0; LANES];
-            out.receives = [false; LANES];
+            out.techniques = 0;
+            out.receives = 0;
             return;
         }
         // As `ShiftKernel::within`: the bin is at most RADIAL - 1 (also for offsets out of
@@ -168,8 +171,8 @@ impl Sample<'_> {
         out.k = k.to_array();
         out.technique = technique.blend(nk, f32x8::ZERO).to_array();
         out.own = lender.blend(f32x8::ZERO, nk).to_array();
-        let receives = (receiver & k.cmp_gt(f32x8::ZERO)).move_mask();
-        out.receives = std::array::from_fn(|j| receives & (1 << j) != 0);
+        out.techniques = technique.move_mask() as u32;
+        out.receives = (receiver & k.cmp_gt(f32x8::ZERO)).move_mask() as u32;
     }
 }
 
@@ -250,8 +253,10 @@ mod tests {
                 sample.block(&cols, start, valid, &mut block);
                 let covers = covers(&cols, (centre, shift, extent), start, valid);
                 for j in 0..LANES {
+                    let receives_j = block.receives & (1 << j) != 0;
                     if j >= valid {
-                        assert!(!block.receives[j] && block.technique[j] == 0.0);
+                        assert!(!receives_j && block.technique[j] == 0.0);
+                        assert_eq!(block.techniques & (1 << j), 0);
                         assert_eq!(covers & (1 << j), 0);
                         continue;
                     }
@@ -275,8 +280,11 @@ mod tests {
                         0.0
                     };
                     assert_eq!(block.technique[j].to_bits(), technique.to_bits(), "{what}");
+                    if block.techniques & (1 << j) == 0 {
+                        assert_eq!(technique, 0.0, "{what}");
+                    }
                     let receives = in_reach && m.needy && takes && k > 0.0;
-                    assert_eq!(block.receives[j], receives, "{what}");
+                    assert_eq!(receives_j, receives, "{what}");
                     if receives {
                         let own = if lender { 0.0 } else { m.n * k };
                         assert_eq!(block.own[j].to_bits(), own.to_bits(), "{what}");

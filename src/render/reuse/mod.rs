@@ -735,10 +735,13 @@ fn lend_one(
             for start in range.clone().step_by(lanes::LANES) {
                 let valid = (range.end - start).min(lanes::LANES);
                 sample.block(&grid.columns, start, valid, &mut block);
-                for j in 0..valid {
+                // Only the set bits: adding the others' 0 would change nothing.
+                for j in bits(block.techniques) {
                     lenders += block.technique[j];
+                }
+                for j in bits(block.receives) {
                     near[len] = (block.k[j], (start + j) as u32, block.own[j]);
-                    len += usize::from(block.receives[j]);
+                    len += 1;
                 }
             }
         }
@@ -764,6 +767,17 @@ fn lend_one(
             pooled[q as usize].add_lit(lent, y, k / (lenders + own), r.hit);
         }
     }
+}
+
+/// The positions of the set bits of `mask`, lowest first.
+fn bits(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let j = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            j
+        })
+    })
 }
 
 /// The shift of sample `r`'s point carried to `at` along a surface whose shift changes by
