@@ -365,6 +365,17 @@ mod tests {
                 ResourceLimit,
             ),
             case(SceneError::from(embree(ErrorCode::Unknown)), BadInput),
+            // What Embree's build passes on when the system refuses it a thread (seen under
+            // `ulimit -v 400000`) is a resource limit, not the scene's fault.
+            case(
+                SceneError::from(EmbreeError::Embree {
+                    code: ErrorCode::Unknown,
+                    message: "rtcCommitScene: pthread_create has failed: Resource temporarily \
+                              unavailable"
+                        .into(),
+                }),
+                ResourceLimit,
+            ),
             case(
                 SceneError::from(crate::limits::MemoryError::allocation("the light tree", 1)),
                 ResourceLimit,

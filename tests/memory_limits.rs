@@ -95,6 +95,36 @@ fn the_cli_refuses_an_image_beyond_the_address_space_limit_with_exit_5() {
     );
 }
 
+/// Under an address-space limit too tight for Embree's BVH build, the build fails and the
+/// command exits with an error; releasing the failed scene used to make TBB throw from a
+/// destructor (`missing_wait`: "terminate called", SIGABRT), seen under `ulimit -v 400000`
+/// with two threads. Where the build fails depends on the machine and its threads, so the
+/// limits around it are tried in turn; none may end in C++'s terminate, and a failure that
+/// is reported is a resource limit (exit 5).
+#[test]
+fn a_bvh_build_the_limit_refuses_fails_without_terminating() {
+    let dir = scratch("bvh");
+    let out_path = dir.join("out.png");
+    let out = out_path.to_str().unwrap();
+    let mut refused = 0;
+    for kib in (300_000..=500_000).step_by(10_000) {
+        let args = ["render", "--width", "64", "--spp", "4", "--json", "-o", out];
+        let run = dofray_limited(kib, &args);
+        let err = text(&run.stderr);
+        assert!(
+            !err.contains("terminate called"),
+            "ulimit -v {kib}: C++ terminated the process: {err}"
+        );
+        if run.status.code() == Some(5) {
+            refused += 1;
+            let json: serde_json::Value =
+                serde_json::from_slice(&run.stdout).expect("one JSON object");
+            assert_eq!(json["error"]["kind"], "resource_limit", "{json}");
+        }
+    }
+    eprintln!("{refused} of 21 limits refused the render cleanly");
+}
+
 /// The command that started this test binary: its path, or, when it was started through the
 /// dynamic loader (`ld-linux.so --library-path DIR BINARY`, as the Embree 4 check runs it, where
 /// `current_exe` is the loader), the loader with its options and the binary.

@@ -333,10 +333,28 @@ impl EmbreeError {
                 code: ErrorCode::OutOfMemory,
                 ..
             } => ErrorKind::ResourceLimit,
+            Self::Embree {
+                code: ErrorCode::Unknown,
+                message,
+            } if refused_resource(message) => ErrorKind::ResourceLimit,
             Self::InvalidGeometry(_) => ErrorKind::BadInput,
             _ => otherwise,
         }
     }
+}
+
+/// Whether an `RTC_ERROR_UNKNOWN`'s message is the system refusing a thread or memory: Embree
+/// passes on what its build threw that way (under `ulimit -v 400000`, for example:
+/// "rtcCommitScene: pthread_create has failed: Resource temporarily unavailable").
+fn refused_resource(message: &str) -> bool {
+    [
+        "pthread_create",
+        "Resource temporarily unavailable",
+        "bad_alloc",
+        "out of memory",
+    ]
+    .iter()
+    .any(|m| message.contains(m))
 }
 
 impl HasKind for EmbreeError {

@@ -251,7 +251,16 @@ impl SceneBuilder {
             sys::rtcSetSceneBuildQuality(self.handle.0, self.quality.raw());
             sys::rtcCommitScene(self.handle.0);
         }
-        self.device.check("rtcCommitScene")?;
+        if let Err(e) = self.device.check("rtcCommitScene") {
+            // A build that failed (out of memory: a worker thread or buffer refused) leaves
+            // a TBB task group that was never waited on; releasing the scene destroys it, and
+            // TBB answers with `missing_wait` thrown from a destructor: std::terminate, the
+            // process aborts (seen under `ulimit -v 400000`). So the failed scene is leaked,
+            // with everything it may still point at (its buffers, filters and device), and
+            // the error returned: once per failed build, on the way to exiting.
+            std::mem::forget(self);
+            return Err(e);
+        }
         let mut bounds = sys::RTCBounds::default();
         // SAFETY: committed scene; bounds is a valid, 16-byte aligned RTCBounds.
         unsafe { sys::rtcGetSceneBounds(self.handle.0, &mut bounds) };

@@ -21,6 +21,7 @@ use std::collections::HashMap;
 use glam::Vec3;
 
 use super::{Object, SceneDesc};
+use crate::limits::{MemoryError, try_vec};
 
 /// The most primitives of one size class whose centres may share one cell of that size.
 pub const MAX_STACKED: u32 = 4096;
@@ -90,9 +91,11 @@ fn each_box(desc: &SceneDesc, mut f: impl FnMut(Vec3, Vec3)) {
     }
 }
 
-/// The fullest cell of `desc` if it holds more than [`MAX_STACKED`] primitives.
-pub fn find_stack(desc: &SceneDesc) -> Option<Stack> {
-    let mut counts = vec![0u32; SLOTS];
+/// The fullest cell of `desc` if it holds more than [`MAX_STACKED`] primitives; an error when
+/// the counters cannot be allocated.
+pub fn find_stack(desc: &SceneDesc) -> Result<Option<Stack>, MemoryError> {
+    // Fallible: the first 4 MiB a scene asks for, where a tight `ulimit -v` is met first.
+    let mut counts = try_vec(SLOTS, 0u32, "the pile check's counters")?;
     each_box(desc, |lo, hi| {
         if let Some(c) = cell(lo, hi) {
             let s = &mut counts[slot(&c)];
@@ -100,7 +103,7 @@ pub fn find_stack(desc: &SceneDesc) -> Option<Stack> {
         }
     });
     if counts.iter().all(|&n| n <= MAX_STACKED) {
-        return None;
+        return Ok(None);
     }
     // Exact counts of the cells in hot slots only.
     let mut exact: HashMap<Cell, u32> = HashMap::new();
@@ -111,13 +114,15 @@ pub fn find_stack(desc: &SceneDesc) -> Option<Stack> {
             *exact.entry(c).or_insert(0) += 1;
         }
     });
-    let ((class, k), count) = exact
+    let fullest = exact
         .into_iter()
         .filter(|&(_, n)| n > MAX_STACKED)
-        .max_by_key(|&((class, k), n)| (n, class, k))?;
-    let size = 2f32.powi(class);
-    let at = (Vec3::new(k[0] as f32, k[1] as f32, k[2] as f32) + 0.5) * size;
-    Some(Stack { count, at, size })
+        .max_by_key(|&((class, k), n)| (n, class, k));
+    Ok(fullest.map(|((class, k), count)| {
+        let size = 2f32.powi(class);
+        let at = (Vec3::new(k[0] as f32, k[1] as f32, k[2] as f32) + 0.5) * size;
+        Stack { count, at, size }
+    }))
 }
 
 #[cfg(test)]

@@ -431,7 +431,7 @@ impl World {
         };
         // Lights and ambient light are checked with everything else numeric.
         check_ranges(desc)?;
-        if let Some(stack) = super::stacking::find_stack(desc) {
+        if let Some(stack) = super::stacking::find_stack(desc)? {
             return Err(SceneError::Stacked(stack));
         }
 
