@@ -77,11 +77,17 @@ fn focus_at_infinity_and_huge_focus_distances_render_the_scene() {
     let huge = render_film(&desc);
     assert_eq!(at_infinity, huge);
     assert!(huge.iter().all(|c| c.is_finite()));
-    // The bottom row sees the checkered ground, not the sky's blue.
+    // The bottom row sees the checkered ground, not the sky (which below the horizon is the
+    // horizon's (0.375, 0.41, 0.475): blue over red 1.27). Lit and blurred, the ground is
+    // brighter and less blue: a converged dense render (2048 spp) gives the row a mean of
+    // (0.653, 0.683, 0.755), blue over red 1.16. (The check this replaces asked one pixel of
+    // the row for blue under red + 0.05, which not even that render has: noise decided it.)
     let bottom = &huge[35 * 48..];
+    let mean = bottom.iter().copied().sum::<Vec3>() / bottom.len() as f32;
+    let blue_over_red = bottom.iter().map(|c| c.z / c.x).sum::<f32>() / bottom.len() as f32;
     assert!(
-        bottom.iter().any(|c| c.z < c.x + 0.05),
-        "{:?}",
+        blue_over_red < 1.22 && mean.x > 1.3 * 0.375,
+        "mean {mean}, blue over red {blue_over_red}: {:?}",
         &bottom[..4]
     );
     // The CoC at infinity is 0 when focused there.

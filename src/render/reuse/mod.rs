@@ -23,7 +23,7 @@
 //!
 //! **Bounded work.** The techniques a receiver combines at a centre c are the *lenders*
 //! there (the sites whose kernel reaches c and that sit on a lattice whose spacing grows with
-//! the blur (`spacing`), so about a dozen overlap any point however dense the sites) plus
+//! the blur (`spacing`), so thirty to a hundred overlap any point however dense the sites) plus
 //! itself. The set depends on c alone, so each receiver's estimate stays unbiased; a
 //! lender's sample is offered to every site it reaches, any other sample only to its own.
 //! Work is per window of the rule's buckets ([`crate::render::refine`]'s lending), fixed by the
@@ -669,10 +669,14 @@ impl Grid {
     }
 }
 
-/// The lattice spacing of the sites that lend samples of shift `s`: a power of two near
-/// `|s| / 1.5`, so about a dozen lenders' kernels overlap any point however dense the sites.
+/// The lattice spacing of the sites that lend samples of shift `s`: a power of two from
+/// `|s| / 6` to `|s| / 3`, so thirty to a hundred lenders' kernels overlap any point however
+/// dense the sites. Lending a sample to a site costs about a hundredth of tracing one for it,
+/// so more lenders are cheap noise taken out: at `|s| / 1.5` (a dozen) the paper scene at
+/// 640 px was 0.6 to 0.75 dB noisier at every sample count from 16 to 256 for up to a tenth
+/// less time, and at `|s| / 6` it gained 0.1 dB more for 7% to 12% more time.
 fn spacing(s: f32) -> usize {
-    let g = (s.abs() / 1.5).max(1.0);
+    let g = (s.abs() / 3.0).max(1.0);
     1 << (g.log2().floor() as u32).min(6)
 }
 
