@@ -672,9 +672,9 @@ impl Grid {
 /// The lattice spacing of the sites that lend samples of shift `s`: a power of two from
 /// `|s| / 6` to `|s| / 3`, so thirty to a hundred lenders' kernels overlap any point however
 /// dense the sites. Lending a sample to a site costs about a hundredth of tracing one for it,
-/// so more lenders are cheap noise taken out: at `|s| / 1.5` (a dozen) the paper scene at
-/// 640 px was 0.6 to 0.75 dB noisier at every sample count from 16 to 256 for up to a tenth
-/// less time, and at `|s| / 6` it gained 0.1 dB more for 7% to 12% more time.
+/// so more lenders are cheap noise taken out: an octave coarser (a dozen lenders) the paper
+/// scene at 640 px was 0.6 to 0.75 dB noisier at every sample count from 16 to 256 for up
+/// to a tenth less time, and an octave finer it gained 0.1 dB more for 7% to 12% more time.
 fn spacing(s: f32) -> usize {
     let g = (s.abs() / 3.0).max(1.0);
     1 << (g.log2().floor() as u32).min(6)
