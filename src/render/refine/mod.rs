@@ -1009,10 +1009,10 @@ fn refine_bucket(
 }
 
 /// This round's work in a bucket (`width` x `height`, each pixel's highlight reach
-/// `reach`, the greatest `top_reach`): the `pending` sites (drained) that want samples, each's new count in `to`. A
-/// site starts with its first samples, then doubles them up to its most while its noise
-/// (with `transparent`, its coverage's too) is above `limit`, or while a highlight seen
-/// within its reach could move it that far.
+/// `reach`, the greatest `top_reach`): the `pending` sites (drained) that want samples,
+/// each's new count in `to`. A site starts with its first samples, then doubles them up to
+/// its most while its noise (with `transparent`, its coverage's too) is above `limit`, or
+/// while a highlight seen within its reach could move it that far.
 fn round_work(
     allot: &allocation::Allotment,
     traced: &Traced,

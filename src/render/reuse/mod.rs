@@ -895,10 +895,8 @@ fn covered<R: Borrow<SiteRecords>>(
             for start in range.clone().step_by(lanes::LANES) {
                 let valid = (range.end - start).min(lanes::LANES);
                 let sample = (r.centre, r.shift, extent);
-                let mut hits = lanes::covers(&grid.columns, sample, start, valid);
-                while hits != 0 {
-                    covered[start + hits.trailing_zeros() as usize] = true;
-                    hits &= hits - 1;
+                for j in bits(lanes::covers(&grid.columns, sample, start, valid)) {
+                    covered[start + j] = true;
                 }
             }
         }
