@@ -221,6 +221,7 @@ mod tests {
                     gradient: Vec2::new(u(6, -0.3, 0.3), u(7, -0.3, 0.3)),
                     needy: hash64(key + 8) % 4 != 0,
                     covered: hash64(key + 9) % 5 == 0,
+                    hidden: false,
                 }
             })
             .collect()
