@@ -44,7 +44,7 @@
 //!   not lend (below) count with the rest the same way.
 //! - A site whose own samples all missed a nearer surface that other sites' samples show
 //!   crossing its footprint (a blurred foreground's rim, seen through a few lens positions)
-//!   takes the nearest of those crossing samples' clusters for its own ([`hidden_surfaces`]):
+//!   takes the nearest of those crossing samples' clusters for its own ([`mark_covered`]):
 //!   its value is `W L_near + (1 - W) L_rest` as above, with `W` most likely small and
 //!   `L_rest` all its own samples, and it borrows however quiet those were (their mean lacks
 //!   that surface). Keeping its own mean instead, as a site once did, made the estimator a
