@@ -967,6 +967,7 @@ fn hidden_surfaces(grid: &Grid, crossing: &[&Record], reach: f32) -> Vec<Option<
     });
     (0..n)
         .map(|q| {
+            // A crosser seen edge-on has an infinite gradient: no plane to carry shifts on.
             if sum[q].1 == 0 || !least[q].is_finite() {
                 return None;
             }
@@ -1687,6 +1688,34 @@ mod tests {
         assert!((lent[behind].mean() - Vec3::splat(0.3)).length() < 1e-5);
         // The others still borrow.
         assert!(lent[24 * 32 + 24].n > own[24 * 32 + 24].n);
+    }
+
+    /// A nearer sample seen edge-on (an infinite shift gradient) gives the sites it crosses no
+    /// surface to take: they stay covered, as before, and the one beside a plain crosser
+    /// takes its surface.
+    #[test]
+    fn a_crosser_seen_edge_on_leaves_its_sites_covered() {
+        let k = kernel(PixelFilterKind::Box);
+        let (mut records, _) = lattice(32, 4, 8, 6.0, |_| 0.3, 3);
+        // Samples of the sites at (4, 4) and (20, 20), over (8, 8) and (24, 24).
+        for (site, at, gradient) in [
+            (
+                4 * 32 + 4,
+                Vec2::new(8.5, 8.5),
+                Vec2::new(f32::INFINITY, 0.0),
+            ),
+            (20 * 32 + 20, Vec2::new(24.5, 24.5), Vec2::ZERO),
+        ] {
+            let mut near = records[site].list[0];
+            (near.shift, near.centre, near.gradient) = (1.0, at, gradient);
+            records[site].list.push(near);
+        }
+        let mut sites = sites((0, 0), 32, &records);
+        mark_covered(&k, (0, 0), (32, 32), &mut sites, &records);
+        let edge_on = sites[8 * 32 + 8].expect("a site");
+        assert!(edge_on.0.covered && !edge_on.hidden());
+        let plain = sites[24 * 32 + 24].expect("a site");
+        assert!(!plain.0.covered && plain.hidden());
     }
 
     /// Sites every `interval` px of a `size` window, `n` samples each, looking at a
