@@ -333,15 +333,23 @@ material = "lamp"
 
 
 def test_light_tracing(tmp_path):
-    # A 1 mm lamp blurred to a 24 px disc: light-traced by default, its energy kept in
-    # adaptive mode; camera rays alone lose most of it between the sparse sites.
+    # A 1 mm lamp blurred to a 24 px disc. Light-traced (the default), its image holds the
+    # lamp's energy at every seed: radiance 400 over its projected area, pi r^2 (f / z)^2
+    # square pixels, in each of three channels. Camera rays alone find it by luck: sample
+    # reuse spreads each sample that does over the disc, so an image holds none of the
+    # lamp or whole multiples of one sample's share, seed by seed.
     scene = tmp_path / "lamp.toml"
     scene.write_text(LAMP)
-    on = dofray.render(scene, spp=16)
-    off = dofray.render(scene, spp=16, light_tracing=False)
-    assert on.stats["light_paths"] > 0 and off.stats["light_paths"] == 0
     energy = lambda r: float(r.rgba[..., :3].sum())
-    assert energy(on) > 2 * energy(off)
+    f_px = 85 / 36 * 192
+    expected = 3 * 400 * np.pi * 0.0005**2 * (f_px / 0.9) ** 2
+    for seed in range(4):
+        on = dofray.render(scene, spp=16, seed=seed)
+        assert on.stats["light_paths"] > 0
+        assert abs(energy(on) / expected - 1) < 0.02, (seed, energy(on), expected)
+    off = [dofray.render(scene, spp=16, seed=seed, light_tracing=False) for seed in range(4)]
+    assert all(r.stats["light_paths"] == 0 for r in off)
+    assert max(map(energy, off)) > 2 * min(map(energy, off))
 
 
 def test_reuse():
