@@ -1140,10 +1140,11 @@ pub struct Lent {
 /// The estimates of a window's sites with their neighbours' samples lent to them: for every
 /// pixel of the `width` x `height` window whose top left pixel is `(x0, y0)` in the image,
 /// `own[p]` where reuse does not hold (see the module documentation), nothing was traced or
-/// `needy[p]` is false (its own samples suffice), else the balance-heuristic combination of
-/// every sample that reaches it. `records[p]` holds pixel p's samples (those `own[p]`
-/// counts: the first [`MAX_RECORDS`] and the sum of the rest). The work is spent only on
-/// samples that can reach a needy site.
+/// `needy[p]` is false (its own samples suffice; a site that missed its nearest surface,
+/// [`Site::hidden`], borrows all the same), else the balance-heuristic combination of every
+/// sample that reaches it. `records[p]` holds pixel p's samples (those `own[p]` counts: the
+/// first [`MAX_RECORDS`] and the sum of the rest). The work is spent only on samples that
+/// can reach a needy site.
 pub fn lend<R: Borrow<SiteRecords>>(
     kernel: &Kernel,
     (x0, y0): (usize, usize),
@@ -1164,7 +1165,8 @@ pub fn lend<R: Borrow<SiteRecords>>(
 
 /// [`lend`] with each pixel's site worked out beforehand, `sites[p]` ([`sites`], its
 /// coverage marked by [`mark_covered`]): where windows overlap, each site is worked out once
-/// rather than once per window.
+/// rather than once per window. `needy` is taken as given: the caller adds the sites that
+/// missed their nearest surface ([`Site::hidden`]) where they may borrow, as [`lend`] does.
 pub fn lend_sites<R: Borrow<SiteRecords>>(
     kernel: &Kernel,
     (x0, y0): (usize, usize),
