@@ -967,7 +967,8 @@ fn hidden_surfaces(grid: &Grid, crossing: &[&Record], reach: f32) -> Vec<Option<
     });
     (0..n)
         .map(|q| {
-            // A crosser seen edge-on has an infinite gradient: no plane to carry shifts on.
+            // No crosser, or one seen edge-on (its infinite gradient carries every shift out
+            // of bounds): no surface to take.
             if sum[q].1 == 0 || !least[q].is_finite() {
                 return None;
             }
@@ -1030,9 +1031,11 @@ pub fn sites<R: Borrow<SiteRecords>>(
         .collect()
 }
 
-/// Marks the `sites` of the `width` x `height` area whose top left pixel is `origin` that a
-/// sample of `records` (the sites around them, in any order) nearer than their cluster
-/// crosses: they neither lend nor borrow (see the module documentation, "Occlusion").
+/// Works out which of the `sites` of the `width` x `height` area whose top left pixel is
+/// `origin` a sample of `records` (the sites around them, in any order) nearer than their
+/// cluster crosses. Each such site takes the nearest surface of the samples that cross it
+/// for its own ([`Site::hidden`]); one that something nearer still crosses is covered, and
+/// neither lends nor borrows (see the module documentation, "Occlusion").
 pub fn mark_covered<R: Borrow<SiteRecords>>(
     kernel: &Kernel,
     origin: (usize, usize),
