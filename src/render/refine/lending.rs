@@ -531,10 +531,7 @@ fn lend_chunk(
     for y in 0..ch {
         for x in 0..cw {
             let p = index(x, y);
-            // A site whose own samples missed the nearest surface borrows however quiet
-            // they were: their mean lacks that surface.
-            let hidden = sites[p].is_some_and(|s| s.hidden());
-            needy[p] = hidden || traced[p].noisier_than(limit, transparent);
+            needy[p] = reuse::borrows(sites[p], traced[p].noisier_than(limit, transparent));
         }
     }
     let window = (&records[..], &sites[..]);

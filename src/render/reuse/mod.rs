@@ -967,9 +967,9 @@ fn hidden_surfaces(grid: &Grid, crossing: &[&Record], reach: f32) -> Vec<Option<
     });
     (0..n)
         .map(|q| {
-            // No crosser, or one seen edge-on (its infinite gradient carries every shift out
-            // of bounds): no surface to take.
-            if sum[q].1 == 0 || !least[q].is_finite() {
+            // No crosser (the least shift stays infinite), or one seen edge-on (its infinite
+            // gradient carries every shift out of bounds): no surface to take.
+            if !least[q].is_finite() {
                 return None;
             }
             // Two empty bins between held ones part the surfaces by at least GAP.
@@ -1052,21 +1052,21 @@ pub fn mark_covered<R: Borrow<SiteRecords>>(
     let grid = Grid::new(corner, (width, height), members);
     let reach = kernel.reach();
     let (covered, crossing) = covered(&grid, records, reach, &area);
-    let mut hidden = Vec::new();
+    let mut crossed = Vec::new();
     for (m, &c) in grid.members.iter().zip(&covered) {
         if let (true, Some(site)) = (c, &mut sites[m.p]) {
             site.0.covered = true;
-            hidden.push(*m);
+            crossed.push(*m);
         }
     }
-    if hidden.is_empty() {
+    if crossed.is_empty() {
         return;
     }
     // A covered site takes the nearest surface that crosses it for its own, checked again
     // in case something nearer still crosses it: only the covered sites take part.
-    let hidden = Grid::new(corner, (width, height), hidden);
-    let surfaces = hidden_surfaces(&hidden, &crossing, reach);
-    let members: Vec<Member> = (hidden.members.iter().zip(surfaces))
+    let crossed = Grid::new(corner, (width, height), crossed);
+    let surfaces = hidden_surfaces(&crossed, &crossing, reach);
+    let retaken: Vec<Member> = (crossed.members.iter().zip(surfaces))
         .filter_map(|(m, surface)| {
             let (lo, hi, gradient) = surface?;
             Some(Member {
@@ -1079,10 +1079,10 @@ pub fn mark_covered<R: Borrow<SiteRecords>>(
             })
         })
         .collect();
-    let area = Bounds::around(members.iter().map(|m| m.at));
-    let hidden = Grid::new(corner, (width, height), members);
-    let (again, _) = self::covered(&hidden, records, reach, &area);
-    for (m, _) in hidden.members.iter().zip(again).filter(|(_, c)| !c) {
+    let area = Bounds::around(retaken.iter().map(|m| m.at));
+    let retaken = Grid::new(corner, (width, height), retaken);
+    let (again, _) = self::covered(&retaken, records, reach, &area);
+    for (m, _) in retaken.members.iter().zip(again).filter(|(_, c)| !c) {
         sites[m.p] = Some(Site(*m));
     }
 }
@@ -1093,6 +1093,13 @@ impl Site {
     pub fn hidden(&self) -> bool {
         self.0.hidden
     }
+}
+
+/// Whether the site `site` of a pixel borrows, its own samples `noisy` (noisier than the
+/// rule wanted) or not: a site that missed its nearest surface ([`Site::hidden`]) borrows
+/// however quiet they were, as their mean lacks that surface.
+pub fn borrows(site: Option<Site>, noisy: bool) -> bool {
+    noisy || site.is_some_and(|s| s.hidden())
 }
 
 /// A box of pixel positions, to skip what lies too far from the sites that borrow.
@@ -1158,9 +1165,8 @@ pub fn lend<R: Borrow<SiteRecords>>(
 ) -> Result<Lent, MemoryError> {
     let mut sites = sites((x0, y0), width, records);
     mark_covered(kernel, (x0, y0), (width, height), &mut sites, records);
-    // A site whose own samples missed the nearest surface borrows however quiet they were.
     let needy: Vec<bool> = (needy.iter().zip(&sites))
-        .map(|(&n, s)| n || s.is_some_and(|s| s.hidden()))
+        .map(|(&n, &s)| borrows(s, n))
         .collect();
     let window = (records, &sites[..]);
     lend_sites(kernel, (x0, y0), (width, height), window, own, &needy)
@@ -1168,8 +1174,8 @@ pub fn lend<R: Borrow<SiteRecords>>(
 
 /// [`lend`] with each pixel's site worked out beforehand, `sites[p]` ([`sites`], its
 /// coverage marked by [`mark_covered`]): where windows overlap, each site is worked out once
-/// rather than once per window. `needy` is taken as given: the caller adds the sites that
-/// missed their nearest surface ([`Site::hidden`]) where they may borrow, as [`lend`] does.
+/// rather than once per window. `needy` is taken as given: the caller decides it with
+/// [`borrows`] where sites may borrow, as [`lend`] does.
 pub fn lend_sites<R: Borrow<SiteRecords>>(
     kernel: &Kernel,
     (x0, y0): (usize, usize),
@@ -1511,7 +1517,7 @@ mod tests {
         assert!(hidden > 10, "{hidden} sites missed the nearer plane");
         // The sites that missed the nearer plane borrow, as `lend` has them.
         let needy: Vec<bool> = (needy.iter().zip(&prepared))
-            .map(|(&n, s)| n || s.is_some_and(|s| s.hidden()))
+            .map(|(&n, &s)| borrows(s, n))
             .collect();
         let window = (&records[..], &prepared[..]);
         let lent = lend_sites(&k, (0, 0), (size, size), window, &own, &needy).unwrap();
