@@ -24,7 +24,19 @@ fn scene() -> SceneDesc {
 
 /// [`scene`] with more of the wall's material parameters (`extra`, TOML lines).
 fn scene_with_wall(extra: &str) -> SceneDesc {
-    let src = format!(
+    let src = toml(extra, "");
+    dofray::scene::file::parse(&src, Path::new("reuse.toml")).unwrap()
+}
+
+/// [`scene`]'s file with more of the camera's keys (`camera`, TOML lines).
+fn toml_with_camera(camera: &str) -> String {
+    toml("", camera)
+}
+
+/// [`scene`]'s file with more of the wall's material parameters (`extra`) and of the
+/// camera's (`camera`), TOML lines.
+fn toml(extra: &str, camera: &str) -> String {
+    format!(
         r#"
 name = "reuse"
 
@@ -39,6 +51,7 @@ f_number = 1.4
 focal_length_mm = 85
 sensor_width_mm = 36
 focus_distance = 1.5
+{camera}
 
 [background]
 horizon = [0.5, 0.55, 0.6]
@@ -84,8 +97,7 @@ center = [-0.06, -0.02, 0.5]
 radius = 0.03
 material = "grey"
 "#
-    );
-    dofray::scene::file::parse(&src, Path::new("reuse.toml")).unwrap()
+    )
 }
 
 fn settings(mode: Mode, spp: u32, reuse: bool) -> RenderSettings {
@@ -212,6 +224,31 @@ fn lending_brings_a_blurred_wall_closer_to_the_reference_and_keeps_depth_edges()
         at_edges_lent < 0.83 * at_edges_own,
         "at the depth edges: {at_edges_lent:e} with lending vs {at_edges_own:e}"
     );
+}
+
+/// Through a bladed aperture (six blades) and an anamorphic one (five blades, stretched 1.5
+/// times), lending brings the blurred wall closer to the reference as through the round
+/// one (measured 0.40 and 0.57 of the error without it; before, such apertures lent
+/// nothing), and keeps the image's brightness: the kernel follows the aperture's shape.
+#[test]
+fn lending_through_bladed_and_anamorphic_apertures() {
+    for aperture in [
+        "blades = 6\nblade_rotation = 15",
+        "blades = 5\nanamorphic = 1.5",
+    ] {
+        let src = toml_with_camera(aperture);
+        let desc = dofray::scene::file::parse(&src, Path::new("reuse.toml")).unwrap();
+        let reference = render(&desc, &settings(Mode::Dense, 512, false));
+        let own = render(&desc, &settings(Mode::Adaptive, 16, false));
+        let lent = render(&desc, &settings(Mode::Adaptive, 16, true));
+        let mse = |f: &Film| mean(squared_errors(f, &reference).into_iter());
+        let (mse_own, mse_lent) = (mse(&own), mse(&lent));
+        assert!(
+            mse_lent < 0.7 * mse_own,
+            "{aperture}: {mse_lent:e} with lending vs {mse_own:e} without"
+        );
+        assert_keeps_brightness(&lent, &reference);
+    }
 }
 
 /// The wall glossy (a dielectric of roughness 0.1: its reflection of the sky and the sun

@@ -55,6 +55,122 @@ impl ApertureShape {
     }
 }
 
+impl ApertureShape {
+    /// Whether it is the unit disc (not polygonal, not stretched).
+    pub fn is_round(&self) -> bool {
+        self.blades < 3 && self.anamorphic == 1.0
+    }
+
+    /// The corners of a polygonal aperture in lens units (as [`polygon`] and
+    /// [`aperture_point`] place them); none for a round or oval one.
+    fn corners(&self) -> impl Iterator<Item = Vec2> + '_ {
+        let n = if self.blades >= 3 { self.blades } else { 0 };
+        let rot = self.rotation_deg.to_radians();
+        (0..n).map(move |k| {
+            let a = rot + TAU * k as f32 / n as f32;
+            Vec2::new(a.cos(), a.sin() * self.anamorphic)
+        })
+    }
+
+    /// Half its width and half its height, lens units: it lies within
+    /// `[-x, x] x [-y, y]`.
+    pub fn half_extents(&self) -> Vec2 {
+        if self.blades >= 3 {
+            self.corners().fold(Vec2::ZERO, |m, c| m.max(c.abs()))
+        } else {
+            Vec2::new(1.0, self.anamorphic)
+        }
+    }
+
+    /// The largest distance of its points from the lens centre, lens units.
+    pub fn outer_radius(&self) -> f32 {
+        if self.blades >= 3 {
+            self.corners().fold(0.0, |m, c| m.max(c.length()))
+        } else {
+            self.anamorphic.max(1.0)
+        }
+    }
+
+    /// Its outline, to take chords of.
+    pub fn outline(&self) -> Outline {
+        let corners: Vec<Vec2> = self.corners().collect();
+        if corners.is_empty() {
+            return Outline {
+                chains: None,
+                anamorphic: self.anamorphic,
+            };
+        }
+        // The corners run counter-clockwise: from the bottom up the right side, from the
+        // top down the left. A flat bottom or top edge belongs to both sides' ends.
+        let n = corners.len();
+        let pick = |better: &dyn Fn(Vec2, Vec2) -> bool| {
+            (0..n).fold(0, |best, k| {
+                if better(corners[k], corners[best]) {
+                    k
+                } else {
+                    best
+                }
+            })
+        };
+        let bottom_right = pick(&|a, b| a.y < b.y || (a.y == b.y && a.x > b.x));
+        let bottom_left = pick(&|a, b| a.y < b.y || (a.y == b.y && a.x < b.x));
+        let top_right = pick(&|a, b| a.y > b.y || (a.y == b.y && a.x > b.x));
+        let top_left = pick(&|a, b| a.y > b.y || (a.y == b.y && a.x < b.x));
+        let walk = |from: usize, to: usize| {
+            let mut chain = vec![corners[from]];
+            let mut k = from;
+            while k != to {
+                k = (k + 1) % n;
+                chain.push(corners[k]);
+            }
+            chain
+        };
+        let right = walk(bottom_right, top_right);
+        let mut left = walk(top_left, bottom_left);
+        left.reverse();
+        Outline {
+            chains: Some((left, right)),
+            anamorphic: self.anamorphic,
+        }
+    }
+}
+
+/// An aperture's outline ([`ApertureShape::outline`]): a polygon's left and right sides,
+/// each from its bottom up (so a chord is two binary searches however many blades), or an
+/// oval.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outline {
+    chains: Option<(Vec<Vec2>, Vec<Vec2>)>,
+    anamorphic: f32,
+}
+
+impl Outline {
+    /// The span of x over the aperture at height `y` (lens units, as [`aperture_point`]
+    /// gives them), `None` where the line misses it: the aperture is convex, so that is all
+    /// of it.
+    pub fn chord(&self, y: f32) -> Option<(f32, f32)> {
+        let Some((left, right)) = &self.chains else {
+            let v = y / self.anamorphic;
+            let half = (1.0 - v * v).sqrt();
+            return (v.abs() <= 1.0).then_some((-half, half));
+        };
+        Some((side_at(left, y)?, side_at(right, y)?))
+    }
+}
+
+/// Where a side of a convex polygon (its corners from the bottom up) crosses height `y`.
+fn side_at(side: &[Vec2], y: f32) -> Option<f32> {
+    let i = side.partition_point(|p| p.y < y);
+    if i == side.len() {
+        return None;
+    }
+    if i == 0 {
+        return (side[0].y == y).then_some(side[0].x);
+    }
+    let (a, b) = (side[i - 1], side[i]);
+    Some(a.x + (b.x - a.x) * (y - a.y) / (b.y - a.y))
+}
+
 impl Default for ApertureShape {
     fn default() -> Self {
         Self {
@@ -387,5 +503,67 @@ mod tests {
             LensFilter::Gaussian.weight(Vec2::ZERO, 1.0)
                 > LensFilter::Gaussian.weight(Vec2::X, 1.0) * 2.0
         );
+    }
+
+    /// A point is inside the aperture exactly where its height's chord holds its x, and no
+    /// sample lies beyond the half extents or the outer radius (which some come close to).
+    #[test]
+    fn chords_and_extents_bound_the_aperture() {
+        let shapes = [
+            ApertureShape::default(),
+            ApertureShape {
+                anamorphic: 1.7,
+                ..ApertureShape::default()
+            },
+            ApertureShape {
+                blades: 6,
+                rotation_deg: 15.0,
+                anamorphic: 1.0,
+            },
+            ApertureShape {
+                blades: 5,
+                rotation_deg: 0.0,
+                anamorphic: 0.6,
+            },
+            ApertureShape {
+                blades: 4,
+                rotation_deg: 45.0,
+                anamorphic: 1.0,
+            },
+            ApertureShape {
+                blades: 1024,
+                rotation_deg: 3.0,
+                anamorphic: 1.3,
+            },
+        ];
+        for shape in &shapes {
+            let (half, outer) = (shape.half_extents(), shape.outer_radius());
+            let outline = shape.outline();
+            let (mut reached, mut farthest) = (Vec2::ZERO, 0.0f32);
+            for i in 0..4000u32 {
+                let p = Vec2::new(
+                    (i as f32 * 0.618_034).fract() * 4.0 - 2.0,
+                    (i as f32 * 0.414_214).fract() * 4.0 - 2.0,
+                );
+                let in_chord = outline
+                    .chord(p.y)
+                    .is_some_and(|(l, r)| l <= p.x && p.x <= r);
+                // Points within rounding of the outline may fall either way.
+                let near_edge = [-1e-4, 1e-4].iter().any(|&e| {
+                    shape.contains(p + Vec2::splat(e)) != shape.contains(p - Vec2::splat(e))
+                });
+                if !near_edge {
+                    assert_eq!(in_chord, shape.contains(p), "{shape:?} at {p}");
+                }
+                let q = aperture_point(Vec2::new(p.x * 0.25 + 0.5, p.y * 0.25 + 0.5), shape);
+                reached = reached.max(q.abs());
+                farthest = farthest.max(q.length());
+            }
+            assert!(reached.cmple(half * 1.0001).all() && reached.cmpgt(half * 0.95).all());
+            assert!(
+                farthest <= outer * 1.0001 && farthest > outer * 0.95,
+                "{shape:?}"
+            );
+        }
     }
 }

@@ -101,8 +101,8 @@ pub trait Lens {
     fn coc_px(&self, camera: &Camera, depth: f32) -> f32;
 
     /// How the film image of a scene point moves with the lens position, when it moves
-    /// rigidly over a round aperture sampled uniformly (what sample reuse,
-    /// [`crate::render::reuse`], needs); `None` for any other lens or aperture.
+    /// rigidly over an aperture sampled uniformly (what sample reuse,
+    /// [`crate::render::reuse`], needs); `None` for any other lens.
     fn reprojection(&self, camera: &Camera) -> Option<Reprojection>;
 
     /// Distance of the plane in focus along the view axis (may be infinite).
@@ -337,12 +337,12 @@ impl Lens for ThinLens {
     /// From [`Lens::film_point`]: a point at depth `z` seen from lens position `l` lands at
     /// `film_dir = (P - eye) / z + offset (1 / focus - 1 / z)`, so it moves by
     /// `k r (1 / focus - 1 / z)` pixels per unit of `l` (k = [`Camera::pixels_per_unit`]).
-    /// Round, unstretched apertures only: the reuse kernel is a disc's.
+    /// Any aperture shape: `l` is the lens position as sampled on it.
     fn reprojection(&self, camera: &Camera) -> Option<Reprojection> {
-        let round = self.aperture.blades == 0 && self.aperture.anamorphic == 1.0;
-        (round && self.aperture_radius > 0.0).then(|| Reprojection {
+        (self.aperture_radius > 0.0).then(|| Reprojection {
             scale: camera.pixels_per_unit() * self.aperture_radius,
             inv_focus_distance: self.inv_focus_distance,
+            aperture: self.aperture,
         })
     }
 
@@ -382,6 +382,8 @@ pub struct Reprojection {
     pub scale: f32,
     /// 1 / the focus distance (0 at infinity).
     pub inv_focus_distance: f32,
+    /// The aperture the lens positions `l` are uniform over (lens units).
+    pub aperture: ApertureShape,
 }
 
 impl Reprojection {
@@ -540,13 +542,32 @@ mod tests {
 
     /// A scene point seen from any lens position lands where [`Reprojection`] says: its
     /// image through the lens centre moved by the shift at its depth times (l.x, -l.y); the
-    /// shift's size is the CoC's radius. Polygonal and anamorphic apertures have none.
+    /// shift's size times the aperture's outer radius is the CoC's radius; through polygonal and anamorphic apertures too
+    /// (lens positions as sampled on them).
     #[test]
     fn reprojection_moves_images_as_the_lens_rays_do() {
-        for focus in [Focus::Distance(3.0), Focus::Distance(f32::INFINITY)] {
-            let spec = oblique(focus);
+        let apertures = [
+            ApertureShape::default(),
+            ApertureShape {
+                blades: 6,
+                ..ApertureShape::default()
+            },
+            ApertureShape {
+                anamorphic: 1.5,
+                ..ApertureShape::default()
+            },
+        ];
+        for (focus, aperture) in [Focus::Distance(3.0), Focus::Distance(f32::INFINITY)]
+            .into_iter()
+            .flat_map(|f| apertures.map(|a| (f, a)))
+        {
+            let spec = CameraSpec {
+                aperture,
+                ..oblique(focus)
+            };
             let camera = spec.build(|_| None).unwrap();
             let re = camera.reprojection().unwrap();
+            assert_eq!(re.aperture, aperture);
             for (px, py, t) in [
                 (160.0, 100.0, 1.5),
                 (30.5, 170.25, 7.0),
@@ -556,32 +577,15 @@ mod tests {
                 let depth = (point - camera.eye).dot(camera.forward);
                 let shift = re.shift(depth);
                 assert!(
-                    (2.0 * shift.abs() - camera.coc_px(depth)).abs() < 1e-3 * (1.0 + shift.abs())
+                    (2.0 * shift.abs() * aperture.outer_radius() - camera.coc_px(depth)).abs()
+                        < 1e-3 * (1.0 + shift.abs())
                 );
-                for lens in [Vec2::new(0.6, -0.3), Vec2::new(-0.2, 0.9)] {
+                for lens in [Vec2::new(0.6, -0.3), Vec2::new(-0.2, 1.3)] {
                     let dir = (point - camera.entry_origin(lens)).normalize();
                     let film = camera.film_point(lens, dir).unwrap().film;
                     let want = Vec2::new(px, py) + shift * Vec2::new(lens.x, -lens.y);
                     assert!((film - want).length() < 5e-3, "{focus:?}: {film} vs {want}");
                 }
-            }
-            for aperture in [
-                ApertureShape {
-                    blades: 6,
-                    ..ApertureShape::default()
-                },
-                ApertureShape {
-                    anamorphic: 1.5,
-                    ..ApertureShape::default()
-                },
-            ] {
-                let camera = CameraSpec {
-                    aperture,
-                    ..spec.clone()
-                }
-                .build(|_| None)
-                .unwrap();
-                assert!(camera.reprojection().is_none());
             }
         }
     }

@@ -252,7 +252,7 @@ pub(crate) struct RenderArgs {
     /// where blurred matte or glossy surfaces carry it (walls behind a sharp subject,
     /// receding floors: 1 to 4 dB at the same samples) for 20-90% more time, less than the
     /// samples it saves; mirrors and glass gain nothing; its small bias is a self-normalised
-    /// estimate's (round thin lens and box lens filter only). It keeps the blurred sites'
+    /// estimate's (thin lens of any aperture shape, box lens filter). It keeps the blurred sites'
     /// samples (up to 256 each) for a few rows of 64 px buckets: with little blur at high
     /// counts that is gigabytes (1920 px wide at 256 spp: about 6 GB), and a render that would
     /// outgrow the memory limit stops with exit 5 instead. `off` shows the sites' own

@@ -351,7 +351,8 @@ impl SiteShader<'_> {
             return;
         };
         let scale = self.settings.exposure.exp2();
-        let r = self.camera.aperture_radius();
+        // The aperture's reach, for the angle it subtends (an oval's longer axis).
+        let r = self.camera.aperture_radius() * re.aperture.outer_radius();
         for lane in 0..b.len {
             let d = Vec3::new(dir[0][lane], dir[1][lane], dir[2][lane]);
             let t = first.t[lane];

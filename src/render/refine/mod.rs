@@ -670,7 +670,9 @@ pub fn refine(
         blur,
         start,
         reach: reach_levels(&blur.widest, s.max_interval)?,
-        kernel: lends.then(|| Kernel::new(&density)),
+        kernel: (shader.camera.reprojection())
+            .filter(|_| lends)
+            .map(|re| Kernel::new(&density, &re.aperture)),
         focus,
         gather: (s.path.reuse)
             .then(|| {
@@ -920,7 +922,8 @@ fn focus_budget(
 }
 
 /// Whether adaptive sites lend samples ([`super::reuse`]): asked for, with paths (which say how
-/// rough a surface is), the box lens filter, and a lens whose images move rigidly.
+/// rough a surface is), the box lens filter, and a lens whose images move rigidly (a thin
+/// lens, whatever its aperture's shape).
 fn reuses(shader: &SiteShader) -> bool {
     let s = shader.settings;
     s.path.reuse

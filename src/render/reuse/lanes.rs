@@ -9,7 +9,7 @@
 use glam::Vec2;
 use wide::{CmpEq, CmpGt, CmpLe, CmpLt, f32x8, i32x8};
 
-use super::{Member, RADIAL, ShiftKernel};
+use super::{DiscKernel, Member, RADIAL, ShiftKernel};
 
 /// Members worked out together.
 pub(super) const LANES: usize = 8;
@@ -97,7 +97,7 @@ pub(super) struct Sample<'a> {
     /// The lattice of its lenders: member q lends when `q.lattice & mask == 0`.
     pub mask: u32,
     /// Its kernel.
-    pub kernel: &'a ShiftKernel,
+    pub kernel: &'a ShiftKernel<'a>,
 }
 
 /// What a block of members makes of one sample, lane by lane.
@@ -139,34 +139,26 @@ impl Sample<'_> {
         let technique = in_reach & lender & counts;
         let receiver = in_reach & flag(&cols.needy) & takes;
         // Where sites are dense and few borrow, whole blocks neither count nor take it.
-        if (technique | receiver).move_mask() == 0 {
+        let wanted = (technique | receiver).move_mask();
+        if wanted == 0 {
             out.technique = [0.0; LANES];
             out.techniques = 0;
             out.receives = 0;
             return;
         }
-        // As `ShiftKernel::within`: the bin is at most RADIAL - 1 (also for offsets out of
-        // reach, whose value is masked).
-        let kt = d2 * f32x8::splat(kernel.bins_per_d2);
-        let t0 = kt.min(f32x8::splat((RADIAL - 1) as f32)).fast_trunc_int();
-        let ft = kt - t0.round_float();
-        let bins = t0.to_array();
-        let (mut b0x, mut b0y, mut b1x, mut b1y) = (
-            [0.0f32; LANES],
-            [0.0f32; LANES],
-            [0.0f32; LANES],
-            [0.0f32; LANES],
-        );
-        for j in 0..LANES {
-            let t = (bins[j] as usize).min(RADIAL - 1);
-            (b0x[j], b0y[j]) = kernel.bins[t].into();
-            (b1x[j], b1y[j]) = kernel.bins[t + 1].into();
-        }
-        let one_minus = f32x8::ONE - ft;
-        let v0 = f32x8::from(b0x) * one_minus + f32x8::from(b1x) * ft;
-        let v1 = f32x8::from(b0y) * one_minus + f32x8::from(b1y) * ft;
-        let tilt = f32x8::splat(kernel.tilt.x) * dx + f32x8::splat(kernel.tilt.y) * dy;
-        let k = (v0 - tilt * v1).max(f32x8::ZERO);
+        let k = match kernel {
+            ShiftKernel::Disc(disc) => disc_block(disc, (dx, dy), d2),
+            // Any other aperture's table is read lane by lane, and only where it is used
+            // (the others' value is masked).
+            ShiftKernel::Shaped(table) => {
+                let (dx, dy) = (dx.to_array(), dy.to_array());
+                let mut k = [0.0f32; LANES];
+                for j in super::bits(wanted as u32) {
+                    k[j] = table.at(Vec2::new(dx[j], dy[j]));
+                }
+                f32x8::from(k)
+            }
+        };
         let nk = column(&cols.n) * k;
         out.k = k.to_array();
         out.technique = technique.blend(nk, f32x8::ZERO).to_array();
@@ -174,6 +166,34 @@ impl Sample<'_> {
         out.techniques = technique.move_mask() as u32;
         out.receives = (receiver & k.cmp_gt(f32x8::ZERO)).move_mask() as u32;
     }
+}
+
+/// The unit disc's kernel ([`DiscKernel::within`]) at offsets `(dx, dy)`, of squared lengths
+/// `d2`, lane by lane.
+#[inline]
+fn disc_block(kernel: &DiscKernel, (dx, dy): (f32x8, f32x8), d2: f32x8) -> f32x8 {
+    // As `DiscKernel::within`: the bin is at most RADIAL - 1 (also for offsets out of
+    // reach, whose value is masked).
+    let kt = d2 * f32x8::splat(kernel.bins_per_d2);
+    let t0 = kt.min(f32x8::splat((RADIAL - 1) as f32)).fast_trunc_int();
+    let ft = kt - t0.round_float();
+    let bins = t0.to_array();
+    let (mut b0x, mut b0y, mut b1x, mut b1y) = (
+        [0.0f32; LANES],
+        [0.0f32; LANES],
+        [0.0f32; LANES],
+        [0.0f32; LANES],
+    );
+    for j in 0..LANES {
+        let t = (bins[j] as usize).min(RADIAL - 1);
+        (b0x[j], b0y[j]) = kernel.bins[t].into();
+        (b1x[j], b1y[j]) = kernel.bins[t + 1].into();
+    }
+    let one_minus = f32x8::ONE - ft;
+    let v0 = f32x8::from(b0x) * one_minus + f32x8::from(b1x) * ft;
+    let v1 = f32x8::from(b0y) * one_minus + f32x8::from(b1y) * ft;
+    let tilt = f32x8::splat(kernel.tilt.x) * dx + f32x8::splat(kernel.tilt.y) * dy;
+    (v0 - tilt * v1).max(f32x8::ZERO)
 }
 
 /// The block of `column` from `start`, as a vector.
@@ -195,6 +215,7 @@ fn lanes<T: Copy>(column: &[T], start: usize) -> [T; LANES] {
 mod tests {
     use super::super::{Kernel, Member};
     use super::*;
+    use crate::camera::aperture::ApertureShape;
     use crate::filter::{PixelFilter, PixelFilterKind};
     use crate::sampler::hash64;
 
@@ -228,10 +249,30 @@ mod tests {
     }
 
     /// The block loop gives exactly (to the bit) what the member-by-member arithmetic gives,
-    /// and nothing for the lanes past `valid`.
+    /// and nothing for the lanes past `valid`: for the disc, a polygon and an oval.
     #[test]
     fn a_block_is_the_members_one_by_one() {
-        let kernel = Kernel::new(&PixelFilter::new(PixelFilterKind::BlackmanHarris).density());
+        for aperture in [
+            ApertureShape::default(),
+            ApertureShape {
+                blades: 5,
+                rotation_deg: 10.0,
+                anamorphic: 1.0,
+            },
+            ApertureShape {
+                anamorphic: 1.6,
+                ..ApertureShape::default()
+            },
+        ] {
+            block_is_members_one_by_one(&aperture);
+        }
+    }
+
+    fn block_is_members_one_by_one(aperture: &ApertureShape) {
+        let kernel = Kernel::new(
+            &PixelFilter::new(PixelFilterKind::BlackmanHarris).density(),
+            aperture,
+        );
         for seed in 0..40u64 {
             let ms = members(seed << 32, 37);
             let cols = Columns::new(&ms);
@@ -239,7 +280,7 @@ mod tests {
             let gradient = Vec2::new(uniform(seed + 1, -0.2, 0.2), uniform(seed + 2, -0.2, 0.2));
             let k_at = kernel.for_sample(shift, gradient);
             let centre = Vec2::new(uniform(seed + 3, 5.0, 35.0), uniform(seed + 4, 5.0, 35.0));
-            let extent = shift.abs().max(0.5) + kernel.reach();
+            let extent = kernel.reach().of(shift.abs().max(0.5));
             let mask = (1u32 << (seed % 6)) - 1;
             let sample = Sample {
                 centre,
