@@ -148,16 +148,9 @@ impl Sample<'_> {
         }
         let k = match kernel {
             ShiftKernel::Disc(disc) => disc_block(disc, (dx, dy), d2),
-            // Any other aperture's table is read lane by lane, and only where it is used
-            // (the others' value is masked).
-            ShiftKernel::Shaped(table) => {
-                let (dx, dy) = (dx.to_array(), dy.to_array());
-                let mut k = [0.0f32; LANES];
-                for j in super::bits(wanted as u32) {
-                    k[j] = table.at(Vec2::new(dx[j], dy[j]));
-                }
-                f32x8::from(k)
-            }
+            // Any other aperture's table is read only where it is used (the others' value
+            // is masked).
+            ShiftKernel::Shaped(table) => table.at_lanes((dx, dy), wanted as u32),
         };
         let nk = column(&cols.n) * k;
         out.k = k.to_array();

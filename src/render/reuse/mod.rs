@@ -292,11 +292,12 @@ enum Form {
     Shaped(shaped::Table),
 }
 
-/// How far a sample's footprint reaches from its centre: `|s| outer + filter` pixels.
+/// How far a sample's footprint reaches from its centre: `|s| outer + filter` pixels. The
+/// kernel is cut round there: the filter's corners reach a little farther, with little of
+/// its mass.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reach {
-    /// The filter's part: its half width (its corners' distance, for apertures other than
-    /// the disc, whose kernel is not cut round).
+    /// The filter's part: its half width.
     filter: f32,
     /// The aperture's farthest point from the lens centre, lens units.
     outer: f32,
@@ -330,12 +331,13 @@ impl Kernel {
                 form: Form::Disc(Self::disc(f)),
             };
         }
+        let reach = Reach {
+            filter: f.reach(),
+            outer: aperture.outer_radius(),
+        };
         Self {
-            reach: Reach {
-                filter: SQRT_2 * f.reach(),
-                outer: aperture.outer_radius(),
-            },
-            form: Form::Shaped(shaped::Table::new(f, aperture)),
+            reach,
+            form: Form::Shaped(shaped::Table::new(f, aperture, reach)),
         }
     }
 

@@ -9,11 +9,14 @@
 //! of shift `-s` at `d`, tilt and all, is that of `s` at `-d` (the image through the lens
 //! turns over with the shift's sign; an odd number of blades shows it).
 
-use glam::{Vec2, Vec3};
-use rayon::prelude::*;
+use std::sync::OnceLock;
 
-use super::{MIN_SHIFT, OCTAVES, PER_OCTAVE};
-use crate::camera::aperture::ApertureShape;
+use glam::{Vec2, Vec3};
+use wide::{f32x8, i32x8};
+
+use super::lanes::LANES;
+use super::{MIN_SHIFT, OCTAVES, PER_OCTAVE, Reach};
+use crate::camera::aperture::{ApertureShape, Outline};
 use crate::filter::FilterDensity;
 
 /// Grid cells per axis over the kernel's box `[-E.x, E.x] x [-E.y, E.y]`.
@@ -26,18 +29,37 @@ const CUMULATIVE: usize = 2048;
 /// `(K0, M)` on a grid per shift row for a shift `s > 0`: `K = K0 - g . M` for a surface
 /// whose shift changes by `g` per pixel, `M(d)` the mean over the aperture of the filter at
 /// `x = d + s (l.x, -l.y)` times `(d - x) / s` (as [`super::Kernel`]'s radial table, with the
-/// first moment a vector: the aperture is not round).
+/// first moment a vector: the aperture is not round). A row is worked out when a sample
+/// first needs it: a frame whose blur is a few pixels reads a fifth of them.
 #[derive(Debug, Clone)]
 pub struct Table {
     /// The aperture's half extents (lens units) and the filter's half width: a row of shift
     /// `s` covers `|d| <= s half + reach` per axis.
     half: Vec2,
     reach: f32,
-    /// `(K0, M.x, M.y)` by shift row, then grid row, then grid column.
-    nodes: Vec<Vec3>,
+    /// Where the kernel is cut round.
+    footprint: Reach,
+    /// What a row is worked out from.
+    source: Source,
+    /// `(K0, M.x, M.y)` by grid row, then grid column, per shift row.
+    rows: Vec<OnceLock<Vec<Vec3>>>,
+}
+
+/// What a [`Table`]'s rows are worked out from.
+#[derive(Debug, Clone)]
+struct Source {
+    area: f32,
+    outline: Outline,
+    cumulative: Cumulative,
+    /// The filter's rows (midpoints): height and mass.
+    filter_rows: Vec<(f32, f32)>,
+    /// The filter's mass and first moment along a whole row, and over the plane.
+    whole: (f32, f32),
+    total: f32,
 }
 
 /// The filter's density per axis, its cumulative mass and first moment.
+#[derive(Debug, Clone)]
 struct Cumulative {
     lo: f32,
     per_cell: f32,
@@ -80,16 +102,12 @@ impl Cumulative {
 
 impl Table {
     /// The kernel of a filter of density `f` (per axis) over `aperture`, a convex shape of
-    /// lens positions sampled uniformly.
-    pub fn new(f: &FilterDensity, aperture: &ApertureShape) -> Self {
+    /// lens positions sampled uniformly, cut round at `footprint`.
+    pub fn new(f: &FilterDensity, aperture: &ApertureShape, footprint: Reach) -> Self {
         let reach = f.reach();
-        let half = aperture.half_extents();
-        let area = aperture.area();
         let cumulative = Cumulative::new(f);
-        let outline = aperture.outline();
         let dy = 2.0 * reach / FILTER_ROWS as f32;
-        // The filter's rows: height and mass.
-        let rows: Vec<(f32, f32)> = (0..FILTER_ROWS)
+        let filter_rows: Vec<(f32, f32)> = (0..FILTER_ROWS)
             .map(|j| {
                 let y = -reach + (j as f32 + 0.5) * dy;
                 (y, f.at(y) * dy)
@@ -97,50 +115,78 @@ impl Table {
             .filter(|&(_, w)| w > 0.0)
             .collect();
         let whole = cumulative.at(reach);
-        let total: f32 = rows.iter().map(|&(_, w)| w).sum::<f32>() * whole.0;
-        let (rows, cumulative, outline) = (&rows, &cumulative, &outline);
-        let shifts = OCTAVES * PER_OCTAVE + 1;
-        let row = |k: usize| {
-            let s = MIN_SHIFT * (k as f32 / PER_OCTAVE as f32).exp2();
-            let extent = half * s + Vec2::splat(reach);
-            let norm = 1.0 / (area * s * s * total);
-            let mut out = Vec::with_capacity(NODES * NODES);
-            let mut spans = Vec::with_capacity(rows.len());
-            for iy in 0..NODES {
-                let d_y = extent.y * (2.0 * iy as f32 / CELLS as f32 - 1.0);
-                // Film row y sees lens height -(y - d.y) / s (film y is down, lens y up):
-                // the lens span there, scaled to pixels.
-                spans.clear();
-                spans.extend(rows.iter().filter_map(|&(y, w)| {
-                    let (l, r) = outline.chord(-(y - d_y) / s)?;
-                    Some((s * l, s * r, w, d_y - y))
-                }));
-                for ix in 0..NODES {
-                    let d_x = extent.x * (2.0 * ix as f32 / CELLS as f32 - 1.0);
-                    let mut v = Vec3::ZERO;
-                    for &(l, r, w, toward) in &spans {
-                        let (lo, hi) = (d_x + l, d_x + r);
-                        if hi <= -reach || lo >= reach {
-                            continue;
-                        }
-                        // Where the span holds the whole row (most of a wide blur), the
-                        // sums are the row's.
-                        let ((m0, x0), (m1, x1)) = if lo <= -reach && hi >= reach {
-                            ((0.0, 0.0), whole)
-                        } else {
-                            (cumulative.at(lo), cumulative.at(hi))
-                        };
-                        let mass = m1 - m0;
-                        // The first moment of `(d - x) / s` (x the film position).
-                        v += w * Vec3::new(mass, (d_x * mass - (x1 - x0)) / s, toward * mass / s);
+        let total = filter_rows.iter().map(|&(_, w)| w).sum::<f32>() * whole.0;
+        Self {
+            half: aperture.half_extents(),
+            reach,
+            footprint,
+            source: Source {
+                area: aperture.area(),
+                outline: aperture.outline(),
+                cumulative,
+                filter_rows,
+                whole,
+                total,
+            },
+            rows: (0..=OCTAVES * PER_OCTAVE)
+                .map(|_| OnceLock::new())
+                .collect(),
+        }
+    }
+
+    /// Shift row `k`'s nodes, worked out on first use.
+    fn row(&self, k: usize) -> &[Vec3] {
+        self.rows[k].get_or_init(|| self.work_out(k))
+    }
+
+    /// Shift row `k`'s nodes.
+    fn work_out(&self, k: usize) -> Vec<Vec3> {
+        let Source {
+            area,
+            outline,
+            cumulative,
+            filter_rows,
+            whole,
+            total,
+        } = &self.source;
+        let reach = self.reach;
+        let s = MIN_SHIFT * (k as f32 / PER_OCTAVE as f32).exp2();
+        let extent = self.half * s + Vec2::splat(reach);
+        let norm = 1.0 / (area * s * s * total);
+        let mut out = Vec::with_capacity(NODES * NODES);
+        let mut spans = Vec::with_capacity(filter_rows.len());
+        for iy in 0..NODES {
+            let d_y = extent.y * (2.0 * iy as f32 / CELLS as f32 - 1.0);
+            // Film row y sees lens height -(y - d.y) / s (film y is down, lens y up): the
+            // lens span there, scaled to pixels.
+            spans.clear();
+            spans.extend(filter_rows.iter().filter_map(|&(y, w)| {
+                let (l, r) = outline.chord(-(y - d_y) / s)?;
+                Some((s * l, s * r, w, d_y - y))
+            }));
+            for ix in 0..NODES {
+                let d_x = extent.x * (2.0 * ix as f32 / CELLS as f32 - 1.0);
+                let mut v = Vec3::ZERO;
+                for &(l, r, w, toward) in &spans {
+                    let (lo, hi) = (d_x + l, d_x + r);
+                    if hi <= -reach || lo >= reach {
+                        continue;
                     }
-                    out.push(v * norm);
+                    // Where the span holds the whole row (most of a wide blur), the sums
+                    // are the row's.
+                    let ((m0, x0), (m1, x1)) = if lo <= -reach && hi >= reach {
+                        ((0.0, 0.0), *whole)
+                    } else {
+                        (cumulative.at(lo), cumulative.at(hi))
+                    };
+                    let mass = m1 - m0;
+                    // The first moment of `(d - x) / s` (x the film position).
+                    v += w * Vec3::new(mass, (d_x * mass - (x1 - x0)) / s, toward * mass / s);
                 }
+                out.push(v * norm);
             }
-            out
-        };
-        let nodes = (0..shifts).into_par_iter().flat_map_iter(row).collect();
-        Self { half, reach, nodes }
+        }
+        out
     }
 
     /// The kernel for one sample's signed shift and shift gradient: the nearest shift
@@ -160,8 +206,9 @@ impl Table {
         let extent = |s: f32| self.half * s + Vec2::splat(self.reach);
         let (box_k, own) = (extent(s_k), extent(s));
         ShiftTable {
-            row: &self.nodes[k * NODES * NODES..(k + 1) * NODES * NODES],
+            row: self.row(k),
             scale: (box_k.x * box_k.y) / (own.x * own.y),
+            cut2: self.footprint.of(s) * self.footprint.of(s),
             per_px: Vec2::splat(CELLS as f32 / 2.0) / own,
             sign: if shift < 0.0 { -1.0 } else { 1.0 },
             gradient,
@@ -175,6 +222,8 @@ pub struct ShiftTable<'a> {
     /// The shift row nearest its shift, and the scale that makes it a density over its box.
     row: &'a [Vec3],
     scale: f32,
+    /// The square of the footprint's radius ([`Reach`]): 0 beyond.
+    cut2: f32,
     /// Grid cells per pixel of offset, per axis: the box the kernel is zero beyond spans
     /// the grid.
     per_px: Vec2,
@@ -185,9 +234,12 @@ pub struct ShiftTable<'a> {
 
 impl ShiftTable<'_> {
     /// `K` at offset `d` (pixels) from the site: the centre minus the site's pixel centre;
-    /// 0 beyond its box (the grid's edge nodes are 0, and offsets beyond read them).
+    /// 0 beyond its footprint.
     #[inline]
     pub fn at(&self, d: Vec2) -> f32 {
+        if d.length_squared() >= self.cut2 {
+            return 0.0;
+        }
         let u = d * self.sign;
         let g = (u * self.per_px + Vec2::splat(CELLS as f32 / 2.0))
             .clamp(Vec2::ZERO, Vec2::splat(CELLS as f32));
@@ -201,12 +253,55 @@ impl ShiftTable<'_> {
         let v = (top * (1.0 - fy) + bottom * fy) * self.scale;
         (v.x - self.gradient.dot(Vec2::new(v.y, v.z))).max(0.0)
     }
+
+    /// [`ShiftTable::at`] at eight offsets `(dx, dy)`, the same to the bit lane by lane, for
+    /// the lanes set in `wanted`, which lie within its footprint (the others are 0): the
+    /// lending loop's blocks
+    /// ([`super::lanes`]). Only the loads are lane by lane.
+    #[inline]
+    pub fn at_lanes(&self, (dx, dy): (f32x8, f32x8), wanted: u32) -> f32x8 {
+        let grid = |d: f32x8, per_px: f32| {
+            (d * f32x8::splat(self.sign) * f32x8::splat(per_px) + f32x8::splat(CELLS as f32 / 2.0))
+                .max(f32x8::ZERO)
+                .min(f32x8::splat(CELLS as f32))
+        };
+        let (gx, gy) = (grid(dx, self.per_px.x), grid(dy, self.per_px.y));
+        let last = i32x8::splat(CELLS as i32 - 1);
+        let (ix, iy) = (gx.fast_trunc_int().min(last), gy.fast_trunc_int().min(last));
+        let (fx, fy) = (gx - ix.round_float(), gy - iy.round_float());
+        let index = (iy * i32x8::splat(NODES as i32) + ix).to_array();
+        // The four nodes' three columns, lane by lane.
+        let mut nodes = [[[0.0f32; LANES]; 3]; 4];
+        for j in super::bits(wanted) {
+            let i = index[j] as usize;
+            let t: &[Vec3; NODES + 2] = self.row[i..i + NODES + 2].try_into().expect("in the grid");
+            for (node, v) in nodes.iter_mut().zip([t[0], t[1], t[NODES], t[NODES + 1]]) {
+                (node[0][j], node[1][j], node[2][j]) = (v.x, v.y, v.z);
+            }
+        }
+        let (one_x, one_y) = (f32x8::ONE - fx, f32x8::ONE - fy);
+        let v = |c: usize| {
+            let top = f32x8::from(nodes[0][c]) * one_x + f32x8::from(nodes[1][c]) * fx;
+            let bottom = f32x8::from(nodes[2][c]) * one_x + f32x8::from(nodes[3][c]) * fx;
+            (top * one_y + bottom * fy) * f32x8::splat(self.scale)
+        };
+        let tilt = f32x8::splat(self.gradient.x) * v(1) + f32x8::splat(self.gradient.y) * v(2);
+        (v(0) - tilt).max(f32x8::ZERO)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::filter::{PixelFilter, PixelFilterKind};
+
+    /// The footprint a [`super::super::Kernel`] cuts a table round at.
+    fn footprint(f: &FilterDensity, shape: &ApertureShape) -> Reach {
+        Reach {
+            filter: f.reach(),
+            outer: shape.outer_radius(),
+        }
+    }
 
     fn shapes() -> [ApertureShape; 2] {
         [
@@ -229,7 +324,7 @@ mod tests {
         for kind in [PixelFilterKind::Box, PixelFilterKind::BlackmanHarris] {
             let f = PixelFilter::new(kind).density();
             for shape in shapes() {
-                let table = Table::new(&f, &shape);
+                let table = Table::new(&f, &shape, footprint(&f, &shape));
                 for s in [0.5f32, 1.3, 4.0, -17.0, 120.0, 3000.0] {
                     let k = table.for_sample(s, Vec2::ZERO);
                     let steps = 400;
@@ -271,7 +366,7 @@ mod tests {
             })
             .collect();
         for shape in shapes() {
-            let table = Table::new(&f, &shape);
+            let table = Table::new(&f, &shape, footprint(&f, &shape));
             for (shift, gradient) in [
                 (9.0f32, Vec2::ZERO),
                 (-9.0, Vec2::ZERO),
