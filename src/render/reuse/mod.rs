@@ -1855,7 +1855,6 @@ mod tests {
             let (shaped, variance) = standard_errors(&Kernel::new(&box_filter, &aperture));
             let (disc, _) = standard_errors(&kernel(PixelFilterKind::Box));
             let what = format!("{aperture:?}, shift {shift}");
-            eprintln!("MEASURE {what}: shaped {shaped} se, variance {variance}, disc {disc}");
             assert!(
                 shaped.abs() < 3.0,
                 "{what}: {shaped} standard errors (disc's {disc})"
