@@ -62,8 +62,8 @@
 //!   albedo above it (`1 - E(wo)`), slowly except at grazing angles: a small bias left.
 //! - Sharp samples (`|s|` under [`MIN_SHIFT`]) and lenses other than a thin lens with the
 //!   box lens filter ([`crate::camera::Lens::reprojection`]: a real lens's images do not
-//!   move rigidly with the lens position); a site none of whose
-//!   nearest surface's samples lend, or with a sample that is not finite, keeps its own mean.
+//!   move rigidly with the lens position); a site none of whose nearest surface's samples
+//!   lend, or with a sample that is not finite, keeps its own mean.
 //!
 //! **Slanted surfaces.** Across a surface that recedes (a floor) `s` changes with the centre,
 //! by `g` per pixel ([`Record::gradient`], from the hit's geometric normal): through lens
@@ -77,10 +77,11 @@
 //!
 //! Bias that remains, all small: `K` is tabulated radially (the filter is separable, not
 //! round) on a 48 x 48 grid of the filter, or for another aperture read from the nearest of
-//! its shift rows ([`shaped`]); a curved surface's `g` holds only near the
-//! sample; the cluster gap lets two surfaces within [`GAP`] pixels of parallax of each other
-//! pass for one; at a depth edge `W` and `L_rest` are estimated from the same render as what
-//! they weigh (a ratio estimate's bias of order 1 / samples, like the self-normalisation).
+//! its shift rows ([`shaped`]), and cut round where the filter's corners reach a little
+//! farther; a curved surface's `g` holds only near the sample; the cluster gap lets two
+//! surfaces within [`GAP`] pixels of parallax of each other pass for one; at a depth edge
+//! `W` and `L_rest` are estimated from the same render as what they weigh (a ratio
+//! estimate's bias of order 1 / samples, like the self-normalisation).
 //!
 //! [`view_alpha`]: crate::shade::Bsdf::view_alpha
 
@@ -148,7 +149,8 @@ impl Record {
     /// The record of a sample at `film` through lens position `lens` whose ray met a point at
     /// `depth` along the view axis, `distance` from the lens, on a surface whose shift
     /// changes by `gradient` per pixel, where the part `view_dependent` of its radiance may
-    /// change over `view_alpha` radians; the aperture reaches `aperture_radius` from its centre.
+    /// change over `view_alpha` radians; the aperture reaches `aperture_radius` from its
+    /// centre.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         reprojection: &Reprojection,
@@ -322,23 +324,16 @@ impl Kernel {
     /// The kernel of a filter of density `f` (per axis) over `aperture`, the shape lens
     /// positions are uniform over.
     pub fn new(f: &FilterDensity, aperture: &ApertureShape) -> Self {
-        if aperture.is_round() {
-            return Self {
-                reach: Reach {
-                    filter: f.reach(),
-                    outer: 1.0,
-                },
-                form: Form::Disc(Self::disc(f)),
-            };
-        }
         let reach = Reach {
             filter: f.reach(),
             outer: aperture.outer_radius(),
         };
-        Self {
-            reach,
-            form: Form::Shaped(shaped::Table::new(f, aperture, reach)),
-        }
+        let form = if aperture.is_round() {
+            Form::Disc(Self::disc(f))
+        } else {
+            Form::Shaped(shaped::Table::new(f, aperture, reach))
+        };
+        Self { reach, form }
     }
 
     /// The unit disc's table.

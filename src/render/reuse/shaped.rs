@@ -53,8 +53,9 @@ struct Source {
     cumulative: Cumulative,
     /// The filter's rows (midpoints): height and mass.
     filter_rows: Vec<(f32, f32)>,
-    /// The filter's mass and first moment along a whole row, and over the plane.
+    /// The filter's mass and first moment along a whole row.
     whole: (f32, f32),
+    /// Its mass over the plane (1 but for the sums' rounding).
     total: f32,
 }
 
@@ -256,8 +257,7 @@ impl ShiftTable<'_> {
 
     /// [`ShiftTable::at`] at eight offsets `(dx, dy)`, the same to the bit lane by lane, for
     /// the lanes set in `wanted`, which lie within its footprint (the others are 0): the
-    /// lending loop's blocks
-    /// ([`super::lanes`]). Only the loads are lane by lane.
+    /// lending loop's blocks ([`super::lanes`]). Only the loads are lane by lane.
     #[inline]
     pub fn at_lanes(&self, (dx, dy): (f32x8, f32x8), wanted: u32) -> f32x8 {
         let grid = |d: f32x8, per_px: f32| {
