@@ -8,7 +8,7 @@
 //!
 //! **Why a sample is valid elsewhere.** A sample of site q is a film position x drawn from
 //! the pixel filter's density f around q and a lens position l uniform on the aperture (the
-//! unit disc; a polygon of blades or an oval, [`shaped`], the same way), of area A. It
+//! unit disc; a polygon of blades or an oval, `shaped.rs`, the same way), of area A. It
 //! found a point at depth z, which lens position l' images at `c + s(z) (l'.x, -l'.y)`
 //! ([`Reprojection`]): a *trajectory* through pixel x lens space, `c` its centre. Where the
 //! point is seen from the whole aperture and looks the same from all of it (a rough surface,
@@ -77,7 +77,7 @@
 //!
 //! Bias that remains, all small: `K` is tabulated radially (the filter is separable, not
 //! round) on a 48 x 48 grid of the filter, or for another aperture read from the nearest of
-//! its shift rows ([`shaped`]), and cut round where the filter's corners reach a little
+//! its shift rows (`shaped.rs`), and cut round where the filter's corners reach a little
 //! farther; a curved surface's `g` holds only near the sample; the cluster gap lets two
 //! surfaces within [`GAP`] pixels of parallax of each other pass for one; at a depth edge
 //! `W` and `L_rest` are estimated from the same render as what they weigh (a ratio
@@ -278,7 +278,7 @@ fn with_later(value: Estimate, lent: &Estimate, site: &SiteRecords) -> Estimate 
 /// the module documentation). For the unit disc, tabulated over `|d|^2 / (|s| + reach)^2`
 /// and `log2 |s|`: the kernel of a surface parallel to the film, `K0(|d|)`, and the first
 /// moment `m(|d|)` of the lens position along `d` under it (over `|d|`), which a tilt adds
-/// to first order. For any other aperture, over the plane ([`shaped`]).
+/// to first order. For any other aperture, over the plane (`shaped.rs`).
 #[derive(Debug, Clone)]
 pub struct Kernel {
     reach: Reach,
