@@ -1734,7 +1734,7 @@ mod tests {
     fn lending_is_unbiased_and_cuts_the_variance() {
         let field = |c: Vec2| 0.2 + 0.05 * c.x + 0.5 * (0.7 * c.y).sin().abs();
         let site = 12 * 32 + 16;
-        let render = |t| lattice(32, 4, 16, 5.0, field, 1000 + t);
+        let render = |t| lattice(32, 4, 16, 5.0, field, (t + 1) << 40);
         let ((own_mean, own_var), (lent_mean, lent_var)) = own_and_lent((32, site), 400, render);
         // Both estimate the same value: within 4 standard errors of their difference.
         let se = ((own_var + lent_var) / 400.0).sqrt();
@@ -1750,11 +1750,11 @@ mod tests {
 
     /// On a plane receding through the blur (its shift grows 0.1 px per px downwards, as a
     /// floor's does) with bands across it, the kernel of a plane parallel to the film
-    /// (ignoring the tilt) moves the blurred bands: the lent estimate is biased, by 8
-    /// standard errors of 200 trials here. The tilted kernel weighs the images' stretch and
-    /// removes most of it. What remains (3.7 standard errors; 0.4 of the flat kernel's at 64
-    /// and at 128 samples a site alike, so not the self-normalised estimate's bias of order
-    /// 1 / samples) is not explained; the kernel's tabulation over shift is a suspect.
+    /// (ignoring the tilt) moves the blurred bands: the lent estimate is biased, by 4.7
+    /// standard errors of 200 trials here (-2.3%). The tilted kernel weighs the images'
+    /// stretch and removes it (+0.01 standard errors). The 3.7 standard errors once left
+    /// here, and the 8 of the flat kernel, came from trials that shared samples (seeds
+    /// `5000 + t` under the sample keys' low bits), which made the standard errors too small.
     #[test]
     fn lending_on_a_slanted_plane_is_unbiased() {
         let field = |c: Vec2| {
@@ -1773,7 +1773,7 @@ mod tests {
                 gradient,
                 seen,
             };
-            let render = |t| slanted(size, 2, 64, plane, field, 5000 + t);
+            let render = |t| slanted(size, 2, 64, plane, field, (t + 1) << 40);
             let ((own_mean, own_var), (lent_mean, lent_var)) =
                 own_and_lent((size, site), trials, render);
             assert!(lent_var < own_var / 2.0, "{lent_var} vs {own_var}");
@@ -1782,9 +1782,9 @@ mod tests {
         };
         let tilted = bias(gradient);
         let flat = bias(Vec2::ZERO);
-        assert!(flat.abs() > 6.0, "flat kernel: {flat} standard errors");
+        assert!(flat.abs() > 3.0, "flat kernel: {flat} standard errors");
         assert!(
-            tilted.abs() < 0.5 * flat.abs(),
+            tilted.abs() < 2.0 && tilted.abs() < 0.5 * flat.abs(),
             "tilted kernel: {tilted} standard errors, flat {flat}"
         );
     }
@@ -1941,18 +1941,18 @@ mod tests {
 
     /// At a blurred foreground edge in front of a blurred, textured wall, a site that sees
     /// both keeps its expected value (its own mean's) and loses variance: the share of the
-    /// foreground it sees comes from all its neighbours' samples. Measured (400 trials, own
-    /// against lent): at x = 14, 16 and 18 the variance falls by 15%, 4.1x and 18%; the means
-    /// differ by +0.6, +1.7 and -2.5 standard errors (+0.1%, +0.7%, -1.4%; the last where the
-    /// foreground lies at the rim of the site's kernel, whose radial tabulation of the box
-    /// filter is least exact).
+    /// foreground it sees comes from all its neighbours' samples. Measured (400 independent
+    /// trials, own against lent): at x = 14, 16 and 18 the variance falls 2.5x, 4.2x and
+    /// 1.7x; the means differ by -0.02, -0.09 and +0.02 standard errors (-0.04% to +0.01%).
+    /// The -2.5 standard errors once measured at x = 18 came from trials that shared
+    /// samples.
     #[test]
     fn a_partly_hidden_wall_is_lent_without_bias() {
         let field = |c: Vec2| 0.1 + 0.4 * (0.5 * c.y).sin().abs();
         let (size, trials) = (32, 400);
         for x in [14, 16, 18] {
             let site = 16 * size + x;
-            let render = |t| occluded((size, 2, 32), ((3.0, 0.9), 16.0, 8.0), field, 9000 + t);
+            let render = |t| occluded((size, 2, 32), ((3.0, 0.9), 16.0, 8.0), field, (t + 1) << 40);
             let (records, own) = render(0);
             let list = &records[site].list;
             let fronts = list.iter().filter(|r| r.shift == 3.0).count();
@@ -1992,11 +1992,12 @@ mod tests {
     /// Beside a blurred foreground edge, a site with four samples often misses the foreground
     /// its pixel partly sees: it then takes the foreground's share from the neighbours'
     /// samples that cross it, and is the same in expectation as its own mean for a fraction
-    /// of the variance. Measured (400 trials, own against lent), at x = 16 and 18 (the
-    /// foreground missed in 9 and 33 of 40 trials): the variance falls 2.7x and 2.3x, the
-    /// means differ by +0.7 and -0.8 standard errors. Keeping its own mean when it missed
-    /// (as before) left the variance 1.5x and 1.9x under its own and the means 2.4 and 4.0
-    /// standard errors apart: which estimator a site used depended on what its samples saw.
+    /// of the variance. Measured (400 independent trials, own against lent), at x = 16 and 18
+    /// (the foreground missed in 9 and 33 of 40 trials): the variance falls 2.4x and 1.6x,
+    /// the means differ by +0.8 and +0.6 standard errors. Keeping its own mean when it missed
+    /// (as before) left the means 2.4 and 4.0 standard errors apart, measured with trials
+    /// that shared samples (too small a standard error, as the 2.7x and 2.3x this test once
+    /// quoted): which estimator a site used depended on what its samples saw.
     #[test]
     fn a_site_that_missed_a_nearer_edge_takes_it_from_its_neighbours() {
         let field = |c: Vec2| 0.1 + 0.4 * (0.5 * c.y).sin().abs();
@@ -2004,7 +2005,7 @@ mod tests {
         let k = kernel(PixelFilterKind::Box);
         for x in [16, 18] {
             let site = 16 * size + x;
-            let render = |t| occluded((size, 2, 4), ((3.0, 0.9), 16.0, 8.0), field, 5000 + t);
+            let render = |t| occluded((size, 2, 4), ((3.0, 0.9), 16.0, 8.0), field, (t + 1) << 40);
             let hidden = (0..40)
                 .filter(|&t| {
                     let (records, _) = render(t);
@@ -2025,7 +2026,7 @@ mod tests {
                 "{x}: {own_mean} vs {lent_mean} (se {se})"
             );
             assert!(
-                lent_var * 2.0 < own_var,
+                lent_var * 1.3 < own_var,
                 "{x}: variance {lent_var} vs own {own_var}"
             );
         }
