@@ -1443,7 +1443,8 @@ mod tests {
     /// Sites every `interval` px of a `size` window, `n` samples each: box-filter film
     /// positions and uniform lens positions drawn from `seed`, and `see(film, r)` the record
     /// of what a sample through film position `film` with lens offset `r = (l.x, -l.y)`
-    /// meets; with each site's own estimate.
+    /// meets; with each site's own estimate. The site and sample fill the keys' bits below
+    /// 40: trials meant to be independent take seeds that differ above them.
     fn sample_sites(
         sites: (usize, usize, usize),
         seed: u64,
