@@ -308,6 +308,25 @@ impl LensFilter {
     }
 }
 
+/// Apertures of every kind, for tests: round, an oval, six blades, five blades stretched,
+/// a square (flat top and bottom edges) and 1024 blades.
+#[cfg(test)]
+pub(crate) fn test_shapes() -> [ApertureShape; 6] {
+    let shape = |blades, rotation_deg, anamorphic| ApertureShape {
+        blades,
+        rotation_deg,
+        anamorphic,
+    };
+    [
+        ApertureShape::default(),
+        shape(0, 0.0, 1.7),
+        shape(6, 15.0, 1.0),
+        shape(5, 0.0, 0.6),
+        shape(4, 45.0, 1.0),
+        shape(1024, 3.0, 1.3),
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -315,18 +334,7 @@ mod tests {
 
     #[test]
     fn batches_equal_single_samples_bit_for_bit() {
-        let shapes = [
-            ApertureShape::default(),
-            ApertureShape {
-                anamorphic: 1.7,
-                ..ApertureShape::default()
-            },
-            ApertureShape {
-                blades: 6,
-                rotation_deg: 10.0,
-                anamorphic: 0.6,
-            },
-        ];
+        let shapes = test_shapes();
         for pixel in 0..200u64 {
             let s = PixelSampler::new(3, pixel * 7919);
             for first in [0u32, 16, 32, 48, 1024, 4096 + 32, 7, u32::MAX - 15] {
@@ -509,33 +517,7 @@ mod tests {
     /// sample lies beyond the half extents or the outer radius (which some come close to).
     #[test]
     fn chords_and_extents_bound_the_aperture() {
-        let shapes = [
-            ApertureShape::default(),
-            ApertureShape {
-                anamorphic: 1.7,
-                ..ApertureShape::default()
-            },
-            ApertureShape {
-                blades: 6,
-                rotation_deg: 15.0,
-                anamorphic: 1.0,
-            },
-            ApertureShape {
-                blades: 5,
-                rotation_deg: 0.0,
-                anamorphic: 0.6,
-            },
-            ApertureShape {
-                blades: 4,
-                rotation_deg: 45.0,
-                anamorphic: 1.0,
-            },
-            ApertureShape {
-                blades: 1024,
-                rotation_deg: 3.0,
-                anamorphic: 1.3,
-            },
-        ];
+        let shapes = test_shapes();
         for shape in &shapes {
             let (half, outer) = (shape.half_extents(), shape.outer_radius());
             let outline = shape.outline();

@@ -546,17 +546,7 @@ mod tests {
     /// (lens positions as sampled on them).
     #[test]
     fn reprojection_moves_images_as_the_lens_rays_do() {
-        let apertures = [
-            ApertureShape::default(),
-            ApertureShape {
-                blades: 6,
-                ..ApertureShape::default()
-            },
-            ApertureShape {
-                anamorphic: 1.5,
-                ..ApertureShape::default()
-            },
-        ];
+        let apertures = super::super::aperture::test_shapes();
         for (focus, aperture) in [Focus::Distance(3.0), Focus::Distance(f32::INFINITY)]
             .into_iter()
             .flat_map(|f| apertures.map(|a| (f, a)))

@@ -208,7 +208,7 @@ fn lanes<T: Copy>(column: &[T], start: usize) -> [T; LANES] {
 mod tests {
     use super::super::{Kernel, Member};
     use super::*;
-    use crate::camera::aperture::ApertureShape;
+    use crate::camera::aperture::{ApertureShape, test_shapes};
     use crate::filter::{PixelFilter, PixelFilterKind};
     use crate::sampler::hash64;
 
@@ -242,21 +242,10 @@ mod tests {
     }
 
     /// The block loop gives exactly (to the bit) what the member-by-member arithmetic gives,
-    /// and nothing for the lanes past `valid`: for the disc, a polygon and an oval.
+    /// and nothing for the lanes past `valid`: for the disc, polygons and an oval.
     #[test]
     fn a_block_is_the_members_one_by_one() {
-        for aperture in [
-            ApertureShape::default(),
-            ApertureShape {
-                blades: 5,
-                rotation_deg: 10.0,
-                anamorphic: 1.0,
-            },
-            ApertureShape {
-                anamorphic: 1.6,
-                ..ApertureShape::default()
-            },
-        ] {
+        for aperture in test_shapes() {
             block_is_members_one_by_one(&aperture);
         }
     }
