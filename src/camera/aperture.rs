@@ -53,9 +53,7 @@ impl ApertureShape {
             q.length_squared() <= 1.0
         }
     }
-}
 
-impl ApertureShape {
     /// Whether it is the unit disc (not polygonal, not stretched).
     pub fn is_round(&self) -> bool {
         self.blades < 3 && self.anamorphic == 1.0

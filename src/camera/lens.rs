@@ -542,8 +542,8 @@ mod tests {
 
     /// A scene point seen from any lens position lands where [`Reprojection`] says: its
     /// image through the lens centre moved by the shift at its depth times (l.x, -l.y); the
-    /// shift's size times the aperture's outer radius is the CoC's radius; through polygonal and anamorphic apertures too
-    /// (lens positions as sampled on them).
+    /// shift's size times the aperture's outer radius is the CoC's radius. Through
+    /// polygonal and anamorphic apertures too (lens positions as sampled on them).
     #[test]
     fn reprojection_moves_images_as_the_lens_rays_do() {
         let apertures = super::super::aperture::test_shapes();
