@@ -119,14 +119,14 @@ pub struct PathLimits {
     /// differs.
     pub light_tracing: bool,
     /// Whether adaptive sites lend their lens samples to the sites around them that see the
-    /// same surface points ([`crate::render::reuse`]; the error-controlled rule, a round thin
-    /// lens and the box lens filter only): a blurred site still noisy after its samples
-    /// takes its neighbours' too, which cuts noise where blurred matte or glossy surfaces
-    /// carry it (1 to 4 dB at the same samples) for 20-90% more time; mirrors and glass gain
-    /// nothing. On by default: at equal error it is faster on every blurred scene measured
-    /// (README, "Sample reuse"); off gives the images of the sites' own samples alone. It
-    /// also lets in-focus sites gather their neighbours' samples through the pixel filter
-    /// (any integrator; [`crate::render::gather`]).
+    /// same surface points ([`crate::render::reuse`]; the error-controlled rule, a thin lens
+    /// of any aperture shape and the box lens filter only): a blurred site still noisy after
+    /// its samples takes its neighbours' too, which cuts noise where blurred matte or glossy
+    /// surfaces carry it (1 to 4 dB at the same samples) for 20-90% more time; mirrors and
+    /// glass gain nothing. On by default: at equal error it is faster on every blurred scene
+    /// measured (README, "Sample reuse"); off gives the images of the sites' own samples
+    /// alone. It also lets in-focus sites gather their neighbours' samples through the pixel
+    /// filter (any integrator; [`crate::render::gather`]).
     pub reuse: bool,
 }
 
