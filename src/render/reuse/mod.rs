@@ -417,7 +417,6 @@ impl Kernel {
             Form::Disc(table) => table,
             Form::Shaped(table) => return ShiftKernel::Shaped(table.for_sample(shift, gradient)),
         };
-        let reach = self.reach.filter;
         let s = shift.abs();
         let top = (OCTAVES * PER_OCTAVE) as f32;
         let ks = ((s / MIN_SHIFT).log2() * PER_OCTAVE as f32).clamp(0.0, top);
@@ -437,9 +436,10 @@ impl Kernel {
         for (bin, (a, b)) in bins.iter_mut().zip(below.iter().zip(above)) {
             *bin = (*a * (1.0 - fk) + *b * fk) * scale;
         }
+        let extent = self.reach.of(s);
         ShiftKernel::Disc(DiscKernel {
-            extent: s + reach,
-            bins_per_d2: RADIAL as f32 / ((s + reach) * (s + reach)),
+            extent,
+            bins_per_d2: RADIAL as f32 / (extent * extent),
             bins,
             tilt: gradient * shift.signum(),
         })

@@ -37,11 +37,10 @@ const CUMULATIVE: usize = 2048;
 /// first needs it: a frame whose blur is a few pixels reads a fifth of them.
 #[derive(Debug, Clone)]
 pub struct Table {
-    /// The aperture's half extents (lens units) and the filter's half width: a row of shift
-    /// `s` covers `|d| <= s half + reach` per axis.
+    /// The aperture's half extents (lens units): a row of shift `s` covers
+    /// `|d| <= s half + reach` per axis, `reach` the filter's half width.
     half: Vec2,
-    reach: f32,
-    /// Where the kernel is cut round.
+    /// Where the kernel is cut round (its filter part is the filter's half width).
     footprint: Reach,
     /// What a row is worked out from.
     source: Source,
@@ -131,7 +130,6 @@ impl Table {
         let total = filter_rows.iter().map(|&(_, w)| w).sum::<f32>() * whole.0;
         Self {
             half: aperture.half_extents(),
-            reach,
             footprint,
             source: Source {
                 area: aperture.area(),
@@ -167,7 +165,7 @@ impl Table {
             whole,
             total,
         } = &self.source;
-        let reach = self.reach;
+        let reach = self.footprint.filter;
         let s = Self::shift(k);
         let extent = self.half * s + Vec2::splat(reach);
         let cells =
@@ -223,7 +221,7 @@ impl Table {
         let k = ((s / MIN_SHIFT).log2() * ROWS_PER_OCTAVE as f32)
             .round()
             .clamp(0.0, top) as usize;
-        let extent = |s: f32| self.half * s + Vec2::splat(self.reach);
+        let extent = |s: f32| self.half * s + Vec2::splat(self.footprint.filter);
         let (box_k, own) = (extent(Self::shift(k)), extent(s));
         let grid = self.row(k);
         let cells = grid.cells as f32;
@@ -231,7 +229,7 @@ impl Table {
             row: &grid.nodes,
             cells: grid.cells,
             scale: (box_k.x * box_k.y) / (own.x * own.y),
-            cut2: self.footprint.of(s) * self.footprint.of(s),
+            cut2: self.footprint.of(s).powi(2),
             per_px: Vec2::splat(cells / 2.0) / own,
             sign: if shift < 0.0 { -1.0 } else { 1.0 },
             gradient,
