@@ -502,29 +502,28 @@ pub fn render_region(
     let phase = Instant::now();
     if let (Mode::Adaptive, Some(tolerance)) = (settings.mode, settings.tolerance()) {
         // Maps, sites and interpolation interleave in rounds: timed as shading.
-        let refined = refine::refine(&shader, tolerance, &blur, region, progress, &mut tally)?;
+        let refined = refine::refine(
+            &shader,
+            tolerance,
+            (&blur, &film.depth),
+            region,
+            progress,
+            &mut tally,
+        )?;
         let lend_share = take_refined(refined, region, &mut film, &mut stats)?;
         stats.sites_seconds = phase.elapsed().as_secs_f64();
         stats.reuse_seconds = lend_share * stats.sites_seconds;
     } else {
         let sites = fixed_sites(settings, &mut film, &blur, region)?;
         stats.maps_seconds += phase.elapsed().as_secs_f64();
-        let phase = Instant::now();
-        progress.start(settings.mode.name(), h as u64);
-        let mut estimates = try_vec(w * h, Estimate::default(), "the pixels' estimates")?;
-        let none = try_vec(w * h, 0, "the pixels' sample counts")?;
-        shader.shade_rows(&none, &film.samples, &mut estimates, progress, &mut tally)?;
-        drop(none);
-        let rgba = estimates.iter().map(|e| e.mean_rgba());
-        let mut rgba = try_collect(rgba, "the pixels' colours")?;
-        drop(estimates);
-        stats.sites_seconds = phase.elapsed().as_secs_f64();
-        let phase = Instant::now();
-        if let Some(sites) = &sites {
-            interpolate::interpolate(&mut rgba, &film.interval, sites, w, h)?;
-        }
-        film.set_rgba(&rgba);
-        stats.interpolate_seconds = phase.elapsed().as_secs_f64();
+        shade_fixed(
+            &shader,
+            &mut film,
+            sites.as_deref(),
+            progress,
+            &mut tally,
+            &mut stats,
+        )?;
     }
     let phase = Instant::now();
     light_trace::trace(
@@ -562,6 +561,36 @@ pub fn render_region(
     stats.ray_log = tally.log;
     stats.seconds = start.elapsed().as_secs_f64();
     Ok((film, stats))
+}
+
+/// Shades the sites `fixed_sites` chose (every pixel with samples) and interpolates the
+/// rest from them where `sites` marks some, timing each in `stats`.
+fn shade_fixed(
+    shader: &SiteShader,
+    film: &mut Film,
+    sites: Option<&[bool]>,
+    progress: &dyn Progress,
+    tally: &mut Tally,
+    stats: &mut RenderStats,
+) -> Result<(), RenderError> {
+    let (w, h) = (film.width, film.height);
+    let phase = Instant::now();
+    progress.start(shader.settings.mode.name(), h as u64);
+    let mut estimates = try_vec(w * h, Estimate::default(), "the pixels' estimates")?;
+    let none = try_vec(w * h, 0, "the pixels' sample counts")?;
+    shader.shade_rows(&none, &film.samples, &mut estimates, progress, tally)?;
+    drop(none);
+    let rgba = estimates.iter().map(|e| e.mean_rgba());
+    let mut rgba = try_collect(rgba, "the pixels' colours")?;
+    drop(estimates);
+    stats.sites_seconds = phase.elapsed().as_secs_f64();
+    let phase = Instant::now();
+    if let Some(sites) = sites {
+        interpolate::interpolate(&mut rgba, &film.interval, sites, w, h)?;
+    }
+    film.set_rgba(&rgba);
+    stats.interpolate_seconds = phase.elapsed().as_secs_f64();
+    Ok(())
 }
 
 /// The error-controlled rule's result into the film and the stats. Returns lending's share

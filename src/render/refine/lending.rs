@@ -535,7 +535,8 @@ fn lend_chunk(
         }
     }
     let window = (&records[..], &sites[..]);
-    let lent = reuse::lend_sites(kernel, (x0, y0), (w, h), window, &own, &needy)?;
+    let lending = (kernel, maps.nearest.as_ref());
+    let lent = reuse::lend_sites(lending, (x0, y0), (w, h), window, &own, &needy)?;
     let mut est = try_vec(cw * ch, Estimate::default(), "the lent values")?;
     let mut borrowed = try_vec(cw * ch, false, "the sites that borrowed")?;
     for y in 0..ch {

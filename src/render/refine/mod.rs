@@ -56,7 +56,7 @@ use super::allocation::{self, FocusBudget};
 use super::estimate::{Estimate, code3};
 use super::gather::{Gather, Layer, SLOTS, Slot, Slots};
 use super::maps;
-use super::reuse::{Kernel, SiteRecords};
+use super::reuse::{Kernel, Nearest, SiteRecords};
 use super::site::SiteShader;
 use super::{Progress, Tally};
 use crate::limits::{MemoryError, try_collect, try_copy, try_vec};
@@ -628,6 +628,8 @@ struct Maps<'a> {
     reach: Vec<u8>,
     /// With sample reuse, its kernel for the render's pixel filter.
     kernel: Option<Kernel>,
+    /// With sample reuse, the depth pass's shifts: what a nearer surface hides.
+    nearest: Option<Nearest>,
     /// With paths, how many samples the sites of one pixel's interval take by their noise
     /// ([`allocation`]).
     focus: Option<FocusBudget>,
@@ -646,7 +648,7 @@ struct Maps<'a> {
 pub fn refine(
     shader: &SiteShader,
     tolerance: f32,
-    blur: &maps::Blur,
+    (blur, depth): (&maps::Blur, &[f32]),
     region: &super::Region,
     progress: &dyn Progress,
     tally: &mut Tally,
@@ -665,14 +667,18 @@ pub fn refine(
     // The sites no blur reaches gather each other's samples.
     let techniques = try_collect(blur.blurred.iter().map(|&b| !b), "the in-focus sites")?;
     let density = s.pixel_filter.density();
+    let lending = (shader.camera.reprojection()).filter(|_| lends);
+    let nearest = match &lending {
+        Some(re) => Some(Nearest::from_depth(re, (width, height), depth)?),
+        None => None,
+    };
     let maps = Maps {
         tolerance,
         blur,
         start,
         reach: reach_levels(&blur.widest, s.max_interval)?,
-        kernel: (shader.camera.reprojection())
-            .filter(|_| lends)
-            .map(|re| Kernel::new(&density, &re.aperture)),
+        kernel: lending.map(|re| Kernel::new(&density, &re.aperture)),
+        nearest,
         focus,
         gather: (s.path.reuse)
             .then(|| {

@@ -36,18 +36,22 @@
 //!   samples' shifts (no gap wider than [`GAP`] within it; two surfaces at different depths
 //!   make a gap). A sample goes only to sites of its cluster. The nearest surface is seen
 //!   wherever its points' trajectories cross the site (nothing nearer hides them), so its
-//!   samples are valid anywhere on them; a farther one's, seen past the nearer's rim, are
-//!   not, and stay with their site. Such a site (at a depth edge) takes its value as
-//!   `W L_near + (1 - W) L_rest`: `L_near` the lent estimate of the nearest surface, `W` the
-//!   sum of the balance-heuristic weights it received (in expectation the share of its
-//!   pixel's pixel x lens samples that see that surface, from all its neighbours' samples
-//!   rather than its own few), `L_rest` the mean of its own other samples. Samples that do
-//!   not lend (below) count with the rest the same way.
+//!   samples are valid anywhere on them; a farther one's, seen past the nearer's rim, only
+//!   where the nearer surface does not hide them. Such a site (at a depth edge) takes its
+//!   value as `W L_near + (1 - W) L_rest`: `L_near` the lent estimate of the nearest
+//!   surface, `W` the sum of the balance-heuristic weights it received (in expectation the
+//!   share of its pixel's pixel x lens samples that see that surface, from all its
+//!   neighbours' samples rather than its own few), `L_rest` what it sees behind.
+//! - Behind a rim (`behind.rs`): `L_rest` is lent too, from its own and its neighbours'
+//!   samples of what lies behind the nearer surface, each kernel weighed by whether the
+//!   depth pass ([`Nearest`]) shows that surface hiding the sample's point from the site's
+//!   pixel centre. Where the depth pass is not given, or one of the site's own samples
+//!   behind does not lend (below), `L_rest` is the mean of its own samples behind.
 //! - A site whose own samples all missed a nearer surface that other sites' samples show
 //!   crossing its footprint (a blurred foreground's rim, seen through a few lens positions)
 //!   takes the nearest of those crossing samples' clusters for its own ([`mark_covered`]):
-//!   its value is `W L_near + (1 - W) L_rest` as above, with `W` most likely small and
-//!   `L_rest` all its own samples, and it borrows however quiet those were (their mean lacks
+//!   its value is `W L_near + (1 - W) L_rest` as above, with `W` most likely small and all
+//!   its own samples behind, and it borrows however quiet those were (their mean lacks
 //!   that surface). Keeping its own mean instead, as a site once did, made the estimator a
 //!   site used depend on what its own samples saw: at the rim that was biased and noisy.
 //!   A site something nearer than even that cluster still crosses is *covered*: it neither
@@ -81,7 +85,9 @@
 //! farther; a curved surface's `g` holds only near the sample; the cluster gap lets two
 //! surfaces within [`GAP`] pixels of parallax of each other pass for one; at a depth edge
 //! `W` and `L_rest` are estimated from the same render as what they weigh (a ratio
-//! estimate's bias of order 1 / samples, like the self-normalisation).
+//! estimate's bias of order 1 / samples, like the self-normalisation); behind a rim,
+//! visibility is judged at the pixel centre through the depth pass's pixels and the nearer
+//! surface's mean shift (`behind.rs`).
 //!
 //! [`view_alpha`]: crate::shade::Bsdf::view_alpha
 
@@ -91,8 +97,11 @@ use std::f32::consts::SQRT_2;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+mod behind;
 mod lanes;
 mod shaped;
+
+pub use behind::Nearest;
 
 use super::estimate::Estimate;
 use crate::camera::Reprojection;
@@ -895,7 +904,12 @@ impl Member {
 /// The mean of the view-dependent parts ([`Record::own`]) of the samples `member` lends and
 /// the variance of that mean's luminance; `None` when they are all zero.
 fn own_part(records: &SiteRecords, member: &Member) -> Option<(Vec3, f64)> {
-    let list = || records.list.iter().filter(|r| member.lends(r));
+    own_part_of(|| records.list.iter().filter(|r| member.lends(r)))
+}
+
+/// The mean of the view-dependent parts of the samples `list` gives and the variance of that
+/// mean's luminance; `None` when they are all zero.
+fn own_part_of<'a, I: Iterator<Item = &'a Record>>(list: impl Fn() -> I) -> Option<(Vec3, f64)> {
     if list().all(|r| r.own == Vec3::ZERO) {
         return None;
     }
@@ -1231,10 +1245,12 @@ pub struct Lent {
 /// `needy[p]` is false (its own samples suffice; a site that missed its nearest surface,
 /// [`Site::hidden`], borrows all the same), else the balance-heuristic combination of every
 /// sample that reaches it. `records[p]` holds pixel p's samples (those `own[p]` counts: the
-/// first [`MAX_RECORDS`] and the sum of the rest). The work is spent only on samples that
-/// can reach a needy site.
+/// first [`MAX_RECORDS`] and the sum of the rest). With the frame's depth pass, `nearest`,
+/// a site at a depth edge borrows what it sees behind the nearer surface too (module
+/// documentation, "Behind a rim"). The work is spent only on samples that can reach a needy
+/// site.
 pub fn lend<R: Borrow<SiteRecords>>(
-    kernel: &Kernel,
+    (kernel, nearest): (&Kernel, Option<&Nearest>),
     (x0, y0): (usize, usize),
     (width, height): (usize, usize),
     records: &[R],
@@ -1247,7 +1263,14 @@ pub fn lend<R: Borrow<SiteRecords>>(
         .map(|(&n, &s)| borrows(s, n))
         .collect();
     let window = (records, &sites[..]);
-    lend_sites(kernel, (x0, y0), (width, height), window, own, &needy)
+    lend_sites(
+        (kernel, nearest),
+        (x0, y0),
+        (width, height),
+        window,
+        own,
+        &needy,
+    )
 }
 
 /// [`lend`] with each pixel's site worked out beforehand, `sites[p]` ([`sites`], its
@@ -1255,7 +1278,7 @@ pub fn lend<R: Borrow<SiteRecords>>(
 /// rather than once per window. `needy` is taken as given: the caller decides it with
 /// [`borrows`] where sites may borrow, as [`lend`] does.
 pub fn lend_sites<R: Borrow<SiteRecords>>(
-    kernel: &Kernel,
+    (kernel, nearest): (&Kernel, Option<&Nearest>),
     (x0, y0): (usize, usize),
     (width, height): (usize, usize),
     (records, sites): (&[R], &[Option<Site>]),
@@ -1277,7 +1300,7 @@ pub fn lend_sites<R: Borrow<SiteRecords>>(
         return unlent(own);
     }
     let grid = Grid::new(Vec2::new(x0 as f32, y0 as f32), (width, height), members);
-    lend_within(kernel, &grid, records, own)
+    lend_within((kernel, nearest), &grid, records, own)
 }
 
 /// Every site's own estimate: nothing lent.
@@ -1320,7 +1343,7 @@ fn taking_part<R: Borrow<SiteRecords>>(
 /// The lending of [`lend`] once the members of the window are known, in `grid`, their
 /// coverage marked.
 fn lend_within<R: Borrow<SiteRecords>>(
-    kernel: &Kernel,
+    (kernel, nearest): (&Kernel, Option<&Nearest>),
     grid: &Grid,
     records: &[R],
     own: &[Estimate],
@@ -1348,7 +1371,8 @@ fn lend_within<R: Borrow<SiteRecords>>(
             lend_one(kernel, grid, (m, r), &mut near, &mut pooled);
         }
     }
-    for (member, lent) in grid.members.iter().zip(pooled) {
+    let behind = nearest.map(|nearest| behind::lend_behind(kernel, grid, records, nearest));
+    for (m, (member, lent)) in grid.members.iter().zip(pooled).enumerate() {
         if member.needy && !member.covered && lent.n > 0 && lent.mean().is_finite() {
             let site = records[member.p].borrow();
             let value = match own_part(site, member) {
@@ -1358,7 +1382,12 @@ fn lend_within<R: Borrow<SiteRecords>>(
             // What it lends covers the share of its pixel the lent weights add up to (in
             // expectation); the rest, if it saw any, is its own samples' (see the module
             // documentation).
-            let rest = rest(site, member);
+            let rest = match behind.as_ref().map(|b| &b[m]) {
+                Some(&far) if far.n > 0 && far.mean().is_finite() => {
+                    behind::with_own_parts(far, site, member)
+                }
+                _ => rest(site, member),
+            };
             let value = if rest.n > 0 {
                 value.blend(lent.weight(), rest)
             } else {
@@ -1606,7 +1635,7 @@ mod tests {
         });
         let k = kernel(PixelFilterKind::Box);
         let needy: Vec<bool> = (0..own.len()).map(|p| p % 3 != 0).collect();
-        let whole = lend(&k, (0, 0), (size, size), &records, &own, &needy).unwrap();
+        let whole = lend((&k, None), (0, 0), (size, size), &records, &own, &needy).unwrap();
         // Prepared in four 20 x 20 areas, each against every sample of the window.
         let half = size / 2;
         let mut prepared: Vec<Option<Site>> = vec![None; size * size];
@@ -1627,7 +1656,7 @@ mod tests {
             .map(|(&n, &s)| borrows(s, n))
             .collect();
         let window = (&records[..], &prepared[..]);
-        let lent = lend_sites(&k, (0, 0), (size, size), window, &own, &needy).unwrap();
+        let lent = lend_sites((&k, None), (0, 0), (size, size), window, &own, &needy).unwrap();
         assert_eq!(lent.borrowed, whole.borrowed);
         assert!(lent.borrowed.iter().filter(|&&b| b).count() > 100);
         for (p, (a, b)) in lent.estimates.iter().zip(&whole.estimates).enumerate() {
@@ -1650,6 +1679,16 @@ mod tests {
     /// [`own_and_lent`] with kernel `k`.
     fn own_and_lent_with(
         k: &Kernel,
+        at: (usize, usize),
+        trials: u64,
+        render: impl Fn(u64) -> (Vec<SiteRecords>, Vec<Estimate>),
+    ) -> ((f64, f64), (f64, f64)) {
+        own_and_lent_by((k, None), at, trials, render)
+    }
+
+    /// [`own_and_lent`] with kernel `k` and, if given, the depth pass's shifts.
+    fn own_and_lent_by(
+        lending: (&Kernel, Option<&Nearest>),
         (size, site): (usize, usize),
         trials: u64,
         render: impl Fn(u64) -> (Vec<SiteRecords>, Vec<Estimate>),
@@ -1658,7 +1697,7 @@ mod tests {
         for t in 0..trials {
             let (records, own) = render(t);
             let needy = vec![true; own.len()];
-            let lent = lend(k, (0, 0), (size, size), &records, &own, &needy)
+            let lent = lend(lending, (0, 0), (size, size), &records, &own, &needy)
                 .unwrap()
                 .estimates;
             let (a, b) = (
@@ -1684,7 +1723,15 @@ mod tests {
         for n in [16, MAX_RECORDS + 8] {
             let (records, own) = lattice(32, 4, n, 6.0, |_| 0.3, 1);
             assert!(records.iter().all(|r| r.list.len() <= MAX_RECORDS));
-            let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32]).unwrap();
+            let lent = lend(
+                (&k, None),
+                (0, 0),
+                (32, 32),
+                &records,
+                &own,
+                &[true; 32 * 32],
+            )
+            .unwrap();
             let mut borrowed = 0;
             for ((e, o), &b) in lent.estimates.iter().zip(&own).zip(&lent.borrowed) {
                 assert_eq!(e.n == 0, o.n == 0);
@@ -1879,9 +1926,16 @@ mod tests {
         near.shift = 1.0;
         near.centre = Vec2::new(8.5, 8.5);
         records[4 * 32 + 4].list.push(near);
-        let lent = lend(&k, (0, 0), (32, 32), &records, &own, &[true; 32 * 32])
-            .unwrap()
-            .estimates;
+        let lent = lend(
+            (&k, None),
+            (0, 0),
+            (32, 32),
+            &records,
+            &own,
+            &[true; 32 * 32],
+        )
+        .unwrap()
+        .estimates;
         assert_ne!(lent[two], own[two]);
         assert!((lent[two].mean() - Vec3::splat(0.3)).length() < 1e-5);
         assert_ne!(lent[behind], own[behind]);
@@ -1963,7 +2017,7 @@ mod tests {
             );
             let needy = vec![true; own.len()];
             let lent = lend(
-                &kernel(PixelFilterKind::Box),
+                (&kernel(PixelFilterKind::Box), None),
                 (0, 0),
                 (size, size),
                 &records,
@@ -1986,6 +2040,55 @@ mod tests {
             assert!(
                 lent_var * gain < own_var,
                 "{x}: variance {lent_var} vs own {own_var}"
+            );
+        }
+    }
+
+    /// Behind a blurred foreground edge, a site that sees both takes what lies behind the
+    /// edge from its neighbours' samples too, each kernel weighed by whether the depth pass
+    /// shows the edge hiding the sample's point from it: the same in expectation as its own
+    /// mean, for less variance than taking that share from its own samples alone. Measured
+    /// (400 independent trials): at x = 14, 16 and 18 the means are -0.37, +0.01 and +0.61
+    /// standard errors from the sites' own; the variance 1.19x, 1.90x and 10.4x under the
+    /// lending before (which took that share from the site's own samples), 3.0x, 7.9x and 17x
+    /// under the sites' own.
+    #[test]
+    fn what_lies_behind_a_rim_is_lent_without_bias() {
+        let field = |c: Vec2| 0.1 + 0.4 * (0.5 * c.y).sin().abs();
+        let (size, trials) = (32, 400);
+        let ((near, edge), far) = ((3.0, 16.0), 8.0);
+        let shifts = (0..size * size)
+            .map(|p| {
+                if ((p % size) as f32) + 0.5 < edge {
+                    near
+                } else {
+                    far
+                }
+            })
+            .collect();
+        let nearest = Nearest::new((size, size), shifts);
+        let k = kernel(PixelFilterKind::Box);
+        for (x, gain) in [(14, 1.1), (16, 1.5), (18, 4.0)] {
+            let site = 16 * size + x;
+            let render = |t| {
+                occluded(
+                    (size, 2, 32),
+                    ((near, 0.9), edge, far),
+                    field,
+                    (t + 1) << 40,
+                )
+            };
+            let ((own_mean, own_var), (lent_mean, lent_var)) =
+                own_and_lent_by((&k, Some(&nearest)), (size, site), trials, render);
+            let (_, (_, before_var)) = own_and_lent_by((&k, None), (size, site), trials, render);
+            let se = ((own_var + lent_var) / trials as f64).sqrt();
+            assert!(
+                (own_mean - lent_mean).abs() < 3.0 * se,
+                "{x}: {own_mean} vs {lent_mean} (se {se})"
+            );
+            assert!(
+                lent_var * gain < before_var,
+                "{x}: variance {lent_var} vs {before_var} before"
             );
         }
     }
@@ -2039,7 +2142,7 @@ mod tests {
         let field = |c: Vec2| 0.2 + 0.5 * (0.7 * c.y).sin().abs();
         let (records, own) = lattice(32, 4, 16, 5.0, field, 77);
         let needy = [true; 32 * 32];
-        let plain = lend(&k, (0, 0), (32, 32), &records, &own, &needy)
+        let plain = lend((&k, None), (0, 0), (32, 32), &records, &own, &needy)
             .unwrap()
             .estimates;
         // Every sample gains a glossy part of its own site's (one site's much brighter and
@@ -2059,7 +2162,7 @@ mod tests {
                 own_glossy[p].add(r.radiance, 1.0, r.hit);
             }
         }
-        let lent = lend(&k, (0, 0), (32, 32), &glossy, &own_glossy, &needy)
+        let lent = lend((&k, None), (0, 0), (32, 32), &glossy, &own_glossy, &needy)
             .unwrap()
             .estimates;
         let mut borrowed = 0;
