@@ -21,6 +21,7 @@ use crate::limits::{MemoryError, try_collect};
 use crate::render::estimate::{Estimate, luminance};
 
 use std::borrow::Borrow;
+use std::cell::OnceCell;
 
 /// The shift ([`Reprojection::shift`]) of the nearest surface through each pixel centre and
 /// the lens centre, the depth pass's: which lens positions a nearer surface hides from a site.
@@ -61,6 +62,11 @@ impl Nearest {
         }
     }
 
+    /// The farthest shift it holds (minus infinity when empty).
+    fn farthest(&self) -> f32 {
+        self.shift.iter().copied().fold(f32::NEG_INFINITY, f32::max)
+    }
+
     /// The shift at the pixel holding image position `c`; `None` outside the frame.
     fn at(&self, c: Vec2) -> Option<f32> {
         if !(c.x >= 0.0 && c.y >= 0.0) {
@@ -78,33 +84,102 @@ impl Member {
         self.carried(r) > self.hi
     }
 
-    /// Whether this member's pixel centre sees sample `r`'s point: not when `r` lies behind
-    /// its nearest surface and the depth pass finds something nearer than `r` where the ray
-    /// to it crosses that surface's depth.
-    fn sees(&self, r: &Record, nearest: &Nearest) -> bool {
-        if !self.behind(r) {
+    /// Whether its own sample `r` is one of what it sees behind its nearest surface that it
+    /// lends: a sample that lends, past that surface.
+    fn lends_behind(&self, r: &Record) -> bool {
+        r.lends && self.behind(r)
+    }
+}
+
+/// Lens positions a side of a member's view ([`Views`]).
+const VIEW: usize = 8;
+
+/// What each member's pixel centre sees through the lens, worked out when first asked: per
+/// cell of a [`VIEW`] x [`VIEW`] grid over the aperture's bounding square, the shift of the
+/// first surface along the ray through the cell's centre, marched through the depth pass
+/// ([`Nearest`]) a pixel at a time from the member's nearest surface on: the first depth at
+/// which the depth pass shows a surface at or before the ray (surfaces as solid behind their
+/// fronts). Every occluder counts, not only the member's nearest surface (a horizon's strip
+/// of floor hides the sky behind a sphere's rim).
+struct Views<'a> {
+    nearest: &'a Nearest,
+    /// The aperture's farthest point from its centre (lens units).
+    outer: f32,
+    /// Where to stop marching: past the farthest shift the depth pass holds.
+    farthest: f32,
+    cells: Vec<OnceCell<[f32; VIEW * VIEW]>>,
+}
+
+impl<'a> Views<'a> {
+    fn new(nearest: &'a Nearest, outer: f32, members: usize) -> Self {
+        Self {
+            nearest,
+            outer,
+            farthest: nearest.farthest() + super::GAP,
+            cells: (0..members).map(|_| OnceCell::new()).collect(),
+        }
+    }
+
+    /// Whether member `m` (at index `q`) sees sample `r`'s point from its pixel centre: `r`
+    /// is not behind its nearest surface, or the first surface along the ray through the
+    /// lens position that images `r` there lies no nearer than `r`.
+    fn sees(&self, (q, m): (usize, &Member), r: &Record) -> bool {
+        if !m.behind(r) {
             return true;
         }
-        let near = 0.5 * (self.lo + self.hi);
-        let crossing = self.at + (near / r.shift) * (r.centre - self.at);
+        // Its nearest surface, where the ray to `r`'s point crosses its depth: exactly.
+        let near = 0.5 * (m.lo + m.hi);
+        let crossing = m.at + (near / r.shift) * (r.centre - m.at);
         let far = carried(r, crossing, r.gradient);
-        let hidden = nearest.at(crossing).is_some_and(|s| s < far - super::GAP);
-        !hidden
+        let hidden = (self.nearest.at(crossing)).is_some_and(|s| s <= m.hi && s < far - super::GAP);
+        if hidden {
+            return false;
+        }
+        // The lens offset `(l.x, -l.y)` that images `r`'s point at the pixel centre, as a
+        // cell of the view (clamped: where the filter, not the blur, brings `r` there).
+        let offset = (m.at - r.centre) / r.shift;
+        let cell = |v: f32| {
+            let t = (v / self.outer + 1.0) * 0.5 * VIEW as f32;
+            (t.max(0.0) as usize).min(VIEW - 1)
+        };
+        let view = self.cells[q].get_or_init(|| self.march(m));
+        // The cell's ray meets `r`'s surface up to half a cell of lens from `r`'s point: its
+        // shift there may differ by the surface's gradient over that much image motion.
+        let slack = r.gradient.length() * r.shift.abs() * self.outer / VIEW as f32;
+        view[cell(-offset.y) * VIEW + cell(offset.x)] >= r.shift - super::GAP - slack
+    }
+
+    /// Member `m`'s view: the first surface's shift through each lens cell.
+    fn march(&self, m: &Member) -> [f32; VIEW * VIEW] {
+        let mut view = [f32::INFINITY; VIEW * VIEW];
+        for (i, first) in view.iter_mut().enumerate() {
+            let l =
+                (Vec2::new((i % VIEW) as f32, (i / VIEW) as f32) + 0.5) * (2.0 / VIEW as f32) - 1.0;
+            let offset = Vec2::new(l.x, -l.y) * self.outer;
+            // A pixel of image motion per step along the ray.
+            let step = 1.0 / offset.length().max(1e-3);
+            let mut shift = m.hi;
+            while shift <= self.farthest {
+                let at = m.at - shift * offset;
+                let beyond = |&s: &f32| s > m.hi && s <= shift + super::GAP;
+                if let Some(s) = self.nearest.at(at).filter(beyond) {
+                    *first = s;
+                    break;
+                }
+                shift += step;
+            }
+        }
+        view
     }
 }
 
 /// Which members take what lies behind their nearest surface from their neighbours: the needy,
-/// uncovered ones some of whose own samples lie behind it, all of those samples lending (a
-/// site with one that does not keeps its own mean of them).
+/// uncovered ones one of whose own samples lies behind it and lends.
 fn receivers<R: Borrow<SiteRecords>>(grid: &Grid, records: &[R]) -> Vec<bool> {
     (grid.members.iter())
         .map(|m| {
             let list = &records[m.p].borrow().list;
-            let mut behind = list.iter().filter(|r| !m.lends(r)).peekable();
-            m.needy
-                && !m.covered
-                && behind.peek().is_some()
-                && behind.all(|r| r.lends && m.behind(r))
+            m.needy && !m.covered && list.iter().any(|r| m.lends_behind(r))
         })
         .collect()
 }
@@ -134,21 +209,21 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
     let receivers = Grid::new(grid.origin, grid.size, taking);
     let occupied = Occupancy::of(&receivers);
     let reach = kernel.reach();
+    let views = Views::new(nearest, reach.outer, grid.members.len());
     // The receivers a sample reaches: (index in `grid`, kernel, own technique's density).
     let mut to: Vec<(usize, f32, f32)> = Vec::new();
     for (m, member) in grid.members.iter().enumerate() {
         if member.covered {
             continue;
         }
-        for r in &records[member.p].borrow().list {
-            if !r.lends {
-                continue;
-            }
+        for r in records[member.p].borrow().list.iter().filter(|r| r.lends) {
             let g = lattice(r.shift);
             let on_lattice = |q: &Member| q.lattice & (g - 1) == 0;
             let extent = reach.of(r.shift);
             let within = |q: &Member| (r.centre - q.at).length_squared() < extent * extent;
-            let takes_it = |q: &Member| within(q) && q.behind(r) && q.sees(r, nearest);
+            let takes_it = |q: usize, other: &Member| {
+                within(other) && other.behind(r) && views.sees((q, other), r)
+            };
             // A lender's sample goes to every receiver it reaches, any other to its own site.
             to.clear();
             if !occupied.any_near(r.centre - grid.origin, extent) {
@@ -156,11 +231,11 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
             }
             if on_lattice(member) {
                 for range in receivers.rows_near(r.centre, extent) {
-                    for i in range.filter(|&i| takes_it(&receivers.members[i])) {
-                        to.push((index[i], 0.0, 0.0));
+                    for j in range.filter(|&j| takes_it(index[j], &receivers.members[j])) {
+                        to.push((index[j], 0.0, 0.0));
                     }
                 }
-            } else if takes[m] && takes_it(member) {
+            } else if takes[m] && takes_it(m, member) {
                 to.push((m, 0.0, 0.0));
             }
             if to.is_empty() {
@@ -170,7 +245,7 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
             let mut lenders = 0.0;
             for q in grid.on_lattice(r.centre, extent, g) {
                 let other = &grid.members[q as usize];
-                if !other.covered && within(other) && other.sees(r, nearest) {
+                if !other.covered && within(other) && views.sees((q as usize, other), r) {
                     lenders += other.n * k_at.at(r.centre - other.at);
                 }
             }
@@ -181,7 +256,7 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
                 *k = k_at.at(r.centre - other.at);
                 // Off the lattice, its own technique adds to the density.
                 *own = if on_lattice(other) { 0.0 } else { other.n * *k };
-                if *k > 0.0 {
+                if *k > 0.0 && lenders + *own > 0.0 {
                     pooled[*q].add_lit(lent, y, *k / (lenders + *own), r.hit);
                 }
             }
@@ -235,13 +310,28 @@ impl Occupancy {
     }
 }
 
-/// The lent estimate `far` of what `member` sees behind its nearest surface, with the mean of
-/// its own such samples' view-dependent parts (which stay with it) added.
-pub(super) fn with_own_parts(far: Estimate, site: &SiteRecords, member: &Member) -> Estimate {
-    match super::own_part_of(|| site.list.iter().filter(|r| !member.lends(r))) {
+/// What `member` sees past its nearest surface, `L_rest`: of its own samples there, the
+/// share that lends (an unbiased estimate of the share of that view its lending surfaces
+/// fill) takes the lent estimate `far` (with the mean of those samples' view-dependent parts,
+/// which stay with it); the others (samples that do not lend: a surface seen edge-on, a
+/// sharp one) count as their own mean, as without lending. Lending what lends and dropping
+/// the rest where a site happened to see none of it would weigh the lending surfaces too
+/// much.
+pub(super) fn rest_with(far: Estimate, site: &SiteRecords, member: &Member) -> Estimate {
+    let rest = || site.list.iter().filter(|r| !member.lends(r));
+    let far = match super::own_part_of(|| rest().filter(|r| member.lends_behind(r))) {
         Some((mean, variance)) => far.plus(mean, variance),
         None => far,
+    };
+    let lending = rest().filter(|r| member.lends_behind(r)).count();
+    let mut others = Estimate::default();
+    for r in rest().filter(|r| !member.lends_behind(r)) {
+        others.add(r.radiance, 1.0, r.hit);
     }
+    if others.n == 0 {
+        return far;
+    }
+    far.blend(lending as f32 / (lending as f32 + others.n as f32), others)
 }
 
 /// The lattice spacing of the sites that lend samples of shift `s` of what lies behind a
@@ -255,4 +345,127 @@ pub(super) fn with_own_parts(far: Estimate, site: &SiteRecords, member: &Member)
 fn lattice(s: f32) -> usize {
     let g = spacing(s);
     if g >= 2 { 2 * g } else { g }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn member(at: Vec2, (lo, hi): (f32, f32)) -> Member {
+        Member {
+            p: 0,
+            lattice: 0,
+            at,
+            n: 16.0,
+            lo,
+            hi,
+            gradient: Vec2::ZERO,
+            needy: true,
+            covered: false,
+            hidden: false,
+        }
+    }
+
+    fn far(centre: Vec2, shift: f32) -> Record {
+        Record {
+            centre,
+            shift,
+            gradient: Vec2::ZERO,
+            radiance: glam::Vec3::ONE,
+            own: glam::Vec3::ZERO,
+            hit: true,
+            lends: true,
+        }
+    }
+
+    /// A foreground of shift 3 covers the frame's left half (pixel centres left of x = 16),
+    /// a wall of shift 8 lies behind. From a site on the wall near the edge, the ray to a
+    /// wall point crosses the foreground's depth at `at + (3 / 8) (c - at)`: hidden exactly
+    /// where that lies left of the edge. Its own surface and anything nearer it always sees.
+    #[test]
+    fn a_nearer_surface_hides_what_lies_behind_it_where_the_depth_pass_shows_it() {
+        let size = 32;
+        let shifts = (0..size * size)
+            .map(|p| if (p % size) < 16 { 3.0 } else { 8.0 })
+            .collect();
+        let nearest = Nearest::new((size, size), shifts);
+        let views = Views::new(&nearest, 1.0, 1);
+        let site = member(Vec2::new(17.5, 16.5), (2.5, 3.5));
+        let sees = |r: &Record| views.sees((0, &site), r);
+        for cx in [10.0f32, 14.0, 16.0, 18.0, 22.0, 26.0] {
+            let r = far(Vec2::new(cx, 16.5), 8.0);
+            let crossing = 17.5 + 3.0 / 8.0 * (cx - 17.5);
+            assert!(site.behind(&r));
+            assert_eq!(sees(&r), crossing >= 16.0, "c.x = {cx}");
+        }
+        // Its nearest surface, and something nearer still, are never hidden from it.
+        assert!(sees(&far(Vec2::new(10.0, 16.5), 3.0)));
+        assert!(sees(&far(Vec2::new(10.0, 16.5), 1.0)));
+        // Past the frame the depth pass says nothing: seen.
+        assert!(sees(&far(Vec2::new(-60.0, 16.5), 8.0)));
+    }
+
+    /// A second occluder between the nearer surface and what lies behind (a strip of floor
+    /// at the horizon, behind a sphere's rim, in front of the sky) hides the sky wherever
+    /// the ray to it crosses the strip, though the nearer surface does not.
+    #[test]
+    fn a_second_occluder_hides_what_lies_behind_it_too() {
+        let size = 32;
+        // Left of x = 8 the nearer surface (shift 3), from x = 20 a strip (shift 6) in
+        // front of the sky (shift 10) between them.
+        let shifts = (0..size * size)
+            .map(|p| match p % size {
+                0..8 => 3.0,
+                8..20 => 10.0,
+                _ => 6.0,
+            })
+            .collect();
+        let nearest = Nearest::new((size, size), shifts);
+        let views = Views::new(&nearest, 1.0, 1);
+        let site = member(Vec2::new(12.5, 16.5), (2.5, 3.5));
+        // The ray to the sky at x = 6 or 15 meets nothing; to x = 22 it passes behind the
+        // strip (at x = 20 by the sky's depth, past the strip's), which hides it.
+        assert!(views.sees((0, &site), &far(Vec2::new(6.0, 16.5), 10.0)));
+        assert!(views.sees((0, &site), &far(Vec2::new(15.0, 16.5), 10.0)));
+        assert!(!views.sees((0, &site), &far(Vec2::new(22.0, 16.5), 10.0)));
+        // The strip itself is seen where nothing nearer hides it.
+        assert!(views.sees((0, &site), &far(Vec2::new(22.0, 16.5), 6.0)));
+    }
+
+    /// The four reads of the summed cell counts find a member exactly where one of the cells
+    /// the square around a point touches holds one.
+    #[test]
+    fn occupancy_finds_the_members_near_a_point() {
+        let origin = Vec2::ZERO;
+        let at = [
+            Vec2::new(5.5, 9.5),
+            Vec2::new(30.5, 2.5),
+            Vec2::new(17.5, 25.5),
+        ];
+        let members = at.iter().map(|&a| member(a, (0.0, 1.0))).collect();
+        let grid = Grid::new(origin, (40, 32), members);
+        let occupied = Occupancy::of(&grid);
+        let cell = |v: f32| (v / super::super::CELL).floor();
+        for y in -5..40 {
+            for x in -5..48 {
+                for radius in [0.5f32, 3.0, 7.0] {
+                    let c = Vec2::new(x as f32, y as f32);
+                    let want = at.iter().any(|m| {
+                        let (lo, hi) = (c - radius, c + radius);
+                        (cell(lo.x)..=cell(hi.x)).contains(&cell(m.x))
+                            && (cell(lo.y)..=cell(hi.y)).contains(&cell(m.y))
+                    });
+                    if want {
+                        assert!(occupied.any_near(c, radius), "{c} {radius}");
+                    }
+                    let far_from_all = at
+                        .iter()
+                        .all(|m| (*m - c).abs().max_element() > radius + 8.0);
+                    if far_from_all {
+                        assert!(!occupied.any_near(c, radius), "{c} {radius}");
+                    }
+                }
+            }
+        }
+    }
 }
