@@ -7,11 +7,21 @@
 //! only for the lens positions the nearer surface does not hide. A sample of a farther point
 //! with centre `c` and shift `s` reaches site p's pixel through lens offset `(p - c) / s`;
 //! along that ray the nearer surface (shift `s_n`) lies at centre `p + (s_n / s) (c - p)`,
-//! and the depth pass ([`Nearest`]) says whether it is there. So each technique's kernel is
-//! weighed by that visibility, the target's (the receiver's) and the density's (every
-//! lender's) alike, and the balance heuristic combines the samples as for the nearest
-//! surface. Visibility is judged at the pixel centre, not over the filter's width: exact
-//! away from the visibility boundary, a bias of the filter's share of the blur at it.
+//! and the depth pass ([`Nearest`]) says whether it is there: a surface at that centre no
+//! farther than the site's nearer surface, and nearer than the sample's, hides it. Other
+//! occluders past the nearer surface (a strip of floor at the horizon, in front of the sky)
+//! are found by marching each site's rays through the depth pass, once per cell of a lens
+//! grid ([`Views`]). Each technique's kernel is weighed by that visibility, the target's
+//! (the receiver's) and the density's (every lender's) alike, and the balance heuristic
+//! combines the samples as for the nearest surface.
+//!
+//! Bias left: visibility is judged at the pixel centre, not over the filter's width (exact
+//! away from the visibility boundary; at it, a share of the filter over the blur), at the
+//! nearer surface's mean shift, on the depth pass's pixels, and for other occluders per lens
+//! cell. Measured on the paper scene at 640 px against the 1024-spp reference, the lending
+//! still gains at 128 spp (49.07 to 49.26 dB); without the march for other occluders it lost
+//! 0.1 dB there (a band of sky lent past the horizon's floor above the spheres), and judged
+//! by the sample's depth alone (anything nearer than it at the crossing hides it) 1.4 dB.
 
 use glam::Vec2;
 
@@ -340,8 +350,8 @@ pub(super) fn rest_with(far: Estimate, site: &SiteRecords, member: &Member) -> E
 /// site's value, and every lent sample is weighed for every rim site it reaches (a blurred
 /// lamp's whole disc): at the nearest surface's spacing, paper at 640 px and 16 spp gained
 /// 0.08 dB more and the bokeh scene at 320 px and 32 spp lost 0.02 dB, for 5% and 4% more
-/// time. Where every site lends (`|s|` under 6) it stays so: an octave coarser there lost
-/// interior half its gain.
+/// time (measured with this module's first visibility test). Where every site lends (`|s|`
+/// under 6) it stays so: an octave coarser there lost interior half its gain.
 fn lattice(s: f32) -> usize {
     let g = spacing(s);
     if g >= 2 { 2 * g } else { g }
