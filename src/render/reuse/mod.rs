@@ -1716,6 +1716,11 @@ mod tests {
         ((own_mean, own_var), (lent_mean, lent_var))
     }
 
+    /// [`lend`] over a 32 x 32 window every site of which may borrow, without the depth pass.
+    fn lend_to_all(k: &Kernel, records: &[SiteRecords], own: &[Estimate]) -> Lent {
+        lend((k, None), (0, 0), (32, 32), records, own, &[true; 32 * 32]).unwrap()
+    }
+
     /// Also where sites took more samples than they record: they lend their first ones.
     #[test]
     fn a_flat_field_stays_exactly_flat() {
@@ -1723,15 +1728,7 @@ mod tests {
         for n in [16, MAX_RECORDS + 8] {
             let (records, own) = lattice(32, 4, n, 6.0, |_| 0.3, 1);
             assert!(records.iter().all(|r| r.list.len() <= MAX_RECORDS));
-            let lent = lend(
-                (&k, None),
-                (0, 0),
-                (32, 32),
-                &records,
-                &own,
-                &[true; 32 * 32],
-            )
-            .unwrap();
+            let lent = lend_to_all(&k, &records, &own);
             let mut borrowed = 0;
             for ((e, o), &b) in lent.estimates.iter().zip(&own).zip(&lent.borrowed) {
                 assert_eq!(e.n == 0, o.n == 0);
@@ -1926,16 +1923,7 @@ mod tests {
         near.shift = 1.0;
         near.centre = Vec2::new(8.5, 8.5);
         records[4 * 32 + 4].list.push(near);
-        let lent = lend(
-            (&k, None),
-            (0, 0),
-            (32, 32),
-            &records,
-            &own,
-            &[true; 32 * 32],
-        )
-        .unwrap()
-        .estimates;
+        let lent = lend_to_all(&k, &records, &own).estimates;
         assert_ne!(lent[two], own[two]);
         assert!((lent[two].mean() - Vec3::splat(0.3)).length() < 1e-5);
         assert_ne!(lent[behind], own[behind]);
