@@ -220,8 +220,8 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
     let occupied = Occupancy::of(&receivers);
     let reach = kernel.reach();
     let views = Views::new(nearest, reach.outer, grid.members.len());
-    // The receivers a sample reaches: (index in `grid`, kernel, own technique's density).
-    let mut to: Vec<(usize, f32, f32)> = Vec::new();
+    // The receivers a sample reaches, by index in `grid`.
+    let mut to: Vec<usize> = Vec::new();
     for (m, member) in grid.members.iter().enumerate() {
         if member.covered {
             continue;
@@ -241,12 +241,11 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
             }
             if on_lattice(member) {
                 for range in receivers.rows_near(r.centre, extent) {
-                    for j in range.filter(|&j| takes_it(index[j], &receivers.members[j])) {
-                        to.push((index[j], 0.0, 0.0));
-                    }
+                    let reached = range.filter(|&j| takes_it(index[j], &receivers.members[j]));
+                    to.extend(reached.map(|j| index[j]));
                 }
             } else if takes[m] && takes_it(m, member) {
-                to.push((m, 0.0, 0.0));
+                to.push(m);
             }
             if to.is_empty() {
                 continue;
@@ -261,13 +260,13 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
             }
             let lent = r.lent();
             let y = f64::from(luminance(lent));
-            for (q, k, own) in &mut to {
-                let other = &grid.members[*q];
-                *k = k_at.at(r.centre - other.at);
+            for &q in &to {
+                let other = &grid.members[q];
+                let k = k_at.at(r.centre - other.at);
                 // Off the lattice, its own technique adds to the density.
-                *own = if on_lattice(other) { 0.0 } else { other.n * *k };
-                if *k > 0.0 && lenders + *own > 0.0 {
-                    pooled[*q].add_lit(lent, y, *k / (lenders + *own), r.hit);
+                let own = if on_lattice(other) { 0.0 } else { other.n * k };
+                if k > 0.0 && lenders + own > 0.0 {
+                    pooled[q].add_lit(lent, y, k / (lenders + own), r.hit);
                 }
             }
         }

@@ -45,8 +45,9 @@
 //! - Behind a rim (`behind.rs`): `L_rest` is lent too, from its own and its neighbours'
 //!   samples of what lies behind the nearer surface, each kernel weighed by whether the
 //!   depth pass ([`Nearest`]) shows that surface hiding the sample's point from the site's
-//!   pixel centre. Where the depth pass is not given, or one of the site's own samples
-//!   behind does not lend (below), `L_rest` is the mean of its own samples behind.
+//!   pixel centre. Its own samples behind that do not lend (below) count as their own mean,
+//!   for their share of its samples behind; where the depth pass is not given, `L_rest` is
+//!   the mean of all its own samples behind.
 //! - A site whose own samples all missed a nearer surface that other sites' samples show
 //!   crossing its footprint (a blurred foreground's rim, seen through a few lens positions)
 //!   takes the nearest of those crossing samples' clusters for its own ([`mark_covered`]):
