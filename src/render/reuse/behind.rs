@@ -40,6 +40,8 @@ pub struct Nearest {
     width: usize,
     height: usize,
     shift: Vec<f32>,
+    /// The farthest shift it holds (minus infinity when empty): where a march may stop.
+    farthest: f32,
 }
 
 impl Nearest {
@@ -55,26 +57,19 @@ impl Nearest {
             depth.iter().map(|&d| reprojection.shift(d)),
             "the depth pass's shifts",
         )?;
-        Ok(Self {
-            width,
-            height,
-            shift,
-        })
+        Ok(Self::new((width, height), shift))
     }
 
     /// A map from shifts given pixel by pixel, row after row.
     pub fn new((width, height): (usize, usize), shift: Vec<f32>) -> Self {
         assert_eq!(shift.len(), width * height, "one shift a pixel");
+        let farthest = shift.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         Self {
             width,
             height,
             shift,
+            farthest,
         }
-    }
-
-    /// The farthest shift it holds (minus infinity when empty).
-    fn farthest(&self) -> f32 {
-        self.shift.iter().copied().fold(f32::NEG_INFINITY, f32::max)
     }
 
     /// The shift at the pixel holding image position `c`; `None` outside the frame.
@@ -125,7 +120,7 @@ impl<'a> Views<'a> {
         Self {
             nearest,
             outer,
-            farthest: nearest.farthest() + super::GAP,
+            farthest: nearest.farthest + super::GAP,
             cells: (0..members).map(|_| OnceCell::new()).collect(),
         }
     }
