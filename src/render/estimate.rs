@@ -63,6 +63,25 @@ impl Estimate {
         self.peak = self.peak.max(y as f32);
     }
 
+    /// The estimate of this one's samples and `other`'s together, as if each of `other`'s
+    /// had been added to this one (up to rounding): a pixel's samples summed in parts.
+    /// Neither may have had a part estimated apart ([`Estimate::plus`]) added yet.
+    pub fn merge(&mut self, other: &Self) {
+        debug_assert!(
+            self.apart == 0.0 && other.apart == 0.0,
+            "merged before plus"
+        );
+        self.n += other.n;
+        self.sum += other.sum;
+        self.hit_w += other.hit_w;
+        self.blocked_w += other.blocked_w;
+        self.w += other.w;
+        self.w2 += other.w2;
+        self.wy += other.wy;
+        self.wy2 += other.wy2;
+        self.peak = self.peak.max(other.peak);
+    }
+
     /// Adds a sample that a real lens blocked (its vignetting), with lens-filter weight `w`:
     /// it brings no light, and the coverage is that of the samples that passed.
     pub fn add_blocked(&mut self, w: f32) {
@@ -233,6 +252,39 @@ impl Estimate {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Samples summed in two parts and merged give what summing them all in one gives:
+    /// count, mean, coverage, standard error and peak.
+    #[test]
+    fn parts_merged_are_the_whole() {
+        let samples: Vec<(Vec3, f32, bool)> = (0..40)
+            .map(|i| {
+                let v = (i * 37 % 11) as f32 / 7.0;
+                (
+                    Vec3::new(v, 0.5 * v, 2.0 - v),
+                    0.1 + (i % 5) as f32,
+                    i % 3 != 0,
+                )
+            })
+            .collect();
+        let add = |e: &mut Estimate, s: &[(Vec3, f32, bool)]| {
+            for &(l, w, hit) in s {
+                e.add_lit(l, f64::from(luminance(l)), w, hit);
+            }
+        };
+        let mut whole = Estimate::default();
+        add(&mut whole, &samples);
+        let (mut first, mut second) = (Estimate::default(), Estimate::default());
+        add(&mut first, &samples[..13]);
+        add(&mut second, &samples[13..]);
+        first.merge(&second);
+        assert_eq!(first.n, whole.n);
+        assert!((first.mean() - whole.mean()).length() < 1e-5);
+        assert!((first.coverage() - whole.coverage()).abs() < 1e-6);
+        assert!((first.std_error() - whole.std_error()).abs() < 1e-5);
+        assert_eq!(first.peak(), whole.peak());
+        assert!((first.weight() - whole.weight()).abs() < 1e-4);
+    }
 
     #[test]
     fn mean_and_standard_error_of_known_samples() {

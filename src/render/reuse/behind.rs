@@ -31,7 +31,8 @@ use crate::limits::{MemoryError, try_collect};
 use crate::render::estimate::{Estimate, luminance};
 
 use std::borrow::Borrow;
-use std::cell::OnceCell;
+use std::ops::Range;
+use std::sync::OnceLock;
 
 /// The shift ([`Reprojection::shift`]) of the nearest surface through each pixel centre and
 /// the lens centre, the depth pass's: which lens positions a nearer surface hides from a site.
@@ -112,7 +113,8 @@ struct Views<'a> {
     outer: f32,
     /// Where to stop marching: past the farthest shift the depth pass holds.
     farthest: f32,
-    cells: Vec<OnceCell<[f32; VIEW * VIEW]>>,
+    /// Boxed: only the few members near a rim are ever asked, and every window asks.
+    cells: Vec<OnceLock<Box<[f32; VIEW * VIEW]>>>,
 }
 
 impl<'a> Views<'a> {
@@ -121,7 +123,7 @@ impl<'a> Views<'a> {
             nearest,
             outer,
             farthest: nearest.farthest + super::GAP,
-            cells: (0..members).map(|_| OnceCell::new()).collect(),
+            cells: (0..members).map(|_| OnceLock::new()).collect(),
         }
     }
 
@@ -147,7 +149,7 @@ impl<'a> Views<'a> {
             let t = (v / self.outer + 1.0) * 0.5 * VIEW as f32;
             (t.max(0.0) as usize).min(VIEW - 1)
         };
-        let view = self.cells[q].get_or_init(|| self.march(m));
+        let view = self.cells[q].get_or_init(|| Box::new(self.march(m)));
         // The cell's ray meets `r`'s surface up to half a cell of lens from `r`'s point: its
         // shift there may differ by the surface's gradient over that much image motion.
         let slack = r.gradient.length() * r.shift.abs() * self.outer / VIEW as f32;
@@ -219,13 +221,12 @@ fn receivers<R: Borrow<SiteRecords>>(grid: &Grid, records: &[R]) -> Vec<bool> {
 /// technique with its kernel weighed by whether it sees the sample's point; a receiver off
 /// the lattice adds its own technique, as for the nearest surface. Only samples that reach a
 /// receiver are weighed, and only the lattice's members and the receivers visited.
-pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
+pub(super) fn lend_behind<R: Borrow<SiteRecords> + Sync>(
     kernel: &Kernel,
     grid: &Grid,
     records: &[R],
     nearest: &Nearest,
 ) -> Vec<Estimate> {
-    let mut pooled = vec![Estimate::default(); grid.members.len()];
     let takes = receivers(grid, records);
     // The receivers by themselves, to find those a sample reaches; `index` maps them back.
     let (index, taking): (Vec<usize>, Vec<Member>) = (grid.members.iter().enumerate())
@@ -233,64 +234,118 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords>>(
         .map(|(q, m)| (q, *m))
         .unzip();
     if index.is_empty() {
-        return pooled;
+        return vec![Estimate::default(); grid.members.len()];
     }
     let receivers = Grid::new(grid.origin, grid.size, taking);
-    let occupied = Occupancy::of(&receivers);
-    let reach = kernel.reach();
-    let views = Views::new(nearest, reach.outer, grid.members.len());
-    // The receivers a sample reaches, by index in `grid`.
-    let mut to: Vec<usize> = Vec::new();
-    for (m, member) in grid.members.iter().enumerate() {
-        if member.covered {
-            continue;
+    let lending = Lending {
+        kernel,
+        grid,
+        takes: &takes,
+        occupied: Occupancy::of(&receivers),
+        receivers: (&receivers, &index),
+        views: Views::new(nearest, kernel.reach().outer, grid.members.len()),
+    };
+    // In two parts summed apart and merged in order (as the nearest surface's lending).
+    let near = |r: &Record| {
+        let extent = kernel.reach().of(r.shift);
+        lending.occupied.any_near(r.centre - grid.origin, extent)
+    };
+    let work = |m: &Member| -> f64 {
+        let list = &records[m.p].borrow().list;
+        let lender = |r: &Record| m.lattice & (lattice(r.shift) - 1) == 0;
+        let each = |r: &Record| if lender(r) { 1.0 } else { 0.05 };
+        let lent = |r: &&Record| r.lends && near(r);
+        if m.covered {
+            0.0
+        } else {
+            list.iter().filter(lent).map(each).sum()
         }
-        for r in records[member.p].borrow().list.iter().filter(|r| r.lends) {
-            let g = lattice(r.shift);
-            let on_lattice = |q: &Member| q.lattice & (g - 1) == 0;
-            let extent = reach.of(r.shift);
-            let within = |q: &Member| (r.centre - q.at).length_squared() < extent * extent;
-            let takes_it = |q: usize, other: &Member| {
-                within(other) && other.behind(r) && views.sees((q, other), r)
-            };
-            // A lender's sample goes to every receiver it reaches, any other to its own site.
-            to.clear();
-            if !occupied.any_near(r.centre - grid.origin, extent) {
-                continue;
-            }
-            if on_lattice(member) {
-                for range in receivers.rows_near(r.centre, extent) {
-                    let reached = range.filter(|&j| takes_it(index[j], &receivers.members[j]));
-                    to.extend(reached.map(|j| index[j]));
-                }
-            } else if takes[m] && takes_it(m, member) {
-                to.push(m);
-            }
-            if to.is_empty() {
-                continue;
-            }
-            let k_at = kernel.for_sample(r.shift, r.gradient);
-            let mut lenders = 0.0;
-            for q in grid.on_lattice(r.centre, extent, g) {
-                let other = &grid.members[q as usize];
-                if !other.covered && within(other) && views.sees((q as usize, other), r) {
-                    lenders += other.n * k_at.at(r.centre - other.at);
-                }
-            }
-            let lent = r.lent();
-            let y = f64::from(luminance(lent));
-            for &q in &to {
-                let other = &grid.members[q];
-                let k = k_at.at(r.centre - other.at);
-                // Off the lattice, its own technique adds to the density.
-                let own = if on_lattice(other) { 0.0 } else { other.n * k };
-                if k > 0.0 && lenders + own > 0.0 {
-                    pooled[q].add_lit(lent, y, k / (lenders + own), r.hit);
-                }
-            }
-        }
+    };
+    let [first, second] = super::halves(&grid.members, work);
+    let (mut pooled, later) = rayon::join(
+        || lending.part(records, first),
+        || lending.part(records, second),
+    );
+    for (p, l) in pooled.iter_mut().zip(&later) {
+        p.merge(l);
     }
     pooled
+}
+
+/// What [`lend_behind`] works with, set up once for both its parts.
+struct Lending<'a> {
+    kernel: &'a Kernel,
+    grid: &'a Grid,
+    /// By member: whether it takes what lies behind ([`receivers`]).
+    takes: &'a [bool],
+    occupied: Occupancy,
+    /// The receivers by themselves, and each one's index in `grid`.
+    receivers: (&'a Grid, &'a [usize]),
+    views: Views<'a>,
+}
+
+impl Lending<'_> {
+    /// What the samples of members `part` lend to the receivers, by member.
+    fn part<R: Borrow<SiteRecords>>(&self, records: &[R], part: Range<usize>) -> Vec<Estimate> {
+        let (grid, kernel, views) = (self.grid, self.kernel, &self.views);
+        let (receivers, index) = self.receivers;
+        let reach = kernel.reach();
+        let mut pooled = vec![Estimate::default(); grid.members.len()];
+        // The receivers a sample reaches, by index in `grid`.
+        let mut to: Vec<usize> = Vec::new();
+        for m in part {
+            let member = &grid.members[m];
+            if member.covered {
+                continue;
+            }
+            for r in records[member.p].borrow().list.iter().filter(|r| r.lends) {
+                let g = lattice(r.shift);
+                let on_lattice = |q: &Member| q.lattice & (g - 1) == 0;
+                let extent = reach.of(r.shift);
+                let within = |q: &Member| (r.centre - q.at).length_squared() < extent * extent;
+                let takes_it = |q: usize, other: &Member| {
+                    within(other) && other.behind(r) && views.sees((q, other), r)
+                };
+                // A lender's sample goes to every receiver it reaches, any other to its own
+                // site.
+                to.clear();
+                if !self.occupied.any_near(r.centre - grid.origin, extent) {
+                    continue;
+                }
+                if on_lattice(member) {
+                    for range in receivers.rows_near(r.centre, extent) {
+                        let reached = range.filter(|&j| takes_it(index[j], &receivers.members[j]));
+                        to.extend(reached.map(|j| index[j]));
+                    }
+                } else if self.takes[m] && takes_it(m, member) {
+                    to.push(m);
+                }
+                if to.is_empty() {
+                    continue;
+                }
+                let k_at = kernel.for_sample(r.shift, r.gradient);
+                let mut lenders = 0.0;
+                for q in grid.on_lattice(r.centre, extent, g) {
+                    let other = &grid.members[q as usize];
+                    if !other.covered && within(other) && views.sees((q as usize, other), r) {
+                        lenders += other.n * k_at.at(r.centre - other.at);
+                    }
+                }
+                let lent = r.lent();
+                let y = f64::from(luminance(lent));
+                for &q in &to {
+                    let other = &grid.members[q];
+                    let k = k_at.at(r.centre - other.at);
+                    // Off the lattice, its own technique adds to the density.
+                    let own = if on_lattice(other) { 0.0 } else { other.n * k };
+                    if k > 0.0 && lenders + own > 0.0 {
+                        pooled[q].add_lit(lent, y, k / (lenders + own), r.hit);
+                    }
+                }
+            }
+        }
+        pooled
+    }
 }
 
 /// How many members a grid's cells hold, summed over every rectangle of cells from the first:

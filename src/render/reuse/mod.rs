@@ -94,6 +94,7 @@
 
 use std::borrow::Borrow;
 use std::f32::consts::SQRT_2;
+use std::ops::Range;
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -1250,7 +1251,7 @@ pub struct Lent {
 /// a site at a depth edge borrows what it sees behind the nearer surface too (module
 /// documentation, "Behind a rim"). The work is spent only on samples that can reach a needy
 /// site.
-pub fn lend<R: Borrow<SiteRecords>>(
+pub fn lend<R: Borrow<SiteRecords> + Sync>(
     (kernel, nearest): (&Kernel, Option<&Nearest>),
     (x0, y0): (usize, usize),
     (width, height): (usize, usize),
@@ -1278,7 +1279,7 @@ pub fn lend<R: Borrow<SiteRecords>>(
 /// coverage marked by [`mark_covered`]): where windows overlap, each site is worked out once
 /// rather than once per window. `needy` is taken as given: the caller decides it with
 /// [`borrows`] where sites may borrow, as [`lend`] does.
-pub fn lend_sites<R: Borrow<SiteRecords>>(
+pub fn lend_sites<R: Borrow<SiteRecords> + Sync>(
     (kernel, nearest): (&Kernel, Option<&Nearest>),
     (x0, y0): (usize, usize),
     (width, height): (usize, usize),
@@ -1341,9 +1342,23 @@ fn taking_part<R: Borrow<SiteRecords>>(
     receivers.grown(2.0 * lent_extent + 2.0)
 }
 
+/// `members` in two runs of about half the `work` each.
+fn halves(members: &[Member], work: impl Fn(&Member) -> f64) -> [Range<usize>; 2] {
+    let each: Vec<f64> = members.iter().map(work).collect();
+    let total: f64 = each.iter().sum();
+    let mut sum = 0.0;
+    let split = (each.iter())
+        .position(|w| {
+            sum += w;
+            2.0 * sum > total
+        })
+        .map_or(members.len(), |i| i + 1);
+    [0..split, split..members.len()]
+}
+
 /// The lending of [`lend`] once the members of the window are known, in `grid`, their
 /// coverage marked.
-fn lend_within<R: Borrow<SiteRecords>>(
+fn lend_within<R: Borrow<SiteRecords> + Sync>(
     (kernel, nearest): (&Kernel, Option<&Nearest>),
     grid: &Grid,
     records: &[R],
@@ -1351,9 +1366,6 @@ fn lend_within<R: Borrow<SiteRecords>>(
 ) -> Result<Lent, MemoryError> {
     let mut out = unlent(own)?;
     let reach = kernel.reach();
-    let mut pooled = vec![Estimate::default(); grid.members.len()];
-    // Scratch for the receivers of one sample: at most every member.
-    let mut near = vec![(0.0, 0, 0.0); grid.members.len()];
     // A sample farther from every receiver than its footprint reaches gives nothing: where
     // only part of the window borrows (a bucket among its neighbours), most are skipped.
     let receivers = Bounds::around(
@@ -1361,18 +1373,55 @@ fn lend_within<R: Borrow<SiteRecords>>(
             .filter(|m| m.needy && !m.covered)
             .map(|m| m.at),
     );
-    // Lent in pixel order (the grid's pixel index), so each receiver adds its samples in an
-    // order that does not depend on the grid.
-    for (m, member) in grid.members.iter().enumerate() {
-        if member.covered {
-            continue;
+    // The lenders in pixel order (the grid's pixel index), so each receiver adds its samples
+    // in an order that does not depend on the grid, in parts summed apart and merged in
+    // order: a window is a thread's longest task, and the last of a frame's leave the other
+    // threads idle unless they can take a part. The parts are fixed by the samples, not the
+    // threads, so the image is the same for any thread count.
+    let lend_part = |part: Range<usize>| {
+        let mut pooled = vec![Estimate::default(); grid.members.len()];
+        // Scratch for the receivers of one sample: at most every member.
+        let mut near = vec![(0.0, 0, 0.0); grid.members.len()];
+        for (m, member) in grid
+            .members
+            .iter()
+            .enumerate()
+            .take(part.end)
+            .skip(part.start)
+        {
+            if member.covered {
+                continue;
+            }
+            let samples = records[member.p].borrow().list.iter();
+            for r in samples.filter(|r| member.lends(r) && receivers.reached_by(r, reach)) {
+                lend_one(kernel, grid, (m, r), &mut near, &mut pooled);
+            }
         }
-        let samples = records[member.p].borrow().list.iter();
-        for r in samples.filter(|r| member.lends(r) && receivers.reached_by(r, reach)) {
-            lend_one(kernel, grid, (m, r), &mut near, &mut pooled);
+        pooled
+    };
+    // A lender's sample visits every member within its reach (about as many wherever the
+    // lattice suits its blur), any other only its own site.
+    let work = |m: &Member| -> f64 {
+        let list = &records[m.p].borrow().list;
+        let lender = |r: &Record| m.lattice & (spacing(r.shift.abs()) - 1) == 0;
+        let each = |r: &Record| if lender(r) { 1.0 } else { 0.05 };
+        let lent = |r: &&Record| m.lends(r) && receivers.reached_by(r, reach);
+        if m.covered {
+            0.0
+        } else {
+            list.iter().filter(lent).map(each).sum()
         }
+    };
+    let [first, second] = halves(&grid.members, work);
+    // What lies behind is lent beside it.
+    let lend_behind = || nearest.map(|nearest| behind::lend_behind(kernel, grid, records, nearest));
+    let ((mut pooled, later), behind) = rayon::join(
+        || rayon::join(|| lend_part(first), || lend_part(second)),
+        lend_behind,
+    );
+    for (p, l) in pooled.iter_mut().zip(&later) {
+        p.merge(l);
     }
-    let behind = nearest.map(|nearest| behind::lend_behind(kernel, grid, records, nearest));
     for (m, (member, lent)) in grid.members.iter().zip(pooled).enumerate() {
         if member.needy && !member.covered && lent.n > 0 && lent.mean().is_finite() {
             let site = records[member.p].borrow();
