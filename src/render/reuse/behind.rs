@@ -128,7 +128,8 @@ struct Views<'a> {
     outer: f32,
     /// Where to stop marching: past the farthest shift the depth pass holds.
     farthest: f32,
-    /// Boxed: only the few members near a rim are ever asked, and every window asks.
+    /// Each member's view once marched. Boxed: most members (all but those near a rim) are
+    /// never asked, and hold a pointer's worth. Both parts of a window's lending share them.
     cells: Vec<OnceLock<Box<[f32; VIEW * VIEW]>>>,
 }
 
@@ -567,8 +568,7 @@ mod tests {
         let nearest = Nearest::new((size, size), vec![8.0; size * size]);
         // A rim site (nearest surface of shift 3) and a lender beside it, both on the
         // lattice of shift 8 (every fourth pixel), each with samples of shift 8 around the
-        // rim site.
-        // Members are placed by their pixel index, which indexes the records too.
+        // rim site. Members are placed by their pixel index, which indexes the records too.
         let rim = Member {
             p: 16 * size + 16,
             ..member(Vec2::new(16.5, 16.5), (2.5, 3.5))

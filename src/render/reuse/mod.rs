@@ -1342,7 +1342,8 @@ fn taking_part<R: Borrow<SiteRecords>>(
     receivers.grown(2.0 * lent_extent + 2.0)
 }
 
-/// `members` in two runs of about half the `work` each.
+/// `members` in two runs of about half the `work` each (the second may be empty: no work,
+/// or most of it in the last member).
 fn halves(members: &[Member], work: impl Fn(&Member) -> f64) -> [Range<usize>; 2] {
     let each: Vec<f64> = members.iter().map(work).collect();
     let total: f64 = each.iter().sum();
@@ -1382,13 +1383,8 @@ fn lend_within<R: Borrow<SiteRecords> + Sync>(
         let mut pooled = vec![Estimate::default(); grid.members.len()];
         // Scratch for the receivers of one sample: at most every member.
         let mut near = vec![(0.0, 0, 0.0); grid.members.len()];
-        for (m, member) in grid
-            .members
-            .iter()
-            .enumerate()
-            .take(part.end)
-            .skip(part.start)
-        {
+        for m in part {
+            let member = &grid.members[m];
             if member.covered {
                 continue;
             }
