@@ -266,18 +266,8 @@ pub(super) fn lend_behind<R: Borrow<SiteRecords> + Sync>(
         let extent = kernel.reach().of(r.shift);
         lending.occupied.any_near(r.centre - grid.origin, extent)
     };
-    let work = |m: &Member| -> f64 {
-        let list = &records[m.p].borrow().list;
-        let lender = |r: &Record| m.lattice & (lattice(r.shift) - 1) == 0;
-        let each = |r: &Record| if lender(r) { 1.0 } else { 0.05 };
-        let lent = |r: &&Record| lent_behind(r) && near(r);
-        if m.covered {
-            0.0
-        } else {
-            list.iter().filter(lent).map(each).sum()
-        }
-    };
-    let [first, second] = super::halves(&grid.members, work);
+    let lent = |_: &Member, r: &Record| lent_behind(r) && near(r);
+    let [first, second] = super::halves((&grid.members, records), lattice, lent);
     let (mut pooled, later) = rayon::join(
         || lending.part(records, first),
         || lending.part(records, second),
@@ -422,20 +412,22 @@ impl Occupancy {
 /// the rest where a site happened to see none of it would weigh the lending surfaces too
 /// much.
 pub(super) fn rest_with(far: Estimate, site: &SiteRecords, member: &Member) -> Estimate {
-    let rest = || site.list.iter().filter(|r| !member.lends(r));
-    let far = match super::own_part_of(|| rest().filter(|r| member.lends_behind(r))) {
+    let (lending, kept): (Vec<&Record>, Vec<&Record>) = (site.list.iter())
+        .filter(|r| !member.lends(r))
+        .partition(|r| member.lends_behind(r));
+    let far = match super::own_part_of(|| lending.iter().copied()) {
         Some((mean, variance)) => far.plus(mean, variance),
         None => far,
     };
-    let lending = rest().filter(|r| member.lends_behind(r)).count();
-    let mut others = Estimate::default();
-    for r in rest().filter(|r| !member.lends_behind(r)) {
-        others.add(r.radiance, 1.0, r.hit);
-    }
-    if others.n == 0 {
+    if kept.is_empty() {
         return far;
     }
-    far.blend(lending as f32 / (lending as f32 + others.n as f32), others)
+    let share = lending.len() as f32 / (lending.len() + kept.len()) as f32;
+    let mut others = Estimate::default();
+    for r in kept {
+        others.add(r.radiance, 1.0, r.hit);
+    }
+    far.blend(share, others)
 }
 
 /// The lattice spacing of the sites that lend samples of shift `s` of what lies behind a

@@ -1342,9 +1342,26 @@ fn taking_part<R: Borrow<SiteRecords>>(
     receivers.grown(2.0 * lent_extent + 2.0)
 }
 
-/// `members` in two runs of about half the `work` each (the second may be empty: no work,
-/// or most of it in the last member).
-fn halves(members: &[Member], work: impl Fn(&Member) -> f64) -> [Range<usize>; 2] {
+/// `members` in two runs of about half their lending work each (the second may be empty: no
+/// work, or most of it in the last member). A member's work counts its samples that `lent`
+/// keeps: 1 for each it lends on the lattice of spacing `lattice(shift)` (it visits every
+/// member within its reach, about as many wherever the lattice suits its blur), a twentieth
+/// for each that goes to its own site alone.
+fn halves<R: Borrow<SiteRecords>>(
+    (members, records): (&[Member], &[R]),
+    lattice: fn(f32) -> usize,
+    lent: impl Fn(&Member, &Record) -> bool,
+) -> [Range<usize>; 2] {
+    let work = |m: &Member| -> f64 {
+        let on_lattice = |r: &Record| m.lattice & (lattice(r.shift) - 1) == 0;
+        let list = &records[m.p].borrow().list;
+        let kept = list.iter().filter(|r| lent(m, r));
+        if m.covered {
+            0.0
+        } else {
+            kept.map(|r| if on_lattice(r) { 1.0 } else { 0.05 }).sum()
+        }
+    };
     let each: Vec<f64> = members.iter().map(work).collect();
     let total: f64 = each.iter().sum();
     let mut sum = 0.0;
@@ -1395,20 +1412,8 @@ fn lend_within<R: Borrow<SiteRecords> + Sync>(
         }
         pooled
     };
-    // A lender's sample visits every member within its reach (about as many wherever the
-    // lattice suits its blur), any other only its own site.
-    let work = |m: &Member| -> f64 {
-        let list = &records[m.p].borrow().list;
-        let lender = |r: &Record| m.lattice & (spacing(r.shift.abs()) - 1) == 0;
-        let each = |r: &Record| if lender(r) { 1.0 } else { 0.05 };
-        let lent = |r: &&Record| m.lends(r) && receivers.reached_by(r, reach);
-        if m.covered {
-            0.0
-        } else {
-            list.iter().filter(lent).map(each).sum()
-        }
-    };
-    let [first, second] = halves(&grid.members, work);
+    let lent = |m: &Member, r: &Record| m.lends(r) && receivers.reached_by(r, reach);
+    let [first, second] = halves((&grid.members, records), spacing, lent);
     // What lies behind is lent beside it.
     let lend_behind = || nearest.map(|nearest| behind::lend_behind(kernel, grid, records, nearest));
     let ((mut pooled, later), behind) = rayon::join(
