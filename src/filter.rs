@@ -121,7 +121,7 @@ impl PixelFilter {
                 ((bin as f64 + frac) / CDF_TABLE as f64 - 0.5) as f32 * self.width
             })
             .collect();
-        FilterSampler { inverse }
+        FilterSampler::new(inverse)
     }
 }
 
@@ -153,14 +153,48 @@ const CDF_TABLE: usize = 1024;
 /// Entries of the tabulated inverse CDF.
 const INVERSE_TABLE: usize = 1024;
 
+/// Cells of [`FilterSampler::density`]'s index over the support.
+const DENSITY_CELLS: usize = 4096;
+
 /// Draws sample offsets from a [`PixelFilter`] by its tabulated inverse CDF.
 #[derive(Debug, Clone)]
 pub struct FilterSampler {
     /// Offsets in pixels at probabilities k / INVERSE_TABLE, k = 0..=INVERSE_TABLE.
     inverse: Vec<f32>,
+    /// For each of [`DENSITY_CELLS`] even cells of the support, the interval of `inverse`
+    /// that holds the cell's start: where [`FilterSampler::density`] starts looking, a step
+    /// or two from the answer (gathering evaluates it ten times a sample).
+    cells: Vec<u16>,
+    /// Cells per pixel of offset.
+    per_px: f32,
 }
 
 impl FilterSampler {
+    /// The sampler of the inverse CDF table `inverse` (INVERSE_TABLE + 1 sorted offsets).
+    fn new(inverse: Vec<f32>) -> Self {
+        let (lo, hi) = (inverse[0], inverse[INVERSE_TABLE]);
+        let per_px = if hi > lo {
+            DENSITY_CELLS as f32 / (hi - lo)
+        } else {
+            0.0
+        };
+        let mut k = 0;
+        let cells = (0..DENSITY_CELLS)
+            .map(|c| {
+                let start = lo + c as f32 / per_px;
+                while k + 1 < INVERSE_TABLE && inverse[k + 1] <= start {
+                    k += 1;
+                }
+                k as u16
+            })
+            .collect();
+        Self {
+            inverse,
+            cells,
+            per_px,
+        }
+    }
+
     /// The offset from the pixel centre, in pixels, for a uniform number `u` in [0, 1): its
     /// density is the filter's 1D profile (to the resolution of a 1024-entry table; exact for
     /// the box).
@@ -180,7 +214,16 @@ impl FilterSampler {
         if !(d >= inv[0] && d < inv[INVERSE_TABLE]) {
             return 0.0;
         }
-        let k = inv.partition_point(|&x| x <= d).clamp(1, INVERSE_TABLE) - 1;
+        // The last entry at or below d (at most INVERSE_TABLE - 1, as d < inv[INVERSE_TABLE]),
+        // found from its cell's start: exactly what a binary search over the table gives.
+        let cell = (((d - inv[0]) * self.per_px) as usize).min(DENSITY_CELLS - 1);
+        let mut k = usize::from(self.cells[cell]);
+        while k > 0 && inv[k] > d {
+            k -= 1;
+        }
+        while k + 1 < INVERSE_TABLE && inv[k + 1] <= d {
+            k += 1;
+        }
         let span = inv[k + 1] - inv[k];
         if span > 0.0 {
             1.0 / (INVERSE_TABLE as f32 * span)
@@ -227,6 +270,46 @@ mod tests {
                 .count() as f32
                 / n as f32;
             assert!((third - share).abs() < 2e-3, "{kind:?}: {third} vs {share}");
+        }
+    }
+
+    /// The indexed lookup finds the interval a binary search over the table finds, on and
+    /// next to every entry and between them.
+    #[test]
+    fn the_density_lookup_is_the_tables() {
+        let searched = |s: &FilterSampler, d: f32| {
+            let inv = &s.inverse;
+            if !(d >= inv[0] && d < inv[INVERSE_TABLE]) {
+                return 0.0;
+            }
+            let k = inv.partition_point(|&x| x <= d).clamp(1, INVERSE_TABLE) - 1;
+            let span = inv[k + 1] - inv[k];
+            if span > 0.0 {
+                1.0 / (INVERSE_TABLE as f32 * span)
+            } else {
+                0.0
+            }
+        };
+        for kind in [
+            PixelFilterKind::Box,
+            PixelFilterKind::Gaussian,
+            PixelFilterKind::BlackmanHarris,
+        ] {
+            for width in [1.0, 2.0, 3.0] {
+                let s = PixelFilter { kind, width }.sampler();
+                let mut ds: Vec<f32> = Vec::new();
+                for &x in &s.inverse {
+                    let bits = x.to_bits();
+                    ds.extend([x, f32::from_bits(bits.wrapping_add(1))]);
+                    ds.push(f32::from_bits(bits.wrapping_sub(1)));
+                    ds.extend([-x, x * 0.999_9]);
+                }
+                ds.extend((0..20_000).map(|i| (i as f32 / 20_000.0 - 0.5) * 1.1 * width));
+                for d in ds {
+                    let (got, want) = (s.density(d), searched(&s, d));
+                    assert_eq!(got.to_bits(), want.to_bits(), "{kind:?} {width} at {d}");
+                }
+            }
         }
     }
 

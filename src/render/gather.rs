@@ -143,17 +143,22 @@ impl<'a> Gather<'a> {
             })
         };
         let (fx, fy) = (along(x, self.width, film.x), along(y, self.height, film.y));
-        // The weight of each receiver, row by row: none where it is no technique (or outside).
-        let weights: [f32; SLOTS] = std::array::from_fn(|k| {
-            let (i, j) = (k % SIDE, k / SIDE);
-            let f = fx[i] * fy[j];
-            if f > 0.0 && self.takes_part((x + i - REACH, y + j - REACH)) {
-                f
-            } else {
-                0.0
+        // The receivers' weights, row by row: none where it is no technique (or outside).
+        // Only the few taps inside the filter's support are visited (3 x 3 of the 5 x 5 for
+        // the 3 px filters), in the same order, so the sums are the same to the bit.
+        let mut weights = [(0usize, 0.0f32); SLOTS];
+        let mut len = 0;
+        let mut total = 0.0f32;
+        for (j, &wy) in fy.iter().enumerate().filter(|(_, w)| **w > 0.0) {
+            for (i, &wx) in fx.iter().enumerate().filter(|(_, w)| **w > 0.0) {
+                let f = wx * wy;
+                if f > 0.0 && self.takes_part((x + i - REACH, y + j - REACH)) {
+                    weights[len] = (j * SIDE + i, f);
+                    len += 1;
+                    total += f;
+                }
             }
-        });
-        let total: f32 = weights.iter().sum();
+        }
         // The site's own pixel always weighs the sample (it drew it from its filter).
         if total.is_nan() || total <= 0.0 {
             return;
@@ -164,10 +169,8 @@ impl<'a> Gather<'a> {
             light: (value * w).extend(w),
             cover: Vec2::new(hits, seen),
         } * (1.0 / total);
-        for (slot, &f) in slots.iter_mut().zip(&weights) {
-            if f > 0.0 {
-                *slot += sample * f;
-            }
+        for &(k, f) in &weights[..len] {
+            slots[k] += sample * f;
         }
     }
 
