@@ -313,6 +313,7 @@ impl Lending<'_> {
                 let g = lattice(r.shift);
                 let on_lattice = |q: &Member| q.lattice & (g - 1) == 0;
                 let extent = reach.of(r.shift);
+                let half = reach.box_of(r.shift);
                 let within = |q: &Member| (r.centre - q.at).length_squared() < extent * extent;
                 let takes_it = |q: usize, other: &Member| {
                     within(other) && other.behind(r) && views.sees((q, other), r)
@@ -324,7 +325,7 @@ impl Lending<'_> {
                     continue;
                 }
                 if on_lattice(member) {
-                    for range in receivers.rows_near(r.centre, extent) {
+                    for range in receivers.rows_near(r.centre, half) {
                         let reached = range.filter(|&j| takes_it(index[j], &receivers.members[j]));
                         to.extend(reached.map(|j| index[j]));
                     }
@@ -336,7 +337,7 @@ impl Lending<'_> {
                 }
                 let k_at = kernel.for_sample(r.shift, r.gradient);
                 let mut lenders = 0.0;
-                for q in grid.on_lattice(r.centre, extent, g) {
+                for q in grid.on_lattice(r.centre, half, g) {
                     let other = &grid.members[q as usize];
                     if !other.covered && within(other) && views.sees((q as usize, other), r) {
                         lenders += other.n * k_at.at(r.centre - other.at);

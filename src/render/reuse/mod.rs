@@ -197,7 +197,7 @@ impl Record {
     /// How far from its centre its footprint reaches: its blur (at least [`MIN_SHIFT`])
     /// over the aperture plus the filter's.
     fn extent(&self, reach: Reach) -> f32 {
-        self.shift.abs().max(MIN_SHIFT) * reach.outer + reach.filter
+        reach.of(self.shift.abs().max(MIN_SHIFT))
     }
 
     /// The part of its radiance that holds along its whole trajectory: what it lends.
@@ -307,19 +307,30 @@ enum Form {
 
 /// How far a sample's footprint reaches from its centre: `|s| outer + filter` pixels. The
 /// kernel is cut round there: the filter's corners reach a little farther, with little of
-/// its mass.
+/// its mass. Along each axis it also lies within `|s| half + filter` (an oval or a bladed
+/// aperture is narrower one way than its outer radius), which bounds the members a sample's
+/// lending visits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reach {
     /// The filter's part: its half width.
     filter: f32,
     /// The aperture's farthest point from the lens centre, lens units.
     outer: f32,
+    /// The aperture's half width and half height, lens units.
+    half: Vec2,
 }
 
 impl Reach {
     /// The footprint of a sample of signed shift `shift`.
     fn of(&self, shift: f32) -> f32 {
         shift.abs() * self.outer + self.filter
+    }
+
+    /// Half the sides of the box that holds the footprint of a sample of signed shift `shift`
+    /// (the filter's support is square, the aperture within `[-half, half]`), at most the
+    /// round footprint's ([`Reach::of`]) each way.
+    fn box_of(&self, shift: f32) -> Vec2 {
+        (self.half * shift.abs() + self.filter).min(Vec2::splat(self.of(shift)))
     }
 }
 
@@ -338,6 +349,7 @@ impl Kernel {
         let reach = Reach {
             filter: f.reach(),
             outer: aperture.outer_radius(),
+            half: aperture.half_extents(),
         };
         let form = if aperture.is_round() {
             Form::Disc(Self::disc(f))
@@ -674,8 +686,8 @@ impl Grid {
 
     /// The members within `radius` of `c` at pixels whose coordinates in the image are
     /// multiples of `g` (a superset: a square).
-    fn on_lattice(&self, c: Vec2, radius: f32, g: usize) -> impl Iterator<Item = u32> + '_ {
-        let span = |v: f32, origin: f32, n: usize| {
+    fn on_lattice(&self, c: Vec2, half: Vec2, g: usize) -> impl Iterator<Item = u32> + '_ {
+        let span = |v: f32, radius: f32, origin: f32, n: usize| {
             let lo = ((v - 0.5 - radius) / g as f32).ceil().max(0.0) as usize * g;
             let hi = ((v - 0.5 + radius) / g as f32).floor();
             let end = origin as usize + n;
@@ -688,8 +700,8 @@ impl Grid {
         };
         let (w, h) = self.size;
         let (ox, oy) = (self.origin.x as usize, self.origin.y as usize);
-        let xs = span(c.x, self.origin.x, w);
-        span(c.y, self.origin.y, h).flat_map(move |y| {
+        let xs = span(c.x, half.x, self.origin.x, w);
+        span(c.y, half.y, self.origin.y, h).flat_map(move |y| {
             xs.clone().filter_map(move |x| {
                 let p = (y - oy) * w + (x - ox);
                 let i = self.before[p];
@@ -739,15 +751,16 @@ impl Grid {
         })
     }
 
-    /// The members at the pixels whose centres may lie within `radius` of `c` (a superset:
-    /// those of the bounding square), a range of their indices per row of pixels.
-    fn rows_near(&self, c: Vec2, radius: f32) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+    /// The members at the pixels whose centres may lie within `half` of `c` along each axis
+    /// (a superset: the box rounded out), a range of their indices per row of pixels.
+    fn rows_near(&self, c: Vec2, half: Vec2) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
         let (w, h) = self.size;
         let c = c - self.origin;
         // Pixel `i`'s centre is at `i + 0.5`: those from `first` to `last` lie within `r` of
         // `v` (a pixel more each side: the bounds are rounded outwards).
+        // A box may lie wholly past the window's far side (an oval's narrow way): empty.
         let span = |v: f32, r: f32, n: usize| {
-            let first = (v - 0.5 - r).floor().max(0.0) as usize;
+            let first = ((v - 0.5 - r).floor().max(0.0) as usize).min(n);
             let last = (v - 0.5 + r).ceil();
             let end = if last < 0.0 {
                 0
@@ -756,10 +769,10 @@ impl Grid {
             };
             first..end.max(first)
         };
-        // The bounding square's columns, every row: members in its corners are visited in
-        // vain, cheaper (eight at a time) than a square root and a span per row.
-        let xs = span(c.x, radius, w);
-        span(c.y, radius, h).filter_map(move |y| {
+        // The bounding box's columns, every row: members in its corners are visited in vain,
+        // cheaper (eight at a time) than a square root and a span per row.
+        let xs = span(c.x, half.x, w);
+        span(c.y, half.y, h).filter_map(move |y| {
             let row = &self.before[y * w..];
             let members = row[xs.start] as usize..row[xs.end] as usize;
             (!members.is_empty()).then_some(members)
@@ -794,6 +807,7 @@ fn lend_one(
 ) {
     let s = r.shift.abs();
     let extent = kernel.reach().of(s);
+    let half = kernel.reach().box_of(s);
     let members = &grid.members;
     let me = &members[m];
     let g = spacing(s);
@@ -833,7 +847,7 @@ fn lend_one(
             kernel: &k_at,
         };
         let mut block = lanes::Block::default();
-        for range in grid.rows_near(r.centre, extent) {
+        for range in grid.rows_near(r.centre, half) {
             for start in range.clone().step_by(lanes::LANES) {
                 let valid = (range.end - start).min(lanes::LANES);
                 sample.block(&grid.columns, start, valid, &mut block);
@@ -850,7 +864,7 @@ fn lend_one(
     } else {
         // Any other sample goes to its own site alone (a needy one, above): only the
         // lenders' kernels and its site's are needed.
-        for q in grid.on_lattice(r.centre, extent, g) {
+        for q in grid.on_lattice(r.centre, half, g) {
             let other = &members[q as usize];
             if !role(other).1 {
                 continue;
@@ -996,7 +1010,7 @@ fn covered<'a, R: Borrow<SiteRecords>>(
     for r in unclear.flat_map(|r| r.list.iter().filter(|r| near(r))) {
         let extent = r.extent(reach);
         let mut crosses = false;
-        for range in grid.rows_near(r.centre, extent) {
+        for range in grid.rows_near(r.centre, Vec2::splat(extent)) {
             for start in range.clone().step_by(lanes::LANES) {
                 let valid = (range.end - start).min(lanes::LANES);
                 let sample = (r.centre, r.shift, extent);
@@ -1030,7 +1044,7 @@ fn hidden_surfaces(
     let each = |f: &mut dyn FnMut(usize, &Record)| {
         for r in crossing {
             let extent = r.extent(reach);
-            for range in grid.rows_near(r.centre, extent) {
+            for range in grid.rows_near(r.centre, Vec2::splat(extent)) {
                 for q in range {
                     let m = &grid.members[q];
                     let d2 = (r.centre - m.at).length_squared();
@@ -1465,6 +1479,88 @@ mod tests {
     /// A uniform number in [0, 1) from a counter.
     fn uniform(i: u64) -> f32 {
         (hash64(i) >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    /// A sample's lending visits only the members in [`Reach::box_of`]'s box: beyond it, in
+    /// the round footprint's square, every aperture's kernel is nothing (at most a millionth
+    /// of its peak, where a tabulated rim's nearest node lies inside), so the box visits every
+    /// member that takes or weighs a sample, at any shift, either sign, on a slant.
+    #[test]
+    fn the_kernel_is_nothing_outside_its_box() {
+        let shapes = crate::camera::aperture::test_shapes();
+        for kind in [PixelFilterKind::Box, PixelFilterKind::BlackmanHarris] {
+            for shape in &shapes {
+                let k = Kernel::new(&PixelFilter::new(kind).density(), shape);
+                for (s, gradient) in [
+                    (0.7f32, Vec2::ZERO),
+                    (-3.0, Vec2::ZERO),
+                    (9.5, Vec2::new(0.2, -0.1)),
+                    (-40.0, Vec2::ZERO),
+                ] {
+                    let (extent, half) = (k.reach().of(s), k.reach().box_of(s));
+                    assert!(half.x <= extent && half.y <= extent, "{shape:?} {s}");
+                    let kernel = k.for_sample(s, gradient);
+                    let steps = 200;
+                    let mut outside = 0;
+                    let at = |i: usize, j: usize| {
+                        (Vec2::new(i as f32, j as f32) / steps as f32 * 2.0 - 1.0) * extent
+                    };
+                    let peak = (0..=steps)
+                        .flat_map(|i| (0..=steps).map(move |j| (i, j)))
+                        .map(|(i, j)| kernel.at(at(i, j)))
+                        .fold(0.0f32, f32::max);
+                    for i in 0..=steps {
+                        for j in 0..=steps {
+                            let d = at(i, j);
+                            if d.x.abs() <= half.x && d.y.abs() <= half.y {
+                                continue;
+                            }
+                            outside += 1;
+                            let v = kernel.at(d);
+                            assert!(v <= 1e-6 * peak, "{kind:?} {shape:?} s {s} at {d}: {v}");
+                        }
+                    }
+                    // The oval's and the stretched blades' boxes are narrower one way.
+                    if shape.half_extents().min_element() < 0.9 * shape.outer_radius() {
+                        assert!(outside > 0, "{shape:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// A box that lies past a window's far side holds no rows (an oval's narrow way can leave
+    /// the window where its round footprint does not).
+    #[test]
+    fn a_box_past_the_window_holds_no_members() {
+        let member = |p: usize| Member {
+            p,
+            lattice: (p % 8) | (p / 8),
+            at: Vec2::new((p % 8) as f32, (p / 8) as f32) + 0.5,
+            n: 16.0,
+            lo: 1.0,
+            hi: 2.0,
+            gradient: Vec2::ZERO,
+            needy: true,
+            covered: false,
+            hidden: false,
+        };
+        let grid = Grid::new(Vec2::ZERO, (8, 8), (0..64).map(member).collect());
+        assert_eq!(
+            grid.rows_near(Vec2::new(20.0, 4.0), Vec2::new(2.0, 9.0))
+                .count(),
+            0
+        );
+        assert_eq!(
+            grid.rows_near(Vec2::new(4.0, -9.0), Vec2::new(9.0, 2.0))
+                .count(),
+            0
+        );
+        let all: usize = grid
+            .rows_near(Vec2::new(4.0, 4.0), Vec2::new(9.0, 9.0))
+            .map(|r| r.len())
+            .sum();
+        assert_eq!(all, 64);
     }
 
     #[test]

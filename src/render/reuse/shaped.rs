@@ -324,6 +324,7 @@ mod tests {
         Reach {
             filter: f.reach(),
             outer: shape.outer_radius(),
+            half: shape.half_extents(),
         }
     }
 
