@@ -64,6 +64,25 @@ pub(crate) struct Prepared {
 }
 
 pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
+    let threads = a.threads.map(usize::from);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads.unwrap_or(0))
+        .build()
+        .context("cannot start worker threads")?;
+    // Every worker runs once before anything large is allocated: a thread maps its stack,
+    // its signal stack and its allocator arena as it starts, and one that started only when
+    // the scene had taken the address space left (`ulimit -v`) aborted the process (std
+    // panics when it cannot map a signal stack; with RUST_BACKTRACE set, the panic's
+    // backtrace then waited forever on a lock its own failed allocation held).
+    pool.broadcast(|_| ());
+    // Loading and building run on those workers too, never on rayon's global pool, which
+    // would start its own threads there.
+    pool.install(|| prepare_on(a, threads))
+        .map(|renderer| Prepared { renderer, pool })
+}
+
+/// [`prepare`]'s scene, loaded and built on the current rayon pool.
+fn prepare_on(a: &SceneArgs, threads: Option<usize>) -> Result<Renderer> {
     let defaults = dofray::scene::LoadOptions::default();
     let options = dofray::scene::LoadOptions {
         allow_outside_paths: a.allow_outside_paths,
@@ -79,11 +98,6 @@ pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
         ..defaults
     };
     let desc = dofray::scene::load_with(&a.scene, &options)?;
-    let threads = a.threads.map(usize::from);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")?;
     // Embree's own thread pool (BVH builds) gets the same bound as rayon's.
     let device = match threads {
         Some(n) => Device::with_threads(n),
@@ -95,5 +109,5 @@ pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
     for warning in &renderer.desc().warnings {
         eprintln!("warning: {warning}");
     }
-    Ok(Prepared { renderer, pool })
+    Ok(renderer)
 }
