@@ -684,8 +684,8 @@ impl Grid {
         })
     }
 
-    /// The members within `radius` of `c` at pixels whose coordinates in the image are
-    /// multiples of `g` (a superset: a square).
+    /// The members within `half` of `c` along each axis at pixels whose coordinates in the
+    /// image are multiples of `g` (a superset: the box).
     fn on_lattice(&self, c: Vec2, half: Vec2, g: usize) -> impl Iterator<Item = u32> + '_ {
         let span = |v: f32, radius: f32, origin: f32, n: usize| {
             let lo = ((v - 0.5 - radius) / g as f32).ceil().max(0.0) as usize * g;
