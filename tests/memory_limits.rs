@@ -18,13 +18,19 @@ const LIMIT_KIB: u64 = 3_000_000;
 
 /// `dofray args...` under `ulimit -v kib`.
 fn dofray_limited(kib: u64, args: &[&str]) -> Output {
-    Command::new("sh")
+    limited(kib, "", args).output().expect("sh runs")
+}
+
+/// The command that runs `wrapper dofray args...` (`wrapper` empty or ending in a space)
+/// under `ulimit -v kib`.
+fn limited(kib: u64, wrapper: &str, args: &[&str]) -> Command {
+    let mut command = Command::new("sh");
+    command
         .arg("-c")
-        .arg(format!("ulimit -v {kib} && exec \"$0\" \"$@\""))
+        .arg(format!("ulimit -v {kib} && exec {wrapper}\"$0\" \"$@\""))
         .arg(env!("CARGO_BIN_EXE_dofray"))
-        .args(args)
-        .output()
-        .expect("sh runs")
+        .args(args);
+    command
 }
 
 fn scratch(name: &str) -> Scratch {
@@ -114,14 +120,7 @@ fn a_bvh_build_the_limit_refuses_fails_without_terminating() {
     for kib in (300_000..=500_000).step_by(10_000) {
         for backtrace in [false, true] {
             let args = ["render", "--width", "64", "--spp", "4", "--json", "-o", out];
-            let mut command = Command::new("sh");
-            command
-                .arg("-c")
-                .arg(format!(
-                    "ulimit -v {kib} && exec timeout -s KILL 60 \"$0\" \"$@\""
-                ))
-                .arg(env!("CARGO_BIN_EXE_dofray"))
-                .args(args);
+            let mut command = limited(kib, "timeout -s KILL 60 ", &args);
             if backtrace {
                 command.env("RUST_BACKTRACE", "1");
             } else {

@@ -1008,6 +1008,9 @@ fn covered<'a, R: Borrow<SiteRecords>>(
         .map(Borrow::borrow)
         .filter(|r| r.list.iter().any(near) && !grid.nearer_than_none_of(&r.list, reach));
     for r in unclear.flat_map(|r| r.list.iter().filter(|r| near(r))) {
+        // Coverage is judged on the round footprint (its square of members), as it always
+        // was, not on the narrower box lending visits: which sites count as covered decides
+        // who lends and borrows, so the box there would change the image, not only its cost.
         let extent = r.extent(reach);
         let mut crosses = false;
         for range in grid.rows_near(r.centre, Vec2::splat(extent)) {
