@@ -4,6 +4,10 @@
 //! their ratio is the real lens's cost per ray relative to the thin lens. The cost of a
 //! render adds tracing and shading on top of it (`dofray bench`).
 //!
+//! `real_lens_build` is what placing a real lens costs, once a camera (and again for every
+//! focus distance of an animation): the exit pupil bounds, the traced blur table and the
+//! chief rays, on the machine's threads.
+//!
 //! Run with `cargo bench --bench lenses`.
 
 use std::hint::black_box;
@@ -61,6 +65,30 @@ fn make_rays(camera: &Camera, samples: &[[[f32; LANES]; 4]]) -> f32 {
     sum
 }
 
+/// The camera of each shipped lens, wide open, with `spec()`'s focus and film.
+fn real_lens_specs() -> Vec<(&'static str, CameraSpec)> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses");
+    [
+        "double-gauss-50mm",
+        "wide-22mm",
+        "telephoto-250mm",
+        "fisheye-10mm",
+    ]
+    .map(|name| {
+        let p = Prescription::load(&dir.join(format!("{name}.dat"))).expect("lens file");
+        let spec = CameraSpec {
+            real_lens: Some(RealLensSpec {
+                prescription: Arc::new(p),
+                f_number: None,
+                sensor_width_mm: 36.0,
+            }),
+            ..spec()
+        };
+        (name, spec)
+    })
+    .into()
+}
+
 fn lenses(c: &mut Criterion) {
     let samples = samples();
     let mut group = c.benchmark_group("lens_rays_640x480");
@@ -70,28 +98,25 @@ fn lenses(c: &mut Criterion) {
     group.measurement_time(Duration::from_secs(3));
     let thin = spec().build(|_| None).expect("thin lens");
     group.bench_function("thin", |b| b.iter(|| make_rays(&thin, black_box(&samples))));
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses");
-    for name in [
-        "double-gauss-50mm",
-        "wide-22mm",
-        "telephoto-250mm",
-        "fisheye-10mm",
-    ] {
-        let p = Prescription::load(&dir.join(format!("{name}.dat"))).expect("lens file");
-        let camera = CameraSpec {
-            real_lens: Some(RealLensSpec {
-                prescription: Arc::new(p),
-                f_number: None,
-                sensor_width_mm: 36.0,
-            }),
-            ..spec()
-        }
-        .build(|_| None)
-        .expect("real lens");
+    for (name, spec) in real_lens_specs() {
+        let camera = spec.build(|_| None).expect("real lens");
         group.bench_function(name, |b| b.iter(|| make_rays(&camera, black_box(&samples))));
     }
     group.finish();
 }
 
-criterion_group!(benches, lenses);
+fn lens_builds(c: &mut Criterion) {
+    let mut group = c.benchmark_group("real_lens_build");
+    group.sample_size(10);
+    group.warm_up_time(Duration::from_secs(1));
+    group.measurement_time(Duration::from_secs(5));
+    for (name, spec) in real_lens_specs() {
+        group.bench_function(name, |b| {
+            b.iter(|| black_box(&spec).build(|_| None).expect("real lens"))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, lenses, lens_builds);
 criterion_main!(benches);

@@ -625,3 +625,51 @@ fn points_project_along_the_chief_rays() {
         assert!(camera.project(camera.eye - camera.forward).is_none());
     }
 }
+
+/// The blur bound near a film position ([`Camera::coc_px_at`], what the blur map reads per
+/// pixel) holds the spot traced there, between the table's radii as on them, wide open and
+/// stopped down, and never exceeds the whole film's bound; the telephoto wide open, whose
+/// corners are soft where its centre is sharp, is far sharper by it in the middle of the
+/// frame than the whole film's bound says.
+#[test]
+fn the_blur_bound_near_a_film_position_holds_the_spot_there() {
+    let half_diagonal = 0.5 * 36.0f32.hypot(24.0);
+    for (name, f_number) in [
+        ("double-gauss-50mm.dat", None),
+        ("double-gauss-50mm.dat", Some(5.6)),
+        ("telephoto-250mm.dat", None),
+        ("wide-22mm.dat", None),
+        ("fisheye-10mm.dat", None),
+    ] {
+        let p = lens(name);
+        let focus = 4.0f32;
+        let c = camera(&p, f_number, focus);
+        let l = real(&c);
+        let pitch = 36.0 / c.width as f32;
+        for s in [0.0f32, 0.06, 0.19, 0.33, 0.47, 0.58, 0.71, 0.86, 0.93, 0.97] {
+            let r = s * half_diagonal;
+            // Film x runs opposite to the image's (the image is inverted on the film).
+            let (px, py) = (0.5 * c.width as f32 - r / pitch, 0.5 * c.height as f32);
+            for depth in [0.6f32, 1.5, 3.0, 3.9, focus, 4.1, 6.0, 20.0, 1e4] {
+                let traced = l.blur_px(r, depth);
+                let near = c.coc_px_at(depth, px, py);
+                assert!(
+                    near >= traced,
+                    "{name} f/{f_number:?}: {near} px bound at {s} of the half diagonal, \
+                     {depth} m, where the spot is {traced} px"
+                );
+                assert!(
+                    near <= c.coc_px(depth),
+                    "{name}: above the whole film's bound"
+                );
+            }
+        }
+    }
+    let p = lens("telephoto-250mm.dat");
+    let c = camera(&p, None, 4.0);
+    let (centre, whole) = (c.coc_px_at(4.0, 180.0, 120.0), c.coc_px(4.0));
+    assert!(
+        centre < 0.5 * whole,
+        "in focus: {centre} px at the centre against {whole} px over the film"
+    );
+}

@@ -103,6 +103,11 @@ impl Lens for CameraLens {
         dispatch!(self, l => l.coc_px(camera, depth))
     }
 
+    #[inline]
+    fn coc_px_at(&self, camera: &Camera, depth: f32, film: Vec2) -> f32 {
+        dispatch!(self, l => l.coc_px_at(camera, depth, film))
+    }
+
     fn reprojection(&self, camera: &Camera) -> Option<Reprojection> {
         dispatch!(self, l => l.reprojection(camera))
     }

@@ -100,6 +100,15 @@ pub trait Lens {
     /// vignetting) must still return a bound of its blur's extent, never less.
     fn coc_px(&self, camera: &Camera, depth: f32) -> f32;
 
+    /// [`Lens::coc_px`] for a point at `depth` whose image lies at film position `film`
+    /// (pixels): still a bound, but of the blur near that film position only, where a lens's
+    /// blur changes across the film (a real lens's field curvature and aberrations keep its
+    /// corners soft where its centre is sharp). The bound over the whole film by default.
+    fn coc_px_at(&self, camera: &Camera, depth: f32, film: Vec2) -> f32 {
+        let _ = film;
+        self.coc_px(camera, depth)
+    }
+
     /// How the film image of a scene point moves with the lens position, when it moves
     /// rigidly over an aperture sampled uniformly (what sample reuse,
     /// [`crate::render::reuse`], needs); `None` for any other lens.

@@ -431,6 +431,12 @@ impl Camera {
         self.lens.coc_px(self, depth)
     }
 
+    /// [`Camera::coc_px`] for a point imaged at film position `(px, py)` (pixels): the bound
+    /// of the blur near there ([`Lens::coc_px_at`]), never above the whole film's.
+    pub fn coc_px_at(&self, depth: f32, px: f32, py: f32) -> f32 {
+        self.lens.coc_px_at(self, depth, Vec2::new(px, py))
+    }
+
     /// Distance of the plane in focus along the view axis (may be infinite).
     pub fn focus_distance(&self) -> f32 {
         self.lens.focus_distance()

@@ -338,8 +338,11 @@ fn depth_pass(
                     }
                 }
             }
-            for (c, &d) in coc.iter_mut().zip(depth.iter()) {
-                *c = camera.coc_px(d);
+            // Each pixel's blur bound near its own film position (a real lens's differs
+            // across the film).
+            for (i, (c, &d)) in coc.iter_mut().zip(depth.iter()).enumerate() {
+                let (x, y) = (i % w, y_start + i / w);
+                *c = camera.coc_px_at(d, x as f32 + 0.5, y as f32 + 0.5);
             }
             progress.advance(1);
             local

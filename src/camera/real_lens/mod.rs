@@ -16,12 +16,14 @@
 //!   the rear pupil bound of area `A` at distance `z`, natural vignetting included),
 //!   divided by that of the film's centre: the centre of the frame is exposed as a thin
 //!   lens exposes it, the corners darken as the real lens darkens them.
-//! - **Blur bound.** [`Lens::coc_px`] is a table over inverse depth of the largest spot a
-//!   point at that depth makes anywhere on the film (traced at five film radii through the
-//!   rim of each one's pupil, found by bisection in 32 directions; 5% wider), interpolated
-//!   linearly: spots grow about linearly in inverse depth on either side of focus (a V), so
-//!   the chords of the table stay above them. Nearer than the table it grows with inverse
-//!   depth from the last entry.
+//! - **Blur bound** (`blur_table.rs`). A table over inverse depth and film radius of the
+//!   spot a point at that depth makes there (`spot.rs`: traced at nine film radii through
+//!   the rim of each one's pupil, its extremes found by bisection and a golden-section
+//!   search; 5% wider), linear in inverse depth between knots, one of which is the focus
+//!   distance's. [`Lens::coc_px`] is the largest over the radii; [`Lens::coc_px_at`], what
+//!   the adaptive sampler's blur map reads per pixel, the larger of the two radii that
+//!   bracket the pixel's, so a lens whose centre is sharp and whose corners are soft (field
+//!   curvature, coma) is sampled as sharp in the middle.
 //!
 //! - **Light tracing.** Light paths enter through the front element's clear aperture,
 //!   sampled uniformly by area ([`FrontCap`]), and are traced through the lens to the film
@@ -46,9 +48,12 @@ use super::prescription::Prescription;
 use super::{Camera, CameraError, check};
 use crate::embree::{LANES, Ray};
 
+mod blur_table;
 mod chief;
 mod landing;
+mod spot;
 
+use blur_table::BlurTable;
 use landing::YieldTable;
 
 /// What a scene or program gives for a real lens.
@@ -79,12 +84,6 @@ impl RealLensSpec {
 const PUPIL_BINS: usize = 32;
 /// Grid (per axis) over the rear element that the bounds are found with.
 const PUPIL_GRID: usize = 40;
-/// Inverse-depth entries of the blur table.
-const COC_ENTRIES: usize = 48;
-/// Grid (per axis) that finds a passing pupil point when the bound's middle is blocked.
-const SPOT_GRID: usize = 16;
-/// Directions in which a spot's pupil rim is found.
-const RIM_DIRECTIONS: usize = 32;
 
 /// An axis-aligned rectangle on the rear plane (lens space, mm), for a film point on +x.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -130,9 +129,8 @@ pub struct RealLens {
     pupil: Vec<Bounds>,
     /// Weight of the film's centre (see the module documentation).
     centre_irradiance: f64,
-    /// Blur diameters (px) at inverse depths `k / (COC_ENTRIES - 1) * max_inv_depth`.
-    coc: Vec<f32>,
-    max_inv_depth: f64,
+    /// The blur bound.
+    blur: BlurTable,
     /// tan of half the vertical field of view of the chief rays, at this focus.
     pub tan_half_vfov: f32,
     /// Chief rays (leaving the front of the lens) of film points at increasing radii on +x,
@@ -215,8 +213,7 @@ impl RealLens {
             optics,
             pupil: Vec::new(),
             centre_irradiance: 1.0,
-            coc: Vec::new(),
-            max_inv_depth: 0.0,
+            blur: BlurTable::default(),
             tan_half_vfov: 0.0,
             chief: Vec::new(),
             yields: YieldTable::default(),
@@ -237,7 +234,7 @@ impl RealLens {
             "a film the lens covers (its chief ray reaches the top edge)",
             format!("{} mm with {}", spec.sensor_width_mm, p.name),
         )?;
-        lens.coc_table();
+        lens.blur = lens.blur_table();
         lens.chief = lens.chief_rays();
         Ok(lens)
     }
@@ -271,8 +268,12 @@ impl RealLens {
     /// The ray from film point `f` through pupil position `u` in [0, 1]^2 of its bound, and
     /// the irradiance weight before normalisation; `None` when the lens blocks it.
     fn trace(&self, f: DVec2, u: DVec2) -> Option<(LensRay, f64)> {
+        self.trace_in(self.bounds_at(f.length()), f, u)
+    }
+
+    /// [`RealLens::trace`] through pupil bound `b`, whatever `f`'s own.
+    fn trace_in(&self, b: &Bounds, f: DVec2, u: DVec2) -> Option<(LensRay, f64)> {
         let r = f.length();
-        let b = self.bounds_at(r);
         let area = b.area();
         if area <= 0.0 {
             return None;
@@ -368,122 +369,21 @@ impl RealLens {
         (self.mean_weight(f) / self.centre_irradiance) as f32
     }
 
-    /// Points just inside the rim of the part of film point `f`'s pupil bound that the lens
-    /// passes (in [0, 1]^2 of the bound), in [`RIM_DIRECTIONS`] directions from a passing
-    /// point near its middle; that part is convex (an intersection of the surfaces' discs as
-    /// seen from `f`), so its extent is theirs.
-    fn pupil_rim(&self, f: DVec2) -> Vec<DVec2> {
-        let passes = |u: DVec2| self.trace(f, u).is_some();
-        // A passing point: the middle, else the mean of a coarse grid's passing points.
-        let mut centre = DVec2::splat(0.5);
-        if !passes(centre) {
-            let grid: Vec<DVec2> = (0..SPOT_GRID * SPOT_GRID)
-                .map(|k| {
-                    let (i, j) = (k % SPOT_GRID, k / SPOT_GRID);
-                    (DVec2::new(i as f64, j as f64) + 0.5) / SPOT_GRID as f64
-                })
-                .filter(|&u| passes(u))
-                .collect();
-            if grid.is_empty() {
-                return Vec::new();
-            }
-            centre = grid.iter().sum::<DVec2>() / grid.len() as f64;
-            if !passes(centre) {
-                return grid;
-            }
-        }
-        (0..RIM_DIRECTIONS)
-            .map(|k| {
-                let a = k as f64 / RIM_DIRECTIONS as f64 * std::f64::consts::TAU;
-                let dir = DVec2::new(a.cos(), a.sin());
-                // The farthest step along dir inside the unit square.
-                let reach = [dir.x, dir.y]
-                    .iter()
-                    .zip([centre.x, centre.y])
-                    .map(|(&d, c)| {
-                        if d > 0.0 {
-                            (1.0 - c) / d
-                        } else if d < 0.0 {
-                            -c / d
-                        } else {
-                            f64::INFINITY
-                        }
-                    })
-                    .fold(f64::INFINITY, f64::min);
-                let (mut inside, mut outside) = (0.0, reach);
-                if passes(centre + dir * reach) {
-                    return centre + dir * reach;
-                }
-                for _ in 0..24 {
-                    let mid = 0.5 * (inside + outside);
-                    if passes(centre + dir * mid) {
-                        inside = mid;
-                    } else {
-                        outside = mid;
-                    }
-                }
-                centre + dir * inside
-            })
-            .collect()
-    }
-
-    /// The blur diameter (px) that a point at lens-space depth `z_plane` makes near film
-    /// point `f`: the extent of where `f`'s rays cross that plane, times the local
-    /// magnification from the plane back to the film, times `margin`.
-    fn spot_px(&self, f: DVec2, z_plane: f64, margin: f64) -> f32 {
-        let at_plane = |(o, d): LensRay| {
-            let t = (z_plane - o.z) / d.z;
-            (d.z > 0.0 && t.is_finite()).then(|| (o + d * t).truncate())
-        };
-        let mut lo = DVec2::splat(f64::INFINITY);
-        let mut hi = DVec2::splat(f64::NEG_INFINITY);
-        for p in self.pupil_rim(f) {
-            if let Some(q) = self.trace(f, p).and_then(|(r, _)| at_plane(r)) {
-                lo = lo.min(q);
-                hi = hi.max(q);
-            }
-        }
-        // Magnification: how far the chief ray's point on the plane moves per film mm.
-        let h = 0.01 * self.half_diagonal;
-        let dir = if f.length() > 0.0 {
-            f.normalize()
-        } else {
-            DVec2::X
-        };
-        let moved = |g: DVec2| self.chief_ray(g).and_then(at_plane);
-        let (Some(a), Some(b)) = (moved(f - dir * h), moved(f + dir * h)) else {
-            return 0.0;
-        };
-        let per_mm = (a - b).length() / (2.0 * h);
-        if per_mm <= 0.0 {
-            return 0.0;
-        }
-        let extent = (hi - lo).max_element();
-        (extent / per_mm / self.pitch * margin) as f32
-    }
-
-    /// Fills the blur table: for inverse depths from 0 (infinity) to that of a point 5 cm in
-    /// front of the front element, the largest spot over five film radii.
-    fn coc_table(&mut self) {
+    /// The blur table: for inverse depths from 0 (infinity) to that of a point 5 cm in
+    /// front of the front element, the spot at each of its film radii.
+    fn blur_table(&self) -> BlurTable {
         let nearest_mm = (self.optics.front_z() - self.eye_z).max(0.0) + 50.0;
-        self.max_inv_depth = 1000.0 / nearest_mm;
-        let radii = [0.0, 0.25, 0.5, 0.75, 0.98].map(|s| s * self.half_diagonal);
-        // The rim's polygon of RIM_DIRECTIONS points is inside the rim by up to
-        // 1 - cos(pi / RIM_DIRECTIONS) of its size (0.5%); spots between the five radii and
-        // the bisection's last step are covered by a few percent more.
+        let inv_focus = 1.0 / f64::from(self.focus_distance);
+        // The rim's polygon is inside the rim by a hair (its extremes are refined, `spot`);
+        // spots between the radii and the bisection's last step are covered by a few percent
+        // more.
         let margin = 1.05;
-        self.coc = (0..COC_ENTRIES)
-            .map(|k| {
-                let inv = k as f64 / (COC_ENTRIES - 1) as f64 * self.max_inv_depth;
-                // A plane far enough to stand for infinity when inv is 0.
-                let depth_mm = if inv > 0.0 { 1000.0 / inv } else { 1e9 };
-                let z_plane = self.eye_z + depth_mm;
-                radii
-                    .iter()
-                    .map(|&r| self.spot_px(DVec2::new(r, 0.0), z_plane, margin))
-                    .fold(0.0f32, f32::max)
-            })
-            .collect();
+        BlurTable::new(1000.0 / nearest_mm, inv_focus, |inv, r| {
+            // A plane far enough to stand for infinity when inv is 0.
+            let depth_mm = if inv > 0.0 { 1000.0 / inv } else { 1e9 };
+            let f = DVec2::new(r * self.half_diagonal, 0.0);
+            self.spot_px(f, self.eye_z + depth_mm, margin)
+        })
     }
 
     /// The world ray of lens ray `(o, d)` (lens space, mm) for `camera`.
@@ -626,23 +526,12 @@ impl Lens for RealLens {
     }
 
     fn coc_px(&self, _camera: &Camera, depth: f32) -> f32 {
-        let inv = if depth > 0.0 {
-            1.0 / f64::from(depth)
-        } else {
-            self.max_inv_depth
-        };
-        let x = inv / self.max_inv_depth * (COC_ENTRIES - 1) as f64;
-        let k = (x.floor() as usize).min(COC_ENTRIES - 2);
-        let f = (x - k as f64) as f32;
-        let rise = self.coc[k + 1] - self.coc[k];
-        if f <= 1.0 {
-            return (self.coc[k] + rise * f).max(0.0);
-        }
-        // Nearer than the table (within 5 cm of the front element): blur grows at least as
-        // the inverse depth from the last entry, or along the last chord where it rises.
-        let last = self.coc[COC_ENTRIES - 1];
-        let along = last + rise.max(0.0) * (f - 1.0);
-        along.max(last * (inv / self.max_inv_depth) as f32).max(0.0)
+        self.blur.whole(depth)
+    }
+
+    fn coc_px_at(&self, _camera: &Camera, depth: f32, film: Vec2) -> f32 {
+        let r = self.film(film.x, film.y).length() / self.half_diagonal;
+        self.blur.near(depth, r)
     }
 
     fn reprojection(&self, _camera: &Camera) -> Option<Reprojection> {
