@@ -62,10 +62,16 @@ def time_to_reach(points, level):
 class Cycles:
     """Renders the saved scene with Cycles and times it."""
 
-    def __init__(self, blend, work, threads):
+    def __init__(self, blend, work, threads, width=None):
         bpy.ops.wm.open_mainfile(filepath=blend)
         self.scene = bpy.context.scene
         self.work = work
+        if width:
+            # The same framing at another size, as dofray's --width: the height keeps the aspect.
+            r = self.scene.render
+            r.resolution_y = round(r.resolution_y * width / r.resolution_x)
+            r.resolution_x = width
+            r.resolution_percentage = 100
         c = self.scene.cycles
         c.use_denoising = False
         c.use_adaptive_sampling = False
@@ -115,6 +121,8 @@ def run_dofray(args, toml):
     cmd = [args.dofray, "bench", toml, "--equal-error", "--json", "--quiet",
            "--ladder", args.dofray_ladder, "--levels", args.levels,
            "--reference-spp", str(args.dofray_reference_spp), "--repeat", str(args.repeat)]
+    if args.width:
+        cmd += ["--width", str(args.width)]
     print("  " + " ".join(cmd), file=sys.stderr)
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode != 0:
@@ -131,10 +139,15 @@ def fmt_t(t, first):
 def run_cycles(args, blend, work):
     """Cycles' overhead, reference time and series (fixed, adaptive, OIDN)."""
     print(f"[{args.scene}] Cycles", file=sys.stderr)
-    cy = Cycles(blend, work, args.threads)
+    cy = Cycles(blend, work, args.threads, args.width)
     _, overhead = cy.render("overhead", 1)
     _, overhead = cy.render("overhead", 1)  # the second call: caches warm, as for every rung
-    reference, ref_seconds = cy.render("reference", args.cycles_reference_spp)
+    saved = os.path.join(work, f"reference-{args.cycles_reference_spp}.exr")
+    if args.reuse_reference and os.path.exists(saved):
+        reference, ref_seconds = read_rgb(saved), None
+    else:
+        reference, ref_seconds = cy.render("reference", args.cycles_reference_spp)
+        os.replace(os.path.join(work, "reference.exr"), saved)
     ints = lambda s: [int(v) for v in s.split(",")]  # noqa: E731
     series = {
         "cycles": cycles_series(cy, "fixed", ints(args.cycles_ladder), reference, overhead,
@@ -166,6 +179,12 @@ def main(argv):
     p.add_argument("--cycles-reference-spp", type=int, default=4096)
     p.add_argument("--repeat", type=int, default=1, help="timed repeats per rung (median)")
     p.add_argument("--threads", type=int, default=0, help="Cycles threads (0: all)")
+    p.add_argument("--width", type=int, default=None,
+                   help="render both at this width, the height keeping the scene's aspect "
+                        "(default: the scene's own size)")
+    p.add_argument("--reuse-reference", action="store_true",
+                   help="take Cycles' reference from the last run's render at the same spp "
+                        "(OUT/SCENE/equal-error*/reference-SPP.exr) instead of rendering it")
     p.add_argument("--reuse-cycles", action="store_true",
                    help="take Cycles' series from the last run's equal-error.json (same scene, "
                         "same machine) and run only dofray")
@@ -182,14 +201,15 @@ def main(argv):
     toml = os.path.join(d, args.scene + ".dof.toml")
     with open(toml, "w") as f:
         f.write(new_toml(side, True))
-    work = os.path.join(d, "equal-error")
+    suffix = f"-{args.width}" if args.width else ""
+    work = os.path.join(d, "equal-error" + suffix)
     os.makedirs(work, exist_ok=True)
 
     print(f"[{args.scene}] dofray", file=sys.stderr)
     dof = run_dofray(args, toml)
 
     if args.reuse_cycles:
-        with open(os.path.join(d, "equal-error.json")) as f:
+        with open(os.path.join(d, f"equal-error{suffix}.json")) as f:
             last = json.load(f)
         overhead = last["cycles_overhead_seconds"]
         ref_seconds = last["cycles_reference_seconds"]
@@ -209,7 +229,7 @@ def main(argv):
     cpu = next((line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo")
                 if line.startswith("model name")), "unknown CPU")
     report = {
-        "scene": args.scene, "cpu": cpu, "threads": os.cpu_count(),
+        "scene": args.scene, "width": args.width, "cpu": cpu, "threads": os.cpu_count(),
         "cycles_version": bpy.app.version_string,
         "cycles_overhead_seconds": overhead, "cycles_reference_spp": args.cycles_reference_spp,
         "cycles_reference_seconds": ref_seconds,
@@ -218,7 +238,7 @@ def main(argv):
         "time_to_level": {n: {str(lv): {"seconds": t, "at_first_rung": f}
                               for lv, (t, f) in v.items()} for n, v in table.items()},
     }
-    with open(os.path.join(d, "equal-error.json"), "w") as f:
+    with open(os.path.join(d, f"equal-error{suffix}.json"), "w") as f:
         json.dump(report, f, indent=2, default=lambda x: None)
 
     lines = [f"**{args.scene}** ({cpu}, {os.cpu_count()} threads; Cycles {bpy.app.version_string}, "
@@ -235,7 +255,7 @@ def main(argv):
                   if n.startswith("cycles") and table[n][lv][0] is not None and ta]
         lines.append(f"- {lv:g} dB, Cycles' time / dofray adaptive's: " + (", ".join(ratios) or "-"))
     text = "\n".join(lines) + "\n"
-    with open(os.path.join(d, "equal-error.md"), "w") as f:
+    with open(os.path.join(d, f"equal-error{suffix}.md"), "w") as f:
         f.write(text)
     print(text)
     return 0
