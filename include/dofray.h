@@ -221,7 +221,10 @@ const char *dofray_status_name(int status);
 /**
  * Creates an Embree device. `config`: Embree's configuration string (such as
  * `"threads=2"` or `"isa=avx2"`); NULL or `""` takes it from the environment variable
- * `DOFRAY_EMBREE_CONFIG`, else Embree's defaults.
+ * `DOFRAY_EMBREE_CONFIG`, else Embree's defaults. The first call also starts dofray's
+ * worker threads (one a core; `RAYON_NUM_THREADS` sets another count), before any scene
+ * takes memory: a worker first started under an address-space limit the scene had used up
+ * would abort the process.
  *
  * # Safety
  * `config` is NULL or a NUL-terminated string; `out` is NULL or points to writable storage

@@ -116,6 +116,7 @@ pub mod scene;
 pub mod settings;
 pub mod shade;
 pub mod view;
+pub mod workers;
 
 /// The vector maths crate of dofray's public types (`Vec3` in scenes, cameras and lights),
 /// re-exported so callers use the same version.

@@ -22,7 +22,10 @@ pub(crate) fn next_device_id() -> u64 {
 
 /// Creates an Embree device. `config`: Embree's configuration string (such as
 /// `"threads=2"` or `"isa=avx2"`); NULL or `""` takes it from the environment variable
-/// `DOFRAY_EMBREE_CONFIG`, else Embree's defaults.
+/// `DOFRAY_EMBREE_CONFIG`, else Embree's defaults. The first call also starts dofray's
+/// worker threads (one a core; `RAYON_NUM_THREADS` sets another count), before any scene
+/// takes memory: a worker first started under an address-space limit the scene had used up
+/// would abort the process.
 ///
 /// # Safety
 /// `config` is NULL or a NUL-terminated string; `out` is NULL or points to writable storage
@@ -35,6 +38,7 @@ pub unsafe extern "C" fn dofray_device_new(
     guard(|| {
         // SAFETY: the function's contract.
         let out = unsafe { out_arg(out) }?;
+        dofray::workers::start_global();
         let device = if config.is_null() {
             Device::new()?
         } else {

@@ -147,18 +147,27 @@ fn prepare(
 impl Job {
     /// Loads, builds and renders (on the calling thread), reporting to `progress`.
     fn run(self, progress: &Shared) -> Result<(Film, RenderStats), Failure> {
-        let (renderer, settings) = prepare(&self.scene, self.overrides, &self.settings)?;
+        let Job {
+            scene,
+            overrides,
+            settings,
+            frame,
+            threads,
+        } = self;
         let render = || {
+            let (renderer, settings) = prepare(&scene, overrides, &settings)?;
             renderer
-                .render_frame(self.frame, None, &settings, progress)
+                .render_frame(frame, None, &settings, progress)
                 .map_err(|e| Failure::from_error(&e))
         };
-        match self.threads {
-            None => render(),
+        // The workers start before the scene is loaded (`dofray::workers`).
+        match threads {
+            None => {
+                dofray::workers::start_global();
+                render()
+            }
             // A pool of the caller's size for this render; the image is the same for any.
-            Some(n) => rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build()
+            Some(n) => dofray::workers::pool(Some(n))
                 .map_err(|e| Failure {
                     kind: ErrorKind::ResourceLimit,
                     message: format!("cannot start {n} worker threads: {e}"),

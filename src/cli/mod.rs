@@ -65,16 +65,8 @@ pub(crate) struct Prepared {
 
 pub(crate) fn prepare(a: &SceneArgs) -> Result<Prepared> {
     let threads = a.threads.map(usize::from);
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads.unwrap_or(0))
-        .build()
-        .context("cannot start worker threads")?;
-    // Every worker runs once before anything large is allocated: a thread maps its stack,
-    // its signal stack and its allocator arena as it starts, and one that started only when
-    // the scene had taken the address space left (`ulimit -v`) aborted the process (std
-    // panics when it cannot map a signal stack; with RUST_BACKTRACE set, the panic's
-    // backtrace then waited forever on a lock its own failed allocation held).
-    pool.broadcast(|_| ());
+    // Every worker starts before anything large is allocated (`dofray::workers`).
+    let pool = dofray::workers::pool(threads).context("cannot start worker threads")?;
     // Loading and building run on those workers too, never on rayon's global pool, which
     // would start its own threads there.
     pool.install(|| prepare_on(a, threads))
