@@ -17,9 +17,9 @@
 //!   divided by that of the film's centre: the centre of the frame is exposed as a thin
 //!   lens exposes it, the corners darken as the real lens darkens them.
 //! - **Blur bound** (`blur_table.rs`). A table over inverse depth and film radius of the
-//!   spot a point at that depth makes there (`spot.rs`: traced at nine film radii through
-//!   the rim of each one's pupil, its extremes found by bisection and a golden-section
-//!   search; 5% wider), linear in inverse depth between knots, one of which is the focus
+//!   spot a point at that depth makes there (`spot.rs`: at nine film radii, the extent of
+//!   where the film point's rays cross the point's plane, searched on its pupil's rim and
+//!   inside it; 5% wider), linear in inverse depth between knots, one of which is the focus
 //!   distance's. [`Lens::coc_px`] is the largest over the radii; [`Lens::coc_px_at`], what
 //!   the adaptive sampler's blur map reads per pixel, the larger of the two radii that
 //!   bracket the pixel's, so a lens whose centre is sharp and whose corners are soft (field

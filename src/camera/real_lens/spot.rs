@@ -1,6 +1,6 @@
 //! The blur spot of a film point: where the rays the lens passes from it cross a plane in
 //! front of the lens, carried back to the film. The blur table the adaptive sampler trusts
-//! ([`super::RealLens`]'s `coc_table`) is made of these, so they must not come out small.
+//! (`blur_table.rs`) is made of these, so they must not come out small.
 
 use std::f64::consts::TAU;
 
