@@ -21,7 +21,9 @@ use std::path::{Path, PathBuf};
 /// classifies any error chain by trying every error type, is at the top.
 const LAYERS: &[&[&str]] = &[
     &["error_kind", "params"],
-    &["embree", "limits", "filter", "sampler", "metrics", "workers"],
+    &[
+        "embree", "limits", "filter", "sampler", "metrics", "workers",
+    ],
     &["camera", "view"],
     &["shade", "settings"],
     &["scene"],
@@ -408,7 +410,11 @@ fn every_test_file_is_in_the_test_binary() {
     // A test binary of its own (a [[test]] of Cargo.toml: one that needs its process alone).
     let manifest = std::fs::read_to_string(root().join("Cargo.toml")).expect("Cargo.toml");
     let own: Vec<&str> = (manifest.lines())
-        .filter_map(|l| l.trim().strip_prefix("path = \"tests/")?.strip_suffix(".rs\""))
+        .filter_map(|l| {
+            l.trim()
+                .strip_prefix("path = \"tests/")?
+                .strip_suffix(".rs\"")
+        })
         .collect();
     let mut missing = Vec::new();
     for entry in std::fs::read_dir(&dir).expect("tests/") {
