@@ -65,22 +65,23 @@ fn make_rays(camera: &Camera, samples: &[[[f32; LANES]; 4]]) -> f32 {
     sum
 }
 
-/// The camera of each shipped lens, wide open, with `spec()`'s focus and film.
+/// The camera of each shipped lens, wide open, with `spec()`'s focus and image size, on a
+/// 36 mm film (the fisheye's image circle covers only a 24 mm one at 4:3).
 fn real_lens_specs() -> Vec<(&'static str, CameraSpec)> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses");
     [
-        "double-gauss-50mm",
-        "wide-22mm",
-        "telephoto-250mm",
-        "fisheye-10mm",
+        ("double-gauss-50mm", 36.0),
+        ("wide-22mm", 36.0),
+        ("telephoto-250mm", 36.0),
+        ("fisheye-10mm", 24.0),
     ]
-    .map(|name| {
+    .map(|(name, sensor_width_mm)| {
         let p = Prescription::load(&dir.join(format!("{name}.dat"))).expect("lens file");
         let spec = CameraSpec {
             real_lens: Some(RealLensSpec {
                 prescription: Arc::new(p),
                 f_number: None,
-                sensor_width_mm: 36.0,
+                sensor_width_mm,
             }),
             ..spec()
         };
