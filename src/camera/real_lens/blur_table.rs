@@ -12,10 +12,10 @@ use rayon::prelude::*;
 /// Inverse-depth knots of the table.
 const ENTRIES: usize = 48;
 /// Film radii of the table, evenly spaced from the centre to [`EDGE`] of the half diagonal.
-pub(super) const RADII: usize = 9;
+const RADII: usize = 9;
 /// The table's outermost radius, a fraction of the film's half diagonal (its corners'
 /// pixel centres lie a little inside the corner).
-pub(super) const EDGE: f64 = 0.98;
+const EDGE: f64 = 0.98;
 
 /// Blur diameters (px) per inverse-depth knot and film radius.
 #[derive(Debug, Clone, PartialEq, Default)]

@@ -25,10 +25,11 @@ const COMPASS_STEPS: usize = 32;
 /// Where film point `f`'s rays pass the lens, in [0, 1]^2 of its pupil bound.
 enum Passing {
     /// A convex region (an intersection of the surfaces' discs as seen from the film point)
-    /// around this passing point, and the passing points of a grid over the bound.
-    Around(DVec2, Vec<DVec2>),
-    /// Grid points that pass, with none passing at their mean.
-    Scattered(Vec<DVec2>),
+    /// around this passing point, and the passing points of a grid over the bound with
+    /// their rays.
+    Around(DVec2, Vec<(DVec2, LensRay)>),
+    /// Grid points that pass, with their rays, with none passing at their mean.
+    Scattered(Vec<(DVec2, LensRay)>),
 }
 
 impl RealLens {
@@ -70,8 +71,10 @@ impl RealLens {
     fn spread(&self, f: DVec2, z_plane: f64) -> Option<(DVec2, DVec2)> {
         let plane = |u: DVec2| self.trace(f, u).and_then(|(r, _)| at_plane(r, z_plane));
         match self.passing(f)? {
-            Passing::Around(centre, grid) => self.region_extent(f, centre, &grid, &plane),
-            Passing::Scattered(points) => extent(points.into_iter().filter_map(plane)),
+            Passing::Around(centre, grid) => self.region_extent(f, centre, &grid, z_plane, &plane),
+            Passing::Scattered(points) => {
+                extent(points.into_iter().filter_map(|(_, r)| at_plane(r, z_plane)))
+            }
         }
     }
 
@@ -80,12 +83,12 @@ impl RealLens {
     /// alone when that mean is blocked; `None` when none passes.
     fn passing(&self, f: DVec2) -> Option<Passing> {
         let passes = |u: DVec2| self.trace(f, u).is_some();
-        let grid: Vec<DVec2> = (0..SPOT_GRID * SPOT_GRID)
-            .map(|k| {
+        let grid: Vec<(DVec2, LensRay)> = (0..SPOT_GRID * SPOT_GRID)
+            .filter_map(|k| {
                 let (i, j) = (k % SPOT_GRID, k / SPOT_GRID);
-                (DVec2::new(i as f64, j as f64) + 0.5) / SPOT_GRID as f64
+                let u = (DVec2::new(i as f64, j as f64) + 0.5) / SPOT_GRID as f64;
+                self.trace(f, u).map(|(r, _)| (u, r))
             })
-            .filter(|&u| passes(u))
             .collect();
         let middle = DVec2::splat(0.5);
         if passes(middle) {
@@ -94,7 +97,7 @@ impl RealLens {
         if grid.is_empty() {
             return None;
         }
-        let mean = grid.iter().sum::<DVec2>() / grid.len() as f64;
+        let mean = grid.iter().map(|(u, _)| *u).sum::<DVec2>() / grid.len() as f64;
         Some(if passes(mean) {
             Passing::Around(mean, grid)
         } else {
@@ -137,7 +140,8 @@ impl RealLens {
     }
 
     /// The least and greatest corners of `plane` over the passing region around `centre`
-    /// (`grid`: passing points inside it). On the rim, [`RIM_DIRECTIONS`] directions, each
+    /// at lens-space depth `z_plane` (`grid`: passing points inside it, with their rays). On
+    /// the rim, [`RIM_DIRECTIONS`] directions, each
     /// side of each axis then refined between the directions either side of its best: a
     /// vignetted pupil is a narrow cat's eye whose extreme points lie between directions.
     /// Inside, from the grid's best point a compass search: wide open near the film's
@@ -148,13 +152,14 @@ impl RealLens {
         &self,
         f: DVec2,
         centre: DVec2,
-        grid: &[DVec2],
+        grid: &[(DVec2, LensRay)],
+        z_plane: f64,
         plane: &impl Fn(DVec2) -> Option<DVec2>,
     ) -> Option<(DVec2, DVec2)> {
         let step = TAU / RIM_DIRECTIONS as f64;
         let at = |angle: f64| plane(self.rim_point(f, centre, angle));
         let rim: Vec<Option<DVec2>> = (0..RIM_DIRECTIONS).map(|k| at(k as f64 * step)).collect();
-        let inside: Vec<Option<DVec2>> = grid.iter().map(|&u| plane(u)).collect();
+        let inside: Vec<Option<DVec2>> = grid.iter().map(|&(_, r)| at_plane(r, z_plane)).collect();
         let (mut lo, mut hi) = extent(rim.iter().chain(&inside).flatten().copied())?;
         // Outside the bound the sampler draws no rays: those points count for nothing.
         let within = |u: DVec2| u.cmpge(DVec2::ZERO).all() && u.cmple(DVec2::ONE).all();
@@ -177,7 +182,7 @@ impl RealLens {
                             f64::NEG_INFINITY
                         }
                     };
-                    top = top.max(compass_max(grid[k], 1.0 / SPOT_GRID as f64, value));
+                    top = top.max(compass_max(grid[k].0, 1.0 / SPOT_GRID as f64, value));
                 }
                 if sign > 0.0 {
                     hi[axis] = hi[axis].max(top);
