@@ -6,6 +6,10 @@
 //! side of the focus distance's, which is one of them (evenly spaced knots put a chord across
 //! the tip: a telephoto focused at 4 m was bounded at 4.1 px in focus, where its spots are 0.1
 //! to 1.2 px). Nearer than the table it grows with inverse depth from the last knot.
+//!
+//! The table is built radius by radius: each film radius's evaluator is made once, holding
+//! what its spots at every depth share (the rays of `spot.rs`'s `SpotRays`), and each knot's
+//! spot is evaluated from it with only the work its depth needs.
 
 use rayon::prelude::*;
 
@@ -35,9 +39,13 @@ pub(super) struct BlurTable {
 
 impl BlurTable {
     /// The table from the nearest inverse depth it covers, `max_inv` (1/m), the focus
-    /// distance's, and `spot(inv, r)`: the spot (px) of a point at inverse depth `inv` seen at
-    /// film radius `r` (a fraction of the half diagonal).
-    pub(super) fn new(max_inv: f64, inv_focus: f64, spot: impl Fn(f64, f64) -> f32 + Sync) -> Self {
+    /// distance's, and `spot`: `spot(r)` is film radius `r`'s evaluator (`r` a fraction of
+    /// the half diagonal), made once per radius, which gives the spot (px) of a point at
+    /// inverse depth `inv`.
+    pub(super) fn new<E>(max_inv: f64, inv_focus: f64, spot: impl Fn(f64) -> E + Sync) -> Self
+    where
+        E: Fn(f64) -> f32 + Send + Sync,
+    {
         // A focus beyond the nearest knot cannot happen (the lens focuses no nearer than its
         // front); keep the tip inside the table anyway.
         let max_inv = max_inv.max(1.5 * inv_focus);
@@ -53,12 +61,17 @@ impl BlurTable {
             rows: Vec::new(),
             row_max: Vec::new(),
         };
-        // Thousands of traced rays a spot: the knots in parallel.
+        // Each radius's evaluator first (what its spots share, traced once), then thousands
+        // of traced rays a spot: the knots in parallel.
+        let at: Vec<E> = (0..RADII)
+            .into_par_iter()
+            .map(|j| spot(j as f64 / (RADII - 1) as f64 * EDGE))
+            .collect();
         table.rows = (0..ENTRIES)
             .into_par_iter()
             .map(|k| {
                 let inv = table.knot(k);
-                std::array::from_fn(|j| spot(inv, j as f64 / (RADII - 1) as f64 * EDGE))
+                std::array::from_fn(|j| at[j](inv))
             })
             .collect();
         table.row_max = table
@@ -141,6 +154,8 @@ impl BlurTable {
 mod tests {
     use super::*;
 
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
     /// A V in inverse depth with its tip at the focus distance's, and wider at the rim.
     fn v(inv_focus: f64) -> impl Fn(f64, f64) -> f32 {
         move |inv, r| (40.0 * (inv - inv_focus).abs() + 0.1 + r) as f32
@@ -150,7 +165,14 @@ mod tests {
     fn the_focus_distance_is_a_knot_and_the_chords_hold_the_v() {
         for (max_inv, inv_focus) in [(14.0, 0.25), (14.0, 0.0), (5.0, 2.0), (20.0, 13.9)] {
             let spot = v(inv_focus);
-            let t = BlurTable::new(max_inv, inv_focus, &spot);
+            let made = AtomicUsize::new(0);
+            let t = BlurTable::new(max_inv, inv_focus, |r| {
+                made.fetch_add(1, Ordering::Relaxed);
+                let spot = &spot;
+                move |inv| spot(inv, r)
+            });
+            // What a radius's spots share is made once for all its knots.
+            assert_eq!(made.into_inner(), RADII);
             assert_eq!(t.knot(t.focus_knot), inv_focus);
             assert_eq!(t.knot(ENTRIES - 1), t.max_inv);
             assert!(t.max_inv >= max_inv);

@@ -19,11 +19,12 @@
 //! - **Blur bound** (`blur_table.rs`). A table over inverse depth and film radius of the
 //!   spot a point at that depth makes there (`spot.rs`: at nine film radii, the extent of
 //!   where the film point's rays cross the point's plane, searched on its pupil's rim and
-//!   inside it; 5% wider), linear in inverse depth between knots, one of which is the focus
-//!   distance's. [`Lens::coc_px`] is the largest over the radii; [`Lens::coc_px_at`], what
-//!   the adaptive sampler's blur map reads per pixel, the larger of the two radii that
-//!   bracket the pixel's, so a lens whose centre is sharp and whose corners are soft (field
-//!   curvature, coma) is sampled as sharp in the middle.
+//!   inside it, from rays each radius's spots share traced once; 5% wider), linear in
+//!   inverse depth between knots, one of which is the focus distance's. [`Lens::coc_px`] is
+//!   the largest over the radii; [`Lens::coc_px_at`], what the adaptive sampler's blur map
+//!   reads per pixel, the larger of the two radii that bracket the pixel's, so a lens whose
+//!   centre is sharp and whose corners are soft (field curvature, coma) is sampled as sharp
+//!   in the middle.
 //!
 //! - **Light tracing.** Light paths enter through the front element's clear aperture,
 //!   sampled uniformly by area ([`FrontCap`]), and are traced through the lens to the film
@@ -84,6 +85,10 @@ impl RealLensSpec {
 const PUPIL_BINS: usize = 32;
 /// Grid (per axis) over the rear element that the bounds are found with.
 const PUPIL_GRID: usize = 40;
+/// The blur table's spots over the traced ones: the rim's polygon is inside the rim by a
+/// hair (its extremes are refined, `spot.rs`); spots between the radii and the bisection's
+/// last step are covered by a few percent more.
+const BLUR_MARGIN: f64 = 1.05;
 
 /// An axis-aligned rectangle on the rear plane (lens space, mm), for a film point on +x.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -359,7 +364,8 @@ impl RealLens {
     /// through the rim of the pupil (the blur table's entries, before their margin).
     pub fn blur_px(&self, film_radius_mm: f32, depth: f32) -> f32 {
         let z_plane = self.eye_z + f64::from(depth) * 1000.0;
-        self.spot_px(DVec2::new(f64::from(film_radius_mm), 0.0), z_plane, 1.0)
+        let f = DVec2::new(f64::from(film_radius_mm), 0.0);
+        self.spot_rays(f).spot_px(z_plane, 1.0)
     }
 
     /// The fraction of the film's centre's irradiance that reaches film point
@@ -370,19 +376,30 @@ impl RealLens {
     }
 
     /// The blur table: for inverse depths from 0 (infinity) to that of a point 5 cm in
-    /// front of the front element, the spot at each of its film radii.
+    /// front of the front element, the spot at each of its film radii, each radius's
+    /// depth-independent rays traced once.
     fn blur_table(&self) -> BlurTable {
+        self.blur_table_of(|f| {
+            let rays = self.spot_rays(f);
+            move |z_plane| rays.spot_px(z_plane, BLUR_MARGIN)
+        })
+    }
+
+    /// The blur table of `spot`: `spot(f)`, made once per film radius, is film point `f`'s
+    /// evaluator, which gives the spot (px) of a point at lens-space depth `z_plane` (mm).
+    fn blur_table_of<E>(&self, spot: impl Fn(DVec2) -> E + Sync) -> BlurTable
+    where
+        E: Fn(f64) -> f32 + Send + Sync,
+    {
         let nearest_mm = (self.optics.front_z() - self.eye_z).max(0.0) + 50.0;
         let inv_focus = 1.0 / f64::from(self.focus_distance);
-        // The rim's polygon is inside the rim by a hair (its extremes are refined, `spot`);
-        // spots between the radii and the bisection's last step are covered by a few percent
-        // more.
-        let margin = 1.05;
-        BlurTable::new(1000.0 / nearest_mm, inv_focus, |inv, r| {
-            // A plane far enough to stand for infinity when inv is 0.
-            let depth_mm = if inv > 0.0 { 1000.0 / inv } else { 1e9 };
-            let f = DVec2::new(r * self.half_diagonal, 0.0);
-            self.spot_px(f, self.eye_z + depth_mm, margin)
+        BlurTable::new(1000.0 / nearest_mm, inv_focus, |r| {
+            let at = spot(DVec2::new(r * self.half_diagonal, 0.0));
+            move |inv: f64| {
+                // A plane far enough to stand for infinity when inv is 0.
+                let depth_mm = if inv > 0.0 { 1000.0 / inv } else { 1e9 };
+                at(self.eye_z + depth_mm)
+            }
         })
     }
 

@@ -1,6 +1,14 @@
 //! The blur spot of a film point: where the rays the lens passes from it cross a plane in
 //! front of the lens, carried back to the film. The blur table the adaptive sampler trusts
 //! (`blur_table.rs`) is made of these, so they must not come out small.
+//!
+//! A spot comes in two parts. [`SpotRays`] is what depends on the film point alone, traced
+//! once ([`RealLens::spot_rays`]): the passing points of a grid over its pupil bound, its
+//! pupil's rim in [`RIM_DIRECTIONS`] directions, with their rays, and the two chief rays
+//! that measure the magnification. [`SpotRays::spot_px`] is what depends on the plane:
+//! where those rays cross it, the extremes refined between rim directions and inside the
+//! pupil, which trace rays of their own. The blur table evaluates each film radius's
+//! [`SpotRays`] at all its knots: the shared part is about 40% of a spot's rays.
 
 use std::f64::consts::TAU;
 
@@ -14,6 +22,8 @@ use crate::camera::optics::LensRay;
 const SPOT_GRID: usize = 16;
 /// Directions in which a spot's pupil rim is first found.
 const RIM_DIRECTIONS: usize = 32;
+/// The angle between neighbouring rim directions.
+const RIM_STEP: f64 = TAU / RIM_DIRECTIONS as f64;
 /// Golden-section steps that refine each of the spot's four extremes between the directions
 /// either side of the best (the bracket shrinks to 2% of its width).
 const REFINE_STEPS: usize = 8;
@@ -22,28 +32,47 @@ const RIM_STEPS: usize = 18;
 /// Steps of the compass search that refines each of the spot's extremes inside the pupil.
 const COMPASS_STEPS: usize = 32;
 
+/// The passing region around a passing point of a film point's pupil bound: a convex
+/// region (an intersection of the surfaces' discs as seen from the film point).
+struct Region {
+    /// The passing point, in [0, 1]^2 of the bound.
+    centre: DVec2,
+    /// The rays through the rim's points in [`RIM_DIRECTIONS`] directions from `centre`,
+    /// the `k`th at angle `k` [`RIM_STEP`] (`None`: blocked).
+    rim: Vec<Option<LensRay>>,
+    /// The passing points of a grid over the bound, with their rays.
+    grid: Vec<(DVec2, LensRay)>,
+}
+
 /// Where film point `f`'s rays pass the lens, in [0, 1]^2 of its pupil bound.
 enum Passing {
-    /// A convex region (an intersection of the surfaces' discs as seen from the film point)
-    /// around this passing point, and the passing points of a grid over the bound with
-    /// their rays.
-    Around(DVec2, Vec<(DVec2, LensRay)>),
+    /// A region around a passing point.
+    Around(Region),
     /// Grid points that pass, with their rays, with none passing at their mean.
     Scattered(Vec<(DVec2, LensRay)>),
 }
 
+/// The part of a film point's blur spot that no depth plane changes: which of its rays the
+/// lens passes, and the rays that measure its magnification.
+pub(super) struct SpotRays<'a> {
+    lens: &'a RealLens,
+    /// The film point (lens space, mm).
+    f: DVec2,
+    /// Where its rays pass (`None`: nowhere).
+    passing: Option<Passing>,
+    /// The chief rays (through the middle of `f`'s own pupil bound) of the film points
+    /// `h` mm either side of `f` along its radius (`None`: blocked).
+    chiefs: [Option<LensRay>; 2],
+    /// See `chiefs`.
+    h: f64,
+}
+
 impl RealLens {
-    /// The blur diameter (px) that a point at lens-space depth `z_plane` makes near film
-    /// point `f`: the extent of where `f`'s rays cross that plane, times the local
-    /// magnification from the plane back to the film, times `margin`; 0 where the lens
-    /// passes none of them.
-    pub(super) fn spot_px(&self, f: DVec2, z_plane: f64, margin: f64) -> f32 {
-        let Some((lo, hi)) = self.spread(f, z_plane) else {
-            return 0.0;
-        };
-        // Magnification: how far the chief ray's point on the plane moves per film mm. Both
-        // rays pass the middle of `f`'s own pupil bound: the bounds step from one radial bin to
-        // the next, and a pair straddling a step measured the jump as well (up to 20% off).
+    /// What film point `f`'s blur spot at any depth is found from.
+    pub(super) fn spot_rays(&self, f: DVec2) -> SpotRays<'_> {
+        // Both chief rays pass the middle of `f`'s own pupil bound: the bounds step from one
+        // radial bin to the next, and a pair straddling a step measured the jump as well (up
+        // to 20% off).
         let h = 0.01 * self.half_diagonal;
         let dir = if f.length() > 0.0 {
             f.normalize()
@@ -51,36 +80,19 @@ impl RealLens {
             DVec2::X
         };
         let bound = self.bounds_at(f.length());
-        let moved = |g: DVec2| {
-            self.trace_in(bound, g, DVec2::splat(0.5))
-                .and_then(|(r, _)| at_plane(r, z_plane))
-        };
-        let (Some(a), Some(b)) = (moved(f - dir * h), moved(f + dir * h)) else {
-            return 0.0;
-        };
-        let per_mm = (a - b).length() / (2.0 * h);
-        if per_mm <= 0.0 {
-            return 0.0;
-        }
-        let extent = (hi - lo).max_element();
-        (extent / per_mm / self.pitch * margin) as f32
-    }
-
-    /// The least and greatest corners of where film point `f`'s rays that the lens passes
-    /// cross the plane at lens-space depth `z_plane` (mm); `None` where it passes none.
-    fn spread(&self, f: DVec2, z_plane: f64) -> Option<(DVec2, DVec2)> {
-        let plane = |u: DVec2| self.trace(f, u).and_then(|(r, _)| at_plane(r, z_plane));
-        match self.passing(f)? {
-            Passing::Around(centre, grid) => self.region_extent(f, centre, &grid, z_plane, &plane),
-            Passing::Scattered(points) => {
-                extent(points.into_iter().filter_map(|(_, r)| at_plane(r, z_plane)))
-            }
+        let chief = |g: DVec2| self.trace_in(bound, g, DVec2::splat(0.5)).map(|(r, _)| r);
+        SpotRays {
+            lens: self,
+            f,
+            passing: self.passing(f),
+            chiefs: [chief(f - dir * h), chief(f + dir * h)],
+            h,
         }
     }
 
     /// A passing point near the middle of film point `f`'s pupil bound (the middle, else the
-    /// mean of a grid's passing points) with the grid's passing points; the grid's points
-    /// alone when that mean is blocked; `None` when none passes.
+    /// mean of a grid's passing points) with its region; the grid's points alone when that
+    /// mean is blocked; `None` when none passes.
     fn passing(&self, f: DVec2) -> Option<Passing> {
         let passes = |u: DVec2| self.trace(f, u).is_some();
         let grid: Vec<(DVec2, LensRay)> = (0..SPOT_GRID * SPOT_GRID)
@@ -92,17 +104,29 @@ impl RealLens {
             .collect();
         let middle = DVec2::splat(0.5);
         if passes(middle) {
-            return Some(Passing::Around(middle, grid));
+            return Some(Passing::Around(self.region(f, middle, grid)));
         }
         if grid.is_empty() {
             return None;
         }
         let mean = grid.iter().map(|(u, _)| *u).sum::<DVec2>() / grid.len() as f64;
         Some(if passes(mean) {
-            Passing::Around(mean, grid)
+            Passing::Around(self.region(f, mean, grid))
         } else {
             Passing::Scattered(grid)
         })
+    }
+
+    /// Film point `f`'s passing region around `centre`, its rim traced in each of the
+    /// [`RIM_DIRECTIONS`] directions.
+    fn region(&self, f: DVec2, centre: DVec2, grid: Vec<(DVec2, LensRay)>) -> Region {
+        let rim = (0..RIM_DIRECTIONS)
+            .map(|k| {
+                let u = self.rim_point(f, centre, k as f64 * RIM_STEP);
+                self.trace(f, u).map(|(r, _)| r)
+            })
+            .collect();
+        Region { centre, rim, grid }
     }
 
     /// The point just inside the rim of the passing region around `centre` in direction
@@ -138,28 +162,56 @@ impl RealLens {
         }
         centre + dir * inside
     }
+}
 
-    /// The least and greatest corners of `plane` over the passing region around `centre`
-    /// at lens-space depth `z_plane` (`grid`: passing points inside it, with their rays). On
-    /// the rim, [`RIM_DIRECTIONS`] directions, each
-    /// side of each axis then refined between the directions either side of its best: a
-    /// vignetted pupil is a narrow cat's eye whose extreme points lie between directions.
-    /// Inside, from the grid's best point a compass search: wide open near the film's
-    /// corners the rays' crossings fold over (aberration), and the spot's extremes lie
-    /// inside the pupil (the double Gauss's spot at 10 km, 0.84 of the half diagonal out, was
-    /// 18% wider than its rim's).
-    fn region_extent(
-        &self,
-        f: DVec2,
-        centre: DVec2,
-        grid: &[(DVec2, LensRay)],
-        z_plane: f64,
-        plane: &impl Fn(DVec2) -> Option<DVec2>,
-    ) -> Option<(DVec2, DVec2)> {
-        let step = TAU / RIM_DIRECTIONS as f64;
-        let at = |angle: f64| plane(self.rim_point(f, centre, angle));
-        let rim: Vec<Option<DVec2>> = (0..RIM_DIRECTIONS).map(|k| at(k as f64 * step)).collect();
-        let inside: Vec<Option<DVec2>> = grid.iter().map(|&(_, r)| at_plane(r, z_plane)).collect();
+impl SpotRays<'_> {
+    /// The blur diameter (px) that a point at lens-space depth `z_plane` makes near the
+    /// film point: the extent of where its rays cross that plane, times the local
+    /// magnification from the plane back to the film, times `margin`; 0 where the lens
+    /// passes none of them.
+    pub(super) fn spot_px(&self, z_plane: f64, margin: f64) -> f32 {
+        let Some((lo, hi)) = self.spread(z_plane) else {
+            return 0.0;
+        };
+        // Magnification: how far the chief ray's point on the plane moves per film mm.
+        let moved = |ray: Option<LensRay>| ray.and_then(|r| at_plane(r, z_plane));
+        let (Some(a), Some(b)) = (moved(self.chiefs[0]), moved(self.chiefs[1])) else {
+            return 0.0;
+        };
+        let per_mm = (a - b).length() / (2.0 * self.h);
+        if per_mm <= 0.0 {
+            return 0.0;
+        }
+        let extent = (hi - lo).max_element();
+        (extent / per_mm / self.lens.pitch * margin) as f32
+    }
+
+    /// The least and greatest corners of where the film point's rays that the lens passes
+    /// cross the plane at lens-space depth `z_plane` (mm); `None` where it passes none.
+    fn spread(&self, z_plane: f64) -> Option<(DVec2, DVec2)> {
+        match self.passing.as_ref()? {
+            Passing::Around(region) => self.region_extent(region, z_plane),
+            Passing::Scattered(points) => {
+                extent(points.iter().filter_map(|&(_, r)| at_plane(r, z_plane)))
+            }
+        }
+    }
+
+    /// The least and greatest corners of where the rays of `region` cross the plane at
+    /// lens-space depth `z_plane`. On the rim, [`RIM_DIRECTIONS`] directions, each side of
+    /// each axis then refined between the directions either side of its best: a vignetted
+    /// pupil is a narrow cat's eye whose extreme points lie between directions. Inside, from
+    /// the grid's best point a compass search: wide open near the film's corners the rays'
+    /// crossings fold over (aberration), and the spot's extremes lie inside the pupil (the
+    /// double Gauss's spot at 10 km, 0.84 of the half diagonal out, was 18% wider than its
+    /// rim's).
+    fn region_extent(&self, region: &Region, z_plane: f64) -> Option<(DVec2, DVec2)> {
+        let (l, f) = (self.lens, self.f);
+        let plane = |u: DVec2| l.trace(f, u).and_then(|(r, _)| at_plane(r, z_plane));
+        let at = |angle: f64| plane(l.rim_point(f, region.centre, angle));
+        let crossing = |r: LensRay| at_plane(r, z_plane);
+        let rim: Vec<Option<DVec2>> = region.rim.iter().map(|r| r.and_then(crossing)).collect();
+        let inside: Vec<Option<DVec2>> = region.grid.iter().map(|&(_, r)| crossing(r)).collect();
         let (mut lo, mut hi) = extent(rim.iter().chain(&inside).flatten().copied())?;
         // Outside the bound the sampler draws no rays: those points count for nothing.
         let within = |u: DVec2| u.cmpge(DVec2::ZERO).all() && u.cmple(DVec2::ONE).all();
@@ -172,7 +224,7 @@ impl RealLens {
                 let mut top = f64::NEG_INFINITY;
                 if let Some(k) = best_of(&rim) {
                     let k = k as f64;
-                    top = golden_max((k - 1.0) * step, (k + 1.0) * step, |a| score(at(a)));
+                    top = golden_max((k - 1.0) * RIM_STEP, (k + 1.0) * RIM_STEP, |a| score(at(a)));
                 }
                 if let Some(k) = best_of(&inside) {
                     let value = |u: DVec2| {
@@ -182,7 +234,8 @@ impl RealLens {
                             f64::NEG_INFINITY
                         }
                     };
-                    top = top.max(compass_max(grid[k].0, 1.0 / SPOT_GRID as f64, value));
+                    let start = region.grid[k].0;
+                    top = top.max(compass_max(start, 1.0 / SPOT_GRID as f64, value));
                 }
                 if sign > 0.0 {
                     hi[axis] = hi[axis].max(top);
@@ -261,9 +314,17 @@ mod tests {
     use std::path::Path;
     use std::sync::Arc;
 
-    use crate::camera::{Camera, CameraLens, CameraSpec, Focus, Prescription, RealLensSpec};
+    use crate::camera::real_lens::BLUR_MARGIN;
+    use crate::camera::{
+        Camera, CameraError, CameraLens, CameraSpec, Focus, Prescription, RealLensSpec,
+    };
 
-    fn camera(name: &str, f_number: Option<f32>, focus: f32) -> Camera {
+    fn camera(
+        name: &str,
+        f_number: Option<f32>,
+        focus: f32,
+        sensor_width_mm: f32,
+    ) -> Result<Camera, CameraError> {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("lenses")
             .join(name);
@@ -274,12 +335,11 @@ mod tests {
             real_lens: Some(RealLensSpec {
                 prescription: Arc::new(Prescription::load(&path).unwrap()),
                 f_number,
-                sensor_width_mm: 36.0,
+                sensor_width_mm,
             }),
             ..CameraSpec::default()
         }
         .build(|_| None)
-        .unwrap()
     }
 
     /// The spread a fine grid over the pupil bound finds: 240 x 240 rays.
@@ -298,7 +358,7 @@ mod tests {
     #[test]
     fn the_spread_holds_what_a_fine_grid_of_rays_finds() {
         for (name, f_number) in [("double-gauss-50mm.dat", None), ("wide-22mm.dat", None)] {
-            let c = camera(name, f_number, 4.0);
+            let c = camera(name, f_number, 4.0, 36.0).unwrap();
             let CameraLens::Real(l) = &c.lens else {
                 unreachable!()
             };
@@ -306,7 +366,8 @@ mod tests {
                 let f = DVec2::new(s * l.half_diagonal, 0.0);
                 for depth_m in [0.7, 4.0, 1e4] {
                     let z = l.eye_z + depth_m * 1000.0;
-                    let (Some((lo, hi)), Some((blo, bhi))) = (l.spread(f, z), brute(l, f, z))
+                    let (Some((lo, hi)), Some((blo, bhi))) =
+                        (l.spot_rays(f).spread(z), brute(l, f, z))
                     else {
                         panic!("{name}: no rays at {s}");
                     };
@@ -320,6 +381,28 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// A film point's shared rays, traced once, give its spot at every depth bit for bit as
+    /// tracing them afresh for each depth does: every shipped lens's blur table.
+    #[test]
+    fn rays_traced_once_per_film_point_give_the_spots_traced_afresh() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("lenses");
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let name = entry.unwrap().file_name().into_string().unwrap();
+            if !name.ends_with(".dat") {
+                continue;
+            }
+            // The fisheye's image circle covers a 24 mm film, not a 36 mm one.
+            let c = camera(&name, None, 2.0, 36.0)
+                .or_else(|_| camera(&name, None, 2.0, 24.0))
+                .unwrap();
+            let CameraLens::Real(l) = &c.lens else {
+                unreachable!()
+            };
+            let afresh = l.blur_table_of(|f| move |z| l.spot_rays(f).spot_px(z, BLUR_MARGIN));
+            assert_eq!(afresh, l.blur, "{name}");
         }
     }
 
