@@ -7,6 +7,7 @@ mod animation;
 mod antialiasing;
 mod architecture;
 mod cancel;
+mod caustics;
 mod cgroup_limits;
 mod cli;
 mod coverage;

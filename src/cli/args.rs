@@ -239,9 +239,10 @@ pub(crate) struct RenderArgs {
     /// through the lens by tracing light from them to the lens, so their bokeh discs come out
     /// clean instead of speckled, and adaptive sites cannot miss them; lamps' (point and spot
     /// lights', emitters') highlights on polished surfaces out of focus are traced from the
-    /// lamp too. Unbiased
-    /// either way; `off` leaves them to camera rays alone (for comparisons) [default: the
-    /// scene's, else on].
+    /// lamp too, and so are caustics: the light a polished surface (roughness up to 0.3)
+    /// throws from a lamp or a sharp sun onto a rough one, which camera rays find as
+    /// fireflies. Unbiased either way; `off` leaves them to camera rays alone (for
+    /// comparisons) [default: the scene's, else on].
     #[arg(long, value_name = "on|off")]
     pub(crate) light_tracing: Option<Switch>,
     /// Path tracer, adaptive: a blurred site still noisy after its own samples also takes the

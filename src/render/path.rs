@@ -6,7 +6,7 @@
 
 use glam::{Vec2, Vec3};
 
-use super::glossy_light::{Found, GlossyPaths, LampKey, Lit};
+use super::glossy_light::{Found, GlossyPaths, LampKey, Lit, eligible, receives};
 use super::light_choice::LightTraced;
 use super::trace::{self, RayKind, Tally, lane_vec};
 use crate::embree::{LANES, Ray, RayHint, RayPacket16, ShadowPacket16};
@@ -48,6 +48,10 @@ struct Lane {
     diffuse: u32,
     glossy: u32,
     transmission: u32,
+    /// Where its last direction left a glossy surface that its rough first surface's
+    /// direction found, the diffuse layer's share of that direction's BSDF value: of a lamp
+    /// whose caustics light paths take ([`GlossyPaths::drops`]) it keeps only that.
+    caustic: Option<Vec3>,
 }
 
 impl Lane {
@@ -61,6 +65,7 @@ impl Lane {
         diffuse: 0,
         glossy: 0,
         transmission: 0,
+        caustic: None,
     };
 }
 
@@ -255,12 +260,11 @@ pub fn trace_path(
     let mut t = [f32::INFINITY; LANES];
     let mut shared = [None; LANES];
     let mut split = ViewSplit::begin(first, scratch);
+    let mut caustics = Caustics::new(light_traced);
     let (mut kind, mut hint) = (RayKind::Primary, RayHint::Coherent);
     for bounce in 0..=limits.total {
         tally.bounce = bounce;
-        let active: u32 = (0..LANES)
-            .filter(|&l| packet.is_active(l))
-            .fold(0, |m, l| m | 1 << l);
+        let active = lanes_where(u32::MAX, |l| packet.is_active(l));
         if active == 0 {
             break;
         }
@@ -286,13 +290,15 @@ pub fn trace_path(
         let unseen = (bounce == 0).then_some(light_traced);
         let glossy = light_traced.glossy.as_ref();
         let found = glossy.filter(|_| bounce == 1).map(|g| (g, &shared));
+        let lights = (unseen, caustics.paths, found);
         let mut v = vertices(
-            world, packet, hits, &lanes, weigh, unseen, found, scratch, radiance,
+            world, packet, hits, &lanes, weigh, lights, scratch, radiance,
         );
         filter_glossy(&mut v.bsdf, hits, &lanes, limits.filter_glossy);
         if bounce == 0 {
             first.note_surfaces(hits, &v.bsdf, &v.ng);
         }
+        let chain = caustics.chain(bounce, hits, &v.bsdf);
         if bounce == limits.total {
             break;
         }
@@ -316,6 +322,7 @@ pub fn trace_path(
             numbers: &numbers,
             lanes: &lanes,
             glossy: light_traced.glossy.as_ref().filter(|_| bounce == 0),
+            caustic: caustics.paths.map(|g| (g, chain)),
         };
         let clamp = clamp_after(limits, bounce + 1);
         next_event(world, &at, clamp, scratch, radiance, tally);
@@ -325,12 +332,46 @@ pub fn trace_path(
         }
         let drawn = (&v, &scattering, &glossy_share, &numbers, &scratch.points);
         scatter_lanes(drawn, (limits, bounce), &mut lanes, split_here, packet);
+        note_caustics(chain, &scattering, packet, &mut lanes);
         kind = RayKind::Secondary;
         hint = RayHint::Incoherent;
     }
     tally.bounce = 0;
     if let Some(s) = split {
         s.finish(first, scratch, radiance);
+    }
+}
+
+/// The light paths that take caustics over ([`GlossyPaths::drops`]), and the lanes whose
+/// first surface receives them.
+struct Caustics<'a> {
+    paths: Option<&'a GlossyPaths>,
+    receivers: u32,
+}
+
+impl<'a> Caustics<'a> {
+    fn new(light_traced: &'a LightTraced) -> Self {
+        Self {
+            paths: (light_traced.glossy.as_ref()).filter(|g| g.takes_caustics()),
+            receivers: 0,
+        }
+    }
+
+    /// The lanes of `hits`, at surfaces of BSDFs `bsdf` at bounce `bounce`, whose light from a
+    /// lamp is a caustic: at bounce 1, those at a glossy surface that their rough first
+    /// surface's direction found (noted at bounce 0); none elsewhere.
+    fn chain(&mut self, bounce: u32, hits: u32, bsdf: &[Bsdf; LANES]) -> u32 {
+        if self.paths.is_none() {
+            return 0;
+        }
+        match bounce {
+            0 => {
+                self.receivers = lanes_where(hits, |l| receives(&bsdf[l]));
+                0
+            }
+            1 => lanes_where(hits & self.receivers, |l| eligible(&bsdf[l])),
+            _ => 0,
+        }
     }
 }
 
@@ -470,8 +511,13 @@ fn add_world(
     }
 }
 
+/// The light paths that share a camera path's second surface's emission, with what its first
+/// surfaces were ([`SharedVertex`]).
+type SharedEmission<'a> = Option<(&'a GlossyPaths, &'a [Option<SharedVertex>; LANES])>;
+
 /// The BSDFs and leaving origins of the lanes in `hits`; adds the emission they see (but not
-/// that of primitives in `unseen`).
+/// that of primitives in `unseen`; of a caustic light paths take from `caustics`, only the
+/// diffuse layer's part; weighted against the light paths of `found` where they share it).
 #[allow(clippy::too_many_arguments)]
 fn vertices(
     world: &World,
@@ -479,8 +525,11 @@ fn vertices(
     hits: u32,
     lanes: &[Lane; LANES],
     (clamp, strategy): (f32, Strategy),
-    unseen: Option<&LightTraced>,
-    found: Option<(&GlossyPaths, &[Option<SharedVertex>; LANES])>,
+    (unseen, caustics, found): (
+        Option<&LightTraced>,
+        Option<&GlossyPaths>,
+        SharedEmission<'_>,
+    ),
     scratch: &mut PathScratch,
     radiance: &mut [Vec3; LANES],
 ) -> Vertices {
@@ -501,6 +550,12 @@ fn vertices(
         let seen = || unseen.is_none_or(|u| !u.contains(hit.geometry.0, hit.prim));
         if le != Vec3::ZERO && seen() {
             let s = &lanes[lane];
+            // Of a caustic the light paths take, the diffuse layer's part (a delta's
+            // reflection they do not take).
+            let key = LampKey::Primitive(hit.geometry.0, hit.prim);
+            let keep = (s.caustic)
+                .filter(|_| !s.delta && caustics.is_some_and(|g| g.drops(key)))
+                .unwrap_or(Vec3::ONE);
             let w = if s.delta {
                 1.0
             } else {
@@ -509,12 +564,11 @@ fn vertices(
                 let shared = found.and_then(|(g, first)| {
                     let f = first[lane]?;
                     let at = f.lit(sp.position, pdf_light)?;
-                    let key = LampKey::Primitive(hit.geometry.0, hit.prim);
                     g.camera_weight(Found::BsdfSample, key, &at, f.to_lens, f.d_lens)
                 });
                 shared.unwrap_or_else(|| bsdf_weight(strategy, s.pdf, pdf_light))
             };
-            radiance[lane] += clamped(s.throughput * le * w, clamp);
+            radiance[lane] += clamped(s.throughput * keep * le * w, clamp);
         }
         bsdf[lane] = material.bsdf(sp.uv, front);
         ng[lane] = hit.ng;
@@ -579,6 +633,9 @@ struct Shading<'a> {
     lanes: &'a [Lane; LANES],
     /// At a camera ray's first surface: the lamps whose glossy reflections light paths share.
     glossy: Option<&'a GlossyPaths>,
+    /// The light paths that take caustics over, and the lanes at a glossy surface whose
+    /// light from their lamps is a caustic of a rough first surface.
+    caustic: Option<(&'a GlossyPaths, u32)>,
 }
 
 /// Next-event estimation: a shadow packet for each always-sampled punctual light, one for the
@@ -656,24 +713,23 @@ fn shadow_packet(
         let Some(bsdf) = &scattering[lane] else {
             continue;
         };
-        // With the split, the diffuse layer's part too (from the same setup).
-        let (f, bsdf_pdf, diffuse) = if specular.is_some() {
+        // The specular lobes' caustic of a lamp the light paths take is theirs.
+        let key = lamp_key(&es, punctual);
+        let dropped = (at.caustic.zip(key))
+            .is_some_and(|((g, chain), key)| chain & (1 << lane) != 0 && g.drops(key));
+        // With the split or a caustic dropped, the diffuse layer's part too (from the same
+        // setup).
+        let (f, bsdf_pdf, diffuse) = if specular.is_some() || dropped {
             bsdf.eval_pdf_diffuse(es.dir)
         } else {
             let (f, pdf) = bsdf.eval_pdf(es.dir);
             (f, pdf, Vec3::ZERO)
         };
+        let f = if dropped { diffuse } else { f };
         if f == Vec3::ZERO {
             continue;
         }
-        let w = light_sample_weight(
-            at,
-            lane,
-            (n, points.get(lane).position),
-            &es,
-            punctual,
-            bsdf_pdf,
-        );
+        let w = light_sample_weight(at, lane, (n, points.get(lane).position), &es, key, bsdf_pdf);
         let c = lanes[lane].throughput * f * es.radiance * (w / es.pdf);
         if !(c.max_element() > 0.0 && c.is_finite()) {
             continue;
@@ -714,21 +770,16 @@ fn shadow_packet(
 
 /// The multiple-importance weight of light sample `es` (drawn with density `es.pdf`,
 /// which the BSDF would draw with `bsdf_pdf`) at lane `lane`'s vertex (shading normal and
-/// position); `punctual` is the index of the punctual light it sampled.
+/// position); `key`: the lamp it sampled, if light paths may leave it.
 fn light_sample_weight(
     at: &Shading,
     lane: usize,
     (n, position): (Vec3, Vec3),
     es: &EmitterSample,
-    punctual: Option<usize>,
+    key: Option<LampKey>,
     bsdf_pdf: f32,
 ) -> f32 {
     // Where light paths share the lamp's reflection here, the weight counts them too.
-    let key = match (es.delta, punctual, es.primitive) {
-        (true, Some(light), _) => Some(LampKey::Punctual(light)),
-        (false, _, Some((g, p))) => Some(LampKey::Primitive(g, p)),
-        _ => None,
-    };
     let shared = at.glossy.zip(key).and_then(|(g, key)| {
         let lit = Lit {
             b: at.v.bsdf[lane],
@@ -833,4 +884,42 @@ fn scatter(
         glossy,
     };
     Some(Ray::new(origin, sample.wi))
+}
+
+/// The lamp light sample `es` found, if light paths may leave it: the punctual light
+/// `punctual` (its index) or an emissive primitive.
+fn lamp_key(es: &EmitterSample, punctual: Option<usize>) -> Option<LampKey> {
+    match (es.delta, punctual, es.primitive) {
+        (true, Some(light), _) => Some(LampKey::Punctual(light)),
+        (false, _, Some((g, p))) => Some(LampKey::Primitive(g, p)),
+        _ => None,
+    }
+}
+
+/// The lanes of `mask` for which `keep` holds.
+fn lanes_where(mask: u32, keep: impl Fn(usize) -> bool) -> u32 {
+    (0..LANES)
+        .filter(|&l| mask & (1 << l) != 0 && keep(l))
+        .fold(0, |m, l| m | 1 << l)
+}
+
+/// Notes in `lanes` the caustic share ([`Lane::caustic`]) of the directions drawn into `packet`
+/// at the surfaces `scattering` of the lanes in `chain` (none elsewhere).
+fn note_caustics(
+    chain: u32,
+    scattering: &[Option<Scattering>; LANES],
+    packet: &RayPacket16,
+    lanes: &mut [Lane; LANES],
+) {
+    let dir = packet.dirs();
+    for (l, s) in lanes.iter_mut().enumerate() {
+        s.caustic = None;
+        if chain & (1 << l) == 0 || !packet.is_active(l) {
+            continue;
+        }
+        if let Some(at) = &scattering[l] {
+            let (f, _, diffuse) = at.eval_pdf_diffuse(lane_vec(dir, l));
+            s.caustic = Some(Vec3::ONE - specular_share(f, diffuse));
+        }
+    }
 }

@@ -50,6 +50,12 @@
 //! disc it shows the path's direction. Suns and the world stay with the camera (they have no
 //! position to trace from), as do emitters beyond that count.
 //!
+//! **Caustics** (`caustic.rs`). Each lamp also takes a second set of paths, with its own pilot
+//! and budget (`Role`): on from the glossy surface by a BSDF sample to the rough surface it
+//! lights, and from there into the lens. Those paths are the light paths' alone (a partition,
+//! not a mixture: the camera drops them). A parallel sun takes these paths too, from discs
+//! across its beam (`beam.rs`); its highlights stay with the camera.
+//!
 //! **Where the lamp's paths go.** Directions are drawn within cones around the bounds of the
 //! geometry whose materials can be glossy, each cone's directions on a [`GRID`] x [`GRID`] grid
 //! (`Aim`): from a punctual light or an emissive sphere's centre, cones that hold each bound
@@ -73,7 +79,7 @@
 //! count, and a region gets exactly the splats the full frame gives it (every region traces
 //! every path: a reflection may land anywhere).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::f32::consts::{PI, TAU};
 
 use glam::{Vec2, Vec3};
@@ -94,6 +100,13 @@ use crate::scene::emitters::{
 };
 use crate::settings::{Integrator, Mode, RenderSettings, Strategy};
 use crate::shade::{Bsdf, Light, Material, SurfacePoint, SurfacePoints16, basis, luminance};
+
+mod beam;
+mod caustic;
+
+pub use caustic::receives;
+
+use beam::Beam;
 
 /// Surfaces at most this rough (perceptual roughness, GGX alpha = its square) take light paths.
 /// Rougher lobes are wide enough that the camera's lens samples find the lamp's reflection
@@ -227,6 +240,9 @@ enum Aim {
     /// from a 4 x 2 m softbox fills 1 / 40000 of such a cone, so its pilot found nothing and
     /// the ball's defocused reflection of the panel stayed with the camera, speckled.
     FromPoint(Vec<(Vec3, f32)>),
+    /// Discs across a parallel sun's beam, one per glossy sphere: its paths' starts are drawn,
+    /// their direction is the sun's.
+    Beam(Beam),
 }
 
 impl Aim {
@@ -235,6 +251,7 @@ impl Aim {
         match self {
             Self::Fixed(cones) => cones.len(),
             Self::FromPoint(spheres) => spheres.len(),
+            Self::Beam(beam) => beam.len(),
         }
     }
 
@@ -247,6 +264,7 @@ impl Aim {
                 let (centre, radius) = spheres[k];
                 Cone::towards(from, centre, radius)
             }
+            Self::Beam(_) => None,
         }
     }
 }
@@ -256,6 +274,9 @@ impl Aim {
 enum Source {
     /// Light `light` of [`crate::scene::emitters::Emitters::always`]: a point or spot light.
     Punctual { light: usize, position: Vec3 },
+    /// Light `light` of [`crate::scene::emitters::Emitters::always`]: a parallel sun (no
+    /// angle), whose paths start across its beam ([`Beam`]) and take caustics only.
+    Sun { light: usize },
     /// An emissive triangle, its points drawn uniformly by area.
     Triangle {
         geometry: u32,
@@ -295,11 +316,16 @@ pub(super) enum LampKey {
 }
 
 impl Source {
+    /// Whether it is an emissive primitive (not a light of the scene's list).
+    fn is_primitive(&self) -> bool {
+        matches!(self, Self::Triangle { .. } | Self::Sphere { .. })
+    }
+
     /// Keys its light paths' sample stream (punctual lights by their index, as before
     /// emissive primitives took light paths too).
     fn stream(&self) -> u64 {
         match *self {
-            Self::Punctual { light, .. } => light as u64,
+            Self::Punctual { light, .. } | Self::Sun { light } => light as u64,
             Self::Triangle { geometry, prim, .. } | Self::Sphere { geometry, prim, .. } => {
                 (1 << 63) | u64::from(geometry) << 32 | u64::from(prim)
             }
@@ -312,7 +338,7 @@ impl Source {
     fn position_density(&self, x: Vec3, to_light: Vec3, d_light: f32) -> f32 {
         let d2 = d_light * d_light;
         match *self {
-            Self::Punctual { .. } => 1.0,
+            Self::Punctual { .. } | Self::Sun { .. } => 1.0,
             Self::Triangle {
                 normal, inv_area, ..
             } => {
@@ -339,10 +365,26 @@ impl Source {
     }
 }
 
+/// What a lamp's light paths are for. A source takes two lamps, so that each has its own
+/// pilot: a highlight's cells and a caustic's are different directions, and the camera's
+/// weights for a highlight read the highlight lamp's cells alone (drawn towards the floors
+/// a ball lights, a highlight's paths would thin out and leave its speckle to the camera).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    /// Reflections in a blurred glossy surface, into the lens (t = 1 and t = 0).
+    Highlights,
+    /// Light a glossy surface throws onto a rough one, into the lens ([`caustic`]).
+    Caustics,
+}
+
+/// Keys caustic lamps' sample streams apart from their sources' highlight lamps'.
+const CAUSTIC_STREAM: u64 = 0x6361_7573_7469_6373;
+
 /// One lamp's light paths.
 #[derive(Debug, Clone)]
 struct Lamp {
     source: Source,
+    role: Role,
     /// Light paths to trace.
     paths: u32,
     aim: Aim,
@@ -354,10 +396,11 @@ struct Lamp {
 
 impl Lamp {
     /// A lamp drawing directions as `aim` says, each cell alike.
-    fn new(source: Source, paths: u32, aim: Aim) -> Self {
+    fn new(source: Source, role: Role, paths: u32, aim: Aim) -> Self {
         let n = aim.len() * GRID * GRID;
         let mut lamp = Self {
             source,
+            role,
             paths,
             aim,
             cells: Vec::new(),
@@ -410,16 +453,45 @@ impl Lamp {
     /// A direction from the lamp's point `from` by three uniform numbers (the first picks the
     /// cell) and its cell; `None` when the cell's cone is empty from there.
     fn sample(&self, from: Vec3, u: [f32; 3]) -> Option<(Vec3, usize)> {
-        let c = self
-            .cdf
-            .partition_point(|&f| f <= u[0])
-            .min(self.cdf.len() - 1);
+        let c = self.draw_cell(u[0]);
         let (k, ij) = (c / (GRID * GRID), c % (GRID * GRID));
         let q = Vec2::new(
             ((ij / GRID) as f32 + u[1]) / GRID as f32,
             ((ij % GRID) as f32 + u[2]) / GRID as f32,
         );
         Some((self.aim.cone(k, from)?.sample(q), c))
+    }
+
+    /// Keys its paths' sample stream.
+    fn stream(&self) -> u64 {
+        match self.role {
+            Role::Highlights => self.source.stream(),
+            Role::Caustics => self.source.stream() ^ CAUSTIC_STREAM,
+        }
+    }
+
+    /// The cell that uniform number `u` draws.
+    fn draw_cell(&self, u: f32) -> usize {
+        self.cdf
+            .partition_point(|&f| f <= u)
+            .min(self.cdf.len() - 1)
+    }
+
+    /// What a path brings the surface point `at` it lit first, per unit of that surface's
+    /// `F / cos` (its BSDF with the shading cosine, over the geometric one): the lamp's light
+    /// over the density of the path's reaching that point per unit area across its direction.
+    /// `None` where that density is 0.
+    fn flux(&self, at: &Lit) -> Option<Vec3> {
+        let per_area = match &self.aim {
+            Aim::Beam(beam) => beam.density(&self.cells, at.x, at.drawn),
+            _ => {
+                let y = at.x + at.to_light * at.d_light;
+                let p_w = self.pdf(y, -at.to_light, at.drawn);
+                let p_y = self.source.position_density(at.x, at.to_light, at.d_light);
+                p_w * p_y / (at.d_light * at.d_light)
+            }
+        };
+        (per_area > 0.0 && per_area.is_finite()).then(|| at.irradiance / per_area)
     }
 
     /// Where path `u` (its numbers: 0-2 the direction, 6-7 the point on an emitter) leaves
@@ -437,6 +509,20 @@ impl Lamp {
                     radiance: Vec3::ZERO,
                 };
                 Some((start, dir, cell))
+            }
+            // A start across the beam, in a cell drawn as a cone's.
+            Source::Sun { .. } => {
+                let Aim::Beam(beam) = &self.aim else {
+                    return None;
+                };
+                let cell = self.draw_cell(dir_u[0]);
+                let origin = beam.start(cell, Vec2::new(dir_u[1], dir_u[2]));
+                let start = Start {
+                    origin,
+                    point: origin,
+                    radiance: Vec3::ZERO,
+                };
+                Some((start, beam.dir(), cell))
             }
             // The point first: the direction's cones are aimed from it.
             Source::Triangle { geometry, prim, .. } => {
@@ -493,6 +579,10 @@ pub struct GlossyPaths {
     by_light: Vec<Option<usize>>,
     /// The lamp of each emissive primitive that has one, by (geometry, primitive).
     by_prim: HashMap<(u32, u32), usize>,
+    /// Whether each light of [`crate::scene::emitters::Emitters::always`] has a caustic lamp.
+    caustic_lights: Vec<bool>,
+    /// The emissive primitives that have a caustic lamp.
+    caustic_prims: HashSet<(u32, u32)>,
     eye: Vec3,
     forward: Vec3,
     right: Vec3,
@@ -508,6 +598,8 @@ pub struct GlossyPaths {
     spp: f32,
     /// CoC in pixels per unit of |1 / focus distance - 1 / depth|.
     coc_scale: f32,
+    /// Whether light paths take over the caustics of their lamps ([`caustic`]).
+    caustics: bool,
     /// 1 / the focus distance.
     inv_focus: f32,
     lens_weight_mean: f32,
@@ -542,25 +634,8 @@ impl GlossyPaths {
         if sources.is_empty() {
             return None;
         }
-        let (w, h) = (camera.width as f64, camera.height as f64);
-        let total = PATHS_PER_SAMPLE * w * h * f64::from(settings.spp);
-        let paths = (total / sources.len() as f64)
-            .ceil()
-            .clamp(1.0, f64::from(u32::MAX)) as u32;
-        let mut lamps = Vec::new();
-        for (source, at, size) in sources {
-            let aim = match source {
-                Source::Triangle { .. } => Aim::FromPoint(spheres.clone()),
-                _ => Aim::Fixed(
-                    (spheres.iter())
-                        .filter_map(|&(c, r)| Cone::towards(at, c, r + size))
-                        .collect(),
-                ),
-            };
-            if aim.len() > 0 {
-                lamps.push(Lamp::new(source, paths, aim));
-            }
-        }
+        let caustics = caustic::allowed(&settings.path);
+        let lamps = lamps(world, (camera, settings), &spheres, sources, caustics);
         if lamps.is_empty() {
             return None;
         }
@@ -569,6 +644,8 @@ impl GlossyPaths {
             lamps,
             by_light: Vec::new(),
             by_prim: HashMap::new(),
+            caustic_lights: Vec::new(),
+            caustic_prims: HashSet::new(),
             eye: camera.eye,
             forward: camera.forward,
             right: camera.right,
@@ -583,17 +660,31 @@ impl GlossyPaths {
                 * aperture.anamorphic.max(1.0)
                 * camera.pixels_per_unit(),
             inv_focus: thin.inv_focus_distance,
+            caustics,
             lens_weight_mean,
         };
         g.guide(world, camera, settings);
         // Lamps whose pilot landed nothing are left to the camera (its weight for them is 1).
         g.lamps.retain(|l| l.paths > 0);
         g.by_light = vec![None; world.emitters.always.len()];
+        g.caustic_lights = vec![false; world.emitters.always.len()];
         for (i, l) in g.lamps.iter().enumerate() {
-            match l.source {
-                Source::Punctual { light, .. } => g.by_light[light] = Some(i),
-                Source::Triangle { geometry, prim, .. } | Source::Sphere { geometry, prim, .. } => {
-                    g.by_prim.insert((geometry, prim), i);
+            match (l.source, l.role) {
+                (Source::Punctual { light, .. } | Source::Sun { light }, Role::Highlights) => {
+                    g.by_light[light] = Some(i);
+                }
+                (Source::Punctual { light, .. } | Source::Sun { light }, Role::Caustics) => {
+                    g.caustic_lights[light] = true;
+                }
+                (
+                    Source::Triangle { geometry, prim, .. } | Source::Sphere { geometry, prim, .. },
+                    role,
+                ) => {
+                    if role == Role::Highlights {
+                        g.by_prim.insert((geometry, prim), i);
+                    } else {
+                        g.caustic_prims.insert((geometry, prim));
+                    }
                 }
             }
         }
@@ -606,24 +697,46 @@ impl GlossyPaths {
     /// cells in proportion to it, [`DEFENSIVE`] evenly. Deterministic: fixed numbers, summed
     /// in order. (A pilot that fails for memory leaves the even draw, which is as unbiased.)
     fn guide(&mut self, world: &World, camera: &Camera, settings: &RenderSettings) {
+        let landed = self.pilot(world, camera, settings);
+        // Each role shares its own budget: caustics take nothing from highlights.
+        for role in [Role::Highlights, Role::Caustics] {
+            self.share_paths(role, &landed);
+        }
+    }
+
+    /// Traces each lamp's pilot, sets its cells from where the pilot's light landed, and
+    /// returns the light each pilot landed per path (`None`: its pilot failed, keep its even
+    /// share).
+    fn pilot(
+        &mut self,
+        world: &World,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Vec<Option<f32>> {
         let seed = settings.seed ^ SALT ^ 0x0070_696c_6f74;
         let count = self.lamps.len();
-        let emitters = (self.lamps.iter())
-            .filter(|l| !matches!(l.source, Source::Punctual { .. }))
-            .count();
-        // Emissive primitives share a pilot budget of [`EMITTER_PILOTS`] lamps' worth.
-        let shared = (PILOT as usize * EMITTER_PILOTS / emitters.max(1)) as u32;
-        let shared = shared.clamp(MIN_PILOT, PILOT);
-        let budget: f64 = self.lamps.iter().map(|l| f64::from(l.paths)).sum();
-        // The light each lamp's pilot landed per path (None: its pilot failed, keep its even
-        // share).
+        let emitters = |role: Role| {
+            (self.lamps.iter())
+                .filter(|l| l.role == role && l.source.is_primitive())
+                .count()
+        };
+        // A role's emissive primitives share a pilot budget of [`EMITTER_PILOTS`] lamps' worth.
+        let shared = |role: Role| {
+            let shared = (PILOT as usize * EMITTER_PILOTS / emitters(role).max(1)) as u32;
+            shared.clamp(MIN_PILOT, PILOT)
+        };
+        let pilots: Vec<u32> = (self.lamps.iter())
+            .map(|l| {
+                if l.source.is_primitive() {
+                    shared(l.role)
+                } else {
+                    PILOT
+                }
+            })
+            .collect();
         let mut landed = vec![None; count];
         for (i, out) in landed.iter_mut().enumerate() {
-            let lamp = &self.lamps[i];
-            let pilot = match lamp.source {
-                Source::Punctual { .. } => PILOT,
-                _ => shared,
-            };
+            let (lamp, pilot) = (&self.lamps[i], pilots[i]);
             let Ok((splats, _)) = self.trace_block(world, camera, settings, lamp, seed, 0..pilot)
             else {
                 continue;
@@ -645,15 +758,29 @@ impl GlossyPaths {
                 .collect();
             self.lamps[i].set_cells(cells);
         }
-        // Paths go to the lamps in proportion to the light their pilots landed ([`SHARED`] of
-        // them evenly); a lamp whose pilot landed nothing gets none: nothing it sends
-        // through a glossy reflection lands, so the camera keeps it all.
-        let live = (landed.iter())
-            .filter(|t| t.is_none_or(|t| t != 0.0))
+        landed
+    }
+
+    /// Shares the paths of the lamps of `role` between them in proportion to the light their
+    /// pilots `landed` ([`SHARED`] of them evenly); a lamp whose pilot landed nothing gets
+    /// none: nothing it sends through a glossy reflection lands, so the camera keeps it all.
+    fn share_paths(&mut self, role: Role, landed: &[Option<f32>]) {
+        let of_role = |l: &Lamp| l.role == role;
+        let budget: f64 = (self.lamps.iter().filter(|l| of_role(l)))
+            .map(|l| f64::from(l.paths))
+            .sum();
+        let live = (self.lamps.iter().zip(landed))
+            .filter(|(l, t)| of_role(l) && t.is_none_or(|t| t != 0.0))
             .count();
         let usable = |t: &Option<f32>| t.filter(|t| t.is_finite()).map_or(0.0, f64::from);
-        let sum: f64 = landed.iter().map(usable).sum();
-        for (lamp, t) in self.lamps.iter_mut().zip(&landed) {
+        let sum: f64 = (self.lamps.iter().zip(landed))
+            .filter(|(l, _)| of_role(l))
+            .map(|(_, t)| usable(t))
+            .sum();
+        for (lamp, t) in self.lamps.iter_mut().zip(landed) {
+            if !of_role(lamp) {
+                continue;
+            }
             if *t == Some(0.0) {
                 lamp.paths = 0;
                 continue;
@@ -705,6 +832,22 @@ impl GlossyPaths {
         self.densities(&self.lamps[lamp], at, to_lens, d_lens)
     }
 
+    /// Whether the camera drops the light of lamp `key` that reaches it through a glossy
+    /// surface from a rough first surface, the caustic light paths take over ([`caustic`]).
+    /// The caller has checked the surfaces ([`receives`] first, [`eligible`] second).
+    pub(super) fn drops(&self, key: LampKey) -> bool {
+        match key {
+            LampKey::Punctual(light) => self.caustic_lights.get(light) == Some(&true),
+            LampKey::Primitive(g, p) => self.caustic_prims.contains(&(g, p)),
+        }
+    }
+
+    /// Whether light paths take over caustics ([`caustic`]): the camera path needs to know
+    /// which of its first surfaces receive them.
+    pub(super) fn takes_caustics(&self) -> bool {
+        self.caustics
+    }
+
     /// Whether some emissive primitive takes light paths (so the camera's BSDF samples that
     /// find one are weighed against them).
     pub(super) fn shares_emitters(&self) -> bool {
@@ -746,7 +889,7 @@ impl GlossyPaths {
         let camera = self.spp * per_sr / self.area;
         // A BSDF sample finds an emissive primitive (not a punctual light).
         let bsdf = match lamp.source {
-            Source::Punctual { .. } => 0.0,
+            Source::Punctual { .. } | Source::Sun { .. } => 0.0,
             _ => camera * b.pdf(n, to_lens, to_light),
         };
         let camera = camera * nee;
@@ -849,11 +992,12 @@ impl GlossyPaths {
         let mut points = SurfacePoints16::default();
         let mut shadow = ShadowPacket16::new();
         let mut t_hit = [f32::INFINITY; LANES];
+        let mut bounces = caustic::Bounces::new();
         for start in (first..end).step_by(LANES) {
             let count = (end - start).min(LANES as u32);
             let numbers: [[f32; 10]; LANES] = std::array::from_fn(|l| {
                 let j = start + (l as u32).min(count - 1);
-                path_numbers(sample_key(seed, lamp.source.stream(), j), 0)
+                path_numbers(sample_key(seed, lamp.stream(), j), 0)
             });
             packet.clear();
             let mut cells = [0usize; LANES];
@@ -873,6 +1017,7 @@ impl GlossyPaths {
             }
             world.surface_points16(&packet, hits, &mut points);
             let mut connections = Connections::default();
+            bounces.clear();
             let dirs = packet.dirs();
             for lane in (0..LANES).filter(|&l| hits & (1 << l) != 0) {
                 let (Some(hit), Some(start)) = (packet.hit(lane), starts[lane]) else {
@@ -881,8 +1026,7 @@ impl GlossyPaths {
                 let sp = points.get(lane);
                 let d = Vec3::new(dirs[0][lane], dirs[1][lane], dirs[2][lane]);
                 let b = world.material(&hit).bsdf(sp.uv, hit.is_front(d));
-                let x = sp.position;
-                if !(eligible(&b) && self.blurred((x - self.eye).dot(self.forward))) {
+                if !eligible(&b) {
                     continue;
                 }
                 let Some(at) = start.lights(world, &lamp.source, cells[lane], b, &sp, hit.ng)
@@ -890,27 +1034,58 @@ impl GlossyPaths {
                     continue;
                 };
                 let u = &numbers[lane];
-                // t = 1: a uniform point of the aperture.
-                let lens = camera.lens.lens_point(Vec2::new(u[8], u[9]));
-                let o = self.eye + (self.right * lens.x + self.up * lens.y) * self.radius;
-                let (v, d_lens) = ((o - x), (o - x).length());
-                if d_lens > 0.0
-                    && let Some(s) = self.landing(&view, lamp, &at, 0, lens, v / d_lens, d_lens)
-                {
-                    connections.add(0, lane, x, v / d_lens, d_lens, s);
+                // A caustic: on to the surface G's BSDF sample finds (whether or not G is
+                // blurred: what it lights may be).
+                if lamp.role == Role::Caustics {
+                    bounces.leave(lamp, lane, &at, [u[3], u[4], u[5]]);
+                    continue;
                 }
-                // t = 0: the BSDF's direction, if it crosses the aperture.
-                if let Some(bs) = at.b.sample(at.n, at.to_light, [u[3], u[4], u[5]])
-                    && !bs.delta
-                    && let Some((lens, d_lens)) = self.lens_crossing(x, bs.wi)
-                    && let Some(s) = self.landing(&view, lamp, &at, 1, lens, bs.wi, d_lens)
-                {
-                    connections.add(1, lane, x, bs.wi, d_lens, s);
-                }
+                self.highlight(&view, lamp, (lane, &at, u), &mut connections);
             }
+            // The caustics' lens points, numbered apart from the paths' first numbers.
+            let lens_u = |lane: usize| {
+                let j = start + lane as u32;
+                let u = path_numbers(sample_key(seed, lamp.stream(), j), 1);
+                Vec2::new(u[0], u[1])
+            };
+            let count = lamp.paths as f32;
+            let here = (world, &view, count);
+            bounces.land(self, here, lens_u, &mut connections, &mut tally);
             connections.trace(world, &mut shadow, &mut tally, &cells, &mut splats);
         }
         Ok((splats, tally))
+    }
+
+    /// Adds lane `lane`'s connections into the lens from the glossy point `at` that `lamp`
+    /// lit, drawn with numbers `u`, where it is blurred: t = 1 and t = 0.
+    fn highlight(
+        &self,
+        view: &View,
+        lamp: &Lamp,
+        (lane, at, u): (usize, &Lit, &[f32; 10]),
+        connections: &mut Connections,
+    ) {
+        let x = at.x;
+        if !self.blurred((x - self.eye).dot(self.forward)) {
+            return;
+        }
+        // t = 1: a uniform point of the aperture.
+        let lens = view.camera.lens.lens_point(Vec2::new(u[8], u[9]));
+        let o = self.eye + (self.right * lens.x + self.up * lens.y) * self.radius;
+        let (v, d_lens) = ((o - x), (o - x).length());
+        if d_lens > 0.0
+            && let Some(s) = self.landing(view, lamp, at, 0, lens, v / d_lens, d_lens)
+        {
+            connections.add(0, lane, x, v / d_lens, d_lens, s);
+        }
+        // t = 0: the BSDF's direction, if it crosses the aperture.
+        if let Some(bs) = at.b.sample(at.n, at.to_light, [u[3], u[4], u[5]])
+            && !bs.delta
+            && let Some((lens, d_lens)) = self.lens_crossing(x, bs.wi)
+            && let Some(s) = self.landing(view, lamp, at, 1, lens, bs.wi, d_lens)
+        {
+            connections.add(1, lane, x, bs.wi, d_lens, s);
+        }
     }
 
     /// The splat of the path from `lamp` to the surface point `at` and on to lens position
@@ -1029,7 +1204,7 @@ impl Start {
     ) -> Option<Lit> {
         let x = sp.position;
         let (to_light, d_light, irradiance, nee) = match *source {
-            Source::Punctual { light, .. } => {
+            Source::Punctual { light, .. } | Source::Sun { light } => {
                 // Lamps are never extended lights (`lamp_sources`): no numbers needed.
                 let es = punctual_sample(&world.emitters.always[light], x, Vec2::ZERO);
                 (es.dir, es.distance, es.radiance, 1.0)
@@ -1065,14 +1240,15 @@ impl Start {
     }
 }
 
-/// One packet's connections from surface points to the lens, by strategy (0: t = 1, 1: t = 0):
-/// their shadow rays (from the lens towards the point) and what each lands if unoccluded.
+/// One packet's connections from surface points to the lens, by strategy (0: t = 1, 1: t = 0,
+/// [`caustic::SLOT`]: a caustic's t = 1): their shadow rays (from the lens towards the point)
+/// and what each lands if unoccluded.
 #[derive(Default)]
 struct Connections {
-    pending: [[Option<Splat>; LANES]; 2],
-    origin: [[[f32; LANES]; 3]; 2],
-    to_x: [[[f32; LANES]; 3]; 2],
-    seg_end: [[f32; LANES]; 2],
+    pending: [[Option<Splat>; LANES]; 3],
+    origin: [[[f32; LANES]; 3]; 3],
+    to_x: [[[f32; LANES]; 3]; 3],
+    seg_end: [[f32; LANES]; 3],
 }
 
 impl Connections {
@@ -1097,7 +1273,7 @@ impl Connections {
         cells: &[usize; LANES],
         splats: &mut Vec<(Splat, usize)>,
     ) {
-        for k in 0..2 {
+        for k in 0..3 {
             let lit = (0..LANES)
                 .filter(|&l| self.pending[k][l].is_some())
                 .fold(0u32, |m, l| m | 1 << l);
@@ -1116,6 +1292,63 @@ impl Connections {
     }
 }
 
+/// The lamps of `sources` (each with the centre and radius of a sphere that holds it) aimed
+/// at the glossy bounds `spheres` of `world`, for a render through `camera` with `settings`,
+/// each with an even share of the paths: a highlight lamp for each source but a sun, and with
+/// `caustics` a caustic lamp for each.
+fn lamps(
+    world: &World,
+    (camera, settings): (&Camera, &RenderSettings),
+    spheres: &[(Vec3, f32)],
+    sources: Vec<(Source, Vec3, f32)>,
+    caustics: bool,
+) -> Vec<Lamp> {
+    let (lo, hi) = world.scene.bounds();
+    let scene = (0.5 * (lo + hi), 0.5 * (hi - lo).length());
+    let mut lamps = Vec::new();
+    for (source, at, size) in sources {
+        let aim = match source {
+            Source::Triangle { .. } => Aim::FromPoint(spheres.to_vec()),
+            Source::Sun { light } => {
+                let Light::Directional { direction, .. } = world.emitters.always[light] else {
+                    continue;
+                };
+                match Beam::new(direction, spheres, scene) {
+                    Some(beam) => Aim::Beam(beam),
+                    None => continue,
+                }
+            }
+            _ => Aim::Fixed(
+                (spheres.iter())
+                    .filter_map(|&(c, r)| Cone::towards(at, c, r + size))
+                    .collect(),
+            ),
+        };
+        if aim.len() == 0 {
+            continue;
+        }
+        if !matches!(source, Source::Sun { .. }) {
+            lamps.push(Lamp::new(source, Role::Highlights, 1, aim.clone()));
+        }
+        if caustics {
+            lamps.push(Lamp::new(source, Role::Caustics, 1, aim));
+        }
+    }
+    // Each role's paths number a quarter of a dense render's camera samples.
+    let (w, h) = (camera.width as f64, camera.height as f64);
+    let total = PATHS_PER_SAMPLE * w * h * f64::from(settings.spp);
+    for role in [Role::Highlights, Role::Caustics] {
+        let count = lamps.iter().filter(|l| l.role == role).count();
+        let paths = (total / count.max(1) as f64)
+            .ceil()
+            .clamp(1.0, f64::from(u32::MAX)) as u32;
+        for lamp in lamps.iter_mut().filter(|l| l.role == role) {
+            lamp.paths = paths;
+        }
+    }
+    lamps
+}
+
 /// The lamps whose light paths a render may trace, each with the centre and radius of a
 /// sphere that holds it: the point and spot lights, then (with multiple importance sampling
 /// and room for a bounce, which the camera's BSDF strategy needs) the [`MAX_PRIMITIVE_LAMPS`]
@@ -1129,7 +1362,10 @@ fn lamp_sources(world: &World, settings: &RenderSettings) -> Vec<(Source, Vec3, 
             Light::Point { position, .. } | Light::Spot { position, .. } => {
                 Some((Source::Punctual { light, position }, position, 0.0))
             }
-            Light::Directional { .. } => None,
+            // A parallel sun takes caustics only, where they are taken at all.
+            Light::Directional { .. } => {
+                caustic::allowed(&settings.path).then_some((Source::Sun { light }, Vec3::ZERO, 0.0))
+            }
         })
         .collect();
     let limits = &settings.path;
@@ -1277,7 +1513,7 @@ mod tests {
             light: 0,
             position: Vec3::ZERO,
         };
-        let mut lamp = Lamp::new(source, 1, Aim::Fixed(vec![cone]));
+        let mut lamp = Lamp::new(source, Role::Highlights, 1, Aim::Fixed(vec![cone]));
         // One cell holds nearly everything, its neighbours almost nothing.
         let mut cells = vec![1e-6f32; GRID * GRID];
         cells[5 * GRID + 7] = 1.0;
