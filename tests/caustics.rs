@@ -15,6 +15,12 @@ const HEIGHT: u32 = 48;
 /// `roughness`, tilted 45 degrees, hangs above it and reflects `lamp` (beside it, shaded from
 /// the floor by a black board) straight down: the floor's only light is the plate's caustic.
 fn scene(roughness: f32, lamp: &str) -> SceneDesc {
+    plate_scene(roughness, 1.0, lamp)
+}
+
+/// [`scene`] with a plate of `metallic` (0: a glossy plastic, whose diffuse layer lights the
+/// floor too).
+fn plate_scene(roughness: f32, metallic: f32, lamp: &str) -> SceneDesc {
     // Without `[[lights]]` a scene file gets a default key light.
     let no_lights = if lamp.contains("[[lights]]") {
         ""
@@ -48,7 +54,7 @@ zenith = 0
 [[materials]]
 name = "plate"
 diffuse = 0.9
-metallic = 1.0
+metallic = {metallic}
 roughness = {roughness}
 
 [[materials]]
@@ -105,6 +111,14 @@ direction = [1, 0, 0]
 intensity = 40
 outer_angle = 8
 inner_angle = 6
+"#;
+
+/// A parallel sun shining level along +x: it lights the plate and, grazing, not the floor.
+const SUN_LAMP: &str = r#"
+[[lights]]
+type = "directional"
+direction = [1, 0, 0]
+irradiance = 3
 "#;
 
 fn settings(spp: u32, light_tracing: bool, seed: u64) -> RenderSettings {
@@ -193,11 +207,19 @@ fn a_plates_caustic_of_an_emissive_ball_keeps_its_light_and_loses_its_speckle() 
 }
 
 #[test]
-fn a_plates_caustic_of_a_spot_light_keeps_its_light() {
-    // A punctual lamp the camera finds only by its light samples from the plate.
-    let desc = scene(0.3, SPOT_LAMP);
-    let off = mean_floor(&desc, 1024, false, 1..=4);
-    let on = mean_floor(&desc, 64, true, 1..=2);
+fn a_plates_caustic_of_a_spot_light_or_a_sun_keeps_its_light() {
+    // Lamps the camera finds only by its light samples from the plate: a spot, and a sun
+    // (whose light paths start across its beam); and a plastic plate under the spot, whose
+    // diffuse layer's light stays with the camera while its coat's goes to the light paths.
+    for (metallic, lamp) in [(1.0, SPOT_LAMP), (1.0, SUN_LAMP), (0.0, SPOT_LAMP)] {
+        caustic_keeps_its_light(&plate_scene(0.3, metallic, lamp));
+    }
+}
+
+/// The floor's light in `desc` is the same from the camera alone as with light paths.
+fn caustic_keeps_its_light(desc: &SceneDesc) {
+    let off = mean_floor(desc, 1024, false, 1..=4);
+    let on = mean_floor(desc, 64, true, 1..=2);
     eprintln!("light on the floor: camera alone {off:.3}, with light paths {on:.3}");
     assert!(off > 1.0, "the caustic is there: {off}");
     assert!(
