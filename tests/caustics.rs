@@ -5,8 +5,10 @@
 
 use std::path::Path;
 
-use dofray::render::{self, Film, Mode, NoProgress, RenderSettings, SettingsPatch};
-use dofray::scene::{SceneDesc, World};
+use dofray::render::{Film, Mode, RenderSettings};
+use dofray::scene::SceneDesc;
+
+use crate::glossy_light::render;
 
 const WIDTH: u32 = 64;
 const HEIGHT: u32 = 48;
@@ -121,25 +123,9 @@ direction = [1, 0, 0]
 irradiance = 3
 "#;
 
+/// Dense settings at `spp` with light tracing on or off and `seed`.
 fn settings(spp: u32, light_tracing: bool, seed: u64) -> RenderSettings {
-    SettingsPatch {
-        mode: Some(Mode::Dense),
-        spp: Some(spp),
-        light_tracing: Some(light_tracing),
-        seed: Some(seed),
-        ..Default::default()
-    }
-    .resolve()
-    .unwrap()
-}
-
-fn render(desc: &SceneDesc, settings: &RenderSettings) -> Film {
-    let device = dofray::embree::Device::new().unwrap();
-    let world = World::build(desc, &device).unwrap();
-    let camera = desc.camera.build(|_| None).unwrap();
-    render::render(&world, &camera, settings, &NoProgress)
-        .unwrap()
-        .0
+    crate::glossy_light::settings(Mode::Dense, spp, light_tracing, seed)
 }
 
 /// The floor below the plate: the lower 30 rows of the frame.

@@ -116,7 +116,9 @@ material = "floor"
     dofray::scene::file::parse(&src, Path::new("ball.toml")).unwrap()
 }
 
-fn settings(mode: Mode, spp: u32, light_tracing: bool, seed: u64) -> RenderSettings {
+/// Settings of `mode` at `spp` with light tracing on or off and `seed` (shared with
+/// `caustics.rs`).
+pub(crate) fn settings(mode: Mode, spp: u32, light_tracing: bool, seed: u64) -> RenderSettings {
     SettingsPatch {
         mode: Some(mode),
         spp: Some(spp),
@@ -128,7 +130,8 @@ fn settings(mode: Mode, spp: u32, light_tracing: bool, seed: u64) -> RenderSetti
     .unwrap()
 }
 
-fn render(desc: &SceneDesc, settings: &RenderSettings) -> Film {
+/// `desc` rendered with `settings` (shared with `caustics.rs`).
+pub(crate) fn render(desc: &SceneDesc, settings: &RenderSettings) -> Film {
     let device = dofray::embree::Device::new().unwrap();
     let world = World::build(desc, &device).unwrap();
     let camera = desc.camera.build(|_| None).unwrap();
