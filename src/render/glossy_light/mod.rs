@@ -604,8 +604,6 @@ pub struct GlossyPaths {
     spp: f32,
     /// CoC in pixels per unit of |1 / focus distance - 1 / depth|.
     coc_scale: f32,
-    /// Whether light paths take over the caustics of their lamps ([`caustic`]).
-    caustics: bool,
     /// 1 / the focus distance.
     inv_focus: f32,
     lens_weight_mean: f32,
@@ -666,7 +664,6 @@ impl GlossyPaths {
                 * aperture.anamorphic.max(1.0)
                 * camera.pixels_per_unit(),
             inv_focus: thin.inv_focus_distance,
-            caustics,
             lens_weight_mean,
         };
         g.guide(world, camera, settings);
@@ -852,10 +849,10 @@ impl GlossyPaths {
         }
     }
 
-    /// Whether light paths take over caustics ([`caustic`]): the camera path needs to know
-    /// which of its first surfaces receive them.
+    /// Whether some lamp's light paths take over its caustics ([`caustic`]): only then does
+    /// the camera path note which of its first surfaces receive them.
     pub(super) fn takes_caustics(&self) -> bool {
-        self.caustics
+        self.caustic_lights.contains(&true) || !self.caustic_prims.is_empty()
     }
 
     /// Whether some emissive primitive takes light paths (so the camera's BSDF samples that
